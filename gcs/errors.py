@@ -1,0 +1,38 @@
+"""Exceptions of gcs.
+
+Every error a user can cause derives from a builtin (``ValueError`` for bad input,
+``RuntimeError`` for a vehicle that misbehaves) and from :class:`GcsError`, which the CLI
+turns into one line on stderr and a non-zero exit code.
+"""
+
+
+class GcsError(Exception):
+    """Base class of the errors the CLI reports as one line."""
+
+
+class ProfileError(GcsError, ValueError):
+    """A profile (YAML) is malformed or inconsistent; the message names file and field."""
+
+
+class TrajectoryError(GcsError, ValueError):
+    """A trajectory is malformed or beyond the vehicle's limits or the arena."""
+
+
+class RunLogError(GcsError, ValueError):
+    """A run directory or trial log is missing, truncated, NaN-filled or inconsistent."""
+
+
+class ModelError(GcsError, ValueError):
+    """A model cannot be used for learning (unstable, wrong shape, direct feedthrough)."""
+
+
+class IdentificationError(GcsError, ValueError):
+    """Identification data are insufficient (too short, not exciting, NaN)."""
+
+
+class VehicleError(GcsError, RuntimeError):
+    """The vehicle is unreachable, refused a command, or the link was lost."""
+
+
+class TrialAborted(GcsError, RuntimeError):
+    """A trial stopped before its end (watchdog, Ctrl-C, link loss); it is marked incomplete."""
