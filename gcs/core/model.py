@@ -1,0 +1,309 @@
+"""Discrete LTI models of the closed loop "position setpoint -> measured position".
+
+A :class:`DiscreteModel` is a SISO state-space model ``(A, B, C)`` sampled at ``dt_s`` with an
+explicit integer input delay of ``delay_samples``::
+
+    x(k+1) = A x(k) + B u(k - delay_samples)
+    y(k)   = C x(k)
+
+There is no direct feedthrough: a position loop cannot move the vehicle in the same sample it
+receives a setpoint. The lifted form of the paper (eq. 4-5) maps ``U = [u(0) .. u(N-1)]`` to
+``Y = [y(1) .. y(N)]`` through the lower-triangular Toeplitz matrix of Markov parameters
+``f_k = C A^(k-1-delay) B``. When the relative degree ``r`` is above one the first ``r - 1``
+outputs cannot be influenced and the last ``r - 1`` inputs influence nothing within the
+trial; :func:`controllable_slices` names both ranges so that the estimator, the update and
+the report treat them the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from gcs.errors import ModelError
+
+__all__ = [
+    "DiscreteModel",
+    "from_transfer_function",
+    "from_state_space",
+    "markov_parameters",
+    "lifted_matrix",
+    "simulate",
+    "relative_degree",
+    "controllable_slices",
+    "dc_gain",
+]
+
+
+@dataclass(frozen=True)
+class DiscreteModel:
+    """SISO discrete state-space model with an explicit input delay.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+        State matrix.
+    B : ndarray, shape (n, 1)
+        Input matrix (input: position setpoint [m]).
+    C : ndarray, shape (1, n)
+        Output matrix (output: measured position [m]).
+    dt_s : float
+        Sample time [s].
+    delay_samples : int
+        Pure input delay in samples, applied before ``B``.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    dt_s: float
+    delay_samples: int = 0
+
+    def __post_init__(self) -> None:
+        A = np.atleast_2d(np.asarray(self.A, dtype=float))
+        n = A.shape[0]
+        B = np.asarray(self.B, dtype=float).reshape(n, 1)
+        C = np.asarray(self.C, dtype=float).reshape(1, n)
+        if A.shape != (n, n):
+            raise ModelError(f"A must be square, got shape {A.shape}")
+        if not np.all(np.isfinite(A)) or not np.all(np.isfinite(B)) or not np.all(np.isfinite(C)):
+            raise ModelError("model matrices contain NaN or inf")
+        if not self.dt_s > 0:
+            raise ModelError(f"dt_s must be positive, got {self.dt_s}")
+        if self.delay_samples < 0:
+            raise ModelError(f"delay_samples must be >= 0, got {self.delay_samples}")
+        object.__setattr__(self, "A", A)
+        object.__setattr__(self, "B", B)
+        object.__setattr__(self, "C", C)
+        object.__setattr__(self, "delay_samples", int(self.delay_samples))
+
+    @property
+    def order(self) -> int:
+        """Number of states of the core model (without delay states)."""
+        return self.A.shape[0]
+
+    def is_stable(self) -> bool:
+        """True when all eigenvalues of ``A`` lie strictly inside the unit circle."""
+        return bool(np.all(np.abs(np.linalg.eigvals(self.A)) < 1.0))
+
+
+def from_transfer_function(
+    num: list[float], den: list[float], delay_s: float, dt_s: float
+) -> DiscreteModel:
+    """Discretise ``G(s) = exp(-delay_s s) num(s) / den(s)`` with a zero-order hold.
+
+    The zero-order hold is exact for the way setpoints are flown: each setpoint is held
+    constant for one sample time. A delay that is a whole number of samples becomes
+    ``delay_samples``; a fractional remainder ``tau`` is discretised exactly (modified
+    z-transform, Astrom and Wittenmark, Computer-Controlled Systems, sec. 2.3) with one extra
+    state holding the previous input.
+
+    Parameters
+    ----------
+    num, den : list of float
+        Polynomial coefficients in descending powers of ``s``; ``len(num) < len(den)``.
+    delay_s : float
+        Pure time delay [s], ``>= 0``.
+    dt_s : float
+        Sample time [s].
+
+    Returns
+    -------
+    DiscreteModel
+    """
+    num = np.atleast_1d(np.asarray(num, dtype=float))
+    den = np.atleast_1d(np.asarray(den, dtype=float))
+    num = np.trim_zeros(num, "f")
+    den = np.trim_zeros(den, "f")
+    if den.size == 0 or num.size == 0:
+        raise ModelError("num and den must be non-empty and non-zero")
+    if num.size >= den.size:
+        raise ModelError("the transfer function must be strictly proper (len(num) < len(den))")
+    if delay_s < 0 or not np.isfinite(delay_s):
+        raise ModelError(f"delay_s must be >= 0, got {delay_s}")
+    Ac, Bc, Cc, _ = scipy.signal.tf2ss(num, den)
+    n_whole = int(np.floor(delay_s / dt_s + 1e-9))
+    tau = delay_s - n_whole * dt_s
+    if tau <= 1e-9 * dt_s:
+        Ad, B0 = _zoh(Ac, Bc, dt_s)
+        return DiscreteModel(Ad, B0, Cc, dt_s, n_whole)
+    # Fractional delay: x(k+1) = Ad x(k) + G0 u(k-n) + G1 u(k-n-1), G0 over [0, dt - tau],
+    # G1 = e^{A (dt - tau)} * integral over [0, tau]. Augment with z(k) = u(k-n-1).
+    Ad, _ = _zoh(Ac, Bc, dt_s)
+    e_late, g0 = _zoh(Ac, Bc, dt_s - tau)
+    _, g_tau = _zoh(Ac, Bc, tau)
+    g1 = e_late @ g_tau
+    n = Ac.shape[0]
+    A_aug = np.block([[Ad, g1], [np.zeros((1, n)), np.zeros((1, 1))]])
+    B_aug = np.vstack([g0, np.ones((1, 1))])
+    C_aug = np.hstack([Cc, np.zeros((1, 1))])
+    return DiscreteModel(A_aug, B_aug, C_aug, dt_s, n_whole)
+
+
+def from_state_space(
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    D: np.ndarray | float,
+    dt_s: float,
+    delay_samples: int = 0,
+) -> DiscreteModel:
+    """Build a :class:`DiscreteModel` from discrete ``A, B, C, D`` (e.g. identified).
+
+    Parameters
+    ----------
+    A, B, C : array_like
+        Discrete state-space matrices, shapes (n, n), (n, 1), (1, n).
+    D : array_like or float
+        Direct feedthrough; must be zero (to 1e-9 relative to the Markov parameters), since the
+        lifted map of the paper has none.
+    dt_s : float
+        Sample time [s].
+    delay_samples : int
+        Pure input delay [samples].
+
+    Returns
+    -------
+    DiscreteModel
+    """
+    model = DiscreteModel(A, B, C, dt_s, delay_samples)
+    d = float(np.asarray(D, dtype=float).reshape(-1)[0]) if np.size(D) else 0.0
+    scale = max(float(np.max(np.abs(markov_parameters(model, 20)))), 1e-12)
+    if abs(d) > 1e-9 * scale:
+        raise ModelError(
+            f"direct feedthrough D = {d:g} is not supported: identify with D = 0 (no_d)"
+        )
+    return model
+
+
+def _zoh(Ac: np.ndarray, Bc: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(e^{A t}, integral_0^t e^{A s} ds B)`` via one matrix exponential."""
+    n, m = Bc.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n] = Ac * t
+    M[:n, n:] = Bc * t
+    E = scipy.linalg.expm(M)
+    return E[:n, :n], E[:n, n:]
+
+
+def markov_parameters(model: DiscreteModel, n: int) -> np.ndarray:
+    """Markov parameters ``f_1 .. f_n`` (eq. 2), the delay included.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+    n : int
+        How many parameters.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``f[k-1] = C A^(k-1-delay) B`` for ``k > delay``, zero otherwise.
+    """
+    f = np.zeros(n)
+    x = model.B[:, 0].copy()
+    c = model.C[0]
+    for k in range(model.delay_samples, n):
+        f[k] = c @ x
+        x = model.A @ x
+    return f
+
+
+def lifted_matrix(model: DiscreteModel, n: int) -> np.ndarray:
+    """Lower-triangular Toeplitz matrix ``F`` of eq. (5), ``Y = F U``.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+    n : int
+        Trial length in samples.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        ``F[i, j] = f_(i-j+1)`` for ``i >= j``; ``Y[i] = y(i+1)``, ``U[j] = u(j)``.
+    """
+    f = markov_parameters(model, n)
+    return scipy.linalg.toeplitz(f, np.zeros(n))
+
+
+def simulate(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
+    """Simulate from rest: outputs ``y(1) .. y(N)`` for inputs ``u(0) .. u(N-1)``.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+    u : ndarray, shape (N,) or (N, M)
+        Input sequence(s); a second axis simulates M sequences at once.
+
+    Returns
+    -------
+    ndarray, same shape as ``u``
+    """
+    u = np.asarray(u, dtype=float)
+    squeeze = u.ndim == 1
+    U = u[:, None] if squeeze else u
+    N = U.shape[0]
+    d = model.delay_samples
+    x = np.zeros((model.order, U.shape[1]))
+    Y = np.zeros_like(U)
+    for k in range(N):
+        if k - d >= 0:
+            x = model.A @ x + model.B @ U[k - d][None, :]
+        else:
+            x = model.A @ x
+        Y[k] = model.C @ x
+    return Y[:, 0] if squeeze else Y
+
+
+def relative_degree(model: DiscreteModel, rtol: float = 1e-9) -> int:
+    """Index ``r`` of the first non-zero Markov parameter (``r >= 1``).
+
+    Parameters
+    ----------
+    model : DiscreteModel
+    rtol : float
+        A Markov parameter counts as zero below ``rtol`` times the largest of the first
+        ``delay + order + 1``.
+
+    Returns
+    -------
+    int
+    """
+    m = model.delay_samples + model.order + 1
+    f = markov_parameters(model, m)
+    scale = float(np.max(np.abs(f)))
+    if scale == 0.0:
+        raise ModelError("the model's input has no effect on its output (all Markov parameters 0)")
+    return int(np.argmax(np.abs(f) > rtol * scale)) + 1
+
+
+def controllable_slices(model: DiscreteModel, n: int) -> tuple[slice, slice]:
+    """Which inputs can act and which outputs can be influenced within an ``n``-sample trial.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+    n : int
+        Trial length in samples.
+
+    Returns
+    -------
+    inputs : slice
+        ``u(0) .. u(n - r)``: the inputs that influence some output of the trial.
+    outputs : slice
+        Indices into ``Y`` of ``y(r) .. y(n)``: the outputs some input influences.
+    """
+    r = relative_degree(model)
+    if r > n:
+        raise ModelError(f"trial of {n} samples is shorter than the model's delay ({r} samples)")
+    return slice(0, n - r + 1), slice(r - 1, n)
+
+
+def dc_gain(model: DiscreteModel) -> float:
+    """Static gain ``C (I - A)^-1 B`` of a stable model."""
+    n = model.order
+    return float((model.C @ np.linalg.solve(np.eye(n) - model.A, model.B))[0, 0])
