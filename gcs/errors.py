@@ -36,3 +36,7 @@ class VehicleError(GcsError, RuntimeError):
 
 class TrialAborted(GcsError, RuntimeError):
     """A trial stopped before its end (watchdog, Ctrl-C, link loss); it is marked incomplete."""
+
+
+class UpdateInfeasible(GcsError, ValueError):
+    """The setpoint limits admit no next input (box, step or deviation bound); names the limit."""

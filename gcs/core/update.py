@@ -1,0 +1,561 @@
+"""Input update of the smoother-based ILC: the quadratically optimal design of eq. (8).
+
+The next trial input ``U_{j+1}`` minimises (paper, sec. III-B)::
+
+    J = E^T We E + dU^T Wdu dU + U^T Wu U,
+    E = F U - Yd + D_hat,   dU = U - U_j,
+
+per axis (SISO), in learning coordinates (metres relative to the trajectory's start point, the
+vehicle at rest there before the trial: zero initial state, ``u(-1) = 0``). ``We = we I``,
+``Wdu = wdu I``, ``Wu = wu I``.
+
+Relative degree ``r > 1`` (a delay of ``r - 1`` samples) is treated as in
+:func:`gcs.core.model.controllable_slices`:
+
+* the cost covers only the outputs ``y(r) .. y(N)``: ``y(1) .. y(r-1)`` cannot be influenced;
+* the free inputs are ``u(0) .. u(N-r)``; the last ``r - 1`` inputs influence nothing within the
+  trial and are pinned to the final reference ``yd(N)`` (the vehicle ends hovering at the end
+  point). Their ``dU`` and ``U`` terms are constants of ``J`` and are included in the reported
+  objective.
+
+Formulation (linear in ``N``): the decision vector is ``z = [u(0) .. u(N-r), x(d+1) .. x(N)]``
+with ``d`` the model's input delay; the dynamics ``x(k+1) = A x(k) + B u(k-d)`` are banded
+equality constraints and the cost on the outputs is ``we (C x(k) - yd(k) + d_hat(k))^2``.
+Without limits (or when the unconstrained optimum already satisfies them) the equality
+constrained QP is solved through its sparse KKT system (``scipy.sparse.linalg.splu``, fill
+reducing ordering); with active limits the same QP plus linear inequalities goes to Clarabel
+(``ZeroConeT`` for the dynamics, ``NonnegativeConeT`` for the limits). See ``docs/update.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import clarabel
+import numpy as np
+import scipy.linalg
+import scipy.signal
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from gcs.core.model import (
+    DiscreteModel,
+    controllable_slices,
+    lifted_matrix,
+    markov_parameters,
+    relative_degree,
+)
+from gcs.errors import ProfileError, RunLogError, TrajectoryError, UpdateInfeasible
+
+__all__ = [
+    "UpdateWeights",
+    "SetpointLimits",
+    "UpdateResult",
+    "next_input",
+    "unconstrained_update_operator",
+    "reference_for_inputs",
+]
+
+#: A limit counts as satisfied by the unconstrained optimum (fast path) within this margin [m].
+_FAST_PATH_TOL_M = 1e-9
+#: An inequality counts as active when its slack is below this [m].
+_ACTIVE_TOL_M = 1e-7
+#: Feasibility pre-check margin [m] (intervals emptier than this are infeasible).
+_FEAS_TOL_M = 1e-9
+
+
+@dataclass(frozen=True)
+class UpdateWeights:
+    """Scalar weights of eq. (8): ``We = we I``, ``Wdu = wdu I``, ``Wu = wu I``.
+
+    Defaults are the values of the paper's Table I.
+
+    Parameters
+    ----------
+    we : float
+        Weight on the predicted tracking error [1/m^2], ``> 0``.
+    wdu : float
+        Weight on the input change between trials [1/m^2], ``>= 0``.
+    wu : float
+        Weight on the input itself [1/m^2], ``>= 0``.
+    """
+
+    we: float = 1.0
+    wdu: float = 0.01
+    wu: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, lower_ok in (("we", False), ("wdu", True), ("wu", True)):
+            value = getattr(self, name)
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                raise ProfileError(
+                    f"UpdateWeights.{name} must be a number, got {value!r}"
+                ) from None
+            if not math.isfinite(v) or v < 0 or (v == 0 and not lower_ok):
+                bound = ">= 0" if lower_ok else "> 0"
+                raise ProfileError(f"UpdateWeights.{name} must be finite and {bound}, got {value}")
+            object.__setattr__(self, name, v)
+
+
+@dataclass(frozen=True)
+class SetpointLimits:
+    """Limits on the setpoints of one axis, in learning coordinates. All optional.
+
+    Parameters
+    ----------
+    u_min_m : float or None
+        Lower edge of the arena box for this axis [m].
+    u_max_m : float or None
+        Upper edge of the arena box for this axis [m].
+    max_step_m : float or None
+        Bound on ``|u(k) - u(k-1)|`` per sample [m], with ``u(-1) = 0`` (vehicle at rest at
+        the start point). Also applies between the last free input and the pinned tail.
+    max_deviation_m : float or None
+        Bound on ``|u(k) - yd_u(k)|`` [m], where ``yd_u`` is the reference aligned with the
+        inputs (see :func:`reference_for_inputs`): the setpoint at ``k`` acts first on
+        ``y(k + r)``, so ``yd_u(k) = yd(k + r)``, and ``yd_u(k) = yd(N)`` for the pinned tail.
+    """
+
+    u_min_m: float | None = None
+    u_max_m: float | None = None
+    max_step_m: float | None = None
+    max_deviation_m: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("u_min_m", "u_max_m", "max_step_m", "max_deviation_m"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                raise ProfileError(
+                    f"SetpointLimits.{name} must be a number or None, got {value!r}"
+                ) from None
+            if math.isnan(v):
+                raise ProfileError(f"SetpointLimits.{name} is NaN")
+            if name in ("max_step_m", "max_deviation_m") and not v >= 0:
+                raise ProfileError(f"SetpointLimits.{name} must be >= 0, got {value}")
+            object.__setattr__(self, name, v)
+        if self.u_min_m is not None and self.u_max_m is not None and self.u_min_m > self.u_max_m:
+            raise UpdateInfeasible(
+                f"arena box is empty: u_min_m = {self.u_min_m:g} > u_max_m = {self.u_max_m:g}"
+            )
+
+
+@dataclass(frozen=True)
+class UpdateResult:
+    """Outcome of one input update (one axis).
+
+    Parameters
+    ----------
+    u_m : ndarray, shape (N,)
+        Next trial input ``u(0) .. u(N-1)`` [m], learning coordinates.
+    status : str
+        ``"solved"``, or Clarabel's status name when it is not ``Solved`` (``"AlmostSolved"``).
+    objective : float
+        Value of eq. (8) at ``u_m`` [dimensionless], the error term over ``y(r) .. y(N)``,
+        the ``dU`` and ``U`` terms over all ``N`` inputs (the pinned tail included); computed
+        from ``u_m`` by the same simulation for both methods.
+    method : str
+        ``"direct"`` (sparse KKT factorisation) or ``"clarabel"``.
+    active_constraints : int
+        Number of inequality limits holding with equality (slack below 1e-7 m).
+    """
+
+    u_m: np.ndarray
+    status: str
+    objective: float
+    method: str
+    active_constraints: int
+
+
+# ---------------------------------------------------------------------------------------------
+# Problem data
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """Equality-constrained QP ``min 1/2 z'Pz + q'z  s.t.  G z = h`` of one axis."""
+
+    n: int  # trial length N
+    r: int  # relative degree
+    m: int  # number of free inputs, N - r + 1
+    y_final: float  # yd(N), value of the pinned tail
+    P: sp.csc_matrix  # full symmetric
+    q: np.ndarray
+    G: sp.csc_matrix
+    h: np.ndarray
+    yd_u: np.ndarray  # reference aligned with the inputs, shape (N,)
+
+
+def _check_vector(name: str, value: object, n: int | None, exc: type[Exception]) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim != 1:
+        raise exc(f"{name} must be one-dimensional, got shape {arr.shape}")
+    if n is not None and arr.shape[0] != n:
+        raise exc(f"{name} must have {n} samples, got {arr.shape[0]}")
+    if not np.all(np.isfinite(arr)):
+        raise exc(f"{name} contains NaN or inf")
+    return arr
+
+
+def reference_for_inputs(yd_m: np.ndarray, r: int) -> np.ndarray:
+    """Align the reference with the inputs: ``yd_u(k) = yd(k + r)``, the tail held at ``yd(N)``.
+
+    Parameters
+    ----------
+    yd_m : ndarray, shape (N,)
+        Reference ``yd(1) .. yd(N)`` [m] (Y-indexed).
+    r : int
+        Relative degree of the model (``>= 1``).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        ``yd_u(k)`` for ``k = 0 .. N-1`` [m] (U-indexed): ``yd_m[k + r - 1]`` for
+        ``k <= N - r`` and ``yd_m[-1]`` for the ``r - 1`` pinned tail samples.
+    """
+    yd_m = np.asarray(yd_m, dtype=float)
+    return np.concatenate([yd_m[r - 1 :], np.full(r - 1, yd_m[-1])])
+
+
+def _build_problem(
+    model: DiscreteModel,
+    yd_m: np.ndarray,
+    d_hat_m: np.ndarray,
+    u_prev_m: np.ndarray,
+    weights: UpdateWeights,
+) -> _Problem:
+    if not isinstance(model, DiscreteModel):
+        raise TypeError(f"model must be a DiscreteModel, got {type(model).__name__}")
+    if not isinstance(weights, UpdateWeights):
+        raise TypeError(f"weights must be UpdateWeights, got {type(weights).__name__}")
+    yd = _check_vector("yd_m", yd_m, None, TrajectoryError)
+    N = yd.shape[0]
+    if N == 0:
+        raise TrajectoryError("yd_m is empty")
+    dh = _check_vector("d_hat_m", d_hat_m, N, RunLogError)
+    up = _check_vector("u_prev_m", u_prev_m, N, RunLogError)
+    controllable_slices(model, N)  # raises ModelError when the trial is shorter than r
+    r = relative_degree(model)
+    d = model.delay_samples
+    nx = model.order
+    m = N - r + 1
+    T = N - d  # number of state blocks x(d+1) .. x(N)
+    s = r - d - 1  # first state block whose output is in the cost
+    A, B, C = model.A, model.B, model.C
+    y_final = float(yd[-1])
+
+    # Dynamics: x(d+1+t) - A x(d+t) - B u(t) = 0, t = 0 .. T-1 (x(d) = 0); u(t) pinned for t >= m.
+    GX = sp.kron(sp.eye(T), sp.eye(nx)) - sp.kron(sp.eye(T, k=-1), sp.csr_matrix(A))
+    GU = sp.kron(sp.eye(T, m), sp.csr_matrix(-B))
+    G = sp.hstack([GU, GX], format="csc")
+    pinned = (np.arange(T) >= m).astype(float)
+    h = np.kron(pinned * y_final, B[:, 0])
+
+    # Cost: we (C x(k) - w(k))^2 for k = r..N, w = yd - d_hat; (wdu + wu) u^2 - 2 wdu u_prev u.
+    mask = (np.arange(T) >= s).astype(float)
+    w = yd - dh
+    ctc = C.T @ C
+    PX = sp.kron(sp.diags(mask), sp.csr_matrix(2.0 * weights.we * ctc))
+    PU = sp.eye(m) * (2.0 * (weights.wdu + weights.wu))
+    P = sp.block_diag([PU, PX], format="csc")
+    qX = (-2.0 * weights.we * (mask * w[d:N]))[:, None] * C[0][None, :]
+    qU = -2.0 * weights.wdu * up[:m]
+    q = np.concatenate([qU, qX.ravel()])
+    return _Problem(N, r, m, y_final, P, q, G, h, reference_for_inputs(yd, r))
+
+
+def _full_input(prob: _Problem, u_free: np.ndarray) -> np.ndarray:
+    return np.concatenate([u_free, np.full(prob.r - 1, prob.y_final)])
+
+
+def _solve_direct(prob: _Problem) -> np.ndarray:
+    """Solve the KKT system ``[P G'; G 0] [z; lam] = [-q; h]``; return the free inputs."""
+    K = sp.bmat([[prob.P, prob.G.T], [prob.G, None]], format="csc")
+    rhs = np.concatenate([-prob.q, prob.h])
+    lu = spla.splu(K, permc_spec="MMD_AT_PLUS_A")
+    sol = lu.solve(rhs)
+    if not np.all(np.isfinite(sol)):
+        raise RuntimeError("KKT factorisation of the input update produced NaN")
+    # One step of iterative refinement keeps the direct path within 1e-10 of the exact optimum.
+    res = rhs - K @ sol
+    sol += lu.solve(res)
+    return sol[: prob.m]
+
+
+# ---------------------------------------------------------------------------------------------
+# Limits
+# ---------------------------------------------------------------------------------------------
+
+
+def _intervals(prob: _Problem, limits: SetpointLimits) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample interval ``[lo, hi]`` from the box and the deviation bound, shape (N,)."""
+    lo = np.full(prob.n, -np.inf)
+    hi = np.full(prob.n, np.inf)
+    if limits.u_min_m is not None:
+        lo[:] = limits.u_min_m
+    if limits.u_max_m is not None:
+        hi[:] = limits.u_max_m
+    if limits.max_deviation_m is not None:
+        lo = np.maximum(lo, prob.yd_u - limits.max_deviation_m)
+        hi = np.minimum(hi, prob.yd_u + limits.max_deviation_m)
+    return lo, hi
+
+
+def _violations(u: np.ndarray, prob: _Problem, limits: SetpointLimits, tol: float) -> int:
+    """Number of limit rows whose slack is below ``tol`` (``tol < 0``: violated by ``-tol``)."""
+    lo, hi = _intervals(prob, limits)
+    count = int(np.sum(u - lo[: u.size] < tol)) + int(np.sum(hi[: u.size] - u < tol))
+    if limits.max_step_m is not None:
+        du = np.diff(np.concatenate([[0.0], u]))
+        count += int(np.sum(limits.max_step_m - du < tol) + np.sum(limits.max_step_m + du < tol))
+    return count
+
+
+def _check_feasible(prob: _Problem, limits: SetpointLimits) -> None:
+    """Exact feasibility test of the limits (they form a chain in ``u``); raise if empty.
+
+    The set of values ``u(k)`` reachable by a sequence satisfying every limit up to ``k`` is an
+    interval, propagated forward: ``R(k) = I(k) & [R(k-1) - s, R(k-1) + s]``.
+    """
+    lo, hi = _intervals(prob, limits)
+    tail = np.arange(prob.n) >= prob.m
+    yT = prob.y_final
+    if np.any(tail):
+        if limits.u_min_m is not None and yT < limits.u_min_m - _FEAS_TOL_M:
+            raise UpdateInfeasible(
+                f"final reference yd[-1] = {yT:g} m (pinned hover point) is below "
+                f"u_min_m = {limits.u_min_m:g} m"
+            )
+        if limits.u_max_m is not None and yT > limits.u_max_m + _FEAS_TOL_M:
+            raise UpdateInfeasible(
+                f"final reference yd[-1] = {yT:g} m (pinned hover point) is above "
+                f"u_max_m = {limits.u_max_m:g} m"
+            )
+    lo = np.where(tail, yT, lo)
+    hi = np.where(tail, yT, hi)
+    empty = np.nonzero(lo > hi + _FEAS_TOL_M)[0]
+    if empty.size:
+        k = int(empty[0])
+        raise UpdateInfeasible(
+            f"arena box [{limits.u_min_m}, {limits.u_max_m}] m and max_deviation_m = "
+            f"{limits.max_deviation_m:g} m leave no setpoint at sample {k} "
+            f"(aligned reference {prob.yd_u[k]:g} m)"
+        )
+    step = limits.max_step_m
+    if step is None:
+        return
+    a, b = 0.0, 0.0  # u(-1) = 0
+    for k in range(prob.n):
+        a2, b2 = max(lo[k], a - step), min(hi[k], b + step)
+        if a2 > b2 + _FEAS_TOL_M:
+            raise UpdateInfeasible(
+                f"max_step_m = {step:g} m cannot reach the allowed setpoints "
+                f"[{lo[k]:g}, {hi[k]:g}] m at sample {k} (reachable [{a - step:g}, {b + step:g}] m)"
+            )
+        a, b = a2, max(a2, b2)
+
+
+def _inequalities(prob: _Problem, limits: SetpointLimits) -> tuple[sp.csc_matrix, np.ndarray]:
+    """Rows ``A_in z <= b_in`` on the free inputs (state columns zero)."""
+    m, nz = prob.m, prob.P.shape[0]
+    lo, hi = _intervals(prob, limits)
+    lo, hi = lo[:m], hi[:m]
+    blocks: list[sp.spmatrix] = []
+    rhs: list[np.ndarray] = []
+    eye = sp.eye(m, nz, format="csr")
+    up = np.isfinite(hi)
+    if np.any(up):
+        blocks.append(eye[up])
+        rhs.append(hi[up])
+    dn = np.isfinite(lo)
+    if np.any(dn):
+        blocks.append(-eye[dn])
+        rhs.append(-lo[dn])
+    if limits.max_step_m is not None:
+        s = limits.max_step_m
+        # D u = [u(0) - 0, u(1) - u(0), .., u(m-1) - u(m-2), (y_final - u(m-1)) if tail].
+        D = sp.eye(m, nz, format="csr") - sp.eye(m, nz, k=-1, format="csr")
+        off = np.zeros(m)
+        if prob.r > 1:
+            D = sp.vstack([D, -sp.eye(1, nz, k=m - 1, format="csr")], format="csr")
+            off = np.append(off, prob.y_final)
+        blocks += [D, -D]
+        rhs += [s - off, s + off]
+    if not blocks:
+        return sp.csc_matrix((0, nz)), np.zeros(0)
+    return sp.vstack(blocks, format="csc"), np.concatenate(rhs)
+
+
+def _clarabel_settings() -> clarabel.DefaultSettings:
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.tol_gap_abs = 1e-10
+    settings.tol_gap_rel = 1e-10
+    settings.tol_feas = 1e-10
+    settings.tol_ktratio = 1e-8
+    settings.max_iter = 300
+    return settings
+
+
+def _solve_clarabel(
+    prob: _Problem, limits: SetpointLimits | None
+) -> tuple[np.ndarray, str, clarabel.DefaultSolution]:
+    """Solve the QP with the limits' inequalities by Clarabel; return free inputs and status."""
+    nz = prob.P.shape[0]
+    A_in, b_in = _inequalities(prob, limits) if limits is not None else (sp.csc_matrix((0, nz)), [])
+    A = sp.vstack([prob.G, A_in], format="csc")
+    b = np.concatenate([prob.h, b_in])
+    cones = [clarabel.ZeroConeT(prob.G.shape[0])]
+    if A_in.shape[0]:
+        cones.append(clarabel.NonnegativeConeT(A_in.shape[0]))
+    P = sp.triu(prob.P, format="csc")
+    solver = clarabel.DefaultSolver(P, prob.q, A, b, cones, _clarabel_settings())
+    solution = solver.solve()
+    status = str(solution.status)
+    if status in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
+        raise UpdateInfeasible(f"Clarabel reports the setpoint limits infeasible ({status})")
+    if status not in ("Solved", "AlmostSolved"):
+        raise RuntimeError(f"Clarabel failed on the input update (status {status})")
+    x = np.asarray(solution.x, dtype=float)
+    return x[: prob.m], ("solved" if status == "Solved" else status), solution
+
+
+# ---------------------------------------------------------------------------------------------
+# Public API
+# ---------------------------------------------------------------------------------------------
+
+
+def _objective(
+    model: DiscreteModel,
+    u: np.ndarray,
+    yd: np.ndarray,
+    dh: np.ndarray,
+    up: np.ndarray,
+    weights: UpdateWeights,
+    r: int,
+) -> float:
+    f = markov_parameters(model, u.size)
+    y = scipy.signal.oaconvolve(f, u)[: u.size] if u.size > 64 else np.convolve(f, u)[: u.size]
+    e = (y - yd + dh)[r - 1 :]
+    du = u - up
+    return float(weights.we * e @ e + weights.wdu * du @ du + weights.wu * u @ u)
+
+
+def next_input(
+    model: DiscreteModel,
+    yd_m: np.ndarray,
+    d_hat_m: np.ndarray,
+    u_prev_m: np.ndarray,
+    weights: UpdateWeights,
+    limits: SetpointLimits | None = None,
+) -> UpdateResult:
+    """Next trial input: minimiser of eq. (8) under the setpoint limits (one axis).
+
+    Parameters
+    ----------
+    model : DiscreteModel
+        Closed-loop model "setpoint -> position" of this axis.
+    yd_m : ndarray, shape (N,)
+        Reference ``yd(1) .. yd(N)`` [m], learning coordinates (Y-indexed).
+    d_hat_m : ndarray, shape (N,)
+        Disturbance estimate ``d_hat(1) .. d_hat(N)`` [m] (Y-indexed), e.g. from the smoother.
+    u_prev_m : ndarray, shape (N,)
+        Input of the last trial ``u_j(0) .. u_j(N-1)`` [m] (U-indexed).
+    weights : UpdateWeights
+        Weights of eq. (8).
+    limits : SetpointLimits or None
+        Setpoint limits of this axis; None for none.
+
+    Returns
+    -------
+    UpdateResult
+        ``u_m`` of shape (N,) [m]; the first ``N - r + 1`` entries optimised, the last
+        ``r - 1`` equal to ``yd_m[-1]``.
+
+    Raises
+    ------
+    UpdateInfeasible
+        The limits admit no input sequence (the message names the limit).
+    TrajectoryError, RunLogError
+        ``yd_m`` (resp. ``d_hat_m``, ``u_prev_m``) has a bad shape or NaN/inf.
+    ModelError
+        The trial is shorter than the model's relative degree.
+    RuntimeError
+        Clarabel failed numerically (status other than solved or infeasible).
+    """
+    prob = _build_problem(model, yd_m, d_hat_m, u_prev_m, weights)
+    yd = np.asarray(yd_m, dtype=float)
+    dh = np.asarray(d_hat_m, dtype=float)
+    up = np.asarray(u_prev_m, dtype=float)
+    u = _full_input(prob, _solve_direct(prob))
+    method, status = "direct", "solved"
+    if limits is not None and _violations(u, prob, limits, -_FAST_PATH_TOL_M) > 0:
+        _check_feasible(prob, limits)
+        u_free, status, _ = _solve_clarabel(prob, limits)
+        u = _full_input(prob, u_free)
+        method = "clarabel"
+    active = 0 if limits is None else _violations(u, prob, limits, _ACTIVE_TOL_M)
+    objective = _objective(model, u, yd, dh, up, weights, prob.r)
+    return UpdateResult(u, status, objective, method, active)
+
+
+def unconstrained_update_operator(
+    model: DiscreteModel, n: int, weights: UpdateWeights
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Dense affine form of the unconstrained update, for batched studies (small ``n``).
+
+    ``next_input(model, yd, d_hat, u_prev, weights).u_m == M @ (yd - d_hat) + L @ u_prev
+    + c * yd[-1]``; for many trials stack them as columns: ``M @ (Yd - D) + L @ Up +
+    np.outer(c, yd_final)``.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+        Closed-loop model of the axis.
+    n : int
+        Trial length ``N`` [samples].
+    weights : UpdateWeights
+        Weights of eq. (8).
+
+    Returns
+    -------
+    M : ndarray, shape (n, n)
+        Acts on ``yd - d_hat`` (Y-indexed) [m/m]; columns ``0 .. r-2`` (the outputs that
+        cannot be influenced) and rows ``n-r+1 ..`` (pinned tail) are zero.
+    L : ndarray, shape (n, n)
+        Acts on ``u_prev`` (U-indexed) [m/m]; non-zero only in the free block
+        ``[:n-r+1, :n-r+1]`` and only when ``wdu > 0``.
+    c : ndarray, shape (n,)
+        Coefficient of ``yd[-1]``: 1 on the ``r - 1`` pinned tail samples, 0 elsewhere.
+
+    Notes
+    -----
+    ``H = we Fc' Fc + (wdu + wu) I`` with ``Fc = F[r-1:, :n-r+1]`` (square, lower triangular,
+    diagonal ``f_r != 0``); ``M[:m, r-1:] = H^-1 we Fc'``, ``L[:m, :m] = wdu H^-1``.
+    Cost ``O(n^3)``: meant for ``n`` up to a few thousand.
+    """
+    if not isinstance(weights, UpdateWeights):
+        raise TypeError(f"weights must be UpdateWeights, got {type(weights).__name__}")
+    n = int(n)
+    inputs, outputs = controllable_slices(model, n)
+    m = inputs.stop
+    r = n - m + 1
+    F = lifted_matrix(model, n)
+    Fc = F[outputs, inputs]
+    H = weights.we * (Fc.T @ Fc) + (weights.wdu + weights.wu) * np.eye(m)
+    cho = scipy.linalg.cho_factor(H)
+    M = np.zeros((n, n))
+    L = np.zeros((n, n))
+    M[:m, r - 1 :] = scipy.linalg.cho_solve(cho, weights.we * Fc.T)
+    if weights.wdu > 0:
+        L[:m, :m] = scipy.linalg.cho_solve(cho, weights.wdu * np.eye(m))
+    c = np.zeros(n)
+    c[m:] = 1.0
+    return M, L, c
