@@ -1,0 +1,464 @@
+"""Tests of gcs.core.update (input update of eq. 8), in the style of Clarabel's own tests:
+status, solution and objective are checked against independently computed values."""
+
+from __future__ import annotations
+
+import clarabel
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gcs.core import update as upd
+from gcs.core.model import (
+    DiscreteModel,
+    from_transfer_function,
+    lifted_matrix,
+    relative_degree,
+    simulate,
+)
+from gcs.core.update import (
+    SetpointLimits,
+    UpdateResult,
+    UpdateWeights,
+    next_input,
+    reference_for_inputs,
+    unconstrained_update_operator,
+)
+from gcs.errors import (
+    GcsError,
+    ModelError,
+    ProfileError,
+    RunLogError,
+    TrajectoryError,
+    UpdateInfeasible,
+)
+
+# ---------------------------------------------------------------------------------------------
+# helpers: independent reference solutions on the dense lifted (controllable) problem
+# ---------------------------------------------------------------------------------------------
+
+
+def random_stable_model(seed: int, delay: int, order: int, zero_cb: bool = False) -> DiscreteModel:
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(order, order))
+    A *= rng.uniform(0.2, 0.95) / max(np.max(np.abs(np.linalg.eigvals(A))), 1e-9)
+    B = rng.normal(size=(order, 1))
+    C = rng.normal(size=(1, order))
+    if zero_cb and order >= 2:
+        # Chain x2(k+1) = b x2(k) + x1(k): C B = 0, C A B = 1 (relative degree delay + 2).
+        A = np.array([[rng.uniform(-0.9, 0.9), 0.0], [1.0, rng.uniform(-0.9, 0.9)]])
+        B = np.array([[1.0], [0.0]])
+        C = np.array([[0.0, 1.0]])
+    return DiscreteModel(A, B, C, 0.05, delay)
+
+
+def signals(seed: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed + 1000)
+    t = np.arange(1, n + 1) / n
+    yd = 2.0 * np.sin(2 * np.pi * t) + 0.5 * t
+    d_hat = 0.1 * rng.normal(size=n)
+    u_prev = yd + 0.2 * rng.normal(size=n)
+    return yd, d_hat, u_prev
+
+
+def dense_reference(model, yd, d_hat, u_prev, w: UpdateWeights) -> np.ndarray:
+    """Normal equations of eq. (8) on the reduced problem (free inputs, influenced outputs)."""
+    n = yd.size
+    r = relative_degree(model)
+    m = n - r + 1
+    F = lifted_matrix(model, n)
+    Fc = F[r - 1 :, :m]
+    H = w.we * Fc.T @ Fc + (w.wdu + w.wu) * np.eye(m)
+    g = w.we * Fc.T @ (yd - d_hat)[r - 1 :] + w.wdu * u_prev[:m]
+    u = np.full(n, yd[-1])
+    u[:m] = np.linalg.solve(H, g)
+    return u
+
+
+def objective_eq8(model, u, yd, d_hat, u_prev, w: UpdateWeights) -> float:
+    """Eq. (8) from a time-domain simulation (independent of the lifted matrix)."""
+    r = relative_degree(model)
+    e = (simulate(model, u) - yd + d_hat)[r - 1 :]
+    du = u - u_prev
+    return float(w.we * e @ e + w.wdu * du @ du + w.wu * u @ u)
+
+
+def dense_clarabel_qp(model, yd, d_hat, u_prev, w, limits: SetpointLimits):
+    """Independent constrained solution: dense lifted QP in the free inputs, solved by Clarabel."""
+    n = yd.size
+    r = relative_degree(model)
+    m = n - r + 1
+    F = lifted_matrix(model, n)
+    Fc = F[r - 1 :, :m]
+    H = 2 * (w.we * Fc.T @ Fc + (w.wdu + w.wu) * np.eye(m))
+    q = -2 * (w.we * Fc.T @ (yd - d_hat)[r - 1 :] + w.wdu * u_prev[:m])
+    yd_u = np.concatenate([yd[r - 1 :], np.full(r - 1, yd[-1])])[:m]
+    rows, rhs = [], []
+    eye = np.eye(m)
+    lo = np.full(m, -np.inf)
+    hi = np.full(m, np.inf)
+    if limits.u_min_m is not None:
+        lo = np.maximum(lo, limits.u_min_m)
+    if limits.u_max_m is not None:
+        hi = np.minimum(hi, limits.u_max_m)
+    if limits.max_deviation_m is not None:
+        lo = np.maximum(lo, yd_u - limits.max_deviation_m)
+        hi = np.minimum(hi, yd_u + limits.max_deviation_m)
+    for k in range(m):
+        if np.isfinite(hi[k]):
+            rows.append(eye[k])
+            rhs.append(hi[k])
+        if np.isfinite(lo[k]):
+            rows.append(-eye[k])
+            rhs.append(-lo[k])
+    if limits.max_step_m is not None:
+        s = limits.max_step_m
+        for k in range(m):
+            row = eye[k] - (eye[k - 1] if k > 0 else 0.0)
+            rows += [row, -row]
+            rhs += [s, s]
+        if r > 1:
+            rows += [-eye[m - 1], eye[m - 1]]
+            rhs += [s - yd[-1], s + yd[-1]]
+    A = sp.csc_matrix(np.array(rows))
+    settings_ = clarabel.DefaultSettings()
+    settings_.verbose = False
+    settings_.tol_gap_abs = settings_.tol_gap_rel = settings_.tol_feas = 1e-10
+    solver = clarabel.DefaultSolver(
+        sp.triu(sp.csc_matrix(H), format="csc"),
+        q,
+        A,
+        np.array(rhs),
+        [clarabel.NonnegativeConeT(len(rhs))],
+        settings_,
+    )
+    sol = solver.solve()
+    u = np.full(n, yd[-1])
+    u[:m] = np.asarray(sol.x)
+    return sol.status, u
+
+
+def assert_within_limits(u, yd, r, limits: SetpointLimits, tol=1e-7):
+    yd_u = reference_for_inputs(yd, r)
+    if limits.u_min_m is not None:
+        assert np.all(u >= limits.u_min_m - tol)
+    if limits.u_max_m is not None:
+        assert np.all(u <= limits.u_max_m + tol)
+    if limits.max_deviation_m is not None:
+        assert np.all(np.abs(u - yd_u) <= limits.max_deviation_m + tol)
+    if limits.max_step_m is not None:
+        assert np.all(np.abs(np.diff(np.concatenate([[0.0], u]))) <= limits.max_step_m + tol)
+
+
+@pytest.fixture
+def px4_model() -> DiscreteModel:
+    # Eq. (11) of the paper at 20 Hz: delay 5 samples, relative degree 6.
+    return from_transfer_function([0.08, 1.94], [1, 1.752, 2.01], 0.25, 0.05)
+
+
+# ---------------------------------------------------------------------------------------------
+# analytic optima
+# ---------------------------------------------------------------------------------------------
+
+
+def test_identity_plant_wdu_zero_gives_exact_inversion():
+    # y(k+1) = u(k): F = I, relative degree 1. With Wdu = Wu = 0 the optimum is U = Yd - D.
+    model = DiscreteModel(np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), 0.1, 0)
+    yd, d_hat, u_prev = signals(1, 30)
+    res = next_input(model, yd, d_hat, u_prev, UpdateWeights(we=1.0, wdu=0.0, wu=0.0))
+    assert isinstance(res, UpdateResult)
+    assert res.status == "solved" and res.method == "direct"
+    np.testing.assert_allclose(res.u_m, yd - d_hat, atol=1e-12)
+    assert res.objective == pytest.approx(0.0, abs=1e-20)
+    assert res.active_constraints == 0
+
+
+def test_one_step_delay_plant_shifts_reference_and_pins_tail():
+    # y(k+1) = u(k-1): relative degree 2, u(k) = yd(k+2) - d(k+2), u(N-1) pinned to yd(N).
+    model = DiscreteModel(np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), 0.1, 1)
+    yd, d_hat, u_prev = signals(2, 25)
+    res = next_input(model, yd, d_hat, u_prev, UpdateWeights(we=2.0, wdu=0.0, wu=0.0))
+    np.testing.assert_allclose(res.u_m[:-1], (yd - d_hat)[1:], atol=1e-12)
+    assert res.u_m[-1] == yd[-1]
+    assert res.objective == pytest.approx(0.0, abs=1e-20)
+
+
+def test_identity_plant_with_input_weights_closed_form():
+    # F = I: J separates per sample, u = (we w + wdu u_prev) / (we + wdu + wu).
+    model = DiscreteModel(np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), 0.1, 0)
+    yd, d_hat, u_prev = signals(3, 20)
+    w = UpdateWeights(we=1.5, wdu=0.3, wu=0.2)
+    res = next_input(model, yd, d_hat, u_prev, w)
+    expected = (w.we * (yd - d_hat) + w.wdu * u_prev) / (w.we + w.wdu + w.wu)
+    np.testing.assert_allclose(res.u_m, expected, atol=1e-12)
+    assert res.objective == pytest.approx(objective_eq8(model, expected, yd, d_hat, u_prev, w))
+
+
+def test_identity_plant_box_is_a_clip():
+    # F = I, Wdu = Wu = 0, box only: the separable optimum is the clipped inversion.
+    model = DiscreteModel(np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), 0.1, 0)
+    yd, d_hat, u_prev = signals(4, 40)
+    w = UpdateWeights(we=1.0, wdu=0.0, wu=0.0)
+    limits = SetpointLimits(u_min_m=-1.2, u_max_m=1.5)
+    res = next_input(model, yd, d_hat, u_prev, w, limits)
+    expected = np.clip(yd - d_hat, -1.2, 1.5)
+    assert res.status == "solved" and res.method == "clarabel"
+    np.testing.assert_allclose(res.u_m, expected, atol=1e-7)
+    n_clipped = int(np.sum((yd - d_hat < -1.2) | (yd - d_hat > 1.5)))
+    assert n_clipped > 0 and res.active_constraints == n_clipped
+    e = expected - (yd - d_hat)
+    assert res.objective == pytest.approx(float(e @ e), rel=1e-7)
+
+
+# ---------------------------------------------------------------------------------------------
+# agreement: direct KKT == Clarabel == dense normal equations == update operator
+# ---------------------------------------------------------------------------------------------
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    delay=st.integers(0, 5),
+    order=st.integers(1, 3),
+    zero_cb=st.booleans(),
+    n=st.integers(12, 40),
+    we=st.floats(0.1, 10.0),
+    wdu=st.floats(1e-3, 1.0),
+    wu=st.sampled_from([0.0, 1e-3, 0.05]),
+)
+def test_direct_equals_clarabel_and_dense(seed, delay, order, zero_cb, n, we, wdu, wu):
+    model = random_stable_model(seed, delay, order, zero_cb)
+    yd, d_hat, u_prev = signals(seed, n)
+    w = UpdateWeights(we=we, wdu=wdu, wu=wu)
+    res = next_input(model, yd, d_hat, u_prev, w)
+    assert res.method == "direct" and res.status == "solved"
+    # Clarabel on the same sparse QP, without limits.
+    prob = upd._build_problem(model, yd, d_hat, u_prev, w)
+    u_free, status, sol = upd._solve_clarabel(prob, None)
+    assert status == "solved" and sol.status == clarabel.SolverStatus.Solved
+    scale = max(1.0, float(np.max(np.abs(res.u_m))))
+    np.testing.assert_allclose(res.u_m[: prob.m], u_free, atol=1e-6 * scale)
+    # Dense normal equations on the controllable problem.
+    np.testing.assert_allclose(res.u_m, dense_reference(model, yd, d_hat, u_prev, w), atol=1e-8)
+    assert res.objective == pytest.approx(
+        objective_eq8(model, res.u_m, yd, d_hat, u_prev, w), rel=1e-9, abs=1e-12
+    )
+
+
+@pytest.mark.parametrize("delay", [0, 3])
+def test_update_operator_equals_next_input(delay):
+    model = random_stable_model(7, delay, 2)
+    n = 50
+    w = UpdateWeights(we=1.0, wdu=0.05, wu=0.01)
+    M, L, c = unconstrained_update_operator(model, n, w)
+    assert M.shape == (n, n) and L.shape == (n, n) and c.shape == (n,)
+    r = relative_degree(model)
+    assert np.all(M[:, : r - 1] == 0) and np.all(M[n - r + 1 :] == 0)
+    # Batched: three trials as columns.
+    cols = [signals(s, n) for s in range(3)]
+    Yd = np.stack([c_[0] for c_ in cols], axis=1)
+    D = np.stack([c_[1] for c_ in cols], axis=1)
+    Up = np.stack([c_[2] for c_ in cols], axis=1)
+    batched = M @ (Yd - D) + L @ Up + np.outer(c, Yd[-1])
+    for j in range(3):
+        res = next_input(model, Yd[:, j], D[:, j], Up[:, j], w)
+        np.testing.assert_allclose(batched[:, j], res.u_m, atol=1e-10)
+
+
+def test_update_operator_without_wdu_has_zero_l(px4_model):
+    M, L, c = unconstrained_update_operator(px4_model, 60, UpdateWeights(wdu=0.0, wu=0.01))
+    assert not np.any(L)
+    assert c.sum() == relative_degree(px4_model) - 1
+
+
+# ---------------------------------------------------------------------------------------------
+# relative degree: pinned tail, excluded head
+# ---------------------------------------------------------------------------------------------
+
+
+def test_pinned_tail_and_excluded_head(px4_model):
+    n = 80
+    r = relative_degree(px4_model)
+    assert r == 6
+    yd, d_hat, u_prev = signals(5, n)
+    w = UpdateWeights()
+    res = next_input(px4_model, yd, d_hat, u_prev, w)
+    # Tail: last r - 1 inputs are the final reference exactly.
+    assert np.all(res.u_m[n - r + 1 :] == yd[-1])
+    # Head: y(1)..y(r-1) cannot be influenced, so their reference/disturbance change nothing.
+    yd2, d2 = yd.copy(), d_hat.copy()
+    yd2[: r - 1] += 3.0
+    d2[: r - 1] -= 1.0
+    res2 = next_input(px4_model, yd2, d2, u_prev, w)
+    np.testing.assert_array_equal(res2.u_m, res.u_m)
+    assert res2.objective == pytest.approx(res.objective, rel=1e-12)
+    # The previous input's tail only shifts the objective by a constant.
+    u_prev2 = u_prev.copy()
+    u_prev2[n - r + 1 :] += 1.0
+    res3 = next_input(px4_model, yd, d_hat, u_prev2, w)
+    np.testing.assert_allclose(res3.u_m, res.u_m, atol=1e-12)
+
+
+def test_zero_cb_model_excludes_extra_head_sample():
+    model = random_stable_model(11, 2, 2, zero_cb=True)
+    assert relative_degree(model) == 4
+    yd, d_hat, u_prev = signals(6, 30)
+    res = next_input(model, yd, d_hat, u_prev, UpdateWeights())
+    np.testing.assert_allclose(res.u_m, dense_reference(model, yd, d_hat, u_prev, UpdateWeights()))
+    assert np.all(res.u_m[-3:] == yd[-1])
+
+
+# ---------------------------------------------------------------------------------------------
+# constrained solutions
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "limits",
+    [
+        SetpointLimits(u_min_m=-1.6, u_max_m=1.7),
+        SetpointLimits(max_step_m=0.25),
+        SetpointLimits(max_deviation_m=0.15),
+        SetpointLimits(u_min_m=-2.0, u_max_m=2.3, max_step_m=0.3, max_deviation_m=1.0),
+    ],
+)
+def test_constrained_matches_dense_qp_and_respects_limits(px4_model, limits):
+    n = 60
+    yd, d_hat, u_prev = signals(8, n)
+    w = UpdateWeights()
+    free = next_input(px4_model, yd, d_hat, u_prev, w)
+    res = next_input(px4_model, yd, d_hat, u_prev, w, limits)
+    assert res.method == "clarabel" and res.status == "solved"
+    assert res.active_constraints > 0
+    r = relative_degree(px4_model)
+    assert_within_limits(res.u_m, yd, r, limits)
+    assert np.all(res.u_m[n - r + 1 :] == yd[-1])
+    assert res.objective >= free.objective - 1e-9
+    status, u_ref = dense_clarabel_qp(px4_model, yd, d_hat, u_prev, w, limits)
+    assert status == clarabel.SolverStatus.Solved
+    np.testing.assert_allclose(res.u_m, u_ref, atol=1e-6)
+    assert res.objective == pytest.approx(
+        objective_eq8(px4_model, u_ref, yd, d_hat, u_prev, w), rel=1e-7
+    )
+
+
+def test_inactive_limits_take_the_fast_path(px4_model):
+    yd, d_hat, u_prev = signals(9, 50)
+    w = UpdateWeights()
+    free = next_input(px4_model, yd, d_hat, u_prev, w)
+    limits = SetpointLimits(u_min_m=-50, u_max_m=50, max_step_m=20, max_deviation_m=30)
+    res = next_input(px4_model, yd, d_hat, u_prev, w, limits)
+    assert res.method == "direct" and res.active_constraints == 0
+    np.testing.assert_array_equal(res.u_m, free.u_m)
+    assert res.objective == free.objective
+
+
+# ---------------------------------------------------------------------------------------------
+# infeasible limits
+# ---------------------------------------------------------------------------------------------
+
+
+def test_box_excluding_final_reference_is_infeasible(px4_model):
+    yd, d_hat, u_prev = signals(10, 40)  # yd[-1] = 0.5
+    with pytest.raises(UpdateInfeasible, match="u_max_m"):
+        next_input(px4_model, yd, d_hat, u_prev, UpdateWeights(), SetpointLimits(u_max_m=0.4))
+
+
+def test_box_and_deviation_disjoint_is_infeasible(px4_model):
+    yd, d_hat, u_prev = signals(10, 40)
+    limits = SetpointLimits(u_min_m=-0.5, u_max_m=1.0, max_deviation_m=0.1)
+    with pytest.raises(UpdateInfeasible, match="max_deviation_m") as info:
+        next_input(px4_model, yd, d_hat, u_prev, UpdateWeights(), limits)
+    assert isinstance(info.value, GcsError) and isinstance(info.value, ValueError)
+
+
+def test_step_too_small_to_reach_reference_is_infeasible(px4_model):
+    n = 40
+    yd = np.full(n, 3.0)  # a 3 m jump from the start point, max 0.05 m per sample
+    with pytest.raises(UpdateInfeasible, match="max_step_m"):
+        next_input(
+            px4_model,
+            yd,
+            np.zeros(n),
+            np.zeros(n),
+            UpdateWeights(),
+            SetpointLimits(max_step_m=0.05),
+        )
+
+
+def test_clarabel_itself_detects_infeasibility(px4_model):
+    # Bypass the pre-check: Clarabel's own certificate is mapped to UpdateInfeasible.
+    n = 40
+    yd = np.full(n, 3.0)
+    prob = upd._build_problem(px4_model, yd, np.zeros(n), np.zeros(n), UpdateWeights())
+    with pytest.raises(UpdateInfeasible, match="Infeasible"):
+        upd._solve_clarabel(prob, SetpointLimits(max_step_m=0.05))
+
+
+def test_empty_box_rejected_at_construction():
+    with pytest.raises(UpdateInfeasible, match="u_min_m"):
+        SetpointLimits(u_min_m=1.0, u_max_m=0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# validation
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"we": 0.0}, {"we": -1.0}, {"wdu": -0.1}, {"wu": float("nan")}, {"we": "x"}]
+)
+def test_bad_weights(kwargs):
+    with pytest.raises(ProfileError):
+        UpdateWeights(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"max_step_m": -0.1}, {"max_deviation_m": -1.0}, {"u_min_m": float("nan")}]
+)
+def test_bad_limits(kwargs):
+    with pytest.raises(ProfileError):
+        SetpointLimits(**kwargs)
+
+
+def test_bad_shapes_and_nan(px4_model):
+    n = 30
+    yd, d_hat, u_prev = signals(12, n)
+    w = UpdateWeights()
+    with pytest.raises(TrajectoryError, match="yd_m"):
+        next_input(px4_model, yd.reshape(5, 6), d_hat, u_prev, w)
+    with pytest.raises(RunLogError, match="d_hat_m"):
+        next_input(px4_model, yd, d_hat[:-1], u_prev, w)
+    bad = u_prev.copy()
+    bad[3] = np.nan
+    with pytest.raises(RunLogError, match="u_prev_m"):
+        next_input(px4_model, yd, d_hat, bad, w)
+    bad_yd = yd.copy()
+    bad_yd[0] = np.inf
+    with pytest.raises(ValueError, match="yd_m"):
+        next_input(px4_model, bad_yd, d_hat, u_prev, w)
+    with pytest.raises(ModelError):  # shorter than the relative degree (6)
+        next_input(px4_model, yd[:4], d_hat[:4], u_prev[:4], w)
+
+
+def test_reference_alignment():
+    yd = np.arange(1.0, 8.0)  # yd(1)..yd(7)
+    np.testing.assert_array_equal(reference_for_inputs(yd, 3), [3, 4, 5, 6, 7, 7, 7])
+    np.testing.assert_array_equal(reference_for_inputs(yd, 1), yd)
+
+
+def test_dense_reference_helper_is_correct():
+    # Guard of the guard: the dense helper satisfies the optimality condition of eq. (8).
+    model = random_stable_model(3, 1, 2)
+    yd, d_hat, u_prev = signals(3, 20)
+    w = UpdateWeights(we=1.0, wdu=0.1, wu=0.0)
+    u = dense_reference(model, yd, d_hat, u_prev, w)
+    r = relative_degree(model)
+    m = 20 - r + 1
+    F = lifted_matrix(model, 20)
+    grad = w.we * F[r - 1 :, :m].T @ (F @ u - yd + d_hat)[r - 1 :] + w.wdu * (u - u_prev)[:m]
+    assert np.max(np.abs(grad)) < 1e-10
+    assert scipy.linalg.norm(u) > 0
