@@ -251,10 +251,9 @@ def simulate(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
     x = np.zeros((model.order, U.shape[1]))
     Y = np.zeros_like(U)
     for k in range(N):
-        if k - d >= 0:
-            x = model.A @ x + model.B @ U[k - d][None, :]
-        else:
-            x = model.A @ x
+        x = model.A @ x
+        if k >= d:
+            x += model.B @ U[k - d][None, :]
         Y[k] = model.C @ x
     return Y[:, 0] if squeeze else Y
 

@@ -1,0 +1,105 @@
+"""Tracking metrics of the paper's Sec. V-A (eq. 10 and the Table IV columns)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["IterationMetrics", "epos", "max_error", "iteration_table"]
+
+
+@dataclass(frozen=True)
+class IterationMetrics:
+    """One row of the learning table (Table IV).
+
+    Parameters
+    ----------
+    iteration : int
+        Trial index j.
+    epos_m : float
+        Average horizontal position error e_pos,j of eq. (10) [m].
+    epos_pct : float
+        ``100 e_pos,j / e_pos,0`` [%].
+    delta_pct : float or None
+        ``100 |e_pos,j - e_pos,j-1| / e_pos,j-1`` [%]; None for the first trial.
+    max_err_m : float
+        Largest horizontal error of the trial [m].
+    """
+
+    iteration: int
+    epos_m: float
+    epos_pct: float
+    delta_pct: float | None
+    max_err_m: float
+
+
+def _horizontal_errors(ref_ne_m: np.ndarray, pos_ne_m: np.ndarray) -> np.ndarray:
+    ref = np.asarray(ref_ne_m, dtype=float)
+    pos = np.asarray(pos_ne_m, dtype=float)
+    if ref.shape != pos.shape or ref.ndim != 2 or ref.shape[1] != 2:
+        raise ValueError(f"expected two (N, 2) arrays, got {ref.shape} and {pos.shape}")
+    return np.hypot(pos[:, 0] - ref[:, 0], pos[:, 1] - ref[:, 1])
+
+
+def epos(ref_ne_m: np.ndarray, pos_ne_m: np.ndarray) -> float:
+    """Average horizontal position error, eq. (10).
+
+    Parameters
+    ----------
+    ref_ne_m : ndarray, shape (N, 2)
+        Desired north and east positions ``x_d(k), y_d(k)``, k = 1..N [m].
+    pos_ne_m : ndarray, shape (N, 2)
+        Measured north and east positions ``x_m(k), y_m(k)`` [m].
+
+    Returns
+    -------
+    float
+        ``(1/N) sum_k sqrt((x_m - x_d)^2 + (y_m - y_d)^2)`` [m].
+    """
+    return float(np.mean(_horizontal_errors(ref_ne_m, pos_ne_m)))
+
+
+def max_error(ref_ne_m: np.ndarray, pos_ne_m: np.ndarray) -> float:
+    """Largest horizontal position error over the trial [m].
+
+    Parameters
+    ----------
+    ref_ne_m : ndarray, shape (N, 2)
+        Desired north and east positions [m].
+    pos_ne_m : ndarray, shape (N, 2)
+        Measured north and east positions [m].
+
+    Returns
+    -------
+    float
+    """
+    return float(np.max(_horizontal_errors(ref_ne_m, pos_ne_m)))
+
+
+def iteration_table(
+    epos_m: list[float], max_err_m: list[float], iterations: list[int] | None = None
+) -> list[IterationMetrics]:
+    """Rows of Table IV from the per-trial e_pos and maximum errors.
+
+    Parameters
+    ----------
+    epos_m : list of float
+        e_pos,j for consecutive trials j = 0, 1, ... [m].
+    max_err_m : list of float
+        Maximum horizontal error of the same trials [m].
+    iterations : list of int, optional
+        Trial indices (default ``0 .. len - 1``).
+
+    Returns
+    -------
+    list of IterationMetrics
+    """
+    if len(epos_m) != len(max_err_m):
+        raise ValueError("epos_m and max_err_m differ in length")
+    iterations = list(range(len(epos_m))) if iterations is None else list(iterations)
+    rows: list[IterationMetrics] = []
+    for i, (e, m) in enumerate(zip(epos_m, max_err_m, strict=True)):
+        delta = None if i == 0 else 100.0 * abs(e - epos_m[i - 1]) / epos_m[i - 1]
+        rows.append(IterationMetrics(iterations[i], float(e), 100.0 * e / epos_m[0], delta, m))
+    return rows

@@ -1,0 +1,410 @@
+"""Profiles and trajectory files (YAML) -> frozen configuration objects.
+
+Every refusal is one line naming the file and the field, raised as :class:`ProfileError` or
+:class:`TrajectoryError` (both ``ValueError``). Unknown fields are refused too: a typo in a
+safety limit must not silently fall back to a default.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from gcs.core.estimators import KilcSettings, SmootherSettings
+from gcs.core.model import DiscreteModel, from_state_space, from_transfer_function
+from gcs.core.trajectory import Box, EightShape
+from gcs.core.update import UpdateWeights
+from gcs.errors import GcsError, ProfileError, TrajectoryError
+
+__all__ = [
+    "LearningConfig",
+    "Profile",
+    "TrajectorySpec",
+    "load_profile",
+    "load_trajectory",
+    "profile_from_dict",
+    "trajectory_from_dict",
+    "ALGORITHMS",
+]
+
+ALGORITHMS = ("smoother", "kilc")
+
+
+class _Fields:
+    """Strict reader of one YAML mapping; errors name the file and the dotted field path."""
+
+    def __init__(self, data: Any, where: str, path: str, error: type[GcsError]) -> None:
+        if not isinstance(data, dict):
+            raise error(f"{where}: field '{path or '<top>'}' must be a mapping")
+        self.data, self.where, self.path, self.error = data, where, path, error
+        self.used: set[str] = set()
+
+    def _name(self, key: str) -> str:
+        return f"{self.path}.{key}" if self.path else key
+
+    def fail(self, key: str, message: str) -> GcsError:
+        return self.error(f"{self.where}: field '{self._name(key)}' {message}")
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, default: Any = ...) -> Any:
+        if key not in self.data:
+            if default is ...:
+                raise self.fail(key, "is missing")
+            return default
+        self.used.add(key)
+        return self.data[key]
+
+    def number(self, key: str, default: Any = ..., *, positive: bool = False) -> float:
+        value = self.raw(key, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(key, f"must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise self.fail(key, f"must be finite, got {value!r}")
+        if positive and value <= 0:
+            raise self.fail(key, f"must be > 0, got {value!r}")
+        return float(value)
+
+    def optional_number(self, key: str) -> float | None:
+        return None if self.raw(key, None) is None else self.number(key, positive=True)
+
+    def integer(self, key: str, default: Any = ...) -> int:
+        value = self.raw(key, default)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(key, f"must be an integer, got {value!r}")
+        return value
+
+    def string(self, key: str, default: Any = ..., choices: tuple[str, ...] = ()) -> str:
+        value = self.raw(key, default)
+        if not isinstance(value, str):
+            raise self.fail(key, f"must be a string, got {value!r}")
+        if choices and value not in choices:
+            raise self.fail(key, f"must be one of {', '.join(choices)}, got {value!r}")
+        return value
+
+    def numbers(self, key: str, length: int | None = None, default: Any = ...) -> list[float]:
+        value = self.raw(key, default)
+        if not isinstance(value, list) or not value:
+            raise self.fail(key, f"must be a non-empty list of numbers, got {value!r}")
+        if length is not None and len(value) != length:
+            raise self.fail(key, f"must have {length} entries, got {len(value)}")
+        for v in value:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise self.fail(key, f"must contain only finite numbers, got {v!r}")
+        return [float(v) for v in value]
+
+    def matrix(self, key: str) -> list[list[float]]:
+        value = self.raw(key)
+        rows = (
+            value if isinstance(value, list) and value and isinstance(value[0], list) else [value]
+        )
+        out = []
+        for row in rows:
+            if not isinstance(row, list):
+                raise self.fail(key, "must be a matrix (list of lists of numbers)")
+            for v in row:
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                    raise self.fail(key, f"must contain only finite numbers, got {v!r}")
+            out.append([float(v) for v in row])
+        return out
+
+    def sub(self, key: str, default: Any = ...) -> _Fields:
+        value = self.raw(key, default)
+        return _Fields({} if value is None else value, self.where, self._name(key), self.error)
+
+    def done(self) -> None:
+        extra = sorted(set(self.data) - self.used)
+        if extra:
+            raise self.fail(extra[0], "is not a known field")
+
+
+@dataclass(frozen=True)
+class LearningConfig:
+    """Learning settings of a profile (Table I by default).
+
+    Parameters
+    ----------
+    algorithm : str
+        ``"smoother"`` (the paper's method) or ``"kilc"`` (the baseline).
+    weights : UpdateWeights
+        We, W_du, Wu of eq. (8).
+    smoother : SmootherSettings
+        Q, R, P(0) and the initial estimate of Algorithm 1.
+    kilc : KilcSettings
+        Q, R, P(0) of the iteration-domain Kalman filter.
+    max_step_m : float or None
+        Bound on the change of a setpoint from one sample to the next [m].
+    max_deviation_m : float or None
+        Bound on the distance of a setpoint from the reference [m].
+    """
+
+    algorithm: str = "smoother"
+    weights: UpdateWeights = field(default_factory=UpdateWeights)
+    smoother: SmootherSettings = field(default_factory=SmootherSettings)
+    kilc: KilcSettings = field(default_factory=KilcSettings)
+    max_step_m: float | None = None
+    max_deviation_m: float | None = None
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A vehicle profile: closed-loop models, learning settings, limits and arena.
+
+    Parameters
+    ----------
+    name : str
+        Profile name.
+    t_ilc_s : float
+        ILC sample time [s].
+    model_x, model_y : DiscreteModel
+        Closed-loop models north setpoint -> north position and east -> east.
+    learning : LearningConfig
+        Learning settings.
+    max_speed_m_s, max_accel_m_s2 : float
+        Vehicle limits a trajectory must respect (horizontal) [m/s], [m/s^2].
+    arena : Box
+        Flight volume, local NED [m].
+    flight : dict
+        Flight settings passed to the flight layer (stream rate, timeouts); may be empty.
+    identification : dict
+        Excitation and PBSID settings used by ``gcs identify``; may be empty.
+    source : dict
+        The parsed YAML as read, stored in run manifests.
+    """
+
+    name: str
+    t_ilc_s: float
+    model_x: DiscreteModel
+    model_y: DiscreteModel
+    learning: LearningConfig
+    max_speed_m_s: float
+    max_accel_m_s2: float
+    arena: Box
+    flight: dict = field(default_factory=dict)
+    identification: dict = field(default_factory=dict)
+    source: dict = field(default_factory=dict)
+
+    def models(self) -> tuple[DiscreteModel, DiscreteModel]:
+        """The (north, east) models."""
+        return self.model_x, self.model_y
+
+
+def _read_yaml(path: Path, error: type[GcsError]) -> Any:
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise error(f"{path}: cannot read ({exc.strerror})") from exc
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f" at line {mark.line + 1}" if mark is not None else ""
+        raise error(f"{path}: malformed YAML{line}: {getattr(exc, 'problem', exc)}") from exc
+
+
+def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
+    try:
+        if f.has("num") or f.has("den"):
+            model = from_transfer_function(
+                f.numbers("num"), f.numbers("den"), f.number("delay_s", 0.0), t_ilc_s
+            )
+        else:
+            dt = f.number("dt_s", positive=True)
+            if abs(dt - t_ilc_s) > 1e-9:
+                raise f.fail("dt_s", f"is {dt:g} s but the profile's t_ilc_s is {t_ilc_s:g} s")
+            model = from_state_space(
+                f.matrix("A"),
+                f.matrix("B"),
+                f.matrix("C"),
+                f.matrix("D") if f.has("D") else 0.0,
+                dt,
+                f.integer("delay_samples", 0),
+            )
+    except GcsError as exc:
+        if isinstance(exc, ProfileError):
+            raise
+        raise ProfileError(f"{f.where}: field '{f.path}': {exc}") from exc
+    except ValueError as exc:
+        raise ProfileError(f"{f.where}: field '{f.path}': {exc}") from exc
+    f.done()
+    if not model.is_stable():
+        raise ProfileError(f"{f.where}: field '{f.path}': the model is not asymptotically stable")
+    return model
+
+
+def _interval(f: _Fields, key: str) -> tuple[float, float]:
+    lo, hi = f.numbers(key, 2)
+    if lo >= hi:
+        raise f.fail(key, f"must be [min, max] with min < max, got [{lo:g}, {hi:g}]")
+    return lo, hi
+
+
+def _learning(f: _Fields) -> LearningConfig:
+    w = f.sub("weights", {})
+    weights = UpdateWeights(
+        we=w.number("we", 1.0, positive=True), wdu=w.number("wdu", 0.01), wu=w.number("wu", 0.0)
+    )
+    w.done()
+    settings = {}
+    for key, cls in (("smoother", SmootherSettings), ("kilc", KilcSettings)):
+        s = f.sub(key, {})
+        try:
+            settings[key] = cls(
+                q=s.number("q", 0.1),
+                r=s.number("r", 0.01),
+                p0=s.number("p0", 0.1),
+                d0=s.number("d0", 0.0),
+            )
+        except ValueError as exc:
+            if isinstance(exc, GcsError):
+                raise
+            raise ProfileError(f"{s.where}: field '{s.path}': {exc}") from exc
+        s.done()
+    limits = f.sub("limits", {})
+    config = LearningConfig(
+        algorithm=f.string("algorithm", "smoother", ALGORITHMS),
+        weights=weights,
+        smoother=settings["smoother"],
+        kilc=settings["kilc"],
+        max_step_m=limits.optional_number("max_step_m"),
+        max_deviation_m=limits.optional_number("max_deviation_m"),
+    )
+    limits.done()
+    f.done()
+    return config
+
+
+def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
+    """Build a :class:`Profile` from parsed YAML.
+
+    Parameters
+    ----------
+    data : dict
+        The parsed profile.
+    where : str
+        Name of the source (file path) used in error messages.
+
+    Returns
+    -------
+    Profile
+    """
+    f = _Fields(data, where, "", ProfileError)
+    t_ilc_s = f.number("t_ilc_s", positive=True)
+    model_x = _model(f.sub("model"), t_ilc_s)
+    model_y = _model(f.sub("model_y"), t_ilc_s) if f.has("model_y") else model_x
+    vehicle = f.sub("vehicle")
+    arena = f.sub("arena")
+    box = Box(_interval(arena, "north_m"), _interval(arena, "east_m"), _interval(arena, "down_m"))
+    profile = Profile(
+        name=f.string("name"),
+        t_ilc_s=t_ilc_s,
+        model_x=model_x,
+        model_y=model_y,
+        learning=_learning(f.sub("learning", {})),
+        max_speed_m_s=vehicle.number("max_speed_m_s", positive=True),
+        max_accel_m_s2=vehicle.number("max_accel_m_s2", positive=True),
+        arena=box,
+        flight=dict(f.raw("flight", {}) or {}),
+        identification=dict(f.raw("identification", {}) or {}),
+        source=data,
+    )
+    f.raw("description", None)
+    vehicle.done()
+    arena.done()
+    f.done()
+    return profile
+
+
+def load_profile(path: str | Path) -> Profile:
+    """Read and validate a profile YAML file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The profile file.
+
+    Returns
+    -------
+    Profile
+    """
+    return profile_from_dict(_read_yaml(Path(path), ProfileError), str(path))
+
+
+@dataclass(frozen=True)
+class TrajectorySpec:
+    """A trajectory file: its name, its shape parameters and the parsed YAML.
+
+    Parameters
+    ----------
+    name : str
+        Trajectory name.
+    shape : EightShape
+        Shape parameters.
+    source : dict
+        The parsed YAML as read, stored in run manifests.
+    """
+
+    name: str
+    shape: EightShape
+    source: dict
+
+
+def trajectory_from_dict(data: Any, where: str = "<trajectory>") -> TrajectorySpec:
+    """Build a :class:`TrajectorySpec` from parsed YAML.
+
+    Parameters
+    ----------
+    data : dict
+        The parsed trajectory.
+    where : str
+        Name of the source (file path) used in error messages.
+
+    Returns
+    -------
+    TrajectorySpec
+    """
+    f = _Fields(data, where, "", TrajectoryError)
+    f.string("type", "eight", ("eight",))
+    defaults = EightShape()
+    try:
+        shape = _eight(f, defaults)
+    except TrajectoryError as exc:
+        if str(exc).startswith(where):
+            raise
+        raise TrajectoryError(f"{where}: {exc}") from exc
+    name = f.string("name")
+    f.raw("description", None)
+    f.done()
+    return TrajectorySpec(name=name, shape=shape, source=data)
+
+
+def _eight(f: _Fields, defaults: EightShape) -> EightShape:
+    return EightShape(
+        center_ned_m=tuple(f.numbers("center_ned_m", 3, list(defaults.center_ned_m))),
+        amplitude_north_m=f.number("amplitude_north_m", positive=True),
+        amplitude_east_m=f.number("amplitude_east_m", positive=True),
+        period_s=f.number("period_s", positive=True),
+        loops=f.integer("loops", defaults.loops),
+        ramp_s=f.number("ramp_s", defaults.ramp_s),
+        hover_s=f.number("hover_s", defaults.hover_s),
+    )
+
+
+def load_trajectory(path: str | Path) -> TrajectorySpec:
+    """Read and validate a trajectory YAML file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The trajectory file.
+
+    Returns
+    -------
+    TrajectorySpec
+    """
+    return trajectory_from_dict(_read_yaml(Path(path), TrajectoryError), str(path))

@@ -1,0 +1,574 @@
+"""The run directory: one learning campaign on disk.
+
+Layout of ``logs/<run-id>/`` (documented for users in the README)::
+
+    manifest.json          profile, trajectory and algorithm as used, software versions
+    reference.csv          the reference on the grid, k = 0..N
+    setpoints-JJJ.csv      the setpoints to fly in trial JJJ (000 = the reference)
+    trial-JJJ.csv          trial JJJ as flown: reference, setpoints, measured position and
+                           velocity on the grid, send times, interpolation flags
+    trial-JJJ.json         its status ("complete" or "incomplete" and why) and metrics
+    estimate-JJJ.csv       disturbance estimate learned from trial JJJ (and K-ILC variance)
+    aborted/               earlier incomplete attempts of a trial, kept when it is re-flown
+
+Every file is written atomically (temporary file in the same directory, then ``os.replace``),
+and a trial counts as complete only once its ``.json`` says so; it is written after the CSV.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import platform
+import tempfile
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gcs import __version__
+from gcs.core.trajectory import Reference, sample_eight
+from gcs.errors import RunLogError
+from gcs.io.config import Profile, TrajectorySpec, profile_from_dict, trajectory_from_dict
+
+__all__ = ["TrialRecord", "TrialStatus", "RunDir", "atomic_write_text", "TRIAL_COLUMNS"]
+
+TRIAL_COLUMNS = (
+    "k", "t_s",
+    "ref_north_m", "ref_east_m", "ref_down_m",
+    "sp_north_m", "sp_east_m", "sp_down_m",
+    "pos_north_m", "pos_east_m", "pos_down_m",
+    "vel_north_m_s", "vel_east_m_s", "vel_down_m_s",
+    "sp_sent_s", "interpolated",
+)  # fmt: skip
+SETPOINT_COLUMNS = ("k", "t_s", "sp_north_m", "sp_east_m", "sp_down_m")
+REFERENCE_COLUMNS = ("k", "t_s", "ref_north_m", "ref_east_m", "ref_down_m")
+ESTIMATE_COLUMNS = ("k", "t_s", "d_north_m", "d_east_m", "p_north_m2", "p_east_m2")
+_PACKAGES = ("numpy", "scipy", "clarabel", "mavsdk", "pymavlink", "typer", "rich")
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (temporary file + rename).
+
+    Parameters
+    ----------
+    path : Path
+        Destination.
+    text : str
+        Content.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _csv_text(columns: tuple[str, ...], table: np.ndarray) -> str:
+    buf = io.StringIO()
+    buf.write(",".join(columns) + "\n")
+    for row in table:
+        buf.write(",".join(_fmt(c, v) for c, v in zip(columns, row, strict=True)) + "\n")
+    return buf.getvalue()
+
+
+def _fmt(column: str, value: float) -> str:
+    if column in ("k", "interpolated"):
+        return str(int(value))
+    if np.isnan(value):
+        return "nan"
+    return f"{value:.9g}"
+
+
+def _read_csv(path: Path, columns: tuple[str, ...]) -> np.ndarray:
+    try:
+        with open(path, newline="") as fh:
+            rows = list(csv.reader(fh))
+    except OSError as exc:
+        raise RunLogError(f"{path}: cannot read ({exc.strerror})") from exc
+    if not rows or tuple(rows[0]) != columns:
+        raise RunLogError(f"{path}: header must be {','.join(columns)}")
+    try:
+        table = np.array([[float(v) for v in r] for r in rows[1:]], dtype=float)
+    except ValueError as exc:
+        raise RunLogError(f"{path}: {exc}") from exc
+    if table.ndim != 2 or table.shape[1] != len(columns):
+        raise RunLogError(f"{path}: every row must have {len(columns)} values")
+    return table
+
+
+@dataclass(frozen=True)
+class TrialRecord:
+    """One trial on the grid ``k = 0..N`` (row k holds u(k) and y(k)).
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (N+1,)
+        Grid times ``k t_ilc_s`` [s] from the trial start.
+    ref_ned_m : ndarray, shape (N+1, 3)
+        Reference yd(k), local NED [m].
+    sp_ned_m : ndarray, shape (N+1, 3)
+        Setpoint u(k) [m]; row N is the final setpoint held after the trial.
+    pos_ned_m : ndarray, shape (N+1, 3)
+        Measured position y(k) [m]; NaN where an aborted trial has no data.
+    vel_ned_m_s : ndarray, shape (N+1, 3)
+        Measured velocity [m/s].
+    sp_sent_s : ndarray, shape (N+1,)
+        Time the setpoint was first sent, from the trial start [s]; NaN for row N.
+    interpolated : ndarray of bool, shape (N+1,)
+        True where the position was interpolated across a telemetry gap.
+    """
+
+    t_s: np.ndarray
+    ref_ned_m: np.ndarray
+    sp_ned_m: np.ndarray
+    pos_ned_m: np.ndarray
+    vel_ned_m_s: np.ndarray
+    sp_sent_s: np.ndarray
+    interpolated: np.ndarray
+
+    @property
+    def n_samples(self) -> int:
+        """N, the number of learned samples."""
+        return len(self.t_s) - 1
+
+    def table(self) -> np.ndarray:
+        """The record as an array with :data:`TRIAL_COLUMNS`."""
+        k = np.arange(len(self.t_s), dtype=float)
+        return np.column_stack(
+            [k, self.t_s, self.ref_ned_m, self.sp_ned_m, self.pos_ned_m, self.vel_ned_m_s,
+             self.sp_sent_s, self.interpolated.astype(float)]
+        )  # fmt: skip
+
+    @classmethod
+    def from_table(cls, table: np.ndarray) -> TrialRecord:
+        """Inverse of :meth:`table`."""
+        return cls(
+            t_s=table[:, 1], ref_ned_m=table[:, 2:5], sp_ned_m=table[:, 5:8],
+            pos_ned_m=table[:, 8:11], vel_ned_m_s=table[:, 11:14], sp_sent_s=table[:, 14],
+            interpolated=table[:, 15] > 0.5,
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class TrialStatus:
+    """The sidecar of a trial.
+
+    Parameters
+    ----------
+    trial : int
+        Trial index j.
+    complete : bool
+        Whether the trial was flown to its end.
+    reason : str or None
+        Why an incomplete trial stopped.
+    epos_m : float or None
+        e_pos,j of eq. (10) [m] (complete trials).
+    max_err_m : float or None
+        Largest horizontal error [m] (complete trials).
+    interpolated_share : float
+        Share of grid samples interpolated across a telemetry gap.
+    extra : dict
+        Anything else the flight layer reported (timing statistics).
+    """
+
+    trial: int
+    complete: bool
+    reason: str | None = None
+    epos_m: float | None = None
+    max_err_m: float | None = None
+    interpolated_share: float = 0.0
+    extra: dict | None = None
+
+
+class RunDir:
+    """A run directory (see the module docstring for its layout).
+
+    Parameters
+    ----------
+    path : Path
+        The directory.
+    manifest : dict
+        Its parsed ``manifest.json``.
+    """
+
+    def __init__(self, path: Path, manifest: dict[str, Any]) -> None:
+        self.path = Path(path)
+        self.manifest = manifest
+
+    # ----------------------------------------------------------------- creation
+    @classmethod
+    def create(
+        cls,
+        root: Path,
+        profile: Profile,
+        trajectory: TrajectorySpec,
+        algorithm: str,
+        run_id: str | None = None,
+    ) -> RunDir:
+        """Create a new run directory under ``root`` with trial 0's setpoints = the reference.
+
+        Parameters
+        ----------
+        root : Path
+            Parent directory (``logs/``).
+        profile : Profile
+            The profile as used.
+        trajectory : TrajectorySpec
+            The trajectory as used.
+        algorithm : str
+            ``"smoother"`` or ``"kilc"``.
+        run_id : str, optional
+            Directory name; default ``<UTC time>-<trajectory>-<algorithm>``.
+
+        Returns
+        -------
+        RunDir
+        """
+        root = Path(root)
+        root.mkdir(parents=True, exist_ok=True)
+        stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
+        base = run_id or f"{stamp}-{trajectory.name}-{algorithm}"
+        path = root / base
+        suffix = 1
+        while True:
+            try:
+                path.mkdir()
+                break
+            except FileExistsError:
+                if run_id:
+                    raise RunLogError(f"{path}: run directory exists already") from None
+                suffix += 1
+                path = root / f"{base}-{suffix}"
+        ref = sample_eight(trajectory.shape, profile.t_ilc_s)
+        manifest = {
+            "format": 1,
+            "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            "gcs_version": __version__,
+            "python": platform.python_version(),
+            "packages": {p: _version(p) for p in _PACKAGES},
+            "algorithm": algorithm,
+            "t_ilc_s": profile.t_ilc_s,
+            "n_samples": ref.n_samples,
+            "profile": profile.source,
+            "trajectory": trajectory.source,
+        }
+        run = cls(path, manifest)
+        atomic_write_text(path / "manifest.json", json.dumps(manifest, indent=2) + "\n")
+        table = np.column_stack([np.arange(ref.n_samples + 1), ref.t_s, ref.pos_ned_m])
+        atomic_write_text(path / "reference.csv", _csv_text(REFERENCE_COLUMNS, table))
+        run.write_setpoints(0, ref.pos_ned_m[:-1])
+        _update_latest(root, path)
+        return run
+
+    @classmethod
+    def open(cls, path: Path) -> RunDir:
+        """Open an existing run directory.
+
+        Parameters
+        ----------
+        path : Path
+            The run directory.
+
+        Returns
+        -------
+        RunDir
+        """
+        path = Path(path)
+        if not path.is_dir():
+            raise RunLogError(f"{path}: not a run directory")
+        mpath = path / "manifest.json"
+        try:
+            manifest = json.loads(mpath.read_text())
+        except OSError as exc:
+            raise RunLogError(f"{mpath}: cannot read ({exc.strerror})") from exc
+        except json.JSONDecodeError as exc:
+            raise RunLogError(f"{mpath}: malformed JSON ({exc.msg}, line {exc.lineno})") from exc
+        for key in ("algorithm", "t_ilc_s", "n_samples", "profile", "trajectory"):
+            if key not in manifest:
+                raise RunLogError(f"{mpath}: field '{key}' is missing")
+        return cls(path, manifest)
+
+    # ----------------------------------------------------------------- accessors
+    @property
+    def algorithm(self) -> str:
+        """The run's learning algorithm."""
+        return str(self.manifest["algorithm"])
+
+    @property
+    def n_samples(self) -> int:
+        """N, samples per trial."""
+        return int(self.manifest["n_samples"])
+
+    @property
+    def t_ilc_s(self) -> float:
+        """ILC sample time [s]."""
+        return float(self.manifest["t_ilc_s"])
+
+    def profile(self) -> Profile:
+        """The profile as recorded in the manifest."""
+        return profile_from_dict(self.manifest["profile"], f"{self.path}/manifest.json:profile")
+
+    def trajectory(self) -> TrajectorySpec:
+        """The trajectory as recorded in the manifest."""
+        where = f"{self.path}/manifest.json:trajectory"
+        return trajectory_from_dict(self.manifest["trajectory"], where)
+
+    def reference(self) -> Reference:
+        """The reference on the grid, recomputed from the manifest."""
+        return sample_eight(self.trajectory().shape, self.t_ilc_s)
+
+    def _file(self, kind: str, j: int, ext: str) -> Path:
+        return self.path / f"{kind}-{j:03d}.{ext}"
+
+    # ----------------------------------------------------------------- setpoints
+    def write_setpoints(self, j: int, sp_ned_m: np.ndarray) -> Path:
+        """Write trial j's setpoints u(0..N-1), shape (N, 3), local NED [m].
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+        sp_ned_m : ndarray, shape (N, 3)
+            Setpoints [m].
+
+        Returns
+        -------
+        Path
+        """
+        sp = np.asarray(sp_ned_m, dtype=float)
+        n = self.n_samples
+        if sp.shape != (n, 3) or not np.all(np.isfinite(sp)):
+            raise RunLogError(f"setpoints for trial {j} must be finite with shape ({n}, 3)")
+        table = np.column_stack([np.arange(n), np.arange(n) * self.t_ilc_s, sp])
+        path = self._file("setpoints", j, "csv")
+        atomic_write_text(path, _csv_text(SETPOINT_COLUMNS, table))
+        return path
+
+    def read_setpoints(self, j: int) -> np.ndarray:
+        """Trial j's setpoints, shape (N, 3), local NED [m].
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        ndarray
+        """
+        path = self._file("setpoints", j, "csv")
+        if not path.exists():
+            raise RunLogError(f"{path}: no setpoints for trial {j} (run 'gcs learn' first)")
+        table = _read_csv(path, SETPOINT_COLUMNS)
+        self._check_grid(path, table, self.n_samples)
+        return table[:, 2:5]
+
+    # ----------------------------------------------------------------- trials
+    def statuses(self) -> list[TrialStatus]:
+        """Status of every trial on disk, by trial index."""
+        out = []
+        for p in sorted(self.path.glob("trial-[0-9][0-9][0-9].json")):
+            out.append(self.read_status(int(p.stem.split("-")[1])))
+        return out
+
+    def read_status(self, j: int) -> TrialStatus:
+        """The sidecar of trial j.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        TrialStatus
+        """
+        path = self._file("trial", j, "json")
+        try:
+            data = json.loads(path.read_text())
+            return TrialStatus(
+                trial=int(data["trial"]), complete=data["status"] == "complete",
+                reason=data.get("reason"), epos_m=data.get("epos_m"),
+                max_err_m=data.get("max_err_m"),
+                interpolated_share=float(data.get("interpolated_share", 0.0)),
+                extra=data.get("extra"),
+            )  # fmt: skip
+        except OSError as exc:
+            raise RunLogError(f"{path}: cannot read ({exc.strerror})") from exc
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+            raise RunLogError(f"{path}: malformed trial status ({exc})") from exc
+
+    def complete_trials(self) -> list[int]:
+        """Indices of the complete trials, ascending."""
+        return [s.trial for s in self.statuses() if s.complete]
+
+    def newest_complete(self) -> int | None:
+        """Index of the newest complete trial, or None."""
+        done = self.complete_trials()
+        return done[-1] if done else None
+
+    def next_trial(self) -> int:
+        """Index of the next trial to fly: one after the newest complete trial."""
+        newest = self.newest_complete()
+        return 0 if newest is None else newest + 1
+
+    def write_trial(self, j: int, record: TrialRecord, status: TrialStatus) -> None:
+        """Record trial j: CSV first, then its status sidecar.
+
+        An earlier incomplete attempt of trial j is moved to ``aborted/``; a complete trial is
+        never overwritten.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+        record : TrialRecord
+            The trial on the grid.
+        status : TrialStatus
+            Completion and metrics.
+        """
+        csv_path, json_path = self._file("trial", j, "csv"), self._file("trial", j, "json")
+        if json_path.exists():
+            if self.read_status(j).complete:
+                raise RunLogError(f"{json_path}: trial {j} is complete; refusing to overwrite it")
+            self._archive_attempt(j)
+        if record.n_samples != self.n_samples:
+            raise RunLogError(f"trial {j} has {record.n_samples} samples, the run {self.n_samples}")
+        atomic_write_text(csv_path, _csv_text(TRIAL_COLUMNS, record.table()))
+        data = {
+            "trial": j,
+            "status": "complete" if status.complete else "incomplete",
+            "reason": status.reason,
+            "epos_m": status.epos_m,
+            "max_err_m": status.max_err_m,
+            "interpolated_share": status.interpolated_share,
+            "extra": status.extra or {},
+            "written_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        }
+        atomic_write_text(json_path, json.dumps(data, indent=2) + "\n")
+
+    def _archive_attempt(self, j: int) -> None:
+        aborted = self.path / "aborted"
+        aborted.mkdir(exist_ok=True)
+        attempt = 1
+        while (aborted / f"trial-{j:03d}-attempt-{attempt}.json").exists():
+            attempt += 1
+        for ext in ("csv", "json"):
+            src = self._file("trial", j, ext)
+            if src.exists():
+                os.replace(src, aborted / f"trial-{j:03d}-attempt-{attempt}.{ext}")
+
+    def read_trial(self, j: int) -> TrialRecord:
+        """Read and validate a complete trial for learning or reporting.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        TrialRecord
+
+        Raises
+        ------
+        RunLogError
+            Incomplete trial, wrong length, NaN values, or a grid that does not match t_ilc_s.
+        """
+        status = self.read_status(j)
+        path = self._file("trial", j, "csv")
+        if not status.complete:
+            raise RunLogError(
+                f"{path}: trial {j} is incomplete ({status.reason}); not learned from"
+            )
+        table = _read_csv(path, TRIAL_COLUMNS)
+        self._check_grid(path, table, self.n_samples + 1)
+        values = table[:, :14]
+        bad = np.argwhere(~np.isfinite(values))
+        if bad.size:
+            row, col = bad[0]
+            raise RunLogError(f"{path}: column '{TRIAL_COLUMNS[col]}' is NaN or inf at k = {row}")
+        return TrialRecord.from_table(table)
+
+    def _check_grid(self, path: Path, table: np.ndarray, rows: int) -> None:
+        if table.shape[0] != rows:
+            raise RunLogError(f"{path}: {table.shape[0]} rows, expected {rows} (truncated?)")
+        k = np.arange(rows)
+        if not np.array_equal(table[:, 0], k):
+            raise RunLogError(f"{path}: column 'k' must count 0..{rows - 1}")
+        err = np.abs(table[:, 1] - k * self.t_ilc_s)
+        if np.any(~np.isfinite(err)) or err.max() > 1e-6:
+            worst = int(np.nanargmax(np.where(np.isfinite(err), err, np.inf)))
+            raise RunLogError(
+                f"{path}: column 't_s' does not match t_ilc_s = {self.t_ilc_s:g} s "
+                f"(k = {worst}: {table[worst, 1]!r})"
+            )
+
+    # ----------------------------------------------------------------- estimates
+    def write_estimate(self, j: int, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray) -> None:
+        """Write the disturbance estimate learned from trial j.
+
+        Parameters
+        ----------
+        j : int
+            Trial index the estimate was learned from.
+        d_hat_ne_m : ndarray, shape (N, 2)
+            Estimate of d(1..N), north and east, learning coordinates [m].
+        p_ne_m2 : ndarray, shape (N, 2)
+            Its error variance [m^2] (K-ILC: the filter's scalar, repeated).
+        """
+        n = self.n_samples
+        k = np.arange(1, n + 1)
+        table = np.column_stack([k, k * self.t_ilc_s, d_hat_ne_m, p_ne_m2])
+        atomic_write_text(self._file("estimate", j, "csv"), _csv_text(ESTIMATE_COLUMNS, table))
+
+    def read_estimate(self, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """The estimate learned from trial j: ``(d_hat (N, 2) [m], p (N, 2) [m^2])``.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        tuple of ndarray
+        """
+        path = self._file("estimate", j, "csv")
+        if not path.exists():
+            raise RunLogError(f"{path}: no estimate for trial {j} (run 'gcs learn' on it)")
+        table = _read_csv(path, ESTIMATE_COLUMNS)
+        if table.shape[0] != self.n_samples or not np.all(np.isfinite(table)):
+            raise RunLogError(f"{path}: expected {self.n_samples} finite rows")
+        return table[:, 2:4], table[:, 4:6]
+
+
+def _version(package: str) -> str | None:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def _update_latest(root: Path, path: Path) -> None:
+    """Point ``root/latest`` at the newest run (best effort: not every filesystem has links)."""
+    link = root / "latest"
+    tmp = root / f".latest.{os.getpid()}"
+    try:
+        tmp.unlink(missing_ok=True)
+        tmp.symlink_to(path.name)
+        os.replace(tmp, link)
+    except OSError:
+        tmp.unlink(missing_ok=True)

@@ -1,0 +1,170 @@
+"""Learning on a run directory: newest complete trial -> estimate -> next setpoints.
+
+This is the one function behind both ``gcs learn`` and the learning between trials of
+``gcs fly``. It is deterministic and idempotent: learning twice from the same trial writes the
+same files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gcs.core.estimators import KilcState
+from gcs.core.learning import LearningInputs, learning_step
+from gcs.core.metrics import epos, max_error
+from gcs.core.trajectory import points_outside
+from gcs.errors import RunLogError
+from gcs.io.config import Profile, load_profile
+from gcs.io.runlog import RunDir, TrialRecord
+
+__all__ = ["LearnOutcome", "learning_inputs", "learn_run", "trial_errors"]
+
+
+@dataclass(frozen=True)
+class LearnOutcome:
+    """What :func:`learn_run` did.
+
+    Parameters
+    ----------
+    trial : int
+        The trial learned from.
+    next_trial : int
+        The trial whose setpoints were written.
+    setpoints_path : Path
+        The file written.
+    methods : tuple of str
+        Solver path per axis ("direct" or "clarabel").
+    active_constraints : int
+        Active setpoint limits, both axes.
+    """
+
+    trial: int
+    next_trial: int
+    setpoints_path: Path
+    methods: tuple[str, str]
+    active_constraints: int
+
+
+def learning_inputs(profile: Profile, algorithm: str) -> LearningInputs:
+    """The learning settings of a profile, for one algorithm.
+
+    Parameters
+    ----------
+    profile : Profile
+        The run's profile.
+    algorithm : str
+        ``"smoother"`` or ``"kilc"``.
+
+    Returns
+    -------
+    LearningInputs
+    """
+    ln = profile.learning
+    return LearningInputs(
+        models=profile.models(),
+        algorithm=algorithm,
+        weights=ln.weights,
+        smoother=ln.smoother,
+        kilc=ln.kilc,
+        arena=profile.arena,
+        max_step_m=ln.max_step_m,
+        max_deviation_m=ln.max_deviation_m,
+    )
+
+
+def trial_errors(record: TrialRecord) -> tuple[float, float]:
+    """e_pos (eq. 10) and the maximum horizontal error of a trial, over k = 1..N [m].
+
+    Parameters
+    ----------
+    record : TrialRecord
+        A complete trial.
+
+    Returns
+    -------
+    tuple of float
+    """
+    ref, pos = record.ref_ned_m[1:, :2], record.pos_ned_m[1:, :2]
+    return epos(ref, pos), max_error(ref, pos)
+
+
+def _check_profile(run: RunDir, profile_path: Path | None) -> Profile:
+    profile = run.profile()
+    if profile_path is not None:
+        given = load_profile(profile_path)
+        if given.source != run.manifest["profile"]:
+            keys = sorted(
+                k
+                for k in set(given.source) | set(run.manifest["profile"])
+                if given.source.get(k) != run.manifest["profile"].get(k)
+            )
+            raise RunLogError(
+                f"{profile_path}: does not match the profile in {run.path}/manifest.json "
+                f"(field '{keys[0]}' differs)"
+            )
+    return profile
+
+
+def _kilc_prior(run: RunDir, j: int) -> tuple[KilcState, KilcState] | None:
+    if j == 0:
+        return None
+    d_hat, p = run.read_estimate(j - 1)
+    return tuple(KilcState(d_hat[:, a].copy(), float(p[0, a]), j) for a in range(2))  # type: ignore[return-value]
+
+
+def learn_run(
+    run: RunDir, algorithm: str | None = None, profile_path: Path | None = None
+) -> LearnOutcome:
+    """Learn from the newest complete trial of ``run`` and write the next trial's setpoints.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+    algorithm : str, optional
+        Must match the run's algorithm when given (one run, one algorithm: K-ILC's state
+        carries over from trial to trial).
+    profile_path : Path, optional
+        A profile file that must match the one recorded in the manifest.
+
+    Returns
+    -------
+    LearnOutcome
+    """
+    if algorithm is not None and algorithm != run.algorithm:
+        raise RunLogError(
+            f"{run.path}: the run learns with '{run.algorithm}', not '{algorithm}' "
+            "(start a new run to compare algorithms)"
+        )
+    profile = _check_profile(run, profile_path)
+    j = run.newest_complete()
+    if j is None:
+        raise RunLogError(f"{run.path}: no complete trial to learn from")
+    record = run.read_trial(j)
+    ref = run.reference()
+    if np.max(np.abs(record.ref_ned_m - ref.pos_ned_m)) > 1e-6:
+        raise RunLogError(f"{run.path}/trial-{j:03d}.csv: reference columns differ from the run's")
+    kilc_prior = _kilc_prior(run, j) if run.algorithm == "kilc" else None
+    step = learning_step(
+        learning_inputs(profile, run.algorithm),
+        ref.pos_ned_m[:, :2],
+        record.sp_ned_m[:-1, :2],
+        record.pos_ned_m[:, :2],
+        kilc_prior,
+    )
+    sp = np.column_stack([step.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
+    outside = points_outside(sp, profile.arena, tol_m=1e-6)
+    if outside.size:  # the QP keeps the box; this guards against a solver that did not
+        raise RunLogError(f"learned setpoint k = {outside[0]} leaves the arena; nothing written")
+    run.write_estimate(j, step.d_hat_ne_m, step.p_ne_m2)
+    path = run.write_setpoints(j + 1, sp)
+    return LearnOutcome(
+        trial=j,
+        next_trial=j + 1,
+        setpoints_path=path,
+        methods=(step.updates[0].method, step.updates[1].method),
+        active_constraints=sum(u.active_constraints for u in step.updates),
+    )

@@ -1,0 +1,173 @@
+"""Reports of a run: the Table IV rows, as a rich table, as JSON, and as plots."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+
+from rich.table import Table
+
+from gcs.core.metrics import IterationMetrics, iteration_table
+from gcs.errors import RunLogError
+from gcs.io.runlog import RunDir, TrialRecord
+from gcs.learn import trial_errors
+
+__all__ = ["run_metrics", "metrics_table", "metrics_json", "write_plots", "complete_records"]
+
+
+def complete_records(run: RunDir) -> dict[int, TrialRecord]:
+    """Every complete trial of ``run``, by index.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+
+    Returns
+    -------
+    dict of int to TrialRecord
+    """
+    return {j: run.read_trial(j) for j in run.complete_trials()}
+
+
+def run_metrics(run: RunDir) -> list[IterationMetrics]:
+    """Table IV rows of the complete trials of ``run`` (computed from the CSV files).
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+
+    Returns
+    -------
+    list of IterationMetrics
+    """
+    records = complete_records(run)
+    if not records:
+        raise RunLogError(f"{run.path}: no complete trial to report")
+    errors = [trial_errors(r) for r in records.values()]
+    return iteration_table([e for e, _ in errors], [m for _, m in errors], list(records))
+
+
+def metrics_table(rows: list[IterationMetrics], title: str = "") -> Table:
+    """A rich table with one row per trial (the columns of the paper's Table IV).
+
+    Parameters
+    ----------
+    rows : list of IterationMetrics
+        The rows.
+    title : str
+        Table title.
+
+    Returns
+    -------
+    rich.table.Table
+    """
+    table = Table(title=title or None)
+    table.add_column("j", justify="right")
+    table.add_column("e_pos,j [m]", justify="right")
+    table.add_column("e_pos,j / e_pos,0 [%]", justify="right")
+    table.add_column("|Δe_pos| / e_pos,j-1 [%]", justify="right")
+    table.add_column("max error [m]", justify="right")
+    for r in rows:
+        delta = "-" if r.delta_pct is None else f"{r.delta_pct:.2f}"
+        table.add_row(
+            str(r.iteration), f"{r.epos_m:.4f}", f"{r.epos_pct:.2f}", delta, f"{r.max_err_m:.4f}"
+        )
+    return table
+
+
+def metrics_json(rows: list[IterationMetrics]) -> list[dict]:
+    """Rows as JSON objects with keys iteration, epos_m, epos_pct, delta_pct, max_err_m.
+
+    Parameters
+    ----------
+    rows : list of IterationMetrics
+        The rows.
+
+    Returns
+    -------
+    list of dict
+    """
+    return [asdict(r) for r in rows]
+
+
+def write_plots(run: RunDir, out_dir: Path, iterations: list[int] | None = None) -> list[Path]:
+    """Write the paper's figures for a run as PNG files.
+
+    ``xy.png``: north-east paths of selected iterations over the reference (Fig. 4);
+    ``north_t.png``: north position against time per iteration (Fig. 5);
+    ``epos.png``: e_pos by iteration (Fig. 2, semilog).
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+    out_dir : Path
+        Where to write (created if missing).
+    iterations : list of int, optional
+        Trials to draw in the path plots (default: 0, 1, 2 and the last).
+
+    Returns
+    -------
+    list of Path
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    records = complete_records(run)
+    if not records:
+        raise RunLogError(f"{run.path}: no complete trial to plot")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if iterations is None:
+        last = max(records)
+        iterations = sorted({j for j in (0, 1, 2, last) if j in records})
+    ref = run.reference()
+    paths = []
+
+    fig, ax = plt.subplots(figsize=(6, 5))
+    ax.plot(ref.pos_ned_m[:, 1], ref.pos_ned_m[:, 0], "k--", lw=1.5, label="reference")
+    for j in iterations:
+        p = records[j].pos_ned_m
+        ax.plot(p[:, 1], p[:, 0], lw=1, label=f"j = {j}")
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax.set_aspect("equal")
+    ax.legend()
+    ax.set_title("Horizontal path per iteration")
+    paths.append(_save(fig, out_dir / "xy.png"))
+
+    fig, ax = plt.subplots(figsize=(8, 4))
+    ax.plot(ref.t_s, ref.pos_ned_m[:, 0], "k--", lw=1.5, label="reference")
+    for j in iterations:
+        r = records[j]
+        ax.plot(r.t_s, r.pos_ned_m[:, 0], lw=1, label=f"j = {j}")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("north [m]")
+    ax.legend()
+    ax.set_title("North position per iteration")
+    paths.append(_save(fig, out_dir / "north_t.png"))
+
+    rows = run_metrics(run)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.semilogy([r.iteration for r in rows], [r.epos_m for r in rows], "o-")
+    ax.set_xlabel("iteration j")
+    ax.set_ylabel("e_pos,j [m]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.set_title(f"Average position error ({run.algorithm})")
+    paths.append(_save(fig, out_dir / "epos.png"))
+    return paths
+
+
+def _save(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.tight_layout()
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+    return path

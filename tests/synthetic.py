@@ -1,0 +1,79 @@
+"""A synthetic run directory: trials 'flown' by a simulated closed loop (no vehicle)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from gcs.core.model import DiscreteModel, from_transfer_function, simulate
+from gcs.io.config import Profile, load_profile, load_trajectory, trajectory_from_dict
+from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.learn import trial_errors
+
+ROOT = Path(__file__).resolve().parents[1]
+SHORT = {
+    "name": "tiny",
+    "type": "eight",
+    "center_ned_m": [0.0, 0.0, -1.5],
+    "amplitude_north_m": 0.6,
+    "amplitude_east_m": 0.6,
+    "period_s": 3.0,
+    "loops": 1,
+    "ramp_s": 1.0,
+    "hover_s": 0.5,
+}
+
+
+def profile() -> Profile:
+    return load_profile(ROOT / "profiles" / "antx.yaml")
+
+
+def true_plants() -> tuple[DiscreteModel, DiscreteModel]:
+    """A 'vehicle' that the profile's eq. (11) describes imperfectly."""
+    return (
+        from_transfer_function([0.09, 2.2], [1, 1.6, 2.3], 0.25, 0.05),
+        from_transfer_function([0.07, 1.8], [1, 1.9, 1.85], 0.25, 0.05),
+    )
+
+
+def fly_synthetic(run: RunDir, j: int, seed: int = 0) -> TrialRecord:
+    """Simulate trial j from its setpoints file and record it as complete."""
+    ref = run.reference()
+    sp = run.read_setpoints(j)
+    start = ref.pos_ned_m[0]
+    rng = np.random.default_rng(seed + j)
+    pos = np.tile(start, (run.n_samples + 1, 1))
+    for a, plant in enumerate(true_plants()):
+        drift = 0.05 * np.sin(0.7 * ref.t_s[1:]) ** 2  # repeatable disturbance
+        pos[1:, a] = start[a] + simulate(plant, sp[:, a] - start[a]) + drift
+        pos[1:, a] += rng.normal(0.0, 0.002, run.n_samples)
+    vel = np.gradient(pos, run.t_ilc_s, axis=0)
+    record = TrialRecord(
+        t_s=ref.t_s,
+        ref_ned_m=ref.pos_ned_m,
+        sp_ned_m=np.vstack([sp, sp[-1]]),
+        pos_ned_m=pos,
+        vel_ned_m_s=vel,
+        sp_sent_s=np.append(ref.t_s[:-1], np.nan),
+        interpolated=np.zeros(run.n_samples + 1, dtype=bool),
+    )
+    e, m = trial_errors(record)
+    run.write_trial(j, record, TrialStatus(j, True, epos_m=e, max_err_m=m))
+    return record
+
+
+def make_run(tmp: Path, algorithm: str = "smoother", trials: int = 1) -> RunDir:
+    """A run of the tiny eight with ``trials`` simulated complete trials and learning between."""
+    from gcs.learn import learn_run
+
+    run = RunDir.create(tmp, profile(), trajectory_from_dict(SHORT), algorithm, run_id="run")
+    for j in range(trials):
+        fly_synthetic(run, j)
+        if j < trials - 1:
+            learn_run(run)
+    return run
+
+
+def eight_trajectory():
+    return load_trajectory(ROOT / "trajectories" / "eight.yaml")
