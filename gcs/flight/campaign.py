@@ -1,0 +1,251 @@
+"""A campaign: take off, fly trial after trial (asking the source for each sequence), land.
+
+Sequence: connect, wait for a valid local position, arm, take off to the altitude of the first
+setpoint, start offboard at the current position, move to the start point and settle. For each
+trial: fly it, hover at its end while ``source.record`` runs (in a worker thread), ask
+``source.setpoints_for`` for the next sequence (worker thread, still hovering), move to its start
+point and settle. After the last trial: land and disarm.
+
+Safety: on Ctrl-C (``CancelledError``/``KeyboardInterrupt``), link loss, offboard rejection or any
+other exception after connecting, the vehicle is stopped (:meth:`Vehicle.emergency_stop`:
+streaming stops, Hold, land, disarm on the ground); a trial that was in flight is handed to
+``source.record_incomplete`` with its partial recording; then the exception is re-raised.
+Completed trials were handed to ``source.record`` already.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from gcs.errors import TrialAborted, VehicleError
+from gcs.flight.settings import FlightSettings
+from gcs.flight.trial import TrialRecording, TrialRun, check_setpoints
+from gcs.flight.vehicle import Vehicle
+
+__all__ = [
+    "TrialSource",
+    "TrialStarted",
+    "TrialProgress",
+    "TrialFinished",
+    "Status",
+    "CampaignEvent",
+    "fly_campaign",
+]
+
+_log = logging.getLogger(__name__)
+
+
+class TrialSource(Protocol):
+    """Where trials come from and where their recordings go (blocking; run in a thread)."""
+
+    def setpoints_for(self, j: int) -> np.ndarray:
+        """Setpoints of trial ``j``: shape (N, 3), absolute local NED [m]; may run a learner."""
+        ...
+
+    def record(self, j: int, recording: TrialRecording) -> None:
+        """Take the complete recording of trial ``j`` (write files, learn)."""
+        ...
+
+    def record_incomplete(self, j: int, recording: TrialRecording, reason: str) -> None:
+        """Take the partial recording of trial ``j``, which stopped early for ``reason``."""
+        ...
+
+
+@dataclass(frozen=True)
+class Status:
+    """A line of campaign status (phase changes, warnings).
+
+    Parameters
+    ----------
+    text : str
+        Human-readable, one line.
+    """
+
+    text: str
+
+
+@dataclass(frozen=True)
+class TrialStarted:
+    """A trial begins streaming.
+
+    Parameters
+    ----------
+    trial : int
+        Trial index ``j``.
+    number : int
+        1-based position of the trial in this campaign.
+    iterations : int
+        Number of trials in this campaign.
+    n_setpoints : int
+        Number of setpoints N.
+    duration_s : float
+        Nominal duration ``N t_ilc_s`` [s].
+    """
+
+    trial: int
+    number: int
+    iterations: int
+    n_setpoints: int
+    duration_s: float
+
+
+@dataclass(frozen=True)
+class TrialProgress:
+    """Live progress of the trial in flight (at most ~10 per second).
+
+    Parameters
+    ----------
+    trial : int
+        Trial index ``j``.
+    k : int
+        Current setpoint index (N once the final hover has begun).
+    n : int
+        Number of setpoints N.
+    err_m : float
+        Horizontal distance between the newest measured position and the setpoint in force
+        when it was received [m] (live indicator, includes the closed-loop lag).
+    """
+
+    trial: int
+    k: int
+    n: int
+    err_m: float
+
+
+@dataclass(frozen=True)
+class TrialFinished:
+    """A trial ended (complete, or aborted).
+
+    Parameters
+    ----------
+    trial : int
+        Trial index ``j``.
+    recording : TrialRecording
+        What was sent and measured (``recording.complete`` tells which case).
+    """
+
+    trial: int
+    recording: TrialRecording
+
+
+CampaignEvent = Status | TrialStarted | TrialProgress | TrialFinished
+EventCallback = Callable[[CampaignEvent], None]
+
+
+async def fly_campaign(
+    url: str,
+    source: TrialSource,
+    iterations: int,
+    first_trial: int,
+    settings: FlightSettings,
+    t_ilc_s: float,
+    on_event: EventCallback | None = None,
+) -> None:
+    """Fly ``iterations`` trials ``first_trial, first_trial + 1, ...`` and land.
+
+    Parameters
+    ----------
+    url : str
+        MAVSDK connection URL of the vehicle.
+    source : TrialSource
+        Supplies each trial's setpoints and takes each recording (called in worker threads).
+    iterations : int
+        Number of trials to fly, >= 1.
+    first_trial : int
+        Index ``j`` of the first trial (to resume a run).
+    settings : FlightSettings
+        Flight settings; ``stream_rate_hz`` must be an integer multiple of ``1 / t_ilc_s``.
+    t_ilc_s : float
+        ILC sample time [s].
+    on_event : callable, optional
+        Receives :class:`Status`, :class:`TrialStarted`, :class:`TrialProgress` and
+        :class:`TrialFinished` events on the event loop; must return quickly.
+
+    Raises
+    ------
+    VehicleError
+        Unreachable vehicle, refused command, lost link, failed settling.
+    TrialAborted
+        The trial watchdog fired (the trial went to ``source.record_incomplete``).
+    asyncio.CancelledError
+        Cancelled (Ctrl-C); the vehicle was landed first.
+    """
+    if iterations < 1:
+        raise ValueError(f"iterations must be >= 1, got {iterations}")
+    settings.sends_per_sample(t_ilc_s)  # fail before connecting
+
+    def emit(event: CampaignEvent) -> None:
+        if on_event is not None:
+            on_event(event)
+
+    vehicle = Vehicle(settings)
+    emit(Status(f"connecting to {url}"))
+    await vehicle.connect(url)
+    run: TrialRun | None = None
+    j = first_trial
+    try:
+        setpoints = check_setpoints(await asyncio.to_thread(source.setpoints_for, j))
+        emit(Status("waiting for a valid local position"))
+        await vehicle.wait_healthy_local_position()
+        altitude_m = -float(setpoints[0, 2])
+        emit(Status(f"arming and taking off to {altitude_m:.1f} m"))
+        await vehicle.arm_and_takeoff(altitude_m)
+        emit(Status("starting offboard"))
+        await vehicle.start_offboard_at_current_position()
+        for number, j in enumerate(range(first_trial, first_trial + iterations), start=1):
+            if number > 1:
+                setpoints = check_setpoints(
+                    await vehicle.hover_while(
+                        asyncio.to_thread(source.setpoints_for, j), f"setpoints of trial {j}"
+                    )
+                )
+            emit(Status(f"moving to the start point of trial {j}"))
+            await vehicle.goto(setpoints[0], settings.transit_speed_m_s)
+            n = setpoints.shape[0]
+            emit(TrialStarted(j, number, iterations, n, n * t_ilc_s))
+
+            def progress(k: int, n: int, err_m: float, j: int = j) -> None:
+                emit(TrialProgress(j, k, n, err_m))
+
+            run = TrialRun(vehicle, setpoints, t_ilc_s, settings, progress)
+            recording = await run.fly()
+            run = None  # handed over below: no longer "in flight"
+            emit(TrialFinished(j, recording))
+            await vehicle.hover_while(
+                asyncio.to_thread(source.record, j, recording), f"recording trial {j}"
+            )
+        emit(Status("landing"))
+        await vehicle.land_and_disarm()
+        emit(Status("landed and disarmed"))
+    except BaseException as exc:
+        reason = _describe(exc)
+        emit(Status(f"aborting: {reason}"))
+        outcome = await vehicle.emergency_stop(reason)
+        emit(Status(f"emergency stop: {outcome}"))
+        if run is not None:
+            partial = getattr(exc, "recording", None)
+            if not isinstance(partial, TrialRecording):
+                partial = run.recording(reason)
+            emit(TrialFinished(j, partial))
+            try:
+                await asyncio.to_thread(source.record_incomplete, j, partial, reason)
+            except Exception:  # keep the original exception; the handover failure is logged
+                _log.exception("record_incomplete(%d) failed", j)
+        raise
+    finally:
+        await vehicle.close()
+
+
+def _describe(exc: BaseException) -> str:
+    """One line naming why the campaign stopped."""
+    if isinstance(exc, asyncio.CancelledError | KeyboardInterrupt):
+        return "interrupted (Ctrl-C or cancelled)"
+    if isinstance(exc, TrialAborted | VehicleError):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc}"

@@ -1,0 +1,115 @@
+"""Settings of the flight layer: stream rates, timeouts, settling and watchdog limits."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from gcs.errors import ProfileError
+
+__all__ = ["FlightSettings"]
+
+
+@dataclass(frozen=True)
+class FlightSettings:
+    """How the flight layer streams, waits and watches.
+
+    Parameters
+    ----------
+    stream_rate_hz : float
+        Rate at which position setpoints are sent [Hz]. Must be an integer multiple ``m`` of
+        ``1 / t_ilc_s`` (checked by :meth:`sends_per_sample`): each trial setpoint is then sent
+        ``m`` times within its sample period. The default 60 Hz is 3 sends per sample at
+        ``t_ilc_s = 0.05`` (50 Hz would be 2.5, which breaks the zero-order hold). At 20 Hz
+        MAVSDK's own 20 Hz re-send interleaves with ours (up to ~10 % near-duplicates).
+    telemetry_rate_hz : float
+        Rate requested for LOCAL_POSITION_NED (``position_velocity_ned``) [Hz].
+    connect_timeout_s : float
+        How long to wait for an autopilot to appear on the link [s].
+    health_timeout_s : float
+        How long to wait for a valid local position estimate [s].
+    takeoff_timeout_s : float
+        How long arming plus take-off to the requested altitude may take [s].
+    land_timeout_s : float
+        How long landing (until the landed state is ON_GROUND) may take [s].
+    command_timeout_s : float
+        Guard around each single MAVSDK command (arm, land, offboard start/stop...) [s]. MAVSDK
+        itself gives up after 2 s without an ACK; this bounds the wait if it does not.
+    settle_tolerance_m : float
+        A hover counts as settled when the measured position stays within this distance of the
+        target [m].
+    settle_time_s : float
+        ... for this long without interruption [s].
+    settle_timeout_s : float
+        Time allowed for settling after a move before it is an error [s].
+    transit_speed_m_s : float
+        Peak speed of moves between trials (to the start point) [m/s].
+    max_setpoint_late_s : float
+        A trial aborts when a setpoint is sent later than this after its deadline [s].
+    max_telemetry_age_s : float
+        A trial (or a move, or a hover) aborts when the newest position sample is older than
+        this [s].
+    yaw_deg : float
+        Constant yaw of all position setpoints [deg, NED, 0 = north].
+    """
+
+    stream_rate_hz: float = 60.0
+    telemetry_rate_hz: float = 50.0
+    connect_timeout_s: float = 10.0
+    health_timeout_s: float = 30.0
+    takeoff_timeout_s: float = 30.0
+    land_timeout_s: float = 60.0
+    command_timeout_s: float = 5.0
+    settle_tolerance_m: float = 0.15
+    settle_time_s: float = 1.0
+    settle_timeout_s: float = 20.0
+    transit_speed_m_s: float = 1.0
+    max_setpoint_late_s: float = 0.1
+    max_telemetry_age_s: float = 0.5
+    yaw_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "yaw_deg" and not math.isfinite(value):
+                raise ProfileError(f"flight.{f.name}: must be finite, got {value}")
+            if f.name != "yaw_deg" and not (math.isfinite(value) and value > 0):
+                raise ProfileError(f"flight.{f.name}: must be finite and positive, got {value}")
+        if self.stream_rate_hz < 2.0:
+            raise ProfileError(
+                f"flight.stream_rate_hz: PX4 needs more than 2 Hz, got {self.stream_rate_hz:g}"
+            )
+
+    @property
+    def telemetry_gap_s(self) -> float:
+        """Neighbouring samples further apart than this (2 telemetry periods) form a gap [s]."""
+        return 2.0 / self.telemetry_rate_hz
+
+    def sends_per_sample(self, t_ilc_s: float) -> int:
+        """Number of sends ``m`` of each setpoint within one ILC sample period.
+
+        Parameters
+        ----------
+        t_ilc_s : float
+            ILC sample time [s].
+
+        Returns
+        -------
+        int
+            ``m = stream_rate_hz * t_ilc_s``, at least 1.
+
+        Raises
+        ------
+        ProfileError
+            If ``stream_rate_hz`` is not an integer multiple of ``1 / t_ilc_s``.
+        """
+        if not (math.isfinite(t_ilc_s) and t_ilc_s > 0):
+            raise ProfileError(f"t_ilc_s: must be a finite positive number, got {t_ilc_s}")
+        m_float = self.stream_rate_hz * t_ilc_s
+        m = round(m_float)
+        if m < 1 or abs(m_float - m) > 1e-6 * max(1.0, m_float):
+            raise ProfileError(
+                f"flight.stream_rate_hz: {self.stream_rate_hz:g} Hz is not an integer multiple "
+                f"of 1/t_ilc_s = {1.0 / t_ilc_s:g} Hz"
+            )
+        return m

@@ -1,0 +1,401 @@
+"""Fly one trial: stream a setpoint sequence on a fixed grid and record the response on it.
+
+Streaming (zero-order hold). Setpoint ``k`` holds for one ILC sample from ``t0 + k t_ilc_s``.
+With ``stream_rate_hz = m / t_ilc_s`` the stream has ``m`` ticks per sample; tick ``i`` goes out
+at the absolute deadline ``t0 + i / stream_rate_hz`` on ``time.monotonic()`` (the asyncio loop
+clock) and carries setpoint ``i // m``. The first tick of each sample is exactly on the sample
+boundary, so the vehicle sees a true ZOH; the repeats keep MAVSDK's own 20 Hz re-send from firing
+in between (it is reset by every send). After the last setpoint the final one is repeated (hover)
+until a telemetry sample at or after ``t0 + N t_ilc_s`` has arrived, so that ``y(N)`` is measured.
+
+Recording. Position samples are stamped on receipt. They are aligned to the grid
+``t_k = t0 + k t_ilc_s`` (k = 0..N) by linear interpolation between the two neighbouring samples;
+a grid point whose neighbours are more than 2 telemetry periods apart is flagged
+"interpolated across a gap". The first-send time of each setpoint is kept too.
+
+Watchdog (checked after every send): a setpoint sent more than ``max_setpoint_late_s`` after its
+deadline, position telemetry older than ``max_telemetry_age_s``, link loss, or any flight mode
+other than OFFBOARD ends the trial with :class:`gcs.errors.TrialAborted`, whose ``recording``
+attribute holds the partial recording (``complete=False``).
+
+Progress. ``on_progress(k, n, err_m)`` is called at most 10 times a second; ``err_m`` is the
+horizontal distance between the newest measured position and the setpoint that was in force
+when that sample was received. It is a live indicator only: it includes the closed loop's lag
+and is not the ILC tracking error (which needs the reference, unknown to this layer).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gcs.errors import TrajectoryError, TrialAborted
+from gcs.flight.settings import FlightSettings
+from gcs.flight.vehicle import TelemetrySample, Vehicle, sleep_until
+
+__all__ = [
+    "TrialRecording",
+    "TrialRun",
+    "ProgressCallback",
+    "fly_trial",
+    "send_schedule",
+    "align_to_grid",
+    "check_setpoints",
+]
+
+ProgressCallback = Callable[[int, int, float], None]
+"""``on_progress(k, n, err_m)``: current setpoint index, number of setpoints, live error [m]."""
+
+PROGRESS_PERIOD_S = 0.1
+LEAD_TICKS = 2  # t0 lies this many stream periods after the trial is entered
+
+
+@dataclass(frozen=True)
+class TrialRecording:
+    """What one trial sent and measured, on the ILC sample grid.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (N+1,)
+        Grid times ``k t_ilc_s`` relative to t0 [s].
+    pos_ned_m : ndarray, shape (N+1, 3)
+        Measured position at the grid times, local NED [m]; NaN where no sample brackets the
+        grid time (only in incomplete recordings).
+    vel_ned_m_s : ndarray, shape (N+1, 3)
+        Measured velocity at the grid times, local NED [m/s]; NaN like ``pos_ned_m``.
+    sent_s : ndarray, shape (N,)
+        Time the first send of each setpoint was issued, relative to t0 [s]; NaN if never sent.
+    interpolated : ndarray of bool, shape (N+1,)
+        Grid point interpolated between samples more than 2 telemetry periods apart.
+    complete : bool
+        The trial ran to its end (``y(N)`` recorded).
+    abort_reason : str or None
+        Why it stopped early; None when complete.
+    setpoints_ned_m : ndarray, shape (N, 3)
+        The setpoints flown, local NED [m].
+    t_ilc_s : float
+        ILC sample time [s].
+    raw_t_s : ndarray, shape (M,)
+        Receipt times of the raw position samples relative to t0 [s].
+    raw_pos_ned_m : ndarray, shape (M, 3)
+        Raw positions, local NED [m].
+    raw_vel_ned_m_s : ndarray, shape (M, 3)
+        Raw velocities, local NED [m/s].
+    max_send_late_s : float
+        Largest delay of a send after its deadline [s].
+    """
+
+    t_s: np.ndarray
+    pos_ned_m: np.ndarray
+    vel_ned_m_s: np.ndarray
+    sent_s: np.ndarray
+    interpolated: np.ndarray
+    complete: bool
+    abort_reason: str | None
+    setpoints_ned_m: np.ndarray
+    t_ilc_s: float
+    raw_t_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    raw_pos_ned_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    raw_vel_ned_m_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    max_send_late_s: float = 0.0
+
+    @property
+    def n_setpoints(self) -> int:
+        """Number of setpoints N."""
+        return int(self.setpoints_ned_m.shape[0])
+
+    @property
+    def interpolated_share(self) -> float:
+        """Share of the N+1 grid points interpolated across a telemetry gap (0..1)."""
+        return float(np.mean(self.interpolated)) if self.interpolated.size else 0.0
+
+
+def check_setpoints(setpoints_ned_m: object) -> np.ndarray:
+    """Validate a setpoint sequence and return it as a float array.
+
+    Parameters
+    ----------
+    setpoints_ned_m : array_like, shape (N, 3)
+        Absolute local NED setpoints [m], N >= 1.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        A float64 copy.
+
+    Raises
+    ------
+    TrajectoryError
+        Wrong shape, empty, or not finite.
+    """
+    sp = np.array(setpoints_ned_m, dtype=float)
+    if sp.ndim != 2 or sp.shape[1] != 3 or sp.shape[0] < 1:
+        raise TrajectoryError(f"setpoints_ned_m: expected shape (N, 3) with N >= 1, got {sp.shape}")
+    if not np.all(np.isfinite(sp)):
+        raise TrajectoryError("setpoints_ned_m: contains NaN or infinite values")
+    return sp
+
+
+def send_schedule(
+    n_setpoints: int, sends_per_sample: int, t_ilc_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Deadlines and setpoint indices of the stream over one trial.
+
+    Parameters
+    ----------
+    n_setpoints : int
+        Number of setpoints N.
+    sends_per_sample : int
+        Sends per ILC sample ``m`` (``stream_rate_hz * t_ilc_s``).
+    t_ilc_s : float
+        ILC sample time [s].
+
+    Returns
+    -------
+    deadlines_s : ndarray, shape (N*m,)
+        Send deadlines relative to t0 [s]: ``i * t_ilc_s / m``.
+    index : ndarray of int, shape (N*m,)
+        Setpoint sent at each deadline: ``i // m``.
+    """
+    ticks = np.arange(n_setpoints * sends_per_sample)
+    return ticks * (t_ilc_s / sends_per_sample), ticks // sends_per_sample
+
+
+def align_to_grid(
+    sample_t_s: Sequence[float] | np.ndarray,
+    sample_values: np.ndarray,
+    grid_t_s: np.ndarray,
+    max_gap_s: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Linearly interpolate time-stamped samples onto a time grid and flag gaps.
+
+    Parameters
+    ----------
+    sample_t_s : array_like, shape (M,)
+        Non-decreasing sample times [s] (same clock and origin as ``grid_t_s``).
+    sample_values : ndarray, shape (M, D)
+        Sample values (any unit).
+    grid_t_s : ndarray, shape (K,)
+        Grid times [s].
+    max_gap_s : float
+        Neighbours further apart than this make a grid point "interpolated across a gap" [s].
+
+    Returns
+    -------
+    values : ndarray, shape (K, D)
+        Interpolated values; NaN where the grid time is not bracketed by samples (before the
+        first or after the last). A grid time equal to a sample time takes that sample.
+    gap : ndarray of bool, shape (K,)
+        Grid point interpolated between neighbours more than ``max_gap_s`` apart.
+    """
+    t = np.asarray(sample_t_s, dtype=float).reshape(-1)
+    x = np.asarray(sample_values, dtype=float)
+    x = x.reshape(t.size, -1) if x.ndim != 2 else x
+    grid = np.asarray(grid_t_s, dtype=float).reshape(-1)
+    values = np.full((grid.size, x.shape[1]), np.nan)
+    gap = np.zeros(grid.size, dtype=bool)
+    if t.size == 0:
+        return values, gap
+    if np.any(np.diff(t) < 0):
+        raise ValueError("sample_t_s must be non-decreasing")
+    hi = np.searchsorted(t, grid, side="left")  # first sample at or after the grid time
+    lo = np.searchsorted(t, grid, side="right") - 1  # last sample at or before it
+    valid = (lo >= 0) & (hi < t.size)
+    lo_v, hi_v, g = lo[valid], hi[valid], grid[valid]
+    span = t[hi_v] - t[lo_v]
+    weight = np.divide(g - t[lo_v], span, out=np.zeros_like(g), where=span > 0)
+    values[valid] = x[lo_v] + weight[:, None] * (x[hi_v] - x[lo_v])
+    gap[valid] = span > max_gap_s
+    return values, gap
+
+
+class TrialRun:
+    """One trial in flight; :func:`fly_trial` is the usual entry point.
+
+    Kept as an object so that a caller who is cancelled mid-trial can still take the partial
+    recording with :meth:`recording`.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        Connected vehicle in OFFBOARD, hovering near the first setpoint.
+    setpoints_ned_m : array_like, shape (N, 3)
+        Absolute local NED setpoints [m].
+    t_ilc_s : float
+        ILC sample time [s].
+    settings : FlightSettings
+        Stream rate and watchdog limits.
+    on_progress : callable, optional
+        ``on_progress(k, n, err_m)``, called at most 10 times a second on the event loop
+        (must return quickly).
+    """
+
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        setpoints_ned_m: object,
+        t_ilc_s: float,
+        settings: FlightSettings,
+        on_progress: ProgressCallback | None = None,
+    ) -> None:
+        self.vehicle = vehicle
+        self.setpoints_ned_m = check_setpoints(setpoints_ned_m)
+        self.t_ilc_s = float(t_ilc_s)
+        self.settings = settings
+        self.sends_per_sample = settings.sends_per_sample(self.t_ilc_s)
+        self.on_progress = on_progress
+        n = self.setpoints_ned_m.shape[0]
+        self.t0: float | None = None
+        self.sent_abs_s = np.full(n, np.nan)
+        self.max_send_late_s = 0.0
+        self.samples: list[TelemetrySample] = []
+
+    async def fly(self) -> TrialRecording:
+        """Stream the trial and return the complete recording.
+
+        Returns
+        -------
+        TrialRecording
+            With ``complete=True``.
+
+        Raises
+        ------
+        TrialAborted
+            The watchdog fired; ``.recording`` holds the partial recording.
+        """
+        vehicle, settings, sp = self.vehicle, self.settings, self.setpoints_ned_m
+        n, m = sp.shape[0], self.sends_per_sample
+        period_s = 1.0 / settings.stream_rate_hz
+        t_end = None
+        next_progress_s = 0.0
+        with vehicle.record_telemetry() as samples:
+            self.samples = samples
+            self.t0 = t0 = time.monotonic() + LEAD_TICKS * period_s
+            t_end = t0 + n * self.t_ilc_s
+            i = 0
+            while True:
+                deadline_s = t0 + i * period_s
+                await sleep_until(deadline_s)
+                k = i // m
+                if k >= n and samples and samples[-1].t_s >= t_end:
+                    break  # y(N) is measured
+                issued_s = time.monotonic()
+                await vehicle.send_setpoint(sp[min(k, n - 1)])
+                if k < n and i % m == 0:
+                    self.sent_abs_s[k] = issued_s
+                late_s = issued_s - deadline_s
+                self.max_send_late_s = max(self.max_send_late_s, late_s)
+                problem = vehicle.control_problem()
+                if late_s > settings.max_setpoint_late_s:
+                    problem = (
+                        f"setpoint {min(k, n - 1)} sent {late_s * 1e3:.0f} ms late "
+                        f"(limit {settings.max_setpoint_late_s * 1e3:.0f} ms)"
+                    )
+                if problem is not None:
+                    exc = TrialAborted(f"trial aborted at sample {min(k, n)}/{n}: {problem}")
+                    exc.recording = self.recording(problem)  # type: ignore[attr-defined]
+                    raise exc
+                if self.on_progress is not None and issued_s >= next_progress_s:
+                    next_progress_s = issued_s + PROGRESS_PERIOD_S
+                    self.on_progress(min(k, n), n, self._live_error_m())
+                i += 1
+        return self.recording(None)
+
+    def _live_error_m(self) -> float:
+        """Horizontal distance of the newest sample from the setpoint in force at its receipt."""
+        if not self.samples or self.t0 is None:
+            return math.nan
+        sample = self.samples[-1]
+        n = self.setpoints_ned_m.shape[0]
+        k = min(max(math.floor((sample.t_s - self.t0) / self.t_ilc_s), 0), n - 1)
+        d_n = sample.pos_ned_m[0] - self.setpoints_ned_m[k, 0]
+        d_e = sample.pos_ned_m[1] - self.setpoints_ned_m[k, 1]
+        return math.hypot(d_n, d_e)
+
+    def recording(self, abort_reason: str | None) -> TrialRecording:
+        """The recording so far, aligned to the grid.
+
+        Parameters
+        ----------
+        abort_reason : str or None
+            None for a complete trial; otherwise why it stopped (the recording is then marked
+            incomplete).
+
+        Returns
+        -------
+        TrialRecording
+            Grid points after the last sample are NaN.
+        """
+        sp = self.setpoints_ned_m
+        n = sp.shape[0]
+        grid_rel_s = np.arange(n + 1) * self.t_ilc_s
+        t0 = self.t0 if self.t0 is not None else math.nan
+        samples = list(self.samples)
+        raw_t = np.array([s.t_s for s in samples], dtype=float) - t0
+        raw_pos = np.array([s.pos_ned_m for s in samples], dtype=float).reshape(-1, 3)
+        raw_vel = np.array([s.vel_ned_m_s for s in samples], dtype=float).reshape(-1, 3)
+        gap_s = self.settings.telemetry_gap_s
+        if self.t0 is None:
+            pos = np.full((n + 1, 3), np.nan)
+            vel = np.full((n + 1, 3), np.nan)
+            gap = np.zeros(n + 1, dtype=bool)
+        else:
+            pos, gap = align_to_grid(raw_t, raw_pos, grid_rel_s, gap_s)
+            vel, _ = align_to_grid(raw_t, raw_vel, grid_rel_s, gap_s)
+        return TrialRecording(
+            t_s=grid_rel_s,
+            pos_ned_m=pos,
+            vel_ned_m_s=vel,
+            sent_s=self.sent_abs_s - t0,
+            interpolated=gap,
+            complete=abort_reason is None,
+            abort_reason=abort_reason,
+            setpoints_ned_m=sp.copy(),
+            t_ilc_s=self.t_ilc_s,
+            raw_t_s=raw_t,
+            raw_pos_ned_m=raw_pos,
+            raw_vel_ned_m_s=raw_vel,
+            max_send_late_s=self.max_send_late_s,
+        )
+
+
+async def fly_trial(
+    vehicle: Vehicle,
+    setpoints_ned_m: object,
+    t_ilc_s: float,
+    settings: FlightSettings,
+    on_progress: ProgressCallback | None = None,
+) -> TrialRecording:
+    """Fly one trial's setpoint sequence and record the response on the sample grid.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        Connected vehicle in OFFBOARD, hovering at (or near) ``setpoints_ned_m[0]``.
+    setpoints_ned_m : array_like, shape (N, 3)
+        Absolute local NED setpoints [m]; setpoint k holds for one sample from t0 + k t_ilc_s.
+    t_ilc_s : float
+        ILC sample time [s].
+    settings : FlightSettings
+        Stream rate (an integer multiple of 1/t_ilc_s) and watchdog limits.
+    on_progress : callable, optional
+        ``on_progress(k, n, err_m)`` at most 10 times a second (see the module docstring).
+
+    Returns
+    -------
+    TrialRecording
+        Complete recording: grid times, positions and velocities at k = 0..N, send times.
+
+    Raises
+    ------
+    TrialAborted
+        Late setpoint, stale telemetry, link loss or a mode other than OFFBOARD; its
+        ``recording`` attribute holds the partial recording.
+    TrajectoryError
+        ``setpoints_ned_m`` is not a finite (N, 3) array.
+    """
+    return await TrialRun(vehicle, setpoints_ned_m, t_ilc_s, settings, on_progress).fly()

@@ -1,0 +1,700 @@
+"""One MAVSDK connection to a PX4 multirotor, flown by position setpoints in local NED.
+
+:class:`Vehicle` owns the ``Mavsdk`` instance, the Action/Offboard/Telemetry plugins and a few
+background tasks that mirror the vehicle's state (position and velocity stamped on receipt with
+``time.monotonic()``, flight mode, armed, landed state, link). Every wait is an event wait on
+that mirror with a timeout, never a fixed sleep; every command is guarded by a timeout so that a
+dead link cannot hang the caller. MAVSDK errors become one-line :class:`gcs.errors.VehicleError`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Awaitable, Callable, Iterator
+from typing import Any, NamedTuple, TypeVar
+
+import numpy as np
+from mavsdk import LogLevel, log_subscribe
+from mavsdk.asyncio import (
+    ComponentType,
+    Configuration,
+    Mavsdk,
+    MavsdkConnectionError,
+    MavsdkError,
+    System,
+)
+from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
+from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync
+
+from gcs.errors import VehicleError
+from gcs.flight.settings import FlightSettings
+
+__all__ = ["TelemetrySample", "Vehicle", "sleep_until", "min_jerk"]
+
+_log = logging.getLogger(__name__)
+_mavsdk_log = logging.getLogger("gcs.flight.mavsdk")
+_T = TypeVar("_T")
+
+_LOG_LEVELS = {
+    LogLevel.DEBUG: logging.DEBUG,
+    LogLevel.INFO: logging.INFO,
+    LogLevel.WARN: logging.WARNING,
+    LogLevel.ERROR: logging.ERROR,
+}
+
+
+def _route_mavsdk_log(level: LogLevel, message: str, file: str | None, line: int) -> bool:
+    """Send a line of the C++ core's log to Python logging instead of coloured stderr."""
+    _mavsdk_log.log(_LOG_LEVELS.get(level, logging.INFO), "%s", message)
+    return True
+
+
+class TelemetrySample(NamedTuple):
+    """One LOCAL_POSITION_NED sample as received.
+
+    Parameters
+    ----------
+    t_s : float
+        Receipt time on ``time.monotonic()`` [s] (the asyncio loop clock).
+    pos_ned_m : tuple of 3 float
+        Position in local NED [m].
+    vel_ned_m_s : tuple of 3 float
+        Velocity in local NED [m/s].
+    """
+
+    t_s: float
+    pos_ned_m: tuple[float, float, float]
+    vel_ned_m_s: tuple[float, float, float]
+
+
+async def sleep_until(deadline_s: float) -> None:
+    """Sleep until an absolute deadline on ``time.monotonic()``; yield once if it has passed.
+
+    Parameters
+    ----------
+    deadline_s : float
+        Absolute time on ``time.monotonic()`` [s].
+    """
+    delay_s = deadline_s - time.monotonic()
+    await asyncio.sleep(delay_s if delay_s > 0 else 0)
+
+
+def min_jerk(s: float) -> float:
+    """Minimum-jerk progress ``10 s^3 - 15 s^4 + 6 s^5`` of a rest-to-rest move.
+
+    Parameters
+    ----------
+    s : float
+        Normalised time in [0, 1] (clipped).
+
+    Returns
+    -------
+    float
+        Normalised distance in [0, 1]; peak slope 1.875 at ``s = 0.5``.
+    """
+    s = min(max(s, 0.0), 1.0)
+    return s**3 * (10.0 - 15.0 * s + 6.0 * s * s)
+
+
+class Vehicle:
+    """A PX4 multirotor behind one MAVSDK connection.
+
+    Parameters
+    ----------
+    settings : FlightSettings
+        Rates, timeouts and limits.
+    """
+
+    def __init__(self, settings: FlightSettings) -> None:
+        self.settings = settings
+        self.latest: TelemetrySample | None = None
+        self.flight_mode: FlightMode = FlightMode.UNKNOWN
+        self.armed: bool = False
+        self.landed_state: LandedState = LandedState.UNKNOWN
+        self.connected: bool = False
+        self.local_position_ok: bool = False
+        self.target_ned_m: np.ndarray | None = None
+        self._streaming_stopped = False
+        self._offboard_started = False
+        self._recorders: list[list[TelemetrySample]] = []
+        self._changed = asyncio.Event()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._mavsdk: Mavsdk | None = None
+        self._system: System | None = None
+        self._action: ActionAsync | None = None
+        self._offboard: OffboardAsync | None = None
+        self._telemetry: TelemetryAsync | None = None
+        self.url: str | None = None
+
+    # ------------------------------------------------------------------ connection
+
+    async def connect(self, url: str, timeout_s: float | None = None) -> None:
+        """Open ``url``, wait for the autopilot and start mirroring its state.
+
+        Parameters
+        ----------
+        url : str
+            MAVSDK connection URL, e.g. ``udpout://127.0.0.1:14540`` or ``udpin://0.0.0.0:14540``.
+        timeout_s : float, optional
+            How long to wait for an autopilot [s]; ``settings.connect_timeout_s`` if omitted.
+
+        Raises
+        ------
+        VehicleError
+            Invalid URL, no autopilot within the timeout, or the telemetry rate was refused.
+        """
+        timeout_s = self.settings.connect_timeout_s if timeout_s is None else timeout_s
+        log_subscribe(_route_mavsdk_log)
+        self.url = url
+        config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+        self._mavsdk = Mavsdk(config)
+        try:
+            await self._mavsdk.add_any_connection(url)
+            system = await self._mavsdk.first_autopilot(timeout_s)
+        except MavsdkConnectionError as exc:
+            await self.close()
+            raise VehicleError(f"cannot open connection {url!r}: {exc}") from None
+        except BaseException:
+            await self.close()
+            raise
+        if system is None:
+            await self.close()
+            raise VehicleError(f"no autopilot answered on {url} within {timeout_s:g} s")
+        self._system = system
+        self._action = ActionAsync(system)
+        self._offboard = OffboardAsync(system)
+        self._telemetry = TelemetryAsync(system)
+        self.connected = await system.is_connected()
+        for watch in (
+            self._watch_position,
+            self._watch_connection,
+            self._watch_flight_mode,
+            self._watch_armed,
+            self._watch_landed_state,
+            self._watch_health,
+        ):
+            self._tasks.append(asyncio.create_task(watch(), name=f"gcs-{watch.__name__}"))
+        telemetry = self._telemetry
+        await self._command(
+            "set position telemetry rate",
+            lambda: telemetry.set_rate_position_velocity_ned(self.settings.telemetry_rate_hz),
+        )
+        try:  # 5 Hz landed state makes landing detection snappier; not essential.
+            await self._command("set landed-state rate", lambda: telemetry.set_rate_landed_state(5))
+        except VehicleError as exc:
+            _log.warning("%s", exc)
+
+    async def close(self) -> None:
+        """Stop the background tasks and release MAVSDK (the vehicle is left as it is)."""
+        tasks, self._tasks = self._tasks, []
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        for plugin in (self._action, self._offboard, self._telemetry):
+            if plugin is not None:
+                plugin.destroy()
+        self._action = self._offboard = self._telemetry = None
+        if self._mavsdk is not None:
+            self._mavsdk.destroy()
+            self._mavsdk = None
+        self.connected = False
+
+    # ------------------------------------------------------------------ state mirror
+
+    def _notify(self) -> None:
+        event, self._changed = self._changed, asyncio.Event()
+        event.set()
+
+    async def _watch_position(self) -> None:
+        assert self._telemetry is not None
+        async for pv in self._telemetry.subscribe_position_velocity_ned():
+            p, v = pv.position, pv.velocity
+            sample = TelemetrySample(
+                time.monotonic(),
+                (p.north_m, p.east_m, p.down_m),
+                (v.north_m_s, v.east_m_s, v.down_m_s),
+            )
+            self.latest = sample
+            for recorder in self._recorders:
+                recorder.append(sample)
+            self._notify()
+
+    async def _watch_connection(self) -> None:
+        assert self._system is not None
+        async for connected in self._system.is_connected_state():
+            self.connected = connected
+            if not connected:
+                _log.warning("link to %s lost (no heartbeat for 3 s)", self.url)
+            self._notify()
+
+    async def _watch_flight_mode(self) -> None:
+        assert self._telemetry is not None
+        async for mode in self._telemetry.subscribe_flight_mode():
+            if mode != self.flight_mode:
+                self.flight_mode = mode
+                self._notify()
+
+    async def _watch_armed(self) -> None:
+        assert self._telemetry is not None
+        async for armed in self._telemetry.subscribe_armed():
+            if armed != self.armed:
+                self.armed = armed
+                self._notify()
+
+    async def _watch_landed_state(self) -> None:
+        assert self._telemetry is not None
+        async for state in self._telemetry.subscribe_landed_state():
+            if state != self.landed_state:
+                self.landed_state = state
+                self._notify()
+
+    async def _watch_health(self) -> None:
+        assert self._telemetry is not None
+        async for health in self._telemetry.subscribe_health():
+            if health.is_local_position_ok != self.local_position_ok:
+                self.local_position_ok = health.is_local_position_ok
+                self._notify()
+
+    @contextlib.contextmanager
+    def record_telemetry(self) -> Iterator[list[TelemetrySample]]:
+        """Collect every position sample received while the context is open.
+
+        Yields
+        ------
+        list of TelemetrySample
+            Grows as samples arrive; starts with the latest sample received before entry.
+        """
+        samples: list[TelemetrySample] = [] if self.latest is None else [self.latest]
+        self._recorders.append(samples)
+        try:
+            yield samples
+        finally:
+            self._recorders.remove(samples)
+
+    def telemetry_age_s(self) -> float:
+        """Age of the newest position sample [s] (infinite before the first one)."""
+        return math.inf if self.latest is None else time.monotonic() - self.latest.t_s
+
+    def control_problem(self) -> str | None:
+        """Why the vehicle is not under our offboard control right now, or None if it is.
+
+        Returns
+        -------
+        str or None
+            "link lost", a flight mode other than OFFBOARD, or stale position telemetry
+            (older than ``settings.max_telemetry_age_s``).
+        """
+        if not self.connected:
+            return "link lost (no heartbeat for 3 s)"
+        if self.flight_mode != FlightMode.OFFBOARD:
+            return f"flight mode is {self.flight_mode.name}, not OFFBOARD"
+        age_s = self.telemetry_age_s()
+        if age_s > self.settings.max_telemetry_age_s:
+            return f"position telemetry stale ({age_s:.2f} s old)"
+        return None
+
+    async def _wait_until(
+        self, predicate: Callable[[], bool], timeout_s: float, what: str, *, in_control: bool
+    ) -> None:
+        """Wait (on state-change events) until ``predicate()`` holds.
+
+        Raises VehicleError on timeout, on link loss, and, with ``in_control``, on any
+        :meth:`control_problem`.
+        """
+        deadline_s = time.monotonic() + timeout_s
+        while not predicate():
+            problem = self.control_problem() if in_control else None
+            if problem is None and not self.connected:
+                problem = "link lost (no heartbeat for 3 s)"
+            if problem is not None:
+                raise VehicleError(f"{problem} while waiting for {what}")
+            remaining_s = deadline_s - time.monotonic()
+            if remaining_s <= 0:
+                raise VehicleError(f"{what} did not happen within {timeout_s:g} s")
+            # Wake up at least at the telemetry-age limit so that silence is noticed.
+            changed = self._changed
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(min(remaining_s, self.settings.max_telemetry_age_s)):
+                    await changed.wait()
+
+    async def _command(self, what: str, call: Callable[[], Awaitable[_T]]) -> _T:
+        """Run one MAVSDK command with the command timeout; errors become VehicleError."""
+        if self._system is None:
+            raise VehicleError(f"{what}: not connected")
+        try:
+            async with asyncio.timeout(self.settings.command_timeout_s):
+                return await call()
+        except TimeoutError:
+            raise VehicleError(
+                f"{what}: no answer within {self.settings.command_timeout_s:g} s"
+            ) from None
+        except MavsdkError as exc:
+            result = getattr(exc, "result", None)
+            name = getattr(result, "name", None) or str(exc)
+            raise VehicleError(f"{what} failed: {name}") from None
+
+    # ------------------------------------------------------------------ flight
+
+    async def wait_healthy_local_position(self, timeout_s: float | None = None) -> None:
+        """Wait until PX4 reports a valid local position and samples are arriving.
+
+        Parameters
+        ----------
+        timeout_s : float, optional
+            Limit [s]; ``settings.health_timeout_s`` if omitted.
+
+        Raises
+        ------
+        VehicleError
+            No valid local position within the timeout, or the link was lost.
+        """
+        timeout_s = self.settings.health_timeout_s if timeout_s is None else timeout_s
+        await self._wait_until(
+            lambda: (
+                self.local_position_ok
+                and self.telemetry_age_s() <= self.settings.max_telemetry_age_s
+            ),
+            timeout_s,
+            "a valid local position estimate",
+            in_control=False,
+        )
+
+    async def arm_and_takeoff(self, altitude_m: float) -> None:
+        """Arm and take off (PX4 Takeoff mode) to ``altitude_m`` above the local origin.
+
+        The altitude is requested through ``MIS_TAKEOFF_ALT``; if the vehicle refuses that
+        parameter the take-off goes to the vehicle's default and the move to the start point
+        corrects the altitude. Take-off counts as done when the altitude is within the settle
+        tolerance, or when PX4 reports it is airborne in Hold (its state after Takeoff).
+
+        Parameters
+        ----------
+        altitude_m : float
+            Height above the local NED origin, positive up [m].
+
+        Raises
+        ------
+        VehicleError
+            Arming or take-off refused or not finished within ``settings.takeoff_timeout_s``.
+        """
+        if not (math.isfinite(altitude_m) and altitude_m > 0):
+            raise VehicleError(f"take-off altitude must be positive, got {altitude_m} m")
+        action = self._require(self._action)
+        try:
+            await self._command(
+                "set take-off altitude", lambda: action.set_takeoff_altitude(float(altitude_m))
+            )
+        except VehicleError as exc:
+            _log.warning("%s; taking off to the vehicle's default altitude", exc)
+        await self._command("arm", action.arm)
+        await self._wait_until(
+            lambda: self.armed, self.settings.command_timeout_s, "armed state", in_control=False
+        )
+        await self._command("take-off", action.takeoff)
+        tolerance_m = self.settings.settle_tolerance_m
+
+        def airborne() -> bool:
+            if self.latest is None:
+                return False
+            height_m = -self.latest.pos_ned_m[2]
+            in_hold = (
+                self.flight_mode == FlightMode.HOLD and self.landed_state == LandedState.IN_AIR
+            )
+            return height_m >= altitude_m - tolerance_m or in_hold
+
+        await self._wait_until(
+            airborne,
+            self.settings.takeoff_timeout_s,
+            f"take-off to {altitude_m:g} m",
+            in_control=False,
+        )
+
+    async def send_setpoint(self, pos_ned_m: Any) -> None:
+        """Send one position setpoint (MAVSDK re-sends the last one at 20 Hz by itself).
+
+        Parameters
+        ----------
+        pos_ned_m : array_like, shape (3,)
+            Absolute local NED position [m].
+
+        Raises
+        ------
+        VehicleError
+            After :meth:`emergency_stop` (streaming is over for good), or MAVSDK refused it.
+        """
+        if self._streaming_stopped:
+            raise VehicleError("setpoint streaming was stopped by an emergency stop")
+        offboard = self._require(self._offboard)
+        n, e, d = (float(x) for x in pos_ned_m)
+        setpoint = PositionNedYaw(n, e, d, self.settings.yaw_deg)
+        try:
+            await offboard.set_position_ned(setpoint)
+        except MavsdkError as exc:
+            raise VehicleError(f"setpoint refused: {getattr(exc, 'result', exc)}") from None
+        self.target_ned_m = np.array([n, e, d])
+
+    async def start_offboard_at_current_position(self, preroll_s: float = 1.0) -> None:
+        """Stream the current position as setpoint, switch to OFFBOARD and wait for it.
+
+        PX4 wants setpoints flowing before the switch (about 1 s); the last one is sent
+        immediately before ``offboard.start()`` (MAVSDK stops its re-send 3 s after the first
+        setpoint if the vehicle is not in OFFBOARD by then).
+
+        Parameters
+        ----------
+        preroll_s : float
+            How long to stream the hover setpoint before switching [s]; must stay below 3 s.
+
+        Raises
+        ------
+        VehicleError
+            No fresh position, offboard refused, or OFFBOARD not reported in time.
+        """
+        if self.latest is None or self.telemetry_age_s() > self.settings.max_telemetry_age_s:
+            raise VehicleError("cannot start offboard: no fresh position telemetry")
+        hover_ned_m = np.array(self.latest.pos_ned_m)
+        period_s = 1.0 / self.settings.stream_rate_hz
+        t0 = time.monotonic()
+        for i in range(max(1, math.ceil(preroll_s / period_s))):
+            await sleep_until(t0 + i * period_s)
+            await self.send_setpoint(hover_ned_m)
+        offboard = self._require(self._offboard)
+        await self.send_setpoint(hover_ned_m)
+        await self._command("start offboard", offboard.start)
+        self._offboard_started = True
+        await self._wait_until(
+            lambda: self.flight_mode == FlightMode.OFFBOARD,
+            self.settings.command_timeout_s,
+            "OFFBOARD mode",
+            in_control=False,
+        )
+
+    async def goto(self, ned_m: Any, speed_m_s: float) -> None:
+        """Move in a straight line to ``ned_m`` and settle there in hover.
+
+        The move starts at the current target (else the measured position), follows a
+        minimum-jerk profile whose peak speed is ``speed_m_s``, is streamed at
+        ``settings.stream_rate_hz`` against absolute deadlines, and ends with
+        :meth:`settle`.
+
+        Parameters
+        ----------
+        ned_m : array_like, shape (3,)
+            Target in local NED [m].
+        speed_m_s : float
+            Peak speed of the move [m/s].
+
+        Raises
+        ------
+        VehicleError
+            Lost control during the move (see :meth:`control_problem`) or did not settle.
+        """
+        target = np.asarray(ned_m, dtype=float).reshape(3)
+        if self.target_ned_m is not None:
+            start = self.target_ned_m.copy()
+        elif self.latest is not None:
+            start = np.array(self.latest.pos_ned_m)
+        else:
+            raise VehicleError("cannot move: no position telemetry yet")
+        distance_m = float(np.linalg.norm(target - start))
+        rate_hz = self.settings.stream_rate_hz
+        duration_s = 1.875 * distance_m / speed_m_s
+        n_ticks = max(1, math.ceil(duration_s * rate_hz))
+        t0 = time.monotonic()
+        for i in range(1, n_ticks + 1):
+            await sleep_until(t0 + i / rate_hz)
+            problem = self.control_problem()
+            if problem is not None:
+                raise VehicleError(f"{problem} while moving to {_fmt(target)}")
+            await self.send_setpoint(start + min_jerk(i / n_ticks) * (target - start))
+        await self.settle(target)
+
+    async def settle(self, ned_m: Any) -> None:
+        """Wait until the measured position stays within tolerance of ``ned_m``.
+
+        Parameters
+        ----------
+        ned_m : array_like, shape (3,)
+            Hover point in local NED [m].
+
+        Raises
+        ------
+        VehicleError
+            Not settled (``settings.settle_tolerance_m`` for ``settings.settle_time_s``) within
+            ``settings.settle_timeout_s``, or lost control meanwhile.
+        """
+        target = np.asarray(ned_m, dtype=float).reshape(3)
+        s = self.settings
+        inside_since: list[float | None] = [None]
+
+        def settled() -> bool:
+            if self.latest is None:
+                return False
+            error_m = float(np.linalg.norm(np.asarray(self.latest.pos_ned_m) - target))
+            if error_m > s.settle_tolerance_m:
+                inside_since[0] = None
+                return False
+            if inside_since[0] is None:
+                inside_since[0] = self.latest.t_s
+            return self.latest.t_s - inside_since[0] >= s.settle_time_s
+
+        await self._wait_until(
+            settled,
+            s.settle_timeout_s,
+            f"settling within {s.settle_tolerance_m:g} m of {_fmt(target)}",
+            in_control=True,
+        )
+
+    async def hold_position(self) -> np.ndarray:
+        """Hover at the current target: re-send it so MAVSDK keeps re-sending it at 20 Hz.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            The hover point in local NED [m] (the last target, else the measured position).
+        """
+        if self.target_ned_m is not None:
+            hover = self.target_ned_m.copy()
+        elif self.latest is not None:
+            hover = np.array(self.latest.pos_ned_m)
+        else:
+            raise VehicleError("cannot hold: no position telemetry yet")
+        await self.send_setpoint(hover)
+        return hover
+
+    async def hover_while(self, work: Awaitable[_T], what: str) -> _T:
+        """Hover while ``work`` (e.g. ``asyncio.to_thread(...)``) runs, watching the vehicle.
+
+        Parameters
+        ----------
+        work : awaitable
+            The work to await; it is not cancelled if the vehicle fails (a thread cannot be).
+        what : str
+            Name of the work for error messages.
+
+        Returns
+        -------
+        object
+            The result of ``work``.
+
+        Raises
+        ------
+        VehicleError
+            Control was lost (see :meth:`control_problem`) before ``work`` finished.
+        """
+        await self.hold_position()
+        task = asyncio.ensure_future(work)
+        while True:
+            done, _ = await asyncio.wait({task}, timeout=self.settings.max_telemetry_age_s / 2)
+            if done:
+                return task.result()
+            problem = self.control_problem()
+            if problem is not None:
+                raise VehicleError(f"{problem} while hovering for {what}")
+
+    async def land_and_disarm(self) -> None:
+        """Land, wait for ON_GROUND, then disarm unless PX4 has disarmed by itself.
+
+        Raises
+        ------
+        VehicleError
+            Landing refused or not finished within ``settings.land_timeout_s``, link lost.
+        """
+        action = self._require(self._action)
+        self._streaming_stopped = True
+        await self._command("land", action.land)
+        await self._wait_until(
+            lambda: self.landed_state == LandedState.ON_GROUND,
+            self.settings.land_timeout_s,
+            "landing",
+            in_control=False,
+        )
+        if self.armed:
+            await self._command("disarm", action.disarm)
+            await self._wait_until(
+                lambda: not self.armed,
+                self.settings.command_timeout_s,
+                "disarmed state",
+                in_control=False,
+            )
+
+    async def emergency_stop(self, reason: str) -> str:
+        """Stop streaming, leave offboard (Hold), land, and disarm once on the ground.
+
+        Every step is guarded by a timeout and failures are logged, not raised, so that a
+        dead link cannot hang or break it. Safe to call in any state, also twice.
+
+        Parameters
+        ----------
+        reason : str
+            Why (logged).
+
+        Returns
+        -------
+        str
+            One line describing the outcome, e.g. "landed and disarmed".
+        """
+        _log.warning("emergency stop: %s", reason)
+        self._streaming_stopped = True
+        if self._system is None or self._action is None or self._offboard is None:
+            return "not connected"
+        if not self.armed and not self._offboard_started:
+            return "vehicle not armed; nothing to do"
+        action, offboard = self._action, self._offboard
+        notes: list[str] = []
+
+        async def attempt(what: str, call: Callable[[], Awaitable[Any]]) -> bool:
+            try:
+                await self._command(what, call)
+                return True
+            except VehicleError as exc:
+                _log.warning("emergency stop: %s", exc)
+                notes.append(str(exc))
+                return False
+
+        if self._offboard_started:
+            await attempt("offboard stop (Hold)", offboard.stop)
+            self._offboard_started = False
+        on_ground = self.landed_state == LandedState.ON_GROUND
+        if self.armed and not on_ground:
+            await attempt("land", action.land)
+            try:
+                await self._wait_until(
+                    lambda: self.landed_state == LandedState.ON_GROUND,
+                    self.settings.land_timeout_s,
+                    "landing",
+                    in_control=False,
+                )
+                on_ground = True
+            except VehicleError as exc:
+                _log.warning("emergency stop: %s", exc)
+                notes.append(str(exc))
+        if on_ground and self.armed and self.connected:
+            await attempt("disarm", action.disarm)
+            with contextlib.suppress(VehicleError):
+                await self._wait_until(
+                    lambda: not self.armed,
+                    self.settings.command_timeout_s,
+                    "disarmed state",
+                    in_control=False,
+                )
+        if not self.connected:
+            return "link lost: vehicle left to its own failsafe (" + "; ".join(notes) + ")"
+        if on_ground and not self.armed:
+            return "landed and disarmed"
+        return "; ".join(notes) or ("on the ground, armed" if on_ground else "airborne")
+
+    @staticmethod
+    def _require(plugin: _T | None) -> _T:
+        if plugin is None:
+            raise VehicleError("not connected")
+        return plugin
+
+
+def _fmt(ned_m: np.ndarray) -> str:
+    return "NED (" + ", ".join(f"{x:.2f}" for x in ned_m) + ") m"

@@ -1,0 +1,290 @@
+"""Pure parts of the flight layer: settings, deadline schedule, grid alignment, trial loop.
+
+The trial loop is exercised against a fake vehicle (no MAVSDK, no sockets) that records the
+setpoints it is sent and feeds position samples from a task.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+
+import numpy as np
+import pytest
+
+from gcs.errors import ProfileError, TrajectoryError, TrialAborted
+from gcs.flight.settings import FlightSettings
+from gcs.flight.trial import (
+    TrialRun,
+    align_to_grid,
+    check_setpoints,
+    fly_trial,
+    send_schedule,
+)
+from gcs.flight.vehicle import TelemetrySample, min_jerk
+
+# ---------------------------------------------------------------- settings
+
+
+def test_sends_per_sample_integer_multiple() -> None:
+    assert FlightSettings(stream_rate_hz=60).sends_per_sample(0.05) == 3
+    assert FlightSettings(stream_rate_hz=20).sends_per_sample(0.05) == 1
+    assert FlightSettings(stream_rate_hz=50).sends_per_sample(0.02) == 1
+    assert FlightSettings().sends_per_sample(0.05) == 3  # default 60 Hz
+
+
+@pytest.mark.parametrize(("rate_hz", "t_ilc_s"), [(50, 0.05), (30, 0.05), (10, 0.05)])
+def test_sends_per_sample_rejects_non_multiples(rate_hz: float, t_ilc_s: float) -> None:
+    with pytest.raises(ProfileError, match="stream_rate_hz"):
+        FlightSettings(stream_rate_hz=rate_hz).sends_per_sample(t_ilc_s)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"stream_rate_hz": 0.0},
+        {"telemetry_rate_hz": -1.0},
+        {"max_setpoint_late_s": float("nan")},
+        {"settle_tolerance_m": float("inf")},
+        {"stream_rate_hz": 1.0},
+        {"yaw_deg": float("nan")},
+    ],
+)
+def test_settings_validation(kwargs: dict[str, float]) -> None:
+    with pytest.raises(ProfileError, match="flight\\."):
+        FlightSettings(**kwargs)
+
+
+def test_settings_accepts_negative_yaw_and_gap_is_two_periods() -> None:
+    s = FlightSettings(yaw_deg=-90.0, telemetry_rate_hz=50.0)
+    assert s.telemetry_gap_s == pytest.approx(0.04)
+
+
+def test_check_setpoints() -> None:
+    assert check_setpoints([[0, 0, -1]]).shape == (1, 3)
+    with pytest.raises(TrajectoryError):
+        check_setpoints(np.zeros((4, 2)))
+    with pytest.raises(TrajectoryError):
+        check_setpoints(np.zeros((0, 3)))
+    with pytest.raises(TrajectoryError):
+        check_setpoints([[0, np.nan, -1]])
+
+
+# ---------------------------------------------------------------- schedule
+
+
+def test_send_schedule_zero_order_hold() -> None:
+    deadlines, index = send_schedule(n_setpoints=4, sends_per_sample=3, t_ilc_s=0.05)
+    assert deadlines.shape == index.shape == (12,)
+    np.testing.assert_allclose(deadlines, np.arange(12) * 0.05 / 3)
+    np.testing.assert_array_equal(index, [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3])
+    # the first send of every setpoint is exactly on its sample boundary
+    first = deadlines[::3]
+    np.testing.assert_allclose(first, np.arange(4) * 0.05)
+
+
+def test_min_jerk_profile() -> None:
+    assert min_jerk(0.0) == 0.0
+    assert min_jerk(1.0) == 1.0
+    assert min_jerk(0.5) == pytest.approx(0.5)
+    assert min_jerk(-1.0) == 0.0 and min_jerk(2.0) == 1.0
+    s = np.linspace(0, 1, 1001)
+    slope = np.gradient([min_jerk(x) for x in s], s)
+    assert slope.max() == pytest.approx(1.875, rel=1e-3)
+
+
+# ---------------------------------------------------------------- alignment
+
+
+def test_align_linear_signal_is_exact() -> None:
+    t = np.arange(0.0, 1.0, 0.02) + 0.003
+    x = np.stack([2.0 * t, -t, 5.0 + 0 * t], axis=1)
+    grid = np.arange(0.0, 0.9, 0.05) + 0.01
+    values, gap = align_to_grid(t, x, grid, max_gap_s=0.04)
+    np.testing.assert_allclose(values[:, 0], 2.0 * grid)
+    np.testing.assert_allclose(values[:, 1], -grid)
+    np.testing.assert_allclose(values[:, 2], 5.0)
+    assert not gap.any()
+
+
+def test_align_flags_gaps_and_nans_outside() -> None:
+    t = np.array([0.00, 0.02, 0.04, 0.14, 0.16])  # 100 ms hole between 0.04 and 0.14
+    x = t[:, None] * 10.0
+    grid = np.array([-0.01, 0.00, 0.03, 0.05, 0.10, 0.14, 0.16, 0.17])
+    values, gap = align_to_grid(t, x, grid, max_gap_s=0.04)
+    np.testing.assert_array_equal(np.isnan(values[:, 0]), [1, 0, 0, 0, 0, 0, 0, 1])
+    np.testing.assert_allclose(values[1:7, 0], [0.0, 0.3, 0.5, 1.0, 1.4, 1.6])
+    np.testing.assert_array_equal(gap, [0, 0, 0, 1, 1, 0, 0, 0])
+
+
+def test_align_exact_hits_and_duplicate_stamps() -> None:
+    t = np.array([0.0, 0.02, 0.02, 0.04])
+    x = np.array([[0.0], [1.0], [2.0], [3.0]])
+    values, gap = align_to_grid(t, x, np.array([0.0, 0.02, 0.03, 0.04]), max_gap_s=0.04)
+    assert np.all(np.isfinite(values))
+    assert values[0, 0] == 0.0 and values[3, 0] == 3.0
+    assert values[2, 0] == pytest.approx(2.5)
+    assert not gap.any()
+
+
+def test_align_gap_threshold_is_strict() -> None:
+    t = np.array([0.0, 0.04, 0.0801])  # exactly 2 periods, then just over
+    x = np.zeros((3, 1))
+    _, gap = align_to_grid(t, x, np.array([0.02, 0.06]), max_gap_s=0.04 + 1e-9)
+    np.testing.assert_array_equal(gap, [False, True])
+
+
+def test_align_rejects_unsorted_and_handles_empty() -> None:
+    with pytest.raises(ValueError):
+        align_to_grid([0.1, 0.0], np.zeros((2, 1)), np.array([0.05]), 0.04)
+    values, gap = align_to_grid([], np.zeros((0, 3)), np.array([0.0, 0.1]), 0.04)
+    assert values.shape == (2, 3) and np.isnan(values).all() and not gap.any()
+
+
+# ---------------------------------------------------------------- trial loop on a fake vehicle
+
+
+class FakeVehicle:
+    """Just enough of Vehicle for TrialRun: first-order response, telemetry at 50 Hz."""
+
+    def __init__(self, telemetry_hz: float = 50.0, drop: tuple[float, float] | None = None):
+        self.sent: list[tuple[float, np.ndarray]] = []
+        self.pos = np.zeros(3)
+        self.target = np.zeros(3)
+        self.latest: TelemetrySample | None = None
+        self._recorders: list[list[TelemetrySample]] = []
+        self.problem: str | None = None
+        self.period_s = 1.0 / telemetry_hz
+        self.drop = drop  # (start, end) relative to the first setpoint: no samples then
+        self.t_first: float | None = None
+
+    async def send_setpoint(self, pos_ned_m: np.ndarray) -> None:
+        now = time.monotonic()
+        self.t_first = self.t_first if self.t_first is not None else now
+        self.sent.append((now, np.array(pos_ned_m)))
+        self.target = np.array(pos_ned_m)
+
+    def control_problem(self) -> str | None:
+        return self.problem
+
+    @contextlib.contextmanager
+    def record_telemetry(self):  # type: ignore[no-untyped-def]
+        samples: list[TelemetrySample] = [] if self.latest is None else [self.latest]
+        self._recorders.append(samples)
+        try:
+            yield samples
+        finally:
+            self._recorders.remove(samples)
+
+    async def telemetry(self) -> None:
+        t0 = time.monotonic()
+        i = 0
+        while True:
+            i += 1
+            delay = t0 + i * self.period_s - time.monotonic()
+            await asyncio.sleep(max(delay, 0))
+            self.pos = self.pos + 0.5 * (self.target - self.pos)
+            now = time.monotonic()
+            if self.drop and self.t_first is not None:
+                rel = now - self.t_first
+                if self.drop[0] <= rel < self.drop[1]:
+                    continue
+            sample = TelemetrySample(now, tuple(self.pos), (0.0, 0.0, 0.0))
+            self.latest = sample
+            for r in self._recorders:
+                r.append(sample)
+
+
+async def _with_telemetry(vehicle: FakeVehicle, coro):  # type: ignore[no-untyped-def]
+    feeder = asyncio.create_task(vehicle.telemetry())
+    try:
+        while vehicle.latest is None:
+            await asyncio.sleep(0.005)
+        return await coro
+    finally:
+        feeder.cancel()
+
+
+def _circle(n: int) -> np.ndarray:
+    phase = np.linspace(0, 2 * np.pi, n)
+    return np.stack([np.cos(phase), np.sin(phase), -2.0 + 0 * phase], axis=1)
+
+
+def test_trial_streams_on_deadlines_and_records_grid() -> None:
+    settings = FlightSettings(stream_rate_hz=60, telemetry_rate_hz=50)
+    sp = _circle(12)
+    vehicle = FakeVehicle()
+    progress: list[tuple[int, int, float]] = []
+    rec = asyncio.run(
+        _with_telemetry(
+            vehicle,
+            fly_trial(vehicle, sp, 0.05, settings, lambda *a: progress.append(a)),  # type: ignore[arg-type]
+        )
+    )
+    assert rec.complete and rec.abort_reason is None
+    assert rec.t_s.shape == (13,) and rec.pos_ned_m.shape == (13, 3)
+    assert rec.vel_ned_m_s.shape == (13, 3) and rec.sent_s.shape == (12,)
+    assert rec.interpolated.shape == (13,)
+    assert np.all(np.isfinite(rec.pos_ned_m))
+    np.testing.assert_allclose(rec.t_s, np.arange(13) * 0.05)
+    # each setpoint is first sent at its sample boundary (loop jitter allowed)
+    assert np.all(rec.sent_s >= -1e-6)
+    np.testing.assert_allclose(rec.sent_s, np.arange(12) * 0.05, atol=0.03)
+    # three sends per sample with the same value, then the final one repeated until y(N)
+    values = np.array([v for _, v in vehicle.sent])
+    assert len(values) >= 36
+    np.testing.assert_allclose(values[:36], np.repeat(sp, 3, axis=0))
+    np.testing.assert_allclose(values[36:], np.repeat(sp[-1:], len(values) - 36, axis=0))
+    assert rec.raw_t_s[-1] >= rec.t_s[-1]  # y(N) was measured, not extrapolated
+    assert 1 <= len(progress) <= 12 and progress[-1][1] == 12
+    np.testing.assert_array_equal(rec.setpoints_ned_m, sp)
+
+
+def test_trial_flags_telemetry_gap() -> None:
+    settings = FlightSettings(stream_rate_hz=20, telemetry_rate_hz=50, max_telemetry_age_s=1.0)
+    vehicle = FakeVehicle(drop=(0.20, 0.32))
+    rec = asyncio.run(_with_telemetry(vehicle, fly_trial(vehicle, _circle(10), 0.05, settings)))
+    assert rec.complete
+    flagged = rec.t_s[rec.interpolated]
+    assert flagged.size >= 1
+    assert np.all((flagged > 0.15) & (flagged < 0.40))
+    assert 0 < rec.interpolated_share < 0.5
+
+
+def test_trial_watchdog_aborts_with_partial_recording() -> None:
+    settings = FlightSettings(stream_rate_hz=20)
+    vehicle = FakeVehicle()
+
+    async def scenario():  # type: ignore[no-untyped-def]
+        run = TrialRun(vehicle, _circle(40), 0.05, settings)
+        fly = asyncio.create_task(run.fly())
+        while len(vehicle.sent) < 10:
+            await asyncio.sleep(0.01)
+        vehicle.problem = "flight mode is HOLD, not OFFBOARD"
+        with pytest.raises(TrialAborted, match="HOLD") as info:
+            await fly
+        return info.value
+
+    exc = asyncio.run(_with_telemetry(vehicle, scenario()))
+    rec = exc.recording
+    assert not rec.complete and "HOLD" in rec.abort_reason
+    assert rec.pos_ned_m.shape == (41, 3)
+    assert np.isfinite(rec.pos_ned_m[0]).all() and np.isnan(rec.pos_ned_m[-1]).all()
+    assert np.isnan(rec.sent_s[-1]) and np.isfinite(rec.sent_s[0])
+    assert len(vehicle.sent) < 20
+
+
+def test_trial_aborts_on_late_setpoint() -> None:
+    settings = FlightSettings(stream_rate_hz=20, max_setpoint_late_s=0.05)
+    vehicle = FakeVehicle()
+
+    async def scenario():  # type: ignore[no-untyped-def]
+        fly = asyncio.create_task(fly_trial(vehicle, _circle(40), 0.05, settings))
+        while len(vehicle.sent) < 5:
+            await asyncio.sleep(0.005)
+        time.sleep(0.2)  # block the loop on purpose: the next send is late
+        with pytest.raises(TrialAborted, match="late"):
+            await fly
+
+    asyncio.run(_with_telemetry(vehicle, scenario()))
