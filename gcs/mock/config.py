@@ -1,0 +1,524 @@
+"""Configuration of the mock drone: physics, controller, disturbances, noise, rates, PX4 params.
+
+:class:`MockConfig` holds everything that describes the simulated vehicle; it is read from a
+YAML profile (``profiles/mock.yaml`` writes out every default) by :func:`load_mock_config`.
+:class:`Faults` holds the injected link and weather faults of one run; they come from the
+command line (``gcs mock --loss ... --gust ...``).
+
+Times in :class:`Faults` (dropout, link loss, gust) count in seconds from the moment the
+vehicle **first enters OFFBOARD**, so that a fault lands at the same point of a trial whatever
+the connection and take-off took. Packet loss and added latency apply from the start.
+
+Units are SI; frames are local NED (north, east, down) with the origin at the take-off spot.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gcs.errors import ProfileError
+from gcs.io.config import _read_yaml
+
+__all__ = [
+    "PhysicsConfig",
+    "ControllerConfig",
+    "DisturbanceConfig",
+    "NoiseConfig",
+    "RatesConfig",
+    "Px4Config",
+    "MockConfig",
+    "Faults",
+    "load_mock_config",
+    "mock_config_from_dict",
+    "MODES",
+]
+
+MODES = ("HOLD", "POSCTL")
+"""Flight modes the mock may boot in (PX4 v1.16 without RC boots in HOLD, with RC in POSCTL)."""
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """Rigid-body translational model.
+
+    Parameters
+    ----------
+    dt_s : float
+        Integration step [s]; the mock steps the physics on this grid against the monotonic
+        clock (0.004 s = 250 Hz).
+    gravity_m_s2 : float
+        Gravitational acceleration [m/s^2].
+    drag_lin_1_s : float
+        Linear (rotor) drag coefficient per unit mass [1/s], acting on the air-relative velocity.
+    drag_quad_1_m : float
+        Quadratic drag coefficient per unit mass [1/m]: ``a = -k |v_air| v_air``.
+    tilt_lag_s : float
+        Time constant of the first-order lag from the commanded to the achieved acceleration
+        (attitude loop plus thrust response) [s].
+    thrust_max_g : float
+        Maximum total thrust in units of the weight (hover = 1).
+    thrust_min_g : float
+        Minimum total thrust while armed in units of the weight (idle).
+    input_delay_s : float
+        Transport delay from the reception of a setpoint to its use by the position controller
+        [s] (link, estimator and mocap latency of a real system).
+    """
+
+    dt_s: float = 0.004
+    gravity_m_s2: float = 9.81
+    drag_lin_1_s: float = 0.10
+    drag_quad_1_m: float = 0.25
+    tilt_lag_s: float = 0.08
+    thrust_max_g: float = 2.0
+    thrust_min_g: float = 0.1
+    input_delay_s: float = 0.19
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """PX4-like cascaded controller: position P, velocity PID, acceleration and tilt limits.
+
+    x and y have slightly different gains on purpose: the identified model of eq. (11) is the
+    same for both axes, the mock's axes are not (as on a real, not perfectly symmetric vehicle).
+
+    Parameters
+    ----------
+    pos_p_x_1_s, pos_p_y_1_s, pos_p_z_1_s : float
+        Position loop gains [1/s] (PX4 ``MPC_XY_P``, ``MPC_Z_P``).
+    vel_p_x_1_s, vel_p_y_1_s, vel_p_z_1_s : float
+        Velocity loop proportional gains [1/s] (PX4 ``MPC_XY_VEL_P_ACC``, ``MPC_Z_VEL_P_ACC``).
+    vel_i_xy_1_s2, vel_i_z_1_s2 : float
+        Velocity loop integral gains [1/s^2] (PX4 ``MPC_XY_VEL_I_ACC``, ``MPC_Z_VEL_I_ACC``).
+    vel_d_xy : float
+        Velocity loop derivative gain [-] (PX4 ``MPC_XY_VEL_D_ACC``), on the measured
+        acceleration.
+    vel_int_max_m_s2 : float
+        Anti-windup bound of each velocity integrator's contribution [m/s^2].
+    vel_max_xy_m_s : float
+        Horizontal speed limit [m/s] (``MPC_XY_VEL_MAX``).
+    vel_max_up_m_s, vel_max_down_m_s : float
+        Vertical speed limits [m/s] (``MPC_Z_VEL_MAX_UP``, ``MPC_Z_VEL_MAX_DN``).
+    acc_max_xy_m_s2 : float
+        Horizontal acceleration limit [m/s^2] (``MPC_ACC_HOR_MAX``).
+    tilt_max_deg : float
+        Tilt limit [deg] (``MPC_TILTMAX_AIR``); bounds the horizontal acceleration by
+        ``g tan(tilt)``.
+    yaw_lag_s : float
+        Time constant of the yaw response [s].
+    """
+
+    pos_p_x_1_s: float = 1.25
+    pos_p_y_1_s: float = 0.93
+    pos_p_z_1_s: float = 1.0
+    vel_p_x_1_s: float = 1.65
+    vel_p_y_1_s: float = 1.62
+    vel_p_z_1_s: float = 4.0
+    vel_i_xy_1_s2: float = 0.1
+    vel_i_z_1_s2: float = 2.0
+    vel_d_xy: float = 0.0
+    vel_int_max_m_s2: float = 2.0
+    vel_max_xy_m_s: float = 12.0
+    vel_max_up_m_s: float = 3.0
+    vel_max_down_m_s: float = 1.5
+    acc_max_xy_m_s2: float = 5.0
+    tilt_max_deg: float = 45.0
+    yaw_lag_s: float = 0.3
+
+
+@dataclass(frozen=True)
+class DisturbanceConfig:
+    """Repeatable aerodynamic field and non-repeatable gusts.
+
+    Parameters
+    ----------
+    field_amplitude_m_s2 : float
+        Peak amplitude of each of the sine terms of the position-dependent disturbance field
+        [m/s^2] (per horizontal axis; the vertical field is a third of it).
+    field_terms : int
+        Number of sine terms per axis.
+    field_wavelength_min_m, field_wavelength_max_m : float
+        Range of the spatial wavelengths of the field [m].
+    field_seed : int
+        Seed of the field's directions and phases. Fixed by the profile (not by ``--seed``): the
+        same trajectory meets the same disturbance in every trial and every run.
+    gust_sigma_m_s2 : float
+        Standard deviation of the Ornstein-Uhlenbeck gust acceleration [m/s^2] (per axis;
+        seeded by ``--seed``, different in every trial).
+    gust_tau_s : float
+        Correlation time of the gusts [s].
+    """
+
+    field_amplitude_m_s2: float = 0.12
+    field_terms: int = 3
+    field_wavelength_min_m: float = 1.5
+    field_wavelength_max_m: float = 5.0
+    field_seed: int = 7
+    gust_sigma_m_s2: float = 0.04
+    gust_tau_s: float = 1.5
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Measurement noise on the reported state (the controller sees the true state).
+
+    Parameters
+    ----------
+    pos_sigma_m : float
+        Motion-capture position noise, standard deviation per axis [m].
+    vel_sigma_m_s : float
+        Velocity noise, standard deviation per axis [m/s].
+    att_sigma_rad : float
+        Attitude noise, standard deviation per angle [rad].
+    """
+
+    pos_sigma_m: float = 0.002
+    vel_sigma_m_s: float = 0.01
+    att_sigma_rad: float = 0.002
+
+
+@dataclass(frozen=True)
+class RatesConfig:
+    """Default stream rates [Hz] (0 disables); MAVSDK's SET_MESSAGE_INTERVAL overrides them.
+
+    PX4 v1.16 SIH measured rates are given in ``docs/mock.md``; the position streams run at
+    50 Hz here (PX4: 30 Hz until the GCS asks for more).
+
+    Parameters
+    ----------
+    heartbeat_hz, sys_status_hz, extended_sys_state_hz, local_position_ned_hz, odometry_hz,
+    attitude_hz, attitude_quaternion_hz, global_position_int_hz, home_position_hz,
+    battery_status_hz, vfr_hud_hz, gps_raw_int_hz, position_target_local_ned_hz, ping_hz,
+    system_time_hz : float
+        Rate of the message of that name [Hz].
+    """
+
+    heartbeat_hz: float = 1.0
+    sys_status_hz: float = 5.0
+    extended_sys_state_hz: float = 1.0
+    local_position_ned_hz: float = 50.0
+    odometry_hz: float = 50.0
+    attitude_hz: float = 100.0
+    attitude_quaternion_hz: float = 50.0
+    global_position_int_hz: float = 50.0
+    home_position_hz: float = 0.5
+    battery_status_hz: float = 0.5
+    vfr_hud_hz: float = 10.0
+    gps_raw_int_hz: float = 8.0
+    position_target_local_ned_hz: float = 10.0
+    ping_hz: float = 1.0
+    system_time_hz: float = 1.0
+
+
+@dataclass(frozen=True)
+class Px4Config:
+    """PX4 commander behaviour and the parameters the mock models (PX4 names in brackets).
+
+    Parameters
+    ----------
+    system_id : int
+        MAVLink system id of the vehicle (``MAV_SYS_ID``); the component id is always 1.
+    initial_mode : str
+        Mode after boot: ``HOLD`` (PX4 v1.16 without RC, as in the SIH capture) or ``POSCTL``.
+    mis_takeoff_alt_m : float
+        Take-off altitude above home [m] (``MIS_TAKEOFF_ALT``).
+    com_of_loss_t_s : float
+        Offboard-loss timeout [s] (``COM_OF_LOSS_T``); after it the vehicle falls back to Hold.
+    offboard_min_stream_s : float
+        How long setpoints must already stream before OFFBOARD is granted [s]. PX4 v1.16 grants
+        it on the first fresh setpoint (0.0; the capture shows 2.5 ms); older docs say ~1 s.
+    offboard_resume : bool
+        Return to OFFBOARD by itself when setpoints come back after an offboard-loss fallback,
+        as long as the operator has not chosen another mode (PX4's mode-fallback semantics).
+    com_disarm_land_s : float
+        Auto-disarm delay after landing [s] (``COM_DISARM_LAND``).
+    com_disarm_prflt_s : float
+        Auto-disarm delay when armed on the ground without taking off [s]
+        (``COM_DISARM_PRFLT``).
+    land_detect_s : float
+        Time the vehicle must rest on the ground before the land detector reports it [s].
+    mpc_land_speed_m_s : float
+        Descent speed in LAND [m/s] (``MPC_LAND_SPEED``).
+    mpc_tko_speed_m_s : float
+        Climb speed in TAKEOFF [m/s] (``MPC_TKO_SPEED``).
+    battery_drain_pct_s : float
+        Battery percentage consumed per second while armed [%/s].
+    home_lat_deg, home_lon_deg, home_alt_m : float
+        Global origin of the local frame (WGS84 degrees, AMSL metres).
+    """
+
+    system_id: int = 1
+    initial_mode: str = "HOLD"
+    mis_takeoff_alt_m: float = 2.5
+    com_of_loss_t_s: float = 1.0
+    offboard_min_stream_s: float = 0.0
+    offboard_resume: bool = True
+    com_disarm_land_s: float = 2.0
+    com_disarm_prflt_s: float = 10.0
+    land_detect_s: float = 1.0
+    mpc_land_speed_m_s: float = 0.7
+    mpc_tko_speed_m_s: float = 1.5
+    battery_drain_pct_s: float = 0.05
+    home_lat_deg: float = 47.3977431
+    home_lon_deg: float = 8.5455947
+    home_alt_m: float = 489.244
+
+
+@dataclass(frozen=True)
+class MockConfig:
+    """Everything that describes the simulated vehicle.
+
+    Parameters
+    ----------
+    physics : PhysicsConfig
+        Rigid-body model.
+    controller : ControllerConfig
+        Cascaded controller gains and limits.
+    disturbance : DisturbanceConfig
+        Repeatable field and gusts.
+    noise : NoiseConfig
+        Measurement noise.
+    rates : RatesConfig
+        Default telemetry rates.
+    px4 : Px4Config
+        Commander behaviour and parameters.
+    """
+
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    controller: ControllerConfig = field(default_factory=ControllerConfig)
+    disturbance: DisturbanceConfig = field(default_factory=DisturbanceConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    rates: RatesConfig = field(default_factory=RatesConfig)
+    px4: Px4Config = field(default_factory=Px4Config)
+
+
+@dataclass(frozen=True)
+class Faults:
+    """Injected faults of one run. Times are seconds after the vehicle first enters OFFBOARD.
+
+    Parameters
+    ----------
+    loss_fraction : float
+        Fraction of UDP datagrams dropped, independently in each direction, from the start.
+    latency_ms : float
+        Added one-way latency of every datagram in each direction [ms], from the start.
+    dropout_start_s, dropout_duration_s : float or None
+        Telemetry dropout window: no streamed telemetry (heartbeats, ACKs and replies still go
+        out) from ``start`` for ``duration`` seconds.
+    link_loss_at_s : float or None
+        From this time on nothing is sent or received any more (the link is gone for good).
+    gust_start_s, gust_duration_s : float or None
+        Wind gust window.
+    gust_vn_m_s, gust_ve_m_s : float
+        Wind speed north and east during the gust [m/s]; it acts through the drag.
+    """
+
+    loss_fraction: float = 0.0
+    latency_ms: float = 0.0
+    dropout_start_s: float | None = None
+    dropout_duration_s: float | None = None
+    link_loss_at_s: float | None = None
+    gust_start_s: float | None = None
+    gust_duration_s: float | None = None
+    gust_vn_m_s: float = 0.0
+    gust_ve_m_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.loss_fraction < 1.0:
+            raise ValueError(f"loss fraction must be in [0, 1), got {self.loss_fraction}")
+        if not 0.0 <= self.latency_ms <= 10_000.0:
+            raise ValueError(f"latency must be in [0, 10000] ms, got {self.latency_ms}")
+        for name in ("dropout_duration_s", "gust_duration_s"):
+            value = getattr(self, name)
+            if value is not None and value < 0:
+                raise ValueError(f"{name} must be >= 0, got {value}")
+        if (self.dropout_start_s is None) != (self.dropout_duration_s is None):
+            raise ValueError("dropout needs both a start and a duration")
+        if (self.gust_start_s is None) != (self.gust_duration_s is None):
+            raise ValueError("gust needs both a start and a duration")
+
+    def dropout_active(self, t_offboard_s: float | None) -> bool:
+        """Whether the telemetry dropout window covers a time.
+
+        Parameters
+        ----------
+        t_offboard_s : float or None
+            Seconds since the first entry into OFFBOARD (None before it).
+
+        Returns
+        -------
+        bool
+        """
+        if t_offboard_s is None or self.dropout_start_s is None:
+            return False
+        return 0.0 <= t_offboard_s - self.dropout_start_s < (self.dropout_duration_s or 0.0)
+
+    def link_lost(self, t_offboard_s: float | None) -> bool:
+        """Whether the link is gone at a time.
+
+        Parameters
+        ----------
+        t_offboard_s : float or None
+            Seconds since the first entry into OFFBOARD (None before it).
+
+        Returns
+        -------
+        bool
+        """
+        return (
+            t_offboard_s is not None
+            and self.link_loss_at_s is not None
+            and t_offboard_s >= self.link_loss_at_s
+        )
+
+    def wind_ned_m_s(self, t_offboard_s: float | None) -> tuple[float, float]:
+        """Wind of the gust fault at a time.
+
+        Parameters
+        ----------
+        t_offboard_s : float or None
+            Seconds since the first entry into OFFBOARD (None before it).
+
+        Returns
+        -------
+        tuple of float
+            Wind north and east [m/s]; zero outside the gust window.
+        """
+        if t_offboard_s is None or self.gust_start_s is None:
+            return (0.0, 0.0)
+        if 0.0 <= t_offboard_s - self.gust_start_s < (self.gust_duration_s or 0.0):
+            return (self.gust_vn_m_s, self.gust_ve_m_s)
+        return (0.0, 0.0)
+
+
+def _check_value(value: Any, annotation: Any, where: str) -> Any:
+    """Validate one YAML scalar against a dataclass field annotation; return the typed value."""
+    if annotation is bool:
+        if not isinstance(value, bool):
+            raise ProfileError(f"{where} must be true or false, got {value!r}")
+        return value
+    if annotation is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ProfileError(f"{where} must be an integer, got {value!r}")
+        return value
+    if annotation is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ProfileError(f"{where} must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ProfileError(f"{where} must be finite, got {value!r}")
+        return float(value)
+    if annotation is str:
+        if not isinstance(value, str):
+            raise ProfileError(f"{where} must be a string, got {value!r}")
+        return value
+    raise TypeError(f"unsupported field type {annotation!r}")  # programming error
+
+
+def _build(cls: type, data: Any, where: str, path: str) -> Any:
+    """Build dataclass ``cls`` from a mapping, strictly (unknown or ill-typed fields raise)."""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ProfileError(f"{where}: field '{path or '<top>'}' must be a mapping")
+    hints = typing.get_type_hints(cls)
+    known = {f.name for f in dataclasses.fields(cls)}
+    for key in data:
+        if key not in known:
+            name = f"{path}.{key}" if path else str(key)
+            raise ProfileError(f"{where}: field '{name}' is not a known field")
+    kwargs = {}
+    for key, value in data.items():
+        name = f"{path}.{key}" if path else key
+        hint = hints[key]
+        if dataclasses.is_dataclass(hint):
+            kwargs[key] = _build(hint, value, where, name)
+        else:
+            kwargs[key] = _check_value(value, hint, f"{where}: field '{name}'")
+    try:
+        return cls(**kwargs)
+    except ValueError as exc:
+        raise ProfileError(f"{where}: field '{path}': {exc}") from exc
+
+
+def mock_config_from_dict(data: Any, where: str = "<dict>") -> MockConfig:
+    """Build a :class:`MockConfig` from a parsed YAML mapping.
+
+    Parameters
+    ----------
+    data : mapping or None
+        Parsed profile; missing sections and fields take their defaults.
+    where : str
+        Name of the source used in error messages (normally the file path).
+
+    Returns
+    -------
+    MockConfig
+
+    Raises
+    ------
+    ProfileError
+        On an unknown or ill-typed field, naming ``where`` and the dotted field.
+    """
+    cfg = _build(MockConfig, data, where, "")
+    _validate(cfg, where)
+    return cfg
+
+
+def _validate(cfg: MockConfig, where: str) -> None:
+    """Range and cross-field checks that a plain type check cannot make."""
+    for section in ("physics", "controller", "disturbance", "noise", "rates"):
+        sub = getattr(cfg, section)
+        for f in dataclasses.fields(sub):
+            value = getattr(sub, f.name)
+            if isinstance(value, float) and value < 0:
+                raise ProfileError(f"{where}: field '{section}.{f.name}' must be >= 0")
+    checks = [
+        ("physics.dt_s", 0.0005 <= cfg.physics.dt_s <= 0.005, "must be in [0.0005, 0.005] s"),
+        ("physics.tilt_lag_s", cfg.physics.tilt_lag_s > 0, "must be > 0"),
+        ("physics.thrust_max_g", cfg.physics.thrust_max_g > 1.0, "must be > 1"),
+        ("physics.thrust_min_g", cfg.physics.thrust_min_g < 1.0, "must be < 1"),
+        ("controller.tilt_max_deg", 0 < cfg.controller.tilt_max_deg < 80, "must be in (0, 80)"),
+        ("controller.yaw_lag_s", cfg.controller.yaw_lag_s > 0, "must be > 0"),
+        ("disturbance.gust_tau_s", cfg.disturbance.gust_tau_s > 0, "must be > 0"),
+        (
+            "disturbance.field_wavelength_max_m",
+            cfg.disturbance.field_wavelength_max_m >= cfg.disturbance.field_wavelength_min_m > 0,
+            "must be >= field_wavelength_min_m > 0",
+        ),
+        ("px4.initial_mode", cfg.px4.initial_mode in MODES, f"must be one of {', '.join(MODES)}"),
+        ("px4.system_id", 1 <= cfg.px4.system_id <= 250, "must be in [1, 250]"),
+        ("px4.mis_takeoff_alt_m", cfg.px4.mis_takeoff_alt_m > 0, "must be > 0"),
+        ("px4.mpc_land_speed_m_s", cfg.px4.mpc_land_speed_m_s > 0, "must be > 0"),
+        ("px4.mpc_tko_speed_m_s", cfg.px4.mpc_tko_speed_m_s > 0, "must be > 0"),
+        ("rates.heartbeat_hz", cfg.rates.heartbeat_hz > 0, "must be > 0 (MAVSDK needs it)"),
+    ]
+    for name, ok, message in checks:
+        if not ok:
+            raise ProfileError(f"{where}: field '{name}' {message}")
+
+
+def load_mock_config(path: str | Path | None) -> MockConfig:
+    """Read a mock profile (YAML); every missing field takes its default.
+
+    Parameters
+    ----------
+    path : str, Path or None
+        Profile file; None gives the defaults.
+
+    Returns
+    -------
+    MockConfig
+
+    Raises
+    ------
+    ProfileError
+        If the file cannot be read, is malformed YAML, or has an unknown or ill-typed field;
+        the message names the file and the field.
+    """
+    if path is None:
+        return MockConfig()
+    return mock_config_from_dict(_read_yaml(Path(path), ProfileError), str(path))
