@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict
 from pathlib import Path
 
+from rich.markup import escape
 from rich.table import Table
 
 from gcs.core.metrics import IterationMetrics, iteration_table
@@ -64,11 +65,8 @@ def metrics_table(rows: list[IterationMetrics], title: str = "") -> Table:
     rich.table.Table
     """
     table = Table(title=title or None)
-    table.add_column("j", justify="right")
-    table.add_column("e_pos,j [m]", justify="right")
-    table.add_column("e_pos,j / e_pos,0 [%]", justify="right")
-    table.add_column("|Δe_pos| / e_pos,j-1 [%]", justify="right")
-    table.add_column("max error [m]", justify="right")
+    for header in ("j", "e_pos [m]", "e_pos/e_pos0 [%]", "|Δe_pos|/prev [%]", "max err [m]"):
+        table.add_column(escape(header), justify="right", no_wrap=True)
     for r in rows:
         delta = "-" if r.delta_pct is None else f"{r.delta_pct:.2f}"
         table.add_row(

@@ -1,0 +1,136 @@
+"""The learn and report commands on a synthetic run directory, and their refusals."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from synthetic import fly_synthetic, make_run
+from typer.testing import CliRunner
+
+from gcs.cli import app
+from gcs.io.runlog import RunDir
+
+runner = CliRunner()
+
+
+def invoke(*args: str):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def files(path: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(path.iterdir()) if p.is_file()}
+
+
+def test_help_reads_like_a_manual() -> None:
+    result = invoke("--help")
+    assert result.exit_code == 0
+    for command in ("learn", "report"):
+        assert command in result.output
+    learn_help = invoke("learn", "--help").output
+    assert "newest complete trial" in learn_help and "Example" in learn_help
+
+
+def test_learn_then_report_round_trip(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=1)
+    result = invoke("learn", run.path)
+    assert result.exit_code == 0, result.output
+    assert (run.path / "setpoints-001.csv").exists()
+    assert (run.path / "estimate-000.csv").exists()
+    fly_synthetic(run, 1)
+    result = invoke("report", run.path, "--json")
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.output)
+    assert [r["iteration"] for r in rows] == [0, 1]
+    assert set(rows[0]) == {"iteration", "epos_m", "epos_pct", "delta_pct", "max_err_m"}
+    assert rows[0]["epos_pct"] == pytest.approx(100.0)
+    assert rows[0]["delta_pct"] is None
+    assert rows[1]["epos_m"] < 0.5 * rows[0]["epos_m"]  # learning helped
+    expected_delta = 100 * abs(rows[1]["epos_m"] - rows[0]["epos_m"]) / rows[0]["epos_m"]
+    assert rows[1]["delta_pct"] == pytest.approx(expected_delta)
+
+
+def test_report_table_and_plots(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=3)
+    result = invoke("report", run.path, "--plot", tmp_path / "plots")
+    assert result.exit_code == 0, result.output
+    assert "e_pos [m]" in result.output
+    for name in ("xy.png", "north_t.png", "epos.png"):
+        data = (tmp_path / "plots" / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
+
+
+def test_learn_is_idempotent(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=1)
+    assert invoke("learn", run.path).exit_code == 0
+    first = files(run.path)
+    assert invoke("learn", run.path).exit_code == 0
+    assert files(run.path) == first
+
+
+def _corrupt(run: RunDir, column: str, row: int, value: str) -> None:
+    path = run.path / "trial-000.csv"
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    cells = lines[row + 1].split(",")
+    cells[header.index(column)] = value
+    lines[row + 1] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (lambda run: _corrupt(run, "pos_east_m", 7, "nan"), "'pos_east_m' is NaN"),
+        (
+            lambda run: (run.path / "trial-000.csv").write_text(
+                "\n".join((run.path / "trial-000.csv").read_text().splitlines()[:-5]) + "\n"
+            ),
+            "truncated",
+        ),
+        (lambda run: _corrupt(run, "t_s", 3, "0.2"), "does not match t_ilc_s"),
+        (lambda run: (run.path / "manifest.json").write_text("{not json"), "malformed JSON"),
+    ],
+)
+def test_learn_refuses_bad_logs_and_writes_nothing(tmp_path: Path, damage, message) -> None:
+    run = make_run(tmp_path, trials=1)
+    damage(run)
+    before = files(run.path)
+    result = invoke("learn", run.path)
+    assert result.exit_code == 2
+    assert message in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert files(run.path) == before
+
+
+def test_learn_refuses_mismatching_profile_and_algorithm(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=1)
+    other = tmp_path / "other.yaml"
+    text = (Path(__file__).parents[1] / "profiles" / "antx.yaml").read_text()
+    other.write_text(text.replace("t_ilc_s: 0.05", "t_ilc_s: 0.04"))
+    result = invoke("learn", run.path, "--profile", other)
+    assert result.exit_code == 2 and "does not match" in result.output
+    result = invoke("learn", run.path, "--algorithm", "kilc")
+    assert result.exit_code == 2 and "learns with 'smoother'" in result.output
+    assert not (run.path / "setpoints-001.csv").exists()
+
+
+def test_learn_refuses_incomplete_only_run(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=0)
+    result = invoke("learn", run.path)
+    assert result.exit_code == 2 and "no complete trial" in result.output
+
+
+def test_missing_run_directory(tmp_path: Path) -> None:
+    result = invoke("report", tmp_path / "nope")
+    assert result.exit_code == 2 and "not a run directory" in result.output
+
+
+def test_learned_setpoints_respect_the_arena(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=1)
+    assert invoke("learn", run.path).exit_code == 0
+    sp = run.read_setpoints(1)
+    bounds = run.profile().arena.bounds()
+    assert np.all(sp >= bounds[:, 0] - 1e-9) and np.all(sp <= bounds[:, 1] + 1e-9)
