@@ -303,6 +303,17 @@ def controllable_slices(model: DiscreteModel, n: int) -> tuple[slice, slice]:
 
 
 def dc_gain(model: DiscreteModel) -> float:
-    """Static gain ``C (I - A)^-1 B`` of a stable model."""
+    """Static gain ``C (I - A)^-1 B`` of a stable model.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+        A stable model.
+
+    Returns
+    -------
+    float
+        Output change per unit input change in steady state [m/m].
+    """
     n = model.order
     return float((model.C @ np.linalg.solve(np.eye(n) - model.A, model.B))[0, 0])
