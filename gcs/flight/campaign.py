@@ -45,15 +45,44 @@ class TrialSource(Protocol):
     """Where trials come from and where their recordings go (blocking; run in a thread)."""
 
     def setpoints_for(self, j: int) -> np.ndarray:
-        """Setpoints of trial ``j``: shape (N, 3), absolute local NED [m]; may run a learner."""
+        """Setpoints of trial ``j`` (may run a learner).
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+            Absolute local NED setpoints [m]; setpoint k holds from t0 + k t_ilc_s.
+        """
         ...
 
     def record(self, j: int, recording: TrialRecording) -> None:
-        """Take the complete recording of trial ``j`` (write files, learn)."""
+        """Take the complete recording of trial ``j`` (write files, learn).
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+        recording : TrialRecording
+            The complete recording.
+        """
         ...
 
     def record_incomplete(self, j: int, recording: TrialRecording, reason: str) -> None:
-        """Take the partial recording of trial ``j``, which stopped early for ``reason``."""
+        """Take the partial recording of trial ``j``, which stopped early.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+        recording : TrialRecording
+            The partial recording (``complete=False``; NaN after the last sample).
+        reason : str
+            Why the trial stopped, one line.
+        """
         ...
 
 

@@ -397,15 +397,19 @@ class Vehicle:
         )
         await self._command("take-off", action.takeoff)
         tolerance_m = self.settings.settle_tolerance_m
+        seen_takeoff_mode = [False]
 
         def airborne() -> bool:
             if self.latest is None:
                 return False
+            seen_takeoff_mode[0] |= self.flight_mode == FlightMode.TAKEOFF
             height_m = -self.latest.pos_ned_m[2]
-            in_hold = (
-                self.flight_mode == FlightMode.HOLD and self.landed_state == LandedState.IN_AIR
+            done_in_hold = (
+                seen_takeoff_mode[0]
+                and self.flight_mode == FlightMode.HOLD
+                and self.landed_state == LandedState.IN_AIR
             )
-            return height_m >= altitude_m - tolerance_m or in_hold
+            return height_m >= altitude_m - tolerance_m or done_in_hold
 
         await self._wait_until(
             airborne,
