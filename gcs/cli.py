@@ -155,3 +155,77 @@ def report(
 def run() -> None:  # pragma: no cover - console-script entry point alias
     """Entry point."""
     app()
+
+
+@app.command()
+@one_line_errors
+def fly(
+    iterations: Annotated[int, typer.Option("--iter", "-n", min=1, help="Trials to fly.")] = 3,
+    mock: Annotated[
+        bool,
+        typer.Option(
+            "--mock",
+            help="Dry run: start the mock drone on a free loopback port and fly it.",
+        ),
+    ] = False,
+    connect: Annotated[
+        str | None,
+        typer.Option(
+            help="MAVSDK connection URL of a real vehicle or PX4 SITL, e.g. udpin://0.0.0.0:14540.",
+        ),
+    ] = None,
+    profile: Annotated[Path, typer.Option(help="Vehicle profile (YAML).")] = DEFAULT_PROFILE,
+    trajectory: Annotated[
+        Path, typer.Option(help="Trajectory to learn (YAML).")
+    ] = DEFAULT_TRAJECTORY,
+    algorithm: Algorithm = None,
+    run_dir: Annotated[
+        Path | None, typer.Option("--run", help="Create the new run exactly here.")
+    ] = None,
+    resume: Annotated[
+        Path | None,
+        typer.Option(help="Continue this run from its last complete trial."),
+    ] = None,
+    logs: Annotated[Path, typer.Option(help="Parent directory of new runs.")] = DEFAULT_LOGS,
+    mock_config: Annotated[
+        Path | None, typer.Option(help="Mock drone settings (YAML) for --mock.")
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the mock drone's random gusts.")] = 0,
+) -> None:
+    """Fly N learning trials: take off, fly, learn, fly again, land.
+
+    Connects through MAVSDK, waits for a healthy local position, arms, takes off to the
+    trajectory's altitude, flies to the start point and settles in hover. Each trial streams
+    its setpoints against absolute deadlines, records the measured position on the sample
+    grid, learns the next trial's setpoints while hovering (the same step as 'gcs learn') and
+    prints the new row of the e_pos table. After the last trial it lands and disarms.
+
+    Safety: Ctrl-C, a lost link, an offboard rejection or any error mid-trial stops streaming,
+    holds, lands and disarms; completed trials stay on disk, the interrupted one is marked
+    incomplete, and --resume continues from the last complete trial. Setpoints outside the
+    profile's arena are never sent.
+
+    Examples: gcs fly --mock --iter 3;
+    gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc
+    """
+    from gcs.flightview import fly_with_display
+
+    _check_algorithm(algorithm)
+    if mock == (connect is not None):
+        raise typer.BadParameter("give exactly one of --mock and --connect")
+    if resume is not None and run_dir is not None:
+        raise typer.BadParameter("give at most one of --run and --resume")
+    fly_with_display(
+        console=console,
+        iterations=iterations,
+        connect=connect,
+        mock_config=mock_config,
+        seed=seed,
+        profile_path=profile,
+        trajectory_path=trajectory,
+        algorithm=algorithm,
+        run_path=run_dir,
+        resume=resume,
+        logs=logs,
+        use_mock=mock,
+    )

@@ -1,0 +1,168 @@
+"""The terminal side of ``gcs fly``: run set-up, the mock drone, and a rich live display."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+from gcs.core.metrics import IterationMetrics
+from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
+from gcs.fly import flight_settings, fly_run, prepare_run
+from gcs.io.config import load_profile, load_trajectory
+from gcs.io.runlog import RunDir
+from gcs.report import metrics_table
+
+__all__ = ["fly_with_display", "vehicle_url"]
+
+
+@contextlib.contextmanager
+def vehicle_url(
+    connect: str | None, use_mock: bool, mock_config: Path | None, seed: int, console: Console
+) -> Iterator[str]:
+    """Yield the MAVSDK URL to fly: a real vehicle's, or a mock drone started for the flight.
+
+    Parameters
+    ----------
+    connect : str or None
+        URL of a real vehicle (used when ``use_mock`` is False).
+    use_mock : bool
+        Start the mock drone as a subprocess on a free loopback port and stop it afterwards.
+    mock_config : Path or None
+        Mock drone settings (YAML).
+    seed : int
+        Seed of the mock drone.
+    console : Console
+        Where to print the mock's URL.
+
+    Yields
+    ------
+    str
+    """
+    if not use_mock:
+        assert connect is not None
+        yield connect
+        return
+    from gcs.mock.process import MockProcess
+
+    with MockProcess(config_path=mock_config, seed=seed) as mock:
+        console.print(f"[dim]mock drone at {mock.url}[/]")
+        yield mock.url
+
+
+def _open_run(
+    resume: Path | None,
+    run_path: Path | None,
+    logs: Path,
+    profile_path: Path,
+    trajectory_path: Path,
+    algorithm: str | None,
+) -> RunDir:
+    if resume is not None:
+        run = RunDir.open(resume)
+        if algorithm is not None and algorithm != run.algorithm:
+            from gcs.errors import RunLogError
+
+            raise RunLogError(f"{resume}: the run learns with '{run.algorithm}', not '{algorithm}'")
+        return run
+    profile = load_profile(profile_path)
+    trajectory = load_trajectory(trajectory_path)
+    return prepare_run(logs, profile, trajectory, algorithm or profile.learning.algorithm, run_path)
+
+
+def fly_with_display(
+    *,
+    console: Console,
+    iterations: int,
+    connect: str | None,
+    mock_config: Path | None,
+    seed: int,
+    profile_path: Path,
+    trajectory_path: Path,
+    algorithm: str | None,
+    run_path: Path | None,
+    resume: Path | None,
+    logs: Path,
+    use_mock: bool,
+) -> RunDir:
+    """Set up (or resume) a run and fly it with a live display.
+
+    Parameters
+    ----------
+    console : Console
+        Terminal output.
+    iterations : int
+        Trials to fly.
+    connect : str or None
+        URL of a real vehicle.
+    mock_config : Path or None
+        Mock settings for ``use_mock``.
+    seed : int
+        Mock seed.
+    profile_path : Path
+        Profile of a new run.
+    trajectory_path : Path
+        Trajectory of a new run.
+    algorithm : str or None
+        Learning algorithm (default: the profile's, or the resumed run's).
+    run_path : Path or None
+        Exact path of a new run.
+    resume : Path or None
+        Run to continue.
+    logs : Path
+        Parent of new runs.
+    use_mock : bool
+        Fly the mock drone.
+
+    Returns
+    -------
+    RunDir
+    """
+    run = _open_run(resume, run_path, logs, profile_path, trajectory_path, algorithm)
+    settings = flight_settings(run.profile())
+    console.print(f"run [bold]{run.path}[/] ({run.algorithm}), next trial {run.next_trial()}")
+    progress = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.fields[err]}"),
+        TimeRemainingColumn(),
+        console=console,
+        transient=True,
+    )
+    task = progress.add_task("waiting", total=1, err="")
+
+    def on_event(event: object) -> None:
+        if isinstance(event, Status):
+            progress.console.print(f"[dim]{event.text}[/]")
+        elif isinstance(event, TrialStarted):
+            progress.update(
+                task,
+                description=f"trial {event.trial} ({event.number}/{event.iterations})",
+                total=event.n_setpoints,
+                completed=0,
+            )
+        elif isinstance(event, TrialProgress):
+            progress.update(task, completed=event.k, err=f"error {event.err_m:.3f} m")
+        elif isinstance(event, TrialFinished) and not event.recording.complete:
+            progress.console.print(f"[red]trial {event.trial} incomplete[/]")
+
+    def on_row(rows: list[IterationMetrics]) -> None:
+        r = rows[-1]
+        delta = "" if r.delta_pct is None else f", {r.delta_pct:5.1f} % better than j-1"
+        progress.console.print(
+            f"trial {r.iteration}: e_pos {r.epos_m:.4f} m = {r.epos_pct:5.1f} % of e_pos,0"
+            f"{delta}, max {r.max_err_m:.3f} m"
+        )
+
+    with (
+        vehicle_url(connect, use_mock, mock_config, seed, console) as url,
+        progress,
+    ):
+        fly_run(url, run, iterations, settings, on_event, on_row)
+    from gcs.report import run_metrics
+
+    console.print(metrics_table(run_metrics(run), f"{run.path.name} ({run.algorithm})"))
+    return run

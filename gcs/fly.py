@@ -1,0 +1,241 @@
+"""``gcs fly``: a run directory as the flight layer's trial source, and the live display.
+
+The flight layer asks for "the next sequence" and hands back recordings; :class:`RunSource`
+answers from the run directory and learns with :func:`gcs.learn.learn_run`, the same function
+``gcs learn`` calls. Everything here runs in worker threads while the vehicle hovers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from gcs.core.metrics import IterationMetrics, iteration_table
+from gcs.core.trajectory import check_reference, points_outside
+from gcs.errors import ProfileError, RunLogError, TrajectoryError
+from gcs.flight.campaign import fly_campaign
+from gcs.flight.settings import FlightSettings
+from gcs.flight.trial import TrialRecording
+from gcs.io.config import Profile, TrajectorySpec
+from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.learn import learn_run, trial_errors
+
+__all__ = ["RunSource", "flight_settings", "prepare_run", "to_record", "fly_run"]
+
+
+def flight_settings(profile: Profile) -> FlightSettings:
+    """The profile's ``flight`` section as :class:`FlightSettings` (unknown keys refused).
+
+    Parameters
+    ----------
+    profile : Profile
+        The profile.
+
+    Returns
+    -------
+    FlightSettings
+    """
+    known = {f.name for f in fields(FlightSettings)}
+    for key, value in profile.flight.items():
+        if key not in known:
+            raise ProfileError(f"profile '{profile.name}': field 'flight.{key}' is not known")
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ProfileError(f"profile '{profile.name}': field 'flight.{key}' must be a number")
+    settings = FlightSettings(**{k: float(v) for k, v in profile.flight.items()})
+    try:
+        settings.sends_per_sample(profile.t_ilc_s)
+    except ValueError as exc:
+        raise ProfileError(
+            f"profile '{profile.name}': field 'flight.stream_rate_hz': {exc}"
+        ) from exc
+    return settings
+
+
+def prepare_run(
+    logs: Path,
+    profile: Profile,
+    trajectory: TrajectorySpec,
+    algorithm: str,
+    run_path: Path | None = None,
+) -> RunDir:
+    """Check the trajectory against the vehicle and the arena, then create the run directory.
+
+    Parameters
+    ----------
+    logs : Path
+        Parent of new run directories.
+    profile : Profile
+        Vehicle profile.
+    trajectory : TrajectorySpec
+        The manoeuvre.
+    algorithm : str
+        ``"smoother"`` or ``"kilc"``.
+    run_path : Path, optional
+        Create the run exactly here instead of ``logs/<run-id>``.
+
+    Returns
+    -------
+    RunDir
+    """
+    from gcs.core.trajectory import sample_eight
+
+    ref = sample_eight(trajectory.shape, profile.t_ilc_s)
+    check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)
+    if run_path is not None:
+        return RunDir.create(run_path.parent, profile, trajectory, algorithm, run_id=run_path.name)
+    return RunDir.create(logs, profile, trajectory, algorithm)
+
+
+def to_record(run: RunDir, recording: TrialRecording) -> TrialRecord:
+    """A flight recording as a row-per-sample trial record of the run.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run (for its reference).
+    recording : TrialRecording
+        What the flight layer sent and measured.
+
+    Returns
+    -------
+    TrialRecord
+    """
+    ref = run.reference()
+    sp = recording.setpoints_ned_m
+    return TrialRecord(
+        t_s=ref.t_s,
+        ref_ned_m=ref.pos_ned_m,
+        sp_ned_m=np.vstack([sp, sp[-1]]),
+        pos_ned_m=recording.pos_ned_m,
+        vel_ned_m_s=recording.vel_ned_m_s,
+        sp_sent_s=np.append(recording.sent_s, np.nan),
+        interpolated=recording.interpolated,
+    )
+
+
+@dataclass
+class RunSource:
+    """Trial source of the flight layer backed by a run directory.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run being flown.
+    on_row : callable, optional
+        Called with the Table IV rows of the run after each complete trial is recorded.
+    """
+
+    run: RunDir
+    on_row: Callable[[list[IterationMetrics]], None] | None = None
+
+    def setpoints_for(self, j: int) -> np.ndarray:
+        """Trial j's setpoints from the run directory, refused if any leaves the arena.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+            Absolute local NED [m].
+        """
+        sp = self.run.read_setpoints(j)
+        profile = self.run.profile()
+        outside = points_outside(sp, profile.arena)
+        if outside.size:
+            k = outside[0]
+            raise TrajectoryError(
+                f"setpoints-{j:03d}.csv: setpoint k = {k} {np.round(sp[k], 3).tolist()} is "
+                f"outside the arena {profile.arena}; not flown"
+            )
+        return sp
+
+    def record(self, j: int, recording: TrialRecording) -> None:
+        """Write a complete trial, then learn the next trial's setpoints from it.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+        recording : TrialRecording
+            The complete recording.
+        """
+        record = to_record(self.run, recording)
+        e, m = trial_errors(record)
+        extra = {"max_send_late_s": recording.max_send_late_s}
+        status = TrialStatus(
+            j, True, epos_m=e, max_err_m=m,
+            interpolated_share=recording.interpolated_share, extra=extra,
+        )  # fmt: skip
+        self.run.write_trial(j, record, status)
+        learn_run(self.run)
+        if self.on_row is not None:
+            self.on_row(self.rows())
+
+    def record_incomplete(self, j: int, recording: TrialRecording, reason: str) -> None:
+        """Write an interrupted trial, marked incomplete (never learned from).
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+        recording : TrialRecording
+            The partial recording.
+        reason : str
+            Why the trial stopped.
+        """
+        record = to_record(self.run, recording)
+        status = TrialStatus(
+            j, False, reason=reason, interpolated_share=recording.interpolated_share
+        )
+        self.run.write_trial(j, record, status)
+
+    def rows(self) -> list[IterationMetrics]:
+        """Table IV rows of the complete trials so far (from the sidecars)."""
+        done = [s for s in self.run.statuses() if s.complete]
+        return iteration_table(
+            [s.epos_m for s in done], [s.max_err_m for s in done], [s.trial for s in done]
+        )
+
+
+def fly_run(
+    url: str,
+    run: RunDir,
+    iterations: int,
+    settings: FlightSettings,
+    on_event: Callable[[object], None] | None = None,
+    on_row: Callable[[list[IterationMetrics]], None] | None = None,
+) -> RunSource:
+    """Fly ``iterations`` trials of ``run`` from its next trial, learning between trials.
+
+    Parameters
+    ----------
+    url : str
+        MAVSDK connection URL.
+    run : RunDir
+        The run; flying starts at ``run.next_trial()``.
+    iterations : int
+        Number of trials.
+    settings : FlightSettings
+        Flight settings.
+    on_event : callable, optional
+        Receives the flight layer's campaign events.
+    on_row : callable, optional
+        Receives the Table IV rows after each complete trial.
+
+    Returns
+    -------
+    RunSource
+    """
+    first = run.next_trial()
+    if first > 0 and not (run.path / f"setpoints-{first:03d}.csv").exists():
+        raise RunLogError(f"{run.path}: no setpoints for trial {first}; run 'gcs learn' first")
+    source = RunSource(run, on_row)
+    asyncio.run(fly_campaign(url, source, iterations, first, settings, run.t_ilc_s, on_event))
+    return source
