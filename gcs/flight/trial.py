@@ -87,6 +87,8 @@ class TrialRecording:
         Raw velocities, local NED [m/s].
     max_send_late_s : float
         Largest delay of a send after its deadline [s].
+    t0_monotonic_s : float
+        t0 on ``time.monotonic()`` [s] (CLOCK_MONOTONIC, comparable with other local processes).
     """
 
     t_s: np.ndarray
@@ -102,6 +104,7 @@ class TrialRecording:
     raw_pos_ned_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     raw_vel_ned_m_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     max_send_late_s: float = 0.0
+    t0_monotonic_s: float = math.nan
 
     @property
     def n_setpoints(self) -> int:
@@ -360,6 +363,7 @@ class TrialRun:
             raw_pos_ned_m=raw_pos,
             raw_vel_ned_m_s=raw_vel,
             max_send_late_s=self.max_send_late_s,
+            t0_monotonic_s=t0,
         )
 
 

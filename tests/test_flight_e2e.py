@@ -1,0 +1,169 @@
+"""End-to-end: the flight layer flies the mock drone through real MAVSDK over UDP loopback.
+
+Each test starts its own mock process on a free port (``--port 0``) and runs in real time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs.errors import TrialAborted, VehicleError
+from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted, fly_campaign
+from gcs.flight.settings import FlightSettings
+from gcs.flight.trial import TrialRecording
+from gcs.flight.vehicle import Vehicle
+
+pytestmark = pytest.mark.e2e
+
+T_ILC_S = 0.05
+SETTINGS = FlightSettings(settle_time_s=0.5, settle_tolerance_m=0.2, connect_timeout_s=5.0)
+
+
+class CircleSource:
+    """Tiny TrialSource: the same circle every trial; keeps what it is handed."""
+
+    def __init__(self, duration_s: float = 4.0, radius_m: float = 0.5, height_m: float = 2.0):
+        n = round(duration_s / T_ILC_S)
+        phase = np.linspace(0.0, 2.0 * np.pi, n)
+        self.setpoints = np.stack(
+            [radius_m * np.sin(phase), radius_m * (1.0 - np.cos(phase)), -height_m + 0 * phase],
+            axis=1,
+        )
+        self.asked: list[int] = []
+        self.recorded: list[tuple[int, TrialRecording]] = []
+        self.incomplete: list[tuple[int, TrialRecording, str]] = []
+
+    def setpoints_for(self, j: int) -> np.ndarray:
+        self.asked.append(j)
+        return self.setpoints.copy()
+
+    def record(self, j: int, recording: TrialRecording) -> None:
+        self.recorded.append((j, recording))
+
+    def record_incomplete(self, j: int, recording: TrialRecording, reason: str) -> None:
+        self.incomplete.append((j, recording, reason))
+
+
+def _mock(tmp_path: Path, **faults: float):  # type: ignore[no-untyped-def]
+    process = pytest.importorskip("gcs.mock.process")
+    config = pytest.importorskip("gcs.mock.config")
+    return process.MockProcess(
+        config_path=None, seed=0, faults=config.Faults(**faults), stats_path=tmp_path / "stats"
+    )
+
+
+def _best_lag_correlation(measured: np.ndarray, commanded: np.ndarray) -> tuple[int, float]:
+    """Lag (samples) maximising the correlation of measured(k + lag) with commanded(k)."""
+    best = (0, -1.0)
+    for lag in range(0, 40):
+        a, b = measured[lag : lag + len(commanded) - 40], commanded[: len(commanded) - 40]
+        r = float(np.corrcoef(a, b)[0, 1])
+        if r > best[1]:
+            best = (lag, r)
+    return best
+
+
+def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
+    source = CircleSource()
+    events: list[object] = []
+    started = time.monotonic()
+    with _mock(tmp_path) as mock:
+        asyncio.run(fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event=events.append))
+    assert time.monotonic() - started < 40.0
+    assert source.asked == [0, 1]
+    assert [j for j, _ in source.recorded] == [0, 1] and not source.incomplete
+    n = source.setpoints.shape[0]
+    for _, rec in source.recorded:
+        assert rec.complete and rec.abort_reason is None
+        assert rec.t_s.shape == (n + 1,) and rec.pos_ned_m.shape == (n + 1, 3)
+        assert rec.vel_ned_m_s.shape == (n + 1, 3) and rec.sent_s.shape == (n,)
+        assert rec.interpolated.shape == (n + 1,) and rec.interpolated_share < 0.05
+        assert np.all(np.isfinite(rec.pos_ned_m)) and np.all(np.isfinite(rec.sent_s))
+        np.testing.assert_allclose(rec.sent_s, rec.t_s[:-1], atol=SETTINGS.max_setpoint_late_s)
+        # the vehicle follows the circle, with the closed loop's lag
+        for axis in (0, 1):
+            lag, r = _best_lag_correlation(rec.pos_ned_m[1:, axis], rec.setpoints_ned_m[:, axis])
+            assert r > 0.9, (axis, lag, r)
+            assert 0 <= lag * T_ILC_S <= 1.5
+        assert np.max(np.abs(rec.pos_ned_m[:, 2] - rec.setpoints_ned_m[0, 2])) < 0.3
+    kinds = [type(e) for e in events]
+    assert kinds.count(TrialStarted) == 2 and kinds.count(TrialFinished) == 2
+    assert TrialProgress in kinds
+    texts = [e.text for e in events if isinstance(e, Status)]
+    assert texts[-1] == "landed and disarmed"
+
+
+def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
+    source = CircleSource(duration_s=8.0)
+    events: list[object] = []
+    started = time.monotonic()
+    with _mock(tmp_path, link_loss_at_s=4.0) as mock:  # noqa: SIM117
+        with pytest.raises((TrialAborted, VehicleError)):
+            asyncio.run(
+                fly_campaign(mock.url, source, 1, 0, SETTINGS, T_ILC_S, on_event=events.append)
+            )
+    assert time.monotonic() - started < 40.0
+    assert not source.recorded
+    assert len(source.incomplete) == 1
+    j, rec, reason = source.incomplete[0]
+    assert j == 0 and not rec.complete and rec.abort_reason
+    assert "telemetry" in reason or "link" in reason
+    measured = np.isfinite(rec.pos_ned_m[:, 0])
+    assert 0 < measured.sum() < len(measured)  # some of it, not all of it
+    assert any(isinstance(e, Status) and e.text.startswith("emergency stop") for e in events)
+
+
+def test_cancellation_mid_trial_lands_and_marks_incomplete(tmp_path: Path) -> None:
+    source = CircleSource(duration_s=6.0)
+    statuses: list[str] = []
+
+    async def fly_then_cancel() -> None:
+        in_trial = asyncio.Event()
+
+        def on_event(event: object) -> None:
+            if isinstance(event, TrialProgress) and event.k >= 20:
+                in_trial.set()
+            if isinstance(event, Status):
+                statuses.append(event.text)
+
+        task = asyncio.create_task(
+            fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event=on_event)
+        )
+        await in_trial.wait()
+        task.cancel()  # what Ctrl-C does to asyncio.run's main task
+        with pytest.raises(asyncio.CancelledError):
+            await task
+
+    with _mock(tmp_path) as mock:
+        asyncio.run(asyncio.wait_for(fly_then_cancel(), 40.0))
+    assert not source.recorded
+    assert len(source.incomplete) == 1
+    j, rec, reason = source.incomplete[0]
+    assert j == 0 and not rec.complete and "interrupted" in reason
+    assert np.isfinite(rec.pos_ned_m[:20]).all()
+    assert "emergency stop: landed and disarmed" in statuses
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_unreachable_url_gives_vehicle_error_quickly() -> None:
+    async def connect(url: str) -> None:
+        vehicle = Vehicle(SETTINGS)
+        await vehicle.connect(url, timeout_s=1.0)
+
+    started = time.monotonic()
+    with pytest.raises(VehicleError, match="no autopilot answered"):
+        asyncio.run(connect(f"udpout://127.0.0.1:{_free_udp_port()}"))
+    assert time.monotonic() - started < 3.0
+    with pytest.raises(VehicleError, match="cannot open connection"):
+        asyncio.run(connect("foo://bar"))
