@@ -1,0 +1,556 @@
+"""PX4 commander of the mock drone: arming, flight modes, offboard rules, land detector.
+
+Pure logic on top of :class:`gcs.mock.physics.QuadPhysics`; no sockets. The server calls
+:meth:`Vehicle.update` with the time since boot and forwards the decoded commands; the
+vehicle answers with MAVLink result codes and leaves status texts in :attr:`Vehicle.events`.
+
+Behaviour copied from PX4 v1.16 (commander sources and the SIH capture in
+``shared/data/px4-sih-offboard.tlog``):
+
+- Boot mode HOLD (AUTO.LOITER; PX4 without RC), or POSCTL by profile.
+- Mode changes are always allowed while disarmed. While armed, OFFBOARD needs a fresh
+  setpoint stream (last setpoint younger than ``COM_OF_LOSS_T``); otherwise the command is
+  TEMPORARILY_REJECTED (MAVSDK reports COMMAND_DENIED).
+- Arming is refused (TEMPORARILY_REJECTED) when the current mode cannot run (OFFBOARD
+  without setpoints) or prevents arming (LAND); arming when armed is accepted and changes
+  nothing; disarming in the air is refused unless forced (param2 = 21196).
+- In OFFBOARD, no setpoint for ``COM_OF_LOSS_T`` makes the vehicle fall back to HOLD at its
+  current position. The operator's choice stays OFFBOARD: if setpoints come back before
+  another mode is chosen the vehicle resumes OFFBOARD (PX4 mode-fallback semantics).
+- TAKEOFF climbs to ``MIS_TAKEOFF_ALT`` at ``MPC_TKO_SPEED``, then switches to HOLD.
+- LAND descends at ``MPC_LAND_SPEED``; the land detector reports touchdown after
+  ``land_detect_s`` of ground contact; auto-disarm ``COM_DISARM_LAND`` later, after which the
+  mode returns to the last operator mode that allows arming (OFFBOARD in the capture).
+- Armed on the ground without taking off: auto-disarm after ``COM_DISARM_PRFLT``.
+- Home is set at arming to the current position.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from dataclasses import dataclass
+
+from gcs.mock.config import MockConfig
+from gcs.mock.physics import QuadPhysics, Target
+
+__all__ = [
+    "Mode",
+    "LandedState",
+    "MavResult",
+    "Vehicle",
+    "Px4Params",
+    "encode_param",
+    "decode_param",
+    "MODE_FROM_CUSTOM",
+]
+
+
+class Mode(enum.Enum):
+    """PX4 flight modes the mock implements, valued ``(main mode, sub mode, base flags)``."""
+
+    POSCTL = (3, 0, 1 | 8 | 16 | 64)
+    HOLD = (4, 3, 1 | 4 | 8 | 16)
+    TAKEOFF = (4, 2, 1 | 4 | 8 | 16)
+    LAND = (4, 6, 1 | 4 | 8 | 16)
+    OFFBOARD = (6, 0, 1 | 16)
+
+    @property
+    def custom_mode(self) -> int:
+        """PX4 ``custom_mode`` of the HEARTBEAT: ``main << 16 | sub << 24``."""
+        return (self.value[0] << 16) | (self.value[1] << 24)
+
+    @property
+    def base_mode(self) -> int:
+        """HEARTBEAT ``base_mode`` while disarmed (add 128 when armed), as PX4 sends it."""
+        return self.value[2]
+
+
+MODE_FROM_CUSTOM = {(m.value[0], m.value[1]): m for m in Mode}
+
+
+class LandedState(enum.IntEnum):
+    """MAV_LANDED_STATE."""
+
+    UNDEFINED = 0
+    ON_GROUND = 1
+    IN_AIR = 2
+    TAKEOFF = 3
+    LANDING = 4
+
+
+class MavResult(enum.IntEnum):
+    """MAV_RESULT of a COMMAND_ACK."""
+
+    ACCEPTED = 0
+    TEMPORARILY_REJECTED = 1
+    DENIED = 2
+    UNSUPPORTED = 3
+    FAILED = 4
+
+
+MAV_PARAM_TYPE_INT32 = 6
+MAV_PARAM_TYPE_REAL32 = 9
+
+
+def encode_param(value: float, param_type: int) -> float:
+    """PX4 bytewise encoding of a parameter value into PARAM_VALUE's float field.
+
+    Parameters
+    ----------
+    value : float
+        Parameter value.
+    param_type : int
+        MAV_PARAM_TYPE (6 INT32: the int's bytes reinterpreted as a float; 9 REAL32).
+
+    Returns
+    -------
+    float
+    """
+    if param_type == MAV_PARAM_TYPE_INT32:
+        return struct.unpack("<f", struct.pack("<i", int(value)))[0]
+    return float(value)
+
+
+def decode_param(raw: float, param_type: int) -> float:
+    """Inverse of :func:`encode_param`.
+
+    Parameters
+    ----------
+    raw : float
+        Float field of PARAM_SET / PARAM_VALUE.
+    param_type : int
+        MAV_PARAM_TYPE.
+
+    Returns
+    -------
+    float
+        Parameter value (integral for INT32).
+    """
+    if param_type == MAV_PARAM_TYPE_INT32:
+        return float(struct.unpack("<i", struct.pack("<f", raw))[0])
+    return float(raw)
+
+
+class Px4Params:
+    """PX4 parameters the mock serves, sorted by name as PX4 indexes them.
+
+    The ones the mock models (``MIS_TAKEOFF_ALT``, ``COM_OF_LOSS_T``, ``COM_DISARM_LAND``,
+    ``COM_DISARM_PRFLT``, ``MPC_LAND_SPEED``, ``MPC_TKO_SPEED``) take effect when set. The
+    others carry the values of the PX4 v1.16 SIH capture so that a GCS reading them sees a
+    plausible vehicle; setting them has no effect.
+
+    Parameters
+    ----------
+    cfg : MockConfig
+        Source of the modelled values.
+    """
+
+    def __init__(self, cfg: MockConfig) -> None:
+        p = cfg.px4
+        real, integer = MAV_PARAM_TYPE_REAL32, MAV_PARAM_TYPE_INT32
+        table = {
+            "MIS_TAKEOFF_ALT": (real, p.mis_takeoff_alt_m),
+            "COM_OF_LOSS_T": (real, p.com_of_loss_t_s),
+            "COM_DISARM_LAND": (real, p.com_disarm_land_s),
+            "COM_DISARM_PRFLT": (real, p.com_disarm_prflt_s),
+            "MPC_LAND_SPEED": (real, p.mpc_land_speed_m_s),
+            "MPC_TKO_SPEED": (real, p.mpc_tko_speed_m_s),
+            "MAV_SYS_ID": (integer, p.system_id),
+            "COM_OBL_RC_ACT": (integer, 0),
+            "COM_RC_IN_MODE": (integer, 1),
+            "NAV_RCL_ACT": (integer, 2),
+            "COM_RCL_EXCEPT": (integer, 0),
+            "NAV_DLL_ACT": (integer, 0),
+            "COM_ARM_WO_GPS": (integer, 1),
+            "EKF2_GPS_CTRL": (integer, 7),
+            "EKF2_HGT_REF": (integer, 1),
+            "MPC_XY_P": (real, 0.95),
+            "MPC_Z_P": (real, 1.0),
+            "MPC_XY_VEL_P_ACC": (real, 1.8),
+            "MPC_XY_VEL_MAX": (real, cfg.controller.vel_max_xy_m_s),
+            "MPC_ACC_HOR_MAX": (real, cfg.controller.acc_max_xy_m_s2),
+            "MPC_TILTMAX_AIR": (real, cfg.controller.tilt_max_deg),
+            "MPC_Z_VEL_MAX_UP": (real, cfg.controller.vel_max_up_m_s),
+            "MPC_Z_VEL_MAX_DN": (real, cfg.controller.vel_max_down_m_s),
+            "SYS_AUTOSTART": (integer, 10040),
+        }
+        self.names = sorted(table)
+        self._values = {k: [t, float(v)] for k, (t, v) in table.items()}
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def __getitem__(self, name: str) -> float:
+        return self._values[name][1]
+
+    def get(self, name: str) -> tuple[int, int, float] | None:
+        """Index, type and value of a parameter, or None if unknown.
+
+        Parameters
+        ----------
+        name : str
+            Parameter name.
+
+        Returns
+        -------
+        tuple (index, MAV_PARAM_TYPE, value) or None
+        """
+        if name not in self._values:
+            return None
+        t, v = self._values[name]
+        return self.names.index(name), t, v
+
+    def set(self, name: str, raw: float) -> tuple[int, int, float] | None:
+        """Set a parameter from its PARAM_SET float (bytewise for integers).
+
+        Parameters
+        ----------
+        name : str
+            Parameter name.
+        raw : float
+            PARAM_SET ``param_value``.
+
+        Returns
+        -------
+        tuple (index, MAV_PARAM_TYPE, value) or None
+            The stored parameter, or None if unknown or not finite.
+        """
+        if name not in self._values:
+            return None
+        t = self._values[name][0]
+        value = decode_param(raw, t)
+        if not math.isfinite(value):
+            return None
+        self._values[name][1] = value
+        return self.get(name)
+
+
+@dataclass
+class ModeChange:
+    """One mode change, for the stats file.
+
+    Parameters
+    ----------
+    t_s : float
+        Vehicle time [s].
+    mode : str
+        New mode name.
+    armed : bool
+        Arming state after the change.
+    """
+
+    t_s: float
+    mode: str
+    armed: bool
+
+
+class Vehicle:
+    """PX4-like commander driving the physics.
+
+    Parameters
+    ----------
+    cfg : MockConfig
+        Mock configuration.
+    seed : int
+        Seed of the gusts and the measurement noise.
+    """
+
+    def __init__(self, cfg: MockConfig, seed: int = 0) -> None:
+        self.cfg = cfg
+        self.physics = QuadPhysics(cfg, seed)
+        self.params = Px4Params(cfg)
+        self.armed = False
+        self.mode = Mode[cfg.px4.initial_mode]
+        self.user_mode = self.mode
+        self._mode_after_disarm = self.mode
+        self.failsafe = False
+        self.landed = True
+        self.took_off = False
+        self.home_ned_m = (0.0, 0.0, 0.0)
+        self.t_armed_s = 0.0
+        self._t_contact_s: float | None = None
+        self._t_landed_s = 0.0
+        self.last_setpoint_t_s = -math.inf
+        self._stream_start_t_s = -math.inf
+        self.setpoint: Target | None = None
+        self.first_offboard_t_s: float | None = None
+        self.events: list[tuple[int, str]] = []
+        self.mode_log: list[ModeChange] = []
+        self.state_changed = False
+
+    # -- queries --------------------------------------------------------------------------
+    @property
+    def t_s(self) -> float:
+        """Vehicle time [s] (the physics clock)."""
+        return self.physics.t_s
+
+    def offboard_signal(self, t_s: float | None = None) -> bool:
+        """Whether the setpoint stream counts as present for PX4's offboard check.
+
+        Parameters
+        ----------
+        t_s : float or None
+            Time [s]; the vehicle time if None.
+
+        Returns
+        -------
+        bool
+        """
+        t = self.t_s if t_s is None else t_s
+        fresh = t - self.last_setpoint_t_s <= self.params["COM_OF_LOSS_T"]
+        long_enough = max(t - self._stream_start_t_s, 0.0) >= self.cfg.px4.offboard_min_stream_s
+        return fresh and long_enough
+
+    def can_run(self, mode: Mode) -> bool:
+        """PX4's ``canRun``: whether a mode may be engaged while armed.
+
+        Parameters
+        ----------
+        mode : Mode
+            Candidate mode.
+
+        Returns
+        -------
+        bool
+        """
+        return mode is not Mode.OFFBOARD or self.offboard_signal()
+
+    @property
+    def armable(self) -> bool:
+        """Pre-arm checks pass in the current mode (SYS_STATUS PREARM_CHECK health bit)."""
+        return self.can_run(self.mode) and self.mode is not Mode.LAND
+
+    @property
+    def landed_state(self) -> LandedState:
+        """MAV_LANDED_STATE as PX4's EXTENDED_SYS_STATE reports it."""
+        if self.landed:
+            return LandedState.ON_GROUND
+        if self.mode is Mode.TAKEOFF:
+            return LandedState.TAKEOFF
+        if self.mode is Mode.LAND:
+            return LandedState.LANDING
+        return LandedState.IN_AIR
+
+    # -- inputs ---------------------------------------------------------------------------
+    def on_setpoint(
+        self, t_s: float, pos_ned_m: tuple[float, float, float], yaw_rad: float
+    ) -> None:
+        """A SET_POSITION_TARGET_LOCAL_NED position setpoint arrived.
+
+        Parameters
+        ----------
+        t_s : float
+            Arrival time [s] on the vehicle clock.
+        pos_ned_m : tuple of float
+            Position setpoint (north, east, down) [m].
+        yaw_rad : float
+            Yaw setpoint [rad]; NaN keeps the current yaw.
+        """
+        if t_s - self.last_setpoint_t_s > self.params["COM_OF_LOSS_T"]:
+            self._stream_start_t_s = t_s
+        self.last_setpoint_t_s = t_s
+        yaw = yaw_rad if math.isfinite(yaw_rad) else self.physics.yaw_rad
+        self.setpoint = Target(pos_ned_m, yaw)
+        if self.mode is Mode.OFFBOARD and self.armed:
+            self.physics.command(t_s, self.setpoint)
+
+    def arm(self, arm: bool, force: bool = False) -> MavResult:
+        """MAV_CMD_COMPONENT_ARM_DISARM.
+
+        Parameters
+        ----------
+        arm : bool
+            True to arm, False to disarm.
+        force : bool
+            param2 = 21196: skip the checks.
+
+        Returns
+        -------
+        MavResult
+        """
+        if arm:
+            if self.armed:
+                return MavResult.ACCEPTED
+            if not force and not self.armable:
+                why = "mode not available" if self.mode is not Mode.LAND else "landing"
+                self.events.append((2, f"Arming denied: {why}"))
+                return MavResult.TEMPORARILY_REJECTED
+            self.armed = True
+            self.t_armed_s = self.t_s
+            self.took_off = False
+            self.home_ned_m = (self.physics.pos[0], self.physics.pos[1], self.physics.pos[2])
+            self.physics.set_armed(True)
+            self._apply_mode_target()
+            self.events.append((6, "Armed by external command"))
+            self._log()
+            return MavResult.ACCEPTED
+        if not self.armed:
+            return MavResult.ACCEPTED
+        if not self.landed and not force:
+            self.events.append((2, "Disarming denied: not landed"))
+            return MavResult.TEMPORARILY_REJECTED
+        self._disarm("Disarmed by external command")
+        return MavResult.ACCEPTED
+
+    def set_mode(self, mode: Mode) -> MavResult:
+        """MAV_CMD_DO_SET_MODE (and NAV_TAKEOFF / NAV_LAND, which change the mode too).
+
+        Parameters
+        ----------
+        mode : Mode
+            Requested mode.
+
+        Returns
+        -------
+        MavResult
+        """
+        if self.armed and not self.can_run(mode):
+            self.events.append((4, f"Switching to {mode.name.title()} is currently not available"))
+            return MavResult.TEMPORARILY_REJECTED
+        self.user_mode = mode
+        if mode is not Mode.LAND:
+            self._mode_after_disarm = mode
+        self.failsafe = False
+        self._enter(mode)
+        return MavResult.ACCEPTED
+
+    def takeoff(self) -> MavResult:
+        """MAV_CMD_NAV_TAKEOFF (altitude from ``MIS_TAKEOFF_ALT``).
+
+        Returns
+        -------
+        MavResult
+        """
+        return self.set_mode(Mode.TAKEOFF)
+
+    def land(self) -> MavResult:
+        """MAV_CMD_NAV_LAND at the current position.
+
+        Returns
+        -------
+        MavResult
+        """
+        result = self.set_mode(Mode.LAND)
+        if result is MavResult.ACCEPTED:
+            self.events.append((6, "Landing at current position"))
+        return result
+
+    # -- time -----------------------------------------------------------------------------
+    def update(self, t_s: float) -> None:
+        """Advance physics and commander to ``t_s``, one physics step at a time.
+
+        Parameters
+        ----------
+        t_s : float
+            Vehicle time to reach [s].
+        """
+        physics = self.physics
+        while physics.t_s + physics.dt_s <= t_s + 1e-9:
+            physics.step()
+            self._commander()
+
+    def _commander(self) -> None:
+        t = self.t_s
+        ph = self.physics
+        # offboard loss and resume
+        if self.armed and self.mode is Mode.OFFBOARD and not self.offboard_signal(t):
+            self.failsafe = True
+            self.events.append((4, "Failsafe activated: no offboard signal, holding"))
+            self._enter(Mode.HOLD)
+        elif (
+            self.failsafe
+            and self.user_mode is Mode.OFFBOARD
+            and self.cfg.px4.offboard_resume
+            and self.offboard_signal(t)
+        ):
+            self.failsafe = False
+            self.events.append((6, "Offboard signal regained"))
+            self._enter(Mode.OFFBOARD)
+        # land detector
+        if self.landed:
+            if self.armed and ph.pos[2] < -0.1:
+                self.landed = False
+                self.took_off = True
+                self._t_contact_s = None
+                self.events.append((6, "Takeoff detected"))
+                self._log()
+        elif ph.on_ground:
+            if self._t_contact_s is None:
+                self._t_contact_s = t
+            elif t - self._t_contact_s >= self.cfg.px4.land_detect_s:
+                self.landed = True
+                self._t_landed_s = t
+                self.events.append((6, "Landing detected"))
+                self._log()
+        else:
+            self._t_contact_s = None
+        # take-off complete
+        if self.mode is Mode.TAKEOFF and self.armed and not self.landed:
+            if abs(ph.pos[2] - ph.target.pos_ned_m[2]) < 0.1 and abs(ph.vel[2]) < 0.3:
+                self.user_mode = Mode.HOLD
+                self._mode_after_disarm = Mode.HOLD
+                self._enter(Mode.HOLD, keep_target=True)
+        # auto-disarm
+        if self.armed and self.landed:
+            if self.took_off or self.mode is Mode.LAND:
+                delay = self.params["COM_DISARM_LAND"]
+                since = self._t_landed_s if self.took_off else self.t_armed_s
+                if delay > 0 and t - since >= delay:
+                    self._disarm("Disarmed by landing")
+            else:
+                delay = self.params["COM_DISARM_PRFLT"]
+                if delay > 0 and t - self.t_armed_s >= delay:
+                    self._disarm("Disarmed by auto preflight disarming")
+
+    # -- internals ------------------------------------------------------------------------
+    def _disarm(self, reason: str) -> None:
+        self.armed = False
+        self.physics.set_armed(False)
+        self.failsafe = False
+        self.events.append((6, reason))
+        self.user_mode = self._mode_after_disarm
+        if not self._enter(self._mode_after_disarm):
+            self._log()
+
+    def _enter(self, mode: Mode, keep_target: bool = False) -> bool:
+        """Switch the reported mode; return whether it changed."""
+        changed = mode is not self.mode
+        self.mode = mode
+        if not keep_target:
+            self._apply_mode_target()
+        if changed:
+            self._log()
+        return changed
+
+    def _apply_mode_target(self) -> None:
+        """Give the physics the target of the current mode."""
+        if not self.armed:
+            return
+        ph, t = self.physics, self.t_s
+        here = (ph.pos[0], ph.pos[1], ph.pos[2])
+        mode = self.mode
+        if mode is Mode.OFFBOARD and self.first_offboard_t_s is None:
+            self.first_offboard_t_s = t
+        if mode is Mode.OFFBOARD and self.setpoint is not None:
+            ph.command(t, self.setpoint)
+        elif mode is Mode.TAKEOFF:
+            alt = self.params["MIS_TAKEOFF_ALT"]
+            down = min(self.home_ned_m[2] - alt, here[2])
+            ph.command(
+                t,
+                Target(
+                    (here[0], here[1], down),
+                    ph.yaw_rad,
+                    vel_up_max_m_s=self.params["MPC_TKO_SPEED"],
+                ),
+            )
+        elif mode is Mode.LAND:
+            ph.command(t, Target(here, ph.yaw_rad, vz_m_s=self.params["MPC_LAND_SPEED"]))
+        else:  # HOLD, POSCTL without sticks: stay here
+            ph.command(t, Target(here, ph.yaw_rad))
+
+    def _log(self) -> None:
+        self.state_changed = True
+        self.mode_log.append(ModeChange(self.t_s, self.mode.name, self.armed))
