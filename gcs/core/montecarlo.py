@@ -1,0 +1,535 @@
+"""Batched Monte Carlo study of the paper's Sec. IV (Tables II and III).
+
+Both learning laws are linear in the data, and almost every step of one learning iteration is
+a *fixed* linear operator that does not depend on the plant or on the trial:
+
+* the nominal lifted matrix ``F_nom`` (the learning always uses the nominal model),
+* the smoother of Algorithm 1 (:func:`gcs.core.estimators.smoother_operator`: its gains depend
+  only on ``q, r, p0`` and ``N``),
+* the unconstrained minimiser of eq. (8),
+  ``U_(j+1) = M_y (Y_d - D_hat_j) + M_u U_j`` with
+  ``M = (F' We F + Wdu + Wu)^-1`` , ``M_y = M F' We``, ``M_u = M Wdu``,
+* the K-ILC gains, a scalar sequence (:func:`gcs.core.estimators.kilc_gains`).
+
+The only plant-dependent step is the true plant's response ``F_p U``, a causal convolution
+with the plant's Markov parameters, done here with a zero-padded FFT. One iteration of the
+whole batch (``plants x repeats`` trials) therefore costs a few ``(M, N) @ (N, N)`` products
+and one batched FFT: ``O(N^2)`` per trial, no Python loop over plants, repeats or samples.
+
+Conventions (as in :mod:`gcs.core.model`): ``Y = [y(1) .. y(N)] = F U + D``,
+``U = [u(0) .. u(N-1)]``, trial ``j = 0`` flies ``U_0`` before any learning, trial ``j >= 1``
+flies the input computed from the data of trial ``j - 1``. The readings of the details the
+paper leaves open are explicit fields of :class:`StudySettings`; ``docs/montecarlo.md``
+gives the evidence for each default.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from gcs.core.estimators import KilcSettings, SmootherSettings, kilc_gains, smoother_operator
+from gcs.core.model import DiscreteModel, from_transfer_function, lifted_matrix
+
+__all__ = [
+    "ALGORITHMS",
+    "PAPER_TABLES",
+    "StudySettings",
+    "StudyRow",
+    "PlantSample",
+    "sample_plants",
+    "update_operator",
+    "error_norms",
+    "run_study",
+    "summarise",
+]
+
+ALGORITHMS = ("smoother", "kilc")
+
+#: The paper's Tables II (5 %) and III (10, 20, 40 %): ``(algorithm, level) ->
+#: (first_mean, first_std, steady_mean, steady_std)``, error 2-norms [m].
+PAPER_TABLES: dict[tuple[str, float], tuple[float, float, float, float]] = {
+    ("smoother", 0.05): (0.84, 0.10, 0.23, 0.01),
+    ("smoother", 0.10): (1.30, 0.32, 0.23, 0.01),
+    ("smoother", 0.20): (2.39, 0.65, 0.23, 0.01),
+    ("smoother", 0.40): (4.33, 2.53, 0.38, 0.25),
+    ("kilc", 0.05): (1.46, 0.21, 0.23, 0.01),
+    ("kilc", 0.10): (1.99, 0.42, 0.23, 0.01),
+    ("kilc", 0.20): (2.74, 0.66, 0.23, 0.01),
+    ("kilc", 0.40): (4.10, 2.16, 0.28, 0.18),
+}
+
+_RULES = ("resample", "exclude")
+_SIGNALS = ("true", "measured")
+_U0 = ("reference", "zero")
+_DIVERGED = ("include", "exclude")
+
+
+@dataclass(frozen=True)
+class StudySettings:
+    """Configuration of the Monte Carlo study (defaults: the paper's Sec. IV and Table I).
+
+    Parameters
+    ----------
+    levels : tuple of float
+        Uncertainty levels: standard deviation of ``wn`` and ``zeta`` as a fraction of the
+        nominal value (0.05 = 5 %).
+    plants : int
+        Plants drawn per level (paper: 100).
+    repeats : int
+        Noise realisations per plant (paper: 10); a plant's statistic is the mean over them.
+    iterations : int
+        Learning updates; trials ``j = 0 .. iterations`` are flown (paper: 30).
+    seed : int
+        Seed of every random draw; plants and noise of a level depend only on ``seed`` and
+        the level, and both algorithms see the same plants and the same noise.
+    n_samples : int
+        Trial length N [samples]. Default 200 (2 s); see ``docs/montecarlo.md``.
+    t_ilc_s : float
+        Sample time of the learning [s] (paper: 0.01 s).
+    noise_std : float
+        Standard deviation of the Gaussian output noise [m]. Default 0.1: "N(0, 0.01)" read
+        as a variance (see ``docs/montecarlo.md``).
+    error_signal : str
+        Which output the error norm ``||Yd - Y_j||_2`` uses: ``"true"`` (noise-free plant
+        output, default) or ``"measured"`` (with the noise).
+    first_iteration : int
+        Trial reported as "first iteration" (default 1, the first learned trial; trial 0
+        flies ``U_0`` and is the same for both algorithms).
+    steady_from, steady_to : int
+        Trials averaged for "steady state", inclusive (paper's footnote 4: 20 to 30).
+    u0 : str
+        First input: ``"reference"`` (``u(k) = yd(k t_ilc_s)``, default) or ``"zero"``.
+    invalid_plant_rule : str
+        What to do with a draw where ``wn <= 0`` or ``zeta <= 0`` (non-physical; with
+        ``zeta < 0`` the plant is unstable): ``"resample"`` it (default, so every level has
+        exactly ``plants`` plants) or ``"exclude"`` it. Either way it counts in
+        ``StudyRow.excluded``.
+    wn_rad_s, zeta : float
+        Nominal natural frequency [rad/s] and damping ratio (paper: 1.8, 0.8).
+    disturbance_amp_m, disturbance_omega_rad_s : float
+        Output disturbance ``d(t) = amp sin^2(omega t)`` [m] (paper: 0.5, 1).
+    reference_amp_m, reference_omega_rad_s : float
+        Desired output ``yd(t) = amp sin(omega t)`` [m] (paper: 1, 0.5 pi).
+    we, wdu, wu : float
+        Weights of eq. (8), each times the identity (Table I: 1, 0.01, 0).
+    smoother : SmootherSettings
+        Algorithm 1 (Table I "Proposed": P(0) = 0.1, R = 0.01, Q = 0.1).
+    kilc : KilcSettings
+        K-ILC filter (Table I: P(0) = 0.1 I, R = 0.01 I, Q = 0.1 I).
+    algorithms : tuple of str
+        Which of ``"smoother"``, ``"kilc"`` to run.
+    diverged_rule : str
+        A plant whose learning diverged (mean error norm of the steady-state trials above
+        that of trial 0) is counted in ``StudyRow.diverged`` and either kept in the
+        statistics (``"include"``, default: the study as specified) or left out of them
+        (``"exclude"``).
+    """
+
+    levels: tuple[float, ...] = (0.05, 0.10, 0.20, 0.40)
+    plants: int = 100
+    repeats: int = 10
+    iterations: int = 30
+    seed: int = 20240601
+    n_samples: int = 200
+    t_ilc_s: float = 0.01
+    noise_std: float = 0.1
+    error_signal: str = "true"
+    first_iteration: int = 1
+    steady_from: int = 20
+    steady_to: int = 30
+    u0: str = "reference"
+    invalid_plant_rule: str = "resample"
+    wn_rad_s: float = 1.8
+    zeta: float = 0.8
+    disturbance_amp_m: float = 0.5
+    disturbance_omega_rad_s: float = 1.0
+    reference_amp_m: float = 1.0
+    reference_omega_rad_s: float = 0.5 * np.pi
+    we: float = 1.0
+    wdu: float = 0.01
+    wu: float = 0.0
+    smoother: SmootherSettings = field(default_factory=SmootherSettings)
+    kilc: KilcSettings = field(default_factory=KilcSettings)
+    algorithms: tuple[str, ...] = ALGORITHMS
+    diverged_rule: str = "include"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "levels", tuple(float(x) for x in self.levels))
+        object.__setattr__(self, "algorithms", tuple(self.algorithms))
+        for name in ("plants", "repeats", "iterations", "n_samples"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"StudySettings.{name} must be >= 1, got {getattr(self, name)}")
+        if any(not np.isfinite(x) or x < 0 for x in self.levels):
+            raise ValueError(f"StudySettings.levels must be finite and >= 0, got {self.levels}")
+        if not self.t_ilc_s > 0:
+            raise ValueError(f"StudySettings.t_ilc_s must be > 0, got {self.t_ilc_s}")
+        if not self.noise_std >= 0:
+            raise ValueError(f"StudySettings.noise_std must be >= 0, got {self.noise_std}")
+        if self.error_signal not in _SIGNALS:
+            raise ValueError(f"StudySettings.error_signal must be one of {_SIGNALS}")
+        if self.u0 not in _U0:
+            raise ValueError(f"StudySettings.u0 must be one of {_U0}")
+        if self.diverged_rule not in _DIVERGED:
+            raise ValueError(f"StudySettings.diverged_rule must be one of {_DIVERGED}")
+        if self.invalid_plant_rule not in _RULES:
+            raise ValueError(f"StudySettings.invalid_plant_rule must be one of {_RULES}")
+        if not 0 <= self.first_iteration <= self.iterations:
+            raise ValueError("StudySettings.first_iteration must lie in 0 .. iterations")
+        if not 0 <= self.steady_from <= self.steady_to <= self.iterations:
+            raise ValueError("StudySettings.steady_from/steady_to must lie in 0 .. iterations")
+        bad = [a for a in self.algorithms if a not in ALGORITHMS]
+        if bad or not self.algorithms:
+            raise ValueError(f"StudySettings.algorithms must be a subset of {ALGORITHMS}")
+        if not (self.we > 0 and self.wdu >= 0 and self.wu >= 0):
+            raise ValueError("StudySettings weights need we > 0, wdu >= 0, wu >= 0")
+        if not (self.wn_rad_s > 0 and self.zeta > 0):
+            raise ValueError("StudySettings.wn_rad_s and zeta must be > 0")
+
+    @property
+    def duration_s(self) -> float:
+        """Trial length ``n_samples * t_ilc_s`` [s]."""
+        return self.n_samples * self.t_ilc_s
+
+
+@dataclass(frozen=True)
+class StudyRow:
+    """One row of Tables II/III: one algorithm at one uncertainty level.
+
+    Parameters
+    ----------
+    algorithm : str
+        ``"smoother"`` (the paper's "Proposed") or ``"kilc"``.
+    uncertainty : float
+        Uncertainty level (fraction of the nominal values).
+    first_mean, first_std : float
+        Mean and standard deviation over plants of the error 2-norm [m] of trial
+        ``first_iteration``, each plant averaged over its repeats.
+    steady_mean, steady_std : float
+        The same for the mean error 2-norm of trials ``steady_from .. steady_to`` [m].
+    excluded : int
+        Plant draws rejected by the invalid-plant rule at this level.
+    excluded_rule : str
+        The rule, in words.
+    plants : int
+        Plants the statistics are over.
+    diverged : int
+        Plants whose learning diverged (steady-state error norm above the trial-0 one),
+        included in or excluded from the statistics by ``StudySettings.diverged_rule``.
+    """
+
+    algorithm: str
+    uncertainty: float
+    first_mean: float
+    first_std: float
+    steady_mean: float
+    steady_std: float
+    excluded: int
+    excluded_rule: str
+    plants: int
+    diverged: int = 0
+
+
+@dataclass(frozen=True)
+class PlantSample:
+    """The plants of one uncertainty level.
+
+    Parameters
+    ----------
+    wn_rad_s : ndarray, shape (P,)
+        Natural frequencies [rad/s] of the plants kept.
+    zeta : ndarray, shape (P,)
+        Damping ratios of the plants kept.
+    excluded : int
+        Draws rejected by ``invalid_plant_rule``.
+    """
+
+    wn_rad_s: np.ndarray
+    zeta: np.ndarray
+    excluded: int
+
+
+def _level_key(level: float) -> int:
+    return int(round(level * 1_000_000))
+
+
+def _rng(settings: StudySettings, level: float, stream: int) -> np.random.Generator:
+    return np.random.default_rng([settings.seed, _level_key(level), stream])
+
+
+def sample_plants(settings: StudySettings, level: float) -> PlantSample:
+    """Draw the plants of one uncertainty level.
+
+    ``wn = wn_nom (1 + level g1)``, ``zeta = zeta_nom (1 + level g2)`` with independent
+    standard normal ``g1, g2``. A draw with ``wn <= 0`` or ``zeta <= 0`` is not a
+    mass-spring-damper (``zeta < 0``: unstable) and is resampled or dropped according to
+    ``settings.invalid_plant_rule``.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        Seed, plant count, nominal values and rule.
+    level : float
+        Relative standard deviation of both parameters.
+
+    Returns
+    -------
+    PlantSample
+    """
+    rng = _rng(settings, level, 0)
+    wn_nom, z_nom = settings.wn_rad_s, settings.zeta
+    g = rng.standard_normal((settings.plants, 2))
+    wn = wn_nom * (1.0 + level * g[:, 0])
+    zeta = z_nom * (1.0 + level * g[:, 1])
+    ok = (wn > 0) & (zeta > 0)
+    excluded = int(np.count_nonzero(~ok))
+    if settings.invalid_plant_rule == "exclude":
+        return PlantSample(wn[ok], zeta[ok], excluded)
+    while not np.all(ok):
+        bad = np.flatnonzero(~ok)
+        g = rng.standard_normal((bad.size, 2))
+        wn[bad] = wn_nom * (1.0 + level * g[:, 0])
+        zeta[bad] = z_nom * (1.0 + level * g[:, 1])
+        ok = (wn > 0) & (zeta > 0)
+        excluded += int(np.count_nonzero(~ok))
+    return PlantSample(wn, zeta, excluded)
+
+
+def _msd_model(wn: float, zeta: float, dt_s: float) -> DiscreteModel:
+    return from_transfer_function([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], 0.0, dt_s)
+
+
+def _markov_batch(wn: np.ndarray, zeta: np.ndarray, n: int, dt_s: float) -> np.ndarray:
+    """Markov parameters ``f_1 .. f_N`` of every plant, shape (P, N).
+
+    ZOH of the controllable canonical form of ``wn^2 / (s^2 + 2 zeta wn s + wn^2)`` (one
+    batched matrix exponential), then ``f_k = C A^(k-1) B`` advanced for all plants at once.
+    Markov parameters do not depend on the realisation, so this equals
+    ``markov_parameters(from_transfer_function(...))`` (a test checks it).
+    """
+    p = wn.size
+    m = np.zeros((p, 3, 3))
+    m[:, 0, 0] = -2.0 * zeta * wn * dt_s
+    m[:, 0, 1] = -wn * wn * dt_s
+    m[:, 1, 0] = dt_s
+    m[:, 0, 2] = dt_s
+    e = scipy.linalg.expm(m)
+    a, x = e[:, :2, :2], e[:, :2, 2]
+    c = np.zeros((p, 2))
+    c[:, 1] = wn * wn
+    f = np.empty((p, n))
+    for k in range(n):
+        f[:, k] = np.einsum("pi,pi->p", c, x)
+        x = np.einsum("pij,pj->pi", a, x)
+    return f
+
+
+def update_operator(
+    f_nom: np.ndarray, we: float, wdu: float, wu: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The unconstrained minimiser of eq. (8) as a fixed affine map.
+
+    ``U_(j+1) = M_y (Y_d - D_hat_j) + M_u U_j`` with ``M = (F' We F + Wdu + Wu)^-1``,
+    ``M_y = M F' We``, ``M_u = M Wdu``; every weight is a scalar times the identity.
+
+    Parameters
+    ----------
+    f_nom : ndarray, shape (N, N)
+        Lifted matrix of the model used for learning.
+    we, wdu, wu : float
+        Weights on the predicted error, the input change and the input.
+
+    Returns
+    -------
+    m_y : ndarray, shape (N, N)
+    m_u : ndarray, shape (N, N)
+    """
+    n = f_nom.shape[0]
+    h = we * (f_nom.T @ f_nom) + (wdu + wu) * np.eye(n)
+    rhs = np.hstack([we * f_nom.T, wdu * np.eye(n)])
+    sol = np.linalg.solve(h, rhs)
+    return sol[:, :n], sol[:, n:]
+
+
+def _signals(settings: StudySettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Reference ``yd(1..N)``, disturbance ``d(1..N)`` and ``U_0``, each shape (N,)."""
+    n, dt = settings.n_samples, settings.t_ilc_s
+    t_out = dt * np.arange(1, n + 1)
+    t_in = dt * np.arange(n)
+    yd = settings.reference_amp_m * np.sin(settings.reference_omega_rad_s * t_out)
+    d = settings.disturbance_amp_m * np.sin(settings.disturbance_omega_rad_s * t_out) ** 2
+    if settings.u0 == "reference":
+        u0 = settings.reference_amp_m * np.sin(settings.reference_omega_rad_s * t_in)
+    else:
+        u0 = np.zeros(n)
+    return yd, d, u0
+
+
+def _simulate(
+    settings: StudySettings,
+    plants: PlantSample,
+    level: float,
+    algorithm: str,
+    step: Callable[[], None] | None = None,
+) -> np.ndarray:
+    """Error norms of every trial, shape (P, R, iterations + 1)."""
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
+    n, dt = settings.n_samples, settings.t_ilc_s
+    p, r = plants.wn_rad_s.size, settings.repeats
+    norms = np.zeros((p, r, settings.iterations + 1))
+    if p == 0:
+        return norms
+    yd, d, u0 = _signals(settings)
+    f_nom = lifted_matrix(_msd_model(settings.wn_rad_s, settings.zeta, dt), n)
+    m_y, m_u = update_operator(f_nom, settings.we, settings.wdu, settings.wu)
+    f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    f_true_fft = np.fft.rfft(f_true, nfft, axis=-1)[:, None, :]
+    noise_rng = _rng(settings, level, 1)  # same stream for both algorithms
+    if algorithm == "smoother":
+        # d_hat = S (y - F u) + s0 d0 and the update are fixed: fold them into two matrices,
+        # u_next = c - y A_y + u A_u (row-vector form, trials along axis 0).
+        s_op, s0 = smoother_operator(n, settings.smoother)
+        a_y = s_op.T @ m_y.T
+        a_u = f_nom.T @ a_y + m_u.T
+        c = (yd - settings.smoother.d0 * s0) @ m_y.T
+    else:
+        gains = kilc_gains(settings.kilc, settings.iterations)
+        d_hat = np.full((p * r, n), settings.kilc.d0)
+        f_nom_t, m_y_t, m_u_t = f_nom.T.copy(), m_y.T.copy(), m_u.T.copy()
+    u = np.broadcast_to(u0, (p * r, n)).copy()
+    measured = settings.error_signal == "measured"
+    for j in range(settings.iterations + 1):
+        u_fft = np.fft.rfft(u.reshape(p, r, n), nfft, axis=-1)
+        y_true = np.fft.irfft(f_true_fft * u_fft, nfft, axis=-1)[..., :n].reshape(p * r, n) + d
+        y = y_true + settings.noise_std * noise_rng.standard_normal((p * r, n))
+        e = yd - (y if measured else y_true)
+        norms[:, :, j] = np.sqrt(np.einsum("ij,ij->i", e, e)).reshape(p, r)
+        if j == settings.iterations:
+            break
+        if algorithm == "smoother":
+            u = c - y @ a_y + u @ a_u
+        else:
+            d_hat += gains[j] * (y - u @ f_nom_t - d_hat)
+            u = (yd - d_hat) @ m_y_t + u @ m_u_t
+        if step is not None:
+            step()
+    return norms
+
+
+def error_norms(settings: StudySettings, level: float, algorithm: str) -> np.ndarray:
+    """Error 2-norms ``||Yd - Y_j||_2`` of every trial of one level and algorithm.
+
+    The plants and the noise are those :func:`run_study` uses for the same ``settings`` and
+    ``level`` (``level`` need not be in ``settings.levels``).
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study.
+    level : float
+        Uncertainty level.
+    algorithm : str
+        ``"smoother"`` or ``"kilc"``.
+
+    Returns
+    -------
+    ndarray, shape (P, repeats, iterations + 1)
+        ``[plant, repeat, j]`` [m]; ``P`` is ``settings.plants`` minus excluded plants.
+    """
+    return _simulate(settings, sample_plants(settings, level), level, algorithm)
+
+
+def _rule_text(settings: StudySettings) -> str:
+    action = "resampled" if settings.invalid_plant_rule == "resample" else "excluded"
+    return f"draws with wn <= 0 or zeta <= 0 {action}"
+
+
+def summarise(
+    settings: StudySettings, norms: np.ndarray, level: float, algorithm: str, excluded: int
+) -> StudyRow:
+    """Reduce an :func:`error_norms` array to one table row.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        Gives ``first_iteration``, ``steady_from`` and ``steady_to``.
+    norms : ndarray, shape (P, R, iterations + 1)
+        Error norms [m].
+    level : float
+        Uncertainty level of the row.
+    algorithm : str
+        Algorithm of the row.
+    excluded : int
+        Rejected plant draws.
+
+    Returns
+    -------
+    StudyRow
+    """
+    per_plant = norms.mean(axis=1)  # (P, J): average over repeats first
+    first = per_plant[:, settings.first_iteration]
+    steady = per_plant[:, settings.steady_from : settings.steady_to + 1].mean(axis=1)
+    diverged = ~(steady <= per_plant[:, 0])  # NaN/inf count as diverged
+    if settings.diverged_rule == "exclude":
+        first, steady = first[~diverged], steady[~diverged]
+    nan = float("nan")
+
+    def stats(x: np.ndarray) -> tuple[float, float]:
+        if x.size == 0:
+            return nan, nan
+        return float(x.mean()), float(x.std(ddof=1)) if x.size > 1 else 0.0
+
+    fm, fs = stats(first)
+    sm, ss = stats(steady)
+    return StudyRow(
+        algorithm=algorithm,
+        uncertainty=float(level),
+        first_mean=fm,
+        first_std=fs,
+        steady_mean=sm,
+        steady_std=ss,
+        excluded=int(excluded),
+        excluded_rule=_rule_text(settings),
+        plants=int(first.size),
+        diverged=int(np.count_nonzero(diverged)),
+    )
+
+
+def run_study(
+    settings: StudySettings, progress: Callable[[int, int], None] | None = None
+) -> list[StudyRow]:
+    """Run the Monte Carlo study: one row per (level, algorithm), levels in order.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study.
+    progress : callable, optional
+        ``progress(done, total)`` after every learning iteration of every (level, algorithm)
+        batch; ``total = len(levels) * len(algorithms) * iterations``.
+
+    Returns
+    -------
+    list of StudyRow
+    """
+    total = len(settings.levels) * len(settings.algorithms) * settings.iterations
+    done = 0
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    rows = []
+    for level in settings.levels:
+        plants = sample_plants(settings, level)
+        for algorithm in settings.algorithms:
+            norms = _simulate(settings, plants, level, algorithm, step)
+            rows.append(summarise(settings, norms, level, algorithm, plants.excluded))
+    return rows
