@@ -160,10 +160,12 @@ def rts_smoother(z: np.ndarray, settings: SmootherSettings) -> SmootherResult:
     d_hat[-1] = d_filt[-1]
     p_s[-1] = p_post[-1]
     for k in range(n - 2, -1, -1):
-        g = p_post[k] / (p_post[k] + q)  # P+(k) / P-(k+1)
+        p_next = p_post[k] + q
+        # P+(k) / P-(k+1); with p0 = q = 0 the estimate is exact and the gain is moot
+        g = p_post[k] / p_next if p_next > 0 else 0.0
         # random walk: the prediction of d(k+1) is the filtered d(k)
         d_hat[k] = d_filt[k] + g * (d_hat[k + 1] - d_filt[k])
-        p_s[k] = p_post[k] + g * g * (p_s[k + 1] - (p_post[k] + q))
+        p_s[k] = p_post[k] + g * g * (p_s[k + 1] - p_next)
     return SmootherResult(d_hat=d_hat, p=p_s, d_filt=d_filt)
 
 

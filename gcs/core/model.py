@@ -124,6 +124,8 @@ def from_transfer_function(
         raise ModelError("the transfer function must be strictly proper (len(num) < len(den))")
     if delay_s < 0 or not np.isfinite(delay_s):
         raise ModelError(f"delay_s must be >= 0, got {delay_s}")
+    if not (dt_s > 0 and np.isfinite(dt_s)):
+        raise ModelError(f"dt_s must be positive and finite, got {dt_s}")
     Ac, Bc, Cc, _ = scipy.signal.tf2ss(num, den)
     n_whole = int(np.floor(delay_s / dt_s + 1e-9))
     tau = delay_s - n_whole * dt_s
