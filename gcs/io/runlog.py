@@ -216,6 +216,7 @@ class RunDir:
         trajectory: TrajectorySpec,
         algorithm: str,
         run_id: str | None = None,
+        reference: Reference | None = None,
     ) -> RunDir:
         """Create a new run directory under ``root`` with trial 0's setpoints = the reference.
 
@@ -231,6 +232,9 @@ class RunDir:
             ``"smoother"`` or ``"kilc"``.
         run_id : str, optional
             Directory name; default ``<UTC time>-<trajectory>-<algorithm>``.
+        reference : Reference, optional
+            The reference to record; default: the trajectory's eight sampled at ``t_ilc_s``
+            (identification runs pass their excitation here).
 
         Returns
         -------
@@ -251,7 +255,13 @@ class RunDir:
                     raise RunLogError(f"{path}: run directory exists already") from None
                 suffix += 1
                 path = root / f"{base}-{suffix}"
-        ref = sample_eight(trajectory.shape, profile.t_ilc_s)
+        ref = (
+            reference if reference is not None else sample_eight(trajectory.shape, profile.t_ilc_s)
+        )
+        if abs(ref.t_ilc_s - profile.t_ilc_s) > 1e-9:
+            raise RunLogError(
+                f"reference sampled at {ref.t_ilc_s:g} s, profile {profile.t_ilc_s:g} s"
+            )
         manifest = {
             "format": 1,
             "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -326,8 +336,18 @@ class RunDir:
         return trajectory_from_dict(self.manifest["trajectory"], where)
 
     def reference(self) -> Reference:
-        """The reference on the grid, recomputed from the manifest."""
-        return sample_eight(self.trajectory().shape, self.t_ilc_s)
+        """The reference on the grid as recorded in ``reference.csv``.
+
+        Velocity and acceleration are central differences of the recorded positions.
+        """
+        path = self.path / "reference.csv"
+        table = _read_csv(path, REFERENCE_COLUMNS)
+        self._check_grid(path, table, self.n_samples + 1)
+        if not np.all(np.isfinite(table)):
+            raise RunLogError(f"{path}: contains NaN or inf")
+        pos = table[:, 2:5]
+        vel = np.gradient(pos, self.t_ilc_s, axis=0)
+        return Reference(table[:, 1], pos, vel, np.gradient(vel, self.t_ilc_s, axis=0))
 
     def _file(self, kind: str, j: int, ext: str) -> Path:
         return self.path / f"{kind}-{j:03d}.{ext}"
