@@ -1,0 +1,199 @@
+"""Benchmark of the ILC input update (gcs.core.update), both horizontal axes.
+
+Prints one JSON line per case::
+
+    {"n": N, "axes": 2, "constrained": bool, "seconds": median, "peak_mb": ..., ...}
+
+``seconds`` is the median wall time of the 2-axis step (two ``next_input`` calls) over several
+repeats, after one warm-up call. ``peak_mb`` is ``resource.getrusage(RUSAGE_SELF).ru_maxrss``
+(Linux: KiB) of a fresh subprocess that runs only that case: it includes the interpreter and the
+imported numpy/scipy/clarabel (``import_mb`` is the same figure taken just before the first
+solve). Lines with ``"baseline": "dense_lifted"`` time the dense lifted formulation (N x N
+``F``, normal equations or Clarabel on the dense QP) in the same run, with
+``"ratio"`` = dense seconds / sparse seconds.
+
+Model: eq. (11) of the paper, ``from_transfer_function([0.08, 1.94], [1, 1.752, 2.01], 0.25,
+dt)``; N = 400 at dt = 0.05 s (20 s, the paper's t_ILC), N = 1500 at dt = 0.04 s (60 s),
+N = 6000 at dt = 0.01 s (60 s at 100 Hz). Reference: an eight (north 2 m amplitude, east 1 m,
+one lap per 20 s) with a minimum-jerk time warp so that it starts and ends at rest at the start
+point. Disturbance: slowly varying offsets of a few decimetres (wind / ground effect).
+
+Usage: ``python benchmarks/learn_step.py`` (all cases, each in a subprocess) or
+``python benchmarks/learn_step.py --case N constrained|free [sparse|dense]``.
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from gcs.core.model import from_transfer_function, lifted_matrix, relative_degree  # noqa: E402
+from gcs.core.update import (  # noqa: E402
+    SetpointLimits,
+    UpdateWeights,
+    next_input,
+    reference_for_inputs,
+)
+
+DT_S = {400: 0.05, 1500: 0.04, 6000: 0.01}
+REPEATS = 7
+DENSE_CASES = [(400, False), (1500, False), (400, True), (1500, True)]
+
+
+def _rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def scenario(n: int, constrained: bool):
+    """Model, per-axis signals and limits of one case."""
+    dt = DT_S[n]
+    model = from_transfer_function([0.08, 1.94], [1, 1.752, 2.01], 0.25, dt)
+    r = relative_degree(model)
+    t = np.arange(1, n + 1) * dt
+    tau = t / t[-1]
+    laps = t[-1] / 20.0
+    theta = 2 * np.pi * laps * (10 * tau**3 - 15 * tau**4 + 6 * tau**5)
+    yd = [2.0 * np.sin(theta), 1.0 * np.sin(2 * theta)]
+    d_hat = [0.3 * np.sin(0.5 * t) ** 2, -0.2 * np.sin(0.4 * t + 0.5) ** 2]
+    u_prev = [reference_for_inputs(y, r) for y in yd]
+    limits = [None, None]
+    if constrained:
+        step = 2.5 * dt  # setpoint speed 2.5 m/s
+        limits = [
+            SetpointLimits(-2.1, 2.1, step, 0.8),
+            SetpointLimits(-1.15, 1.15, step, 0.8),
+        ]
+    return model, yd, d_hat, u_prev, limits
+
+
+def run_sparse(n: int, constrained: bool) -> dict:
+    model, yd, d_hat, u_prev, limits = scenario(n, constrained)
+    w = UpdateWeights()
+    import_mb = _rss_mb()
+
+    def step():
+        return [next_input(model, yd[a], d_hat[a], u_prev[a], w, limits[a]) for a in range(2)]
+
+    results = step()  # warm-up
+    times = []
+    for _ in range(REPEATS):
+        t0 = time.perf_counter()
+        step()
+        times.append(time.perf_counter() - t0)
+    return {
+        "n": n,
+        "axes": 2,
+        "constrained": constrained,
+        "seconds": round(statistics.median(times), 4),
+        "peak_mb": round(_rss_mb(), 1),
+        "import_mb": round(import_mb, 1),
+        "methods": [res.method for res in results],
+        "active": [res.active_constraints for res in results],
+        "objective": [round(res.objective, 6) for res in results],
+        "memory": "ru_maxrss",
+    }
+
+
+def _dense_axis(model, yd, d_hat, u_prev, w, limits):
+    """Dense lifted baseline: F (N x N), normal equations, or Clarabel on the dense QP."""
+    import clarabel
+    import scipy.linalg
+    import scipy.sparse as sp
+
+    n = yd.size
+    r = relative_degree(model)
+    m = n - r + 1
+    F = lifted_matrix(model, n)
+    Fc = F[r - 1 :, :m]
+    H = w.we * Fc.T @ Fc + (w.wdu + w.wu) * np.eye(m)
+    g = w.we * Fc.T @ (yd - d_hat)[r - 1 :] + w.wdu * u_prev[:m]
+    u = np.full(n, yd[-1])
+    if limits is None:
+        u[:m] = scipy.linalg.cho_solve(scipy.linalg.cho_factor(H), g)
+        return u
+    yd_u = reference_for_inputs(yd, r)[:m]
+    lo = np.maximum(limits.u_min_m, yd_u - limits.max_deviation_m)
+    hi = np.minimum(limits.u_max_m, yd_u + limits.max_deviation_m)
+    eye = sp.eye(m, format="csc")
+    D = (eye - sp.eye(m, k=-1, format="csc")).tocsc()
+    tail = sp.csc_matrix(([-1.0], ([0], [m - 1])), shape=(1, m))
+    s = limits.max_step_m
+    A = sp.vstack([eye, -eye, D, -D, tail, -tail], format="csc")
+    b = np.concatenate([hi, -lo, np.full(m, s), np.full(m, s), [s - yd[-1]], [s + yd[-1]]])
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = 1e-10
+    P = sp.triu(sp.csc_matrix(2 * H), format="csc")
+    sol = clarabel.DefaultSolver(
+        P, -2 * g, A, b, [clarabel.NonnegativeConeT(b.size)], settings
+    ).solve()
+    u[:m] = np.asarray(sol.x)
+    return u
+
+
+def run_dense(n: int, constrained: bool) -> dict:
+    model, yd, d_hat, u_prev, limits = scenario(n, constrained)
+    w = UpdateWeights()
+    import_mb = _rss_mb()
+
+    def step():
+        return [_dense_axis(model, yd[a], d_hat[a], u_prev[a], w, limits[a]) for a in range(2)]
+
+    dense_u = step()
+    repeats = 3 if n > 1000 else REPEATS
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        step()
+        times.append(time.perf_counter() - t0)
+    sparse_u = [next_input(model, yd[a], d_hat[a], u_prev[a], w, limits[a]).u_m for a in range(2)]
+    diff = max(float(np.max(np.abs(a - b))) for a, b in zip(dense_u, sparse_u, strict=True))
+    return {
+        "baseline": "dense_lifted",
+        "n": n,
+        "axes": 2,
+        "constrained": constrained,
+        "seconds": round(statistics.median(times), 4),
+        "peak_mb": round(_rss_mb(), 1),
+        "import_mb": round(import_mb, 1),
+        "max_abs_diff_vs_sparse_m": diff,
+        "memory": "ru_maxrss",
+    }
+
+
+def _subprocess(n: int, constrained: bool, kind: str) -> dict:
+    cmd = [sys.executable, __file__, "--case", str(n), "constrained" if constrained else "free"]
+    out = subprocess.run(cmd + [kind], check=True, capture_output=True, text=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def main() -> None:
+    if len(sys.argv) >= 4 and sys.argv[1] == "--case":
+        n, constrained = int(sys.argv[2]), sys.argv[3] == "constrained"
+        kind = sys.argv[4] if len(sys.argv) > 4 else "sparse"
+        line = run_dense(n, constrained) if kind == "dense" else run_sparse(n, constrained)
+        print(json.dumps(line))
+        return
+    sparse_lines = {}
+    for n in DT_S:
+        for constrained in (False, True):
+            line = _subprocess(n, constrained, "sparse")
+            sparse_lines[(n, constrained)] = line
+            print(json.dumps(line), flush=True)
+    for n, constrained in DENSE_CASES:
+        line = _subprocess(n, constrained, "dense")
+        line["ratio"] = round(line["seconds"] / sparse_lines[(n, constrained)]["seconds"], 2)
+        print(json.dumps(line), flush=True)
+
+
+if __name__ == "__main__":
+    main()
