@@ -1,0 +1,239 @@
+"""Tests of the batched Monte Carlo study (gcs.core.montecarlo)."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+
+import numpy as np
+import pytest
+
+from gcs.core import montecarlo as mc
+from gcs.core.estimators import kilc_init, kilc_update, rts_smoother
+from gcs.core.model import from_transfer_function, lifted_matrix, markov_parameters, simulate
+
+SMALL = mc.StudySettings(
+    levels=(0.1,),
+    plants=3,
+    repeats=2,
+    iterations=5,
+    steady_from=3,
+    steady_to=5,
+    n_samples=60,
+    seed=7,
+)
+
+
+def _update_module():
+    try:
+        return importlib.import_module("gcs.core.update")
+    except ImportError:
+        return None
+
+
+def _msd(wn: float, zeta: float, dt: float):
+    return from_transfer_function([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], 0.0, dt)
+
+
+def _reference_norms(settings: mc.StudySettings, level: float, algorithm: str) -> np.ndarray:
+    """Trial-by-trial loop with the per-trial reference functions (no batching)."""
+    n, dt = settings.n_samples, settings.t_ilc_s
+    plants = mc.sample_plants(settings, level)
+    p, r = plants.wn_rad_s.size, settings.repeats
+    t_out = dt * np.arange(1, n + 1)
+    yd = np.sin(settings.reference_omega_rad_s * t_out)
+    d = settings.disturbance_amp_m * np.sin(t_out) ** 2
+    u0 = np.sin(settings.reference_omega_rad_s * dt * np.arange(n))
+    nominal = _msd(settings.wn_rad_s, settings.zeta, dt)
+    f_nom = lifted_matrix(nominal, n)
+    upd = _update_module()
+    if upd is not None:
+        weights = upd.UpdateWeights(we=settings.we, wdu=settings.wdu, wu=settings.wu)
+
+        def update(d_hat, u):
+            return upd.next_input(nominal, yd, d_hat, u, weights).u_m
+    else:
+        m_y, m_u = mc.update_operator(f_nom, settings.we, settings.wdu, settings.wu)
+
+        def update(d_hat, u):
+            return m_y @ (yd - d_hat) + m_u @ u
+
+    # the study's noise stream: one (P*R, N) draw per trial, trials in order
+    rng = mc._rng(settings, level, 1)
+    noise = [rng.standard_normal((p * r, n)) for _ in range(settings.iterations + 1)]
+    norms = np.zeros((p, r, settings.iterations + 1))
+    for i in range(p):
+        plant = _msd(float(plants.wn_rad_s[i]), float(plants.zeta[i]), dt)
+        for k in range(r):
+            u = u0.copy()
+            state = kilc_init(n, settings.kilc)
+            for j in range(settings.iterations + 1):
+                y_true = simulate(plant, u) + d
+                y = y_true + settings.noise_std * noise[j][i * r + k]
+                e = yd - (y if settings.error_signal == "measured" else y_true)
+                norms[i, k, j] = np.linalg.norm(e)
+                z = y - f_nom @ u
+                if algorithm == "smoother":
+                    d_hat = rts_smoother(z, settings.smoother).d_hat
+                else:
+                    state = kilc_update(state, z, settings.kilc)
+                    d_hat = state.d_hat
+                u = update(d_hat, u)
+    return norms
+
+
+@pytest.mark.parametrize("algorithm", mc.ALGORITHMS)
+@pytest.mark.parametrize("signal", ["true", "measured"])
+def test_batched_study_equals_per_trial_reference(algorithm: str, signal: str) -> None:
+    settings = dataclasses.replace(SMALL, error_signal=signal)
+    batched = mc.error_norms(settings, 0.1, algorithm)
+    reference = _reference_norms(settings, 0.1, algorithm)
+    assert batched.shape == (3, 2, 6)
+    np.testing.assert_allclose(batched, reference, rtol=1e-8, atol=1e-10)
+
+
+def test_update_operator_equals_update_module() -> None:
+    upd = _update_module()
+    if upd is None or not hasattr(upd, "unconstrained_update_operator"):
+        pytest.skip("gcs.core.update not available")
+    n = 50
+    model = _msd(1.8, 0.8, 0.01)
+    weights = upd.UpdateWeights(we=1.0, wdu=0.01, wu=0.0)
+    m_y, m_u = mc.update_operator(lifted_matrix(model, n), 1.0, 0.01, 0.0)
+    big_m, big_l, c = upd.unconstrained_update_operator(model, n, weights)
+    np.testing.assert_allclose(m_y, big_m, atol=1e-9)
+    np.testing.assert_allclose(m_u, big_l, atol=1e-9)
+    np.testing.assert_allclose(c, 0.0)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        yd, d_hat, u = rng.standard_normal((3, n))
+        expected = upd.next_input(model, yd, d_hat, u, weights).u_m
+        np.testing.assert_allclose(m_y @ (yd - d_hat) + m_u @ u, expected, atol=1e-8)
+
+
+def test_batched_markov_parameters_equal_model() -> None:
+    wn = np.array([1.8, 0.4, 3.1])
+    zeta = np.array([0.8, 0.1, 1.7])
+    f = mc._markov_batch(wn, zeta, 120, 0.01)
+    for i in range(3):
+        expected = markov_parameters(_msd(wn[i], zeta[i], 0.01), 120)
+        np.testing.assert_allclose(f[i], expected, rtol=1e-10, atol=1e-15)
+
+
+@pytest.mark.parametrize("algorithm", mc.ALGORITHMS)
+def test_nominal_noise_free_learning_converges(algorithm: str) -> None:
+    settings = mc.StudySettings(
+        levels=(0.0,), plants=2, repeats=1, iterations=30, n_samples=200, noise_std=0.0
+    )
+    norms = mc.error_norms(settings, 0.0, algorithm)
+    e = norms[0, 0]
+    np.testing.assert_allclose(norms[1, 0], e)  # every plant is the nominal one
+    assert np.all(np.diff(e) <= 1e-12), "error norm must not increase"
+    assert e[0] > 5.0
+    assert e[-1] < 0.03 * e[0]
+    # with an exact model and no noise the error keeps shrinking towards zero
+    longer = dataclasses.replace(settings, iterations=300, steady_from=0, steady_to=300)
+    e_long = mc.error_norms(longer, 0.0, algorithm)[0, 0]
+    assert e_long[-1] < 0.5 * e[-1]
+
+
+def test_first_learned_trial_differs_between_algorithms_but_trial_zero_does_not() -> None:
+    a = mc.error_norms(SMALL, 0.1, "smoother")
+    b = mc.error_norms(SMALL, 0.1, "kilc")
+    np.testing.assert_array_equal(a[:, :, 0], b[:, :, 0])  # same plants, same noise, same U_0
+    assert not np.allclose(a[:, :, 1], b[:, :, 1])
+
+
+def test_deterministic_for_a_fixed_seed() -> None:
+    rows1 = mc.run_study(SMALL)
+    rows2 = mc.run_study(SMALL)
+    assert rows1 == rows2
+    other = mc.run_study(dataclasses.replace(SMALL, seed=8))
+    assert other[0].first_mean != rows1[0].first_mean
+    # a level's numbers do not depend on which other levels are run
+    both = mc.run_study(dataclasses.replace(SMALL, levels=(0.05, 0.1)))
+    assert both[2:] == rows1
+
+
+def test_invalid_plant_rules() -> None:
+    settings = mc.StudySettings(
+        levels=(1.0,), plants=200, repeats=1, iterations=2, steady_from=1, steady_to=2, seed=1
+    )
+    resampled = mc.sample_plants(settings, 1.0)
+    assert resampled.wn_rad_s.size == 200
+    assert np.all(resampled.wn_rad_s > 0) and np.all(resampled.zeta > 0)
+    assert resampled.excluded > 0
+    excl = mc.sample_plants(dataclasses.replace(settings, invalid_plant_rule="exclude"), 1.0)
+    assert excl.wn_rad_s.size == 200 - excl.excluded
+    assert np.all(excl.wn_rad_s > 0) and np.all(excl.zeta > 0)
+    # the first draw is common to both rules: resampling only replaces the invalid draws
+    assert np.isin(excl.wn_rad_s, resampled.wn_rad_s).all()
+    assert excl.excluded <= resampled.excluded
+    small = dataclasses.replace(settings, plants=20, n_samples=40, invalid_plant_rule="exclude")
+    rows = mc.run_study(small)
+    assert all(r.plants == 20 - r.excluded for r in rows)
+    assert "excluded" in rows[0].excluded_rule
+    assert (
+        "resampled"
+        in mc.run_study(dataclasses.replace(small, invalid_plant_rule="resample"))[0].excluded_rule
+    )
+    # at 5 % a negative parameter needs a 20-sigma draw
+    assert mc.sample_plants(mc.StudySettings(), 0.05).excluded == 0
+
+
+def test_diverged_rule_counts_and_excludes() -> None:
+    settings = dataclasses.replace(SMALL, plants=1, levels=(0.1,))
+    norms = np.ones((2, 2, 6))
+    norms[1, :, 1:] = 100.0  # plant 1 diverged
+    row = mc.summarise(settings, norms, 0.1, "kilc", 0)
+    assert row.diverged == 1 and row.plants == 2 and row.steady_mean == pytest.approx(50.5)
+    excl = dataclasses.replace(settings, diverged_rule="exclude")
+    row = mc.summarise(excl, norms, 0.1, "kilc", 0)
+    assert row.diverged == 1 and row.plants == 1 and row.steady_mean == pytest.approx(1.0)
+
+
+def test_result_structure_and_progress() -> None:
+    settings = dataclasses.replace(SMALL, levels=(0.05, 0.2))
+    calls: list[tuple[int, int]] = []
+    rows = mc.run_study(settings, progress=lambda done, total: calls.append((done, total)))
+    assert [(r.algorithm, r.uncertainty) for r in rows] == [
+        ("smoother", 0.05),
+        ("kilc", 0.05),
+        ("smoother", 0.2),
+        ("kilc", 0.2),
+    ]
+    total = 2 * 2 * settings.iterations
+    assert calls[-1] == (total, total) and len(calls) == total
+    assert [c[0] for c in calls] == list(range(1, total + 1))
+    for r in rows:
+        assert isinstance(r, mc.StudyRow)
+        assert r.plants == 3 and r.excluded == 0
+        assert np.isfinite([r.first_mean, r.first_std, r.steady_mean, r.steady_std]).all()
+        assert r.first_std >= 0 and r.steady_std >= 0
+        norms = mc.error_norms(settings, r.uncertainty, r.algorithm)
+        per_plant = norms.mean(axis=1)
+        assert r.first_mean == pytest.approx(per_plant[:, 1].mean())
+        assert r.steady_mean == pytest.approx(per_plant[:, 3:6].mean())
+    assert set(mc.PAPER_TABLES) == {(a, x) for a in mc.ALGORITHMS for x in (0.05, 0.1, 0.2, 0.4)}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        rows[0].first_mean = 0.0  # type: ignore[misc]
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("plants", 0),
+        ("noise_std", -1.0),
+        ("error_signal", "noisy"),
+        ("u0", "ramp"),
+        ("invalid_plant_rule", "keep"),
+        ("diverged_rule", "drop"),
+        ("algorithms", ("ilc",)),
+        ("steady_to", 99),
+        ("first_iteration", 31),
+        ("levels", (-0.1,)),
+    ],
+)
+def test_settings_validation(field: str, value: object) -> None:
+    with pytest.raises(ValueError, match=field.split("_")[0]):
+        mc.StudySettings(**{field: value})
