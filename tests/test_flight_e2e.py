@@ -6,6 +6,7 @@ Each test starts its own mock process on a free port (``--port 0``) and runs in 
 from __future__ import annotations
 
 import asyncio
+import json
 import socket
 import time
 from pathlib import Path
@@ -54,8 +55,17 @@ def _mock(tmp_path: Path, **faults: float):  # type: ignore[no-untyped-def]
     process = pytest.importorskip("gcs.mock.process")
     config = pytest.importorskip("gcs.mock.config")
     return process.MockProcess(
-        config_path=None, seed=0, faults=config.Faults(**faults), stats_path=tmp_path / "stats"
+        config_path=None, seed=0, faults=config.Faults(**faults), stats_path=tmp_path / STATS
     )
+
+
+STATS = "stats.json"
+
+
+def _final_mode(tmp_path: Path) -> dict:
+    """Last mode-log entry of the mock's stats: ``{"t_monotonic_s", "mode", "armed"}``."""
+    stats = json.loads((tmp_path / STATS).read_text())
+    return stats["modes"][-1]
 
 
 def _best_lag_correlation(measured: np.ndarray, commanded: np.ndarray) -> tuple[int, float]:
@@ -97,6 +107,7 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     assert TrialProgress in kinds
     texts = [e.text for e in events if isinstance(e, Status)]
     assert texts[-1] == "landed and disarmed"
+    assert _final_mode(tmp_path)["armed"] is False
 
 
 def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
@@ -117,6 +128,9 @@ def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
     measured = np.isfinite(rec.pos_ned_m[:, 0])
     assert 0 < measured.sum() < len(measured)  # some of it, not all of it
     assert any(isinstance(e, Status) and e.text.startswith("emergency stop") for e in events)
+    # The link is gone for good, so nothing we send arrives: the mock's offboard-loss failsafe
+    # (COM_OF_LOSS_T) must have taken the vehicle out of OFFBOARD.
+    assert _final_mode(tmp_path)["mode"] != "OFFBOARD"
 
 
 def test_cancellation_mid_trial_lands_and_marks_incomplete(tmp_path: Path) -> None:
@@ -148,6 +162,7 @@ def test_cancellation_mid_trial_lands_and_marks_incomplete(tmp_path: Path) -> No
     assert j == 0 and not rec.complete and "interrupted" in reason
     assert np.isfinite(rec.pos_ned_m[:20]).all()
     assert "emergency stop: landed and disarmed" in statuses
+    assert _final_mode(tmp_path)["armed"] is False
 
 
 def _free_udp_port() -> int:
