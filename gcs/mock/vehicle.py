@@ -270,6 +270,7 @@ class Vehicle:
         self.took_off = False
         self.home_ned_m = (0.0, 0.0, 0.0)
         self.t_armed_s = 0.0
+        self._armed_total_s = 0.0
         self._t_contact_s: float | None = None
         self._t_landed_s = 0.0
         self.last_setpoint_t_s = -math.inf
@@ -316,6 +317,15 @@ class Vehicle:
         bool
         """
         return mode is not Mode.OFFBOARD or self.offboard_signal()
+
+    def armed_seconds(self) -> float:
+        """Total time spent armed since boot [s] (drives the battery model).
+
+        Returns
+        -------
+        float
+        """
+        return self._armed_total_s + (self.t_s - self.t_armed_s if self.armed else 0.0)
 
     @property
     def armable(self) -> bool:
@@ -487,11 +497,16 @@ class Vehicle:
         else:
             self._t_contact_s = None
         # take-off complete
-        if self.mode is Mode.TAKEOFF and self.armed and not self.landed:
-            if abs(ph.pos[2] - ph.target.pos_ned_m[2]) < 0.1 and abs(ph.vel[2]) < 0.3:
-                self.user_mode = Mode.HOLD
-                self._mode_after_disarm = Mode.HOLD
-                self._enter(Mode.HOLD, keep_target=True)
+        if (
+            self.mode is Mode.TAKEOFF
+            and self.armed
+            and not self.landed
+            and abs(ph.pos[2] - ph.target.pos_ned_m[2]) < 0.1
+            and abs(ph.vel[2]) < 0.3
+        ):
+            self.user_mode = Mode.HOLD
+            self._mode_after_disarm = Mode.HOLD
+            self._enter(Mode.HOLD, keep_target=True)
         # auto-disarm
         if self.armed and self.landed:
             if self.took_off or self.mode is Mode.LAND:
@@ -506,6 +521,7 @@ class Vehicle:
 
     # -- internals ------------------------------------------------------------------------
     def _disarm(self, reason: str) -> None:
+        self._armed_total_s += self.t_s - self.t_armed_s
         self.armed = False
         self.physics.set_armed(False)
         self.failsafe = False

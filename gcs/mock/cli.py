@@ -1,0 +1,215 @@
+"""``gcs mock``: run the mock drone (the main CLI registers :func:`mock_command`)."""
+
+from __future__ import annotations
+
+import signal
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from gcs.errors import GcsError
+from gcs.mock.config import Faults, load_mock_config
+
+__all__ = ["mock_command", "parse_dropout", "parse_gust", "faults_cli_args", "run_mock"]
+
+
+def _floats(text: str, count: int, what: str, fmt: str) -> list[float]:
+    parts = text.split(":")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) != count:
+        raise typer.BadParameter(f"{what} must be {fmt}, got {text!r}")
+    return values
+
+
+def parse_dropout(text: str) -> tuple[float, float]:
+    """Parse ``START:DURATION`` [s].
+
+    Parameters
+    ----------
+    text : str
+        Option value.
+
+    Returns
+    -------
+    tuple of float
+        Start and duration [s].
+    """
+    start, duration = _floats(text, 2, "--dropout", "START:DURATION")
+    return start, duration
+
+
+def parse_gust(text: str) -> tuple[float, float, float, float]:
+    """Parse ``START:DURATION:VN:VE`` (s, s, m/s, m/s).
+
+    Parameters
+    ----------
+    text : str
+        Option value.
+
+    Returns
+    -------
+    tuple of float
+        Start [s], duration [s], wind north and east [m/s].
+    """
+    start, duration, vn, ve = _floats(text, 4, "--gust", "START:DURATION:VN:VE")
+    return start, duration, vn, ve
+
+
+def faults_cli_args(faults: Faults) -> list[str]:
+    """Command-line options of ``gcs mock`` that reproduce a :class:`Faults`.
+
+    Parameters
+    ----------
+    faults : Faults
+        Faults to express.
+
+    Returns
+    -------
+    list of str
+        Options, empty for no faults.
+    """
+    args: list[str] = []
+    if faults.loss_fraction:
+        args += ["--loss", repr(faults.loss_fraction)]
+    if faults.latency_ms:
+        args += ["--latency-ms", repr(faults.latency_ms)]
+    if faults.dropout_start_s is not None:
+        args += ["--dropout", f"{faults.dropout_start_s!r}:{faults.dropout_duration_s!r}"]
+    if faults.link_loss_at_s is not None:
+        args += ["--link-loss-at", repr(faults.link_loss_at_s)]
+    if faults.gust_start_s is not None:
+        args += [
+            "--gust",
+            f"{faults.gust_start_s!r}:{faults.gust_duration_s!r}:"
+            f"{faults.gust_vn_m_s!r}:{faults.gust_ve_m_s!r}",
+        ]
+    return args
+
+
+def run_mock(
+    config: Path | None,
+    faults: Faults,
+    seed: int = 0,
+    port: int = 0,
+    gcs_port: int | None = None,
+    stats_out: Path | None = None,
+) -> None:
+    """Bind, announce ``READY <url>`` on stdout, run until SIGTERM/SIGINT, write the stats.
+
+    Parameters
+    ----------
+    config : Path or None
+        Mock profile (YAML); None for the defaults.
+    faults : Faults
+        Injected faults.
+    seed : int
+        Seed of gusts, noise and packet loss.
+    port : int
+        UDP port on 127.0.0.1 (0 = ephemeral).
+    gcs_port : int or None
+        Also send to a GCS listening on 127.0.0.1:gcs_port.
+    stats_out : Path or None
+        Where to write the JSON statistics on exit.
+    """
+    from gcs.mock.server import MockServer, write_json_atomic
+
+    cfg = load_mock_config(config)
+    server = MockServer(cfg, faults, seed=seed, port=port, gcs_port=gcs_port)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: server.stop())
+    sys.stdout.write(f"READY {server.url}\n")
+    sys.stdout.flush()
+    print(
+        f"mock drone (PX4 quadrotor, sysid {cfg.px4.system_id}) on 127.0.0.1:{server.port}; "
+        f"connect MAVSDK to {server.url}; Ctrl-C to stop",
+        file=sys.stderr,
+        flush=True,
+    )
+    try:
+        server.run()
+    finally:
+        if stats_out is not None:
+            write_json_atomic(stats_out, server.stats())
+
+
+def mock_command(
+    config: Annotated[
+        Path | None, typer.Option("--config", help="Mock profile (YAML), e.g. profiles/mock.yaml.")
+    ] = None,
+    port: Annotated[
+        int, typer.Option("--port", min=0, max=65535, help="UDP port on 127.0.0.1; 0 = any free.")
+    ] = 0,
+    gcs_port: Annotated[
+        int | None,
+        typer.Option("--gcs-port", min=1, max=65535, help="Also send to a GCS on this port."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of gusts, noise, packet loss.")] = 0,
+    loss: Annotated[
+        float, typer.Option("--loss", min=0.0, max=0.99, help="Datagram loss fraction.")
+    ] = 0.0,
+    latency_ms: Annotated[
+        float, typer.Option("--latency-ms", min=0.0, help="Added one-way latency [ms].")
+    ] = 0.0,
+    dropout: Annotated[
+        str | None, typer.Option("--dropout", help="Telemetry dropout START:DURATION [s].")
+    ] = None,
+    link_loss_at: Annotated[
+        float | None, typer.Option("--link-loss-at", help="Lose the link for good at T [s].")
+    ] = None,
+    gust: Annotated[
+        str | None, typer.Option("--gust", help="Wind gust START:DURATION:VN:VE [s, s, m/s].")
+    ] = None,
+    stats_out: Annotated[
+        Path | None, typer.Option("--stats-out", help="Write setpoint arrivals etc. (JSON).")
+    ] = None,
+) -> None:
+    """Run a mock PX4 quadrotor that MAVSDK cannot tell from the real one.
+
+    The mock binds a UDP socket on 127.0.0.1 (``--port``, default any free port) and prints
+    exactly one line ``READY udpout://127.0.0.1:<port>`` on stdout; connect MAVSDK (or
+    ``gcs fly``) with that URL. It speaks MAVLink 2 as PX4 v1.16 does: heartbeats with PX4
+    modes, arming, take-off, hold, land with auto-disarm, offboard with PX4's rules
+    (refused without a setpoint stream, falls back to Hold after COM_OF_LOSS_T without
+    setpoints), PX4 parameters, and telemetry at PX4-like rates (position and odometry at
+    50 Hz; SET_MESSAGE_INTERVAL is honoured). The simulated vehicle follows a PX4-like
+    cascaded controller whose x and y closed loops resemble eq. (11) of the paper, with a
+    repeatable position-dependent disturbance, random gusts and millimetre mocap noise.
+
+    Faults: ``--loss`` and ``--latency-ms`` apply from the start and to both directions. The
+    times of ``--dropout``, ``--link-loss-at`` and ``--gust`` count in seconds from the
+    moment the vehicle first enters OFFBOARD. A dropout silences the telemetry streams
+    (heartbeats and command replies go on); a link loss silences everything for good; a gust
+    blows the given north/east wind through the drag.
+
+    SIGTERM or Ctrl-C stops it; with ``--stats-out`` it then writes, atomically, a JSON file
+    with the arrival time (monotonic clock) and value of every position setpoint, the mode
+    changes and packet counters.
+
+    Examples:
+
+        gcs mock --seed 3
+
+        gcs mock --config profiles/mock.yaml --gust 5:2:0:3 --stats-out /tmp/mock.json
+    """
+    try:
+        faults = Faults(
+            loss_fraction=loss,
+            latency_ms=latency_ms,
+            dropout_start_s=parse_dropout(dropout)[0] if dropout else None,
+            dropout_duration_s=parse_dropout(dropout)[1] if dropout else None,
+            link_loss_at_s=link_loss_at,
+            gust_start_s=parse_gust(gust)[0] if gust else None,
+            gust_duration_s=parse_gust(gust)[1] if gust else None,
+            gust_vn_m_s=parse_gust(gust)[2] if gust else 0.0,
+            gust_ve_m_s=parse_gust(gust)[3] if gust else 0.0,
+        )
+    except ValueError as exc:
+        if isinstance(exc, GcsError):
+            raise
+        raise typer.BadParameter(str(exc)) from exc
+    run_mock(config, faults, seed=seed, port=port, gcs_port=gcs_port, stats_out=stats_out)

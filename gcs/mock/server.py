@@ -1,0 +1,647 @@
+"""MAVLink 2 UDP endpoint of the mock drone (pymavlink), in real time.
+
+One process, one thread, one UDP socket bound on ``127.0.0.1:PORT``. The GCS connects with
+``udpout://127.0.0.1:PORT``: MAVSDK sends its HEARTBEAT first, the mock learns the reply
+address from it and answers with a HEARTBEAT at once. ``gcs_port`` additionally sends
+everything to a GCS listening on that port (QGroundControl style).
+
+The loop sleeps in ``select`` until the next physics step (``dt_s``, on a grid of the
+monotonic clock, so there is no drift), the next telemetry message or the next delayed
+datagram, whichever comes first; a datagram wakes it at once. Setpoints are time-stamped on
+arrival and handed to the vehicle after the physics has caught up to that instant.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import heapq
+import json
+import math
+import os
+import random
+import select
+import socket
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from gcs.mock.config import Faults, MockConfig
+from gcs.mock.vehicle import MODE_FROM_CUSTOM, MavResult, Vehicle, encode_param
+
+__all__ = ["MockServer", "STREAMS", "write_json_atomic"]
+
+# stream name -> MAVLink message id (rates in RatesConfig are named <stream>_hz)
+STREAMS = {
+    "heartbeat": 0,
+    "sys_status": 1,
+    "system_time": 2,
+    "ping": 4,
+    "gps_raw_int": 24,
+    "attitude": 30,
+    "attitude_quaternion": 31,
+    "local_position_ned": 32,
+    "global_position_int": 33,
+    "vfr_hud": 74,
+    "position_target_local_ned": 85,
+    "battery_status": 147,
+    "home_position": 242,
+    "extended_sys_state": 245,
+    "odometry": 331,
+}
+_ID_TO_STREAM = {v: k for k, v in STREAMS.items()}
+# Streams that a telemetry dropout silences (heartbeats and replies keep going).
+_TELEMETRY = set(STREAMS) - {"heartbeat", "ping"}
+
+# SYS_STATUS sensor bits of the PX4 v1.16 SIH capture; PREARM_CHECK follows the arming checks.
+_SENSORS_PRESENT = 50348079
+_SENSORS_ENABLED = 50413615
+_SENSORS_HEALTH = 52480063
+_PREARM_CHECK = 0x10000000
+_EARTH_RADIUS_M = 6_371_000.0
+_FORCE_MAGIC = 21196
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write JSON through a temporary file in the same directory and ``os.replace``.
+
+    Parameters
+    ----------
+    path : Path
+        Destination.
+    data : Any
+        JSON-serialisable object.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(data, f)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+class _Writer:
+    """File-like sink that pymavlink's ``*_send`` methods write packed datagrams into."""
+
+    def __init__(self, server: MockServer) -> None:
+        self.server = server
+
+    def write(self, buf: bytes) -> None:
+        self.server._transmit(bytes(buf))
+
+
+class MockServer:
+    """The mock drone's MAVLink endpoint and real-time loop.
+
+    Parameters
+    ----------
+    cfg : MockConfig
+        Vehicle configuration.
+    faults : Faults
+        Injected faults.
+    seed : int
+        Seed of gusts, noise and packet loss.
+    port : int
+        UDP port to bind on 127.0.0.1 (0 = ephemeral).
+    gcs_port : int or None
+        Also send to 127.0.0.1:gcs_port.
+    """
+
+    def __init__(
+        self,
+        cfg: MockConfig,
+        faults: Faults | None = None,
+        seed: int = 0,
+        port: int = 0,
+        gcs_port: int | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.faults = faults or Faults()
+        self.seed = seed
+        self.sysid = cfg.px4.system_id
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", port))
+        self.sock.setblocking(False)
+        self.port: int = self.sock.getsockname()[1]
+        self.peers: list[tuple[str, int]] = []
+        if gcs_port is not None:
+            self.peers.append(("127.0.0.1", gcs_port))
+        self.mav = mavlink2.MAVLink(_Writer(self), srcSystem=self.sysid, srcComponent=1)
+        self.parser = mavlink2.MAVLink(None)
+        self.parser.robust_parsing = True
+        self.vehicle = Vehicle(cfg, seed)
+        self._fault_rng = random.Random(seed + 0xFA17)
+        self._delayed: list[tuple[float, int, str, bytes, tuple[str, int] | None]] = []
+        self._delayed_seq = 0
+        self._telemetry_now = False
+        self._stop = False
+        self.t0 = time.monotonic()
+        self._streams: dict[str, list[float]] = {}
+        for name in STREAMS:
+            self._set_rate(name, getattr(cfg.rates, f"{name}_hz"))
+        self._ping_seq = 0
+        self._meas_t = -1.0
+        self._meas: tuple[Any, Any] = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        self._att_rng = random.Random(seed + 0xA77)
+        # statistics
+        self.sp_t: list[float] = []
+        self.sp_values: list[tuple[float, float, float, float, int, int]] = []
+        self.counts = {"rx": 0, "tx": 0, "rx_dropped": 0, "tx_dropped": 0, "steps": 0}
+        self.max_lag_s = 0.0
+
+    # -- public ---------------------------------------------------------------------------
+    @property
+    def url(self) -> str:
+        """MAVSDK connection URL of this mock."""
+        return f"udpout://127.0.0.1:{self.port}"
+
+    def stop(self) -> None:
+        """Ask the loop to end (safe from a signal handler)."""
+        self._stop = True
+
+    def run(self, duration_s: float | None = None) -> None:
+        """Run the real-time loop until :meth:`stop` (or for ``duration_s``).
+
+        Parameters
+        ----------
+        duration_s : float or None
+            Stop after this many seconds (None: until stopped).
+        """
+        dt = self.vehicle.physics.dt_s
+        t0 = self.t0
+        end = math.inf if duration_s is None else time.monotonic() + duration_s
+        next_tick = t0 + (math.floor((time.monotonic() - t0) / dt) + 1) * dt
+        sock = self.sock
+        while not self._stop and time.monotonic() < end:
+            deadline = next_tick
+            if self.peers:
+                deadline = min(deadline, min(s[1] for s in self._streams.values()))
+            if self._delayed:
+                deadline = min(deadline, self._delayed[0][0])
+            timeout = deadline - time.monotonic()
+            if timeout > 0:
+                readable, _, _ = select.select([sock], [], [], timeout)
+            else:
+                readable = [sock]
+            if readable:
+                self._drain()
+            now = time.monotonic()
+            self._release_delayed(now)
+            if now >= next_tick:
+                self._advance(now)
+                next_tick = t0 + (math.floor((now - t0) / dt) + 1) * dt
+            self._after_update()
+            if self.peers:
+                self._send_streams(now)
+        self.sock.close()
+
+    def stats(self) -> dict[str, Any]:
+        """Raw statistics of the run (setpoint arrivals, modes, counters).
+
+        Returns
+        -------
+        dict
+            JSON-serialisable; see ``docs/mock.md`` for the fields.
+        """
+        v = self.vehicle
+        cols = list(zip(*self.sp_values, strict=True)) if self.sp_values else [[]] * 6
+        first = v.first_offboard_t_s
+        return {
+            "format": "gcs-mock-stats/1",
+            "seed": self.seed,
+            "port": self.port,
+            "faults": dataclasses.asdict(self.faults),
+            "boot_monotonic_s": self.t0,
+            "first_offboard_monotonic_s": None if first is None else self.t0 + first,
+            "setpoints": {
+                "t_rx_monotonic_s": self.sp_t,
+                "north_m": list(cols[0]),
+                "east_m": list(cols[1]),
+                "down_m": list(cols[2]),
+                "yaw_rad": list(cols[3]),
+                "time_boot_ms": list(cols[4]),
+                "type_mask": list(cols[5]),
+            },
+            "modes": [
+                {"t_monotonic_s": self.t0 + m.t_s, "mode": m.mode, "armed": m.armed}
+                for m in v.mode_log
+            ],
+            "packets": {k: self.counts[k] for k in ("rx", "tx", "rx_dropped", "tx_dropped")},
+            "physics_steps": self.counts["steps"],
+            "max_physics_lag_s": self.max_lag_s,
+            "cpu_s": time.process_time(),
+            "wall_s": time.monotonic() - self.t0,
+        }
+
+    # -- time -----------------------------------------------------------------------------
+    def _t(self, now: float | None = None) -> float:
+        return (time.monotonic() if now is None else now) - self.t0
+
+    def _t_offboard(self) -> float | None:
+        first = self.vehicle.first_offboard_t_s
+        return None if first is None else self._t() - first
+
+    def _advance(self, now: float) -> None:
+        v = self.vehicle
+        v.physics.wind_ne_m_s = self.faults.wind_ned_m_s(self._t_offboard())
+        before = v.physics.t_s
+        v.update(now - self.t0)
+        steps = int(round((v.physics.t_s - before) / v.physics.dt_s))
+        self.counts["steps"] += steps
+        if steps > 1:
+            self.max_lag_s = max(self.max_lag_s, (steps - 1) * v.physics.dt_s)
+
+    def _after_update(self) -> None:
+        v = self.vehicle
+        if v.state_changed:
+            v.state_changed = False
+            self._send_heartbeat()
+        while v.events:
+            severity, text = v.events.pop(0)
+            self.mav.statustext_send(severity, text.encode()[:50], 0, 0)
+
+    # -- transport ------------------------------------------------------------------------
+    def _transmit(self, buf: bytes) -> None:
+        f = self.faults
+        t_off = self._t_offboard()
+        if f.link_lost(t_off) or (self._telemetry_now and f.dropout_active(t_off)):
+            self.counts["tx_dropped"] += 1
+            return
+        if f.loss_fraction > 0 and self._fault_rng.random() < f.loss_fraction:
+            self.counts["tx_dropped"] += 1
+            return
+        if f.latency_ms > 0:
+            self._push_delayed("out", buf, None)
+            return
+        self._sendto(buf)
+
+    def _sendto(self, buf: bytes) -> None:
+        for peer in self.peers:
+            try:
+                self.sock.sendto(buf, peer)
+                self.counts["tx"] += 1
+            except OSError:
+                pass  # nobody listening (ICMP port unreachable); UDP carries on
+
+    def _push_delayed(self, kind: str, buf: bytes, addr: tuple[str, int] | None) -> None:
+        self._delayed_seq += 1
+        due = time.monotonic() + self.faults.latency_ms / 1000.0
+        heapq.heappush(self._delayed, (due, self._delayed_seq, kind, buf, addr))
+
+    def _release_delayed(self, now: float) -> None:
+        while self._delayed and self._delayed[0][0] <= now:
+            _, _, kind, buf, addr = heapq.heappop(self._delayed)
+            if kind == "out":
+                self._sendto(buf)
+            else:
+                assert addr is not None
+                self._handle_datagram(buf, addr)
+
+    def _drain(self) -> None:
+        f = self.faults
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(4096)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                continue  # ICMP error from an earlier send
+            self.counts["rx"] += 1
+            if f.link_lost(self._t_offboard()) or (
+                f.loss_fraction > 0 and self._fault_rng.random() < f.loss_fraction
+            ):
+                self.counts["rx_dropped"] += 1
+                continue
+            if f.latency_ms > 0:
+                self._push_delayed("in", data, addr)
+            else:
+                self._handle_datagram(data, addr)
+
+    # -- reception ------------------------------------------------------------------------
+    def _handle_datagram(self, data: bytes, addr: tuple[str, int]) -> None:
+        if addr not in self.peers:
+            if len(self.peers) >= 4:
+                self.peers.pop(0)
+            self.peers.append(addr)
+            self._send_heartbeat()
+        try:
+            msgs = self.parser.parse_buffer(data) or []
+        except mavlink2.MAVError:
+            return
+        for msg in msgs:
+            handler = getattr(self, f"_on_{msg.get_type().lower()}", None)
+            if handler is not None:
+                handler(msg)
+
+    def _for_me(self, msg: Any) -> bool:
+        return msg.target_system in (0, self.sysid) and msg.target_component in (0, 1)
+
+    def _on_set_position_target_local_ned(self, msg: Any) -> None:
+        if msg.target_system not in (0, self.sysid):
+            return
+        now = time.monotonic()
+        t = now - self.t0
+        v = self.vehicle
+        self.sp_t.append(now)
+        self.sp_values.append((msg.x, msg.y, msg.z, msg.yaw, msg.time_boot_ms, msg.type_mask))
+        v.update(t)
+        if msg.coordinate_frame == mavlink2.MAV_FRAME_LOCAL_NED and msg.type_mask & 0b111 == 0:
+            v.on_setpoint(t, (msg.x, msg.y, msg.z), msg.yaw if not msg.type_mask & 1024 else 0.0)
+        elif v.setpoint is not None:
+            # proof of life only: the mock flies position setpoints, not velocity/acceleration
+            v.on_setpoint(t, v.setpoint.pos_ned_m, v.setpoint.yaw_rad)
+
+    def _on_command_long(self, msg: Any) -> None:
+        if not self._for_me(msg):
+            return
+        params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6)
+        self._command(msg.command, params + (msg.param7,), msg)
+
+    def _on_command_int(self, msg: Any) -> None:
+        if not self._for_me(msg):
+            return
+        params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.x, msg.y, msg.z)
+        self._command(msg.command, params, msg)
+
+    def _command(self, command: int, p: tuple[float, ...], msg: Any) -> None:
+        v = self.vehicle
+        v.update(self._t())
+        result = MavResult.UNSUPPORTED
+        send_after: Any = None
+        if command == mavlink2.MAV_CMD_COMPONENT_ARM_DISARM:
+            if p[0] == 1.0 or p[0] == 0.0:
+                force = math.isfinite(p[1]) and round(p[1]) == _FORCE_MAGIC
+                result = v.arm(p[0] == 1.0, force)
+            else:
+                result = MavResult.DENIED
+        elif command == mavlink2.MAV_CMD_DO_SET_MODE:
+            main = int(p[1]) if math.isfinite(p[1]) else -1
+            sub = int(p[2]) if math.isfinite(p[2]) else 0
+            mode = MODE_FROM_CUSTOM.get((main, sub if main == 4 else 0))
+            if mode is None or not (int(p[0]) & 1 if math.isfinite(p[0]) else 0):
+                result = MavResult.DENIED
+            else:
+                result = v.set_mode(mode)
+        elif command == mavlink2.MAV_CMD_NAV_TAKEOFF:
+            result = v.takeoff()
+        elif command == mavlink2.MAV_CMD_NAV_LAND:
+            result = v.land()
+        elif command == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL:
+            result = self._cmd_message_interval(p[0], p[1])
+        elif command == mavlink2.MAV_CMD_GET_MESSAGE_INTERVAL:
+            name = _ID_TO_STREAM.get(int(p[0])) if math.isfinite(p[0]) else None
+            if name is not None:
+                result = MavResult.ACCEPTED
+                period = self._streams[name][0]
+                interval = -1 if math.isinf(period) else int(period * 1e6)
+                send_after = lambda: self.mav.message_interval_send(int(p[0]), interval)  # noqa: E731
+        elif command == mavlink2.MAV_CMD_REQUEST_MESSAGE:
+            msg_id = int(p[0]) if math.isfinite(p[0]) else -1
+            sender = self._sender_for(msg_id)
+            result = MavResult.ACCEPTED if sender is not None else MavResult.DENIED
+            send_after = sender
+        elif command == mavlink2.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            result = MavResult.ACCEPTED
+            send_after = self._send_autopilot_version
+        if send_after is not None:
+            send_after()
+        self.mav.command_ack_send(command, int(result), 0, 0, msg.get_srcSystem(),
+                                  msg.get_srcComponent())  # fmt: skip
+        self._after_update()
+
+    def _cmd_message_interval(self, msg_id: float, interval_us: float) -> MavResult:
+        if not (math.isfinite(msg_id) and math.isfinite(interval_us)):
+            return MavResult.DENIED
+        name = _ID_TO_STREAM.get(int(msg_id))
+        if name is None:
+            return MavResult.DENIED
+        if interval_us == 0:
+            self._set_rate(name, getattr(self.cfg.rates, f"{name}_hz"))
+        elif interval_us < 0:
+            self._set_rate(name, 0.0)
+        else:
+            self._set_rate(name, 1e6 / interval_us)
+        return MavResult.ACCEPTED
+
+    def _sender_for(self, msg_id: int) -> Any:
+        if msg_id == mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return self._send_autopilot_version
+        name = _ID_TO_STREAM.get(msg_id)
+        return None if name is None else getattr(self, f"_send_{name}")
+
+    def _on_param_request_read(self, msg: Any) -> None:
+        if not self._for_me(msg):
+            return
+        params = self.vehicle.params
+        if msg.param_index >= 0:
+            if msg.param_index < len(params):
+                self._send_param(params.names[msg.param_index])
+        else:
+            name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
+            if params.get(name) is not None:
+                self._send_param(name)
+
+    def _on_param_request_list(self, msg: Any) -> None:
+        if self._for_me(msg):
+            for name in self.vehicle.params.names:
+                self._send_param(name)
+
+    def _on_param_set(self, msg: Any) -> None:
+        if not self._for_me(msg):
+            return
+        name = msg.param_id.rstrip("\x00")
+        if self.vehicle.params.set(name, msg.param_value) is not None:
+            self._send_param(name)
+
+    def _on_ping(self, msg: Any) -> None:
+        if msg.target_system == 0:  # a request; replies to our own pings carry our id
+            self.mav.ping_send(msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent())
+
+    def _on_timesync(self, msg: Any) -> None:
+        if msg.tc1 == 0:
+            self.mav.timesync_send(time.monotonic_ns(), msg.ts1)
+
+    # -- transmission ---------------------------------------------------------------------
+    def _set_rate(self, name: str, rate_hz: float) -> None:
+        period = 1.0 / rate_hz if rate_hz > 0 else math.inf
+        self._streams[name] = [period, time.monotonic() + min(period, 0.05)]
+
+    def _send_streams(self, now: float) -> None:
+        for name, stream in self._streams.items():
+            if stream[1] <= now:
+                period = stream[0]
+                stream[1] += period
+                if stream[1] < now:
+                    stream[1] = now + period
+                self._telemetry_now = name in _TELEMETRY
+                getattr(self, f"_send_{name}")()
+                self._telemetry_now = False
+
+    def _measured(self) -> tuple[Any, Any]:
+        ph = self.vehicle.physics
+        if ph.t_s != self._meas_t:
+            self._meas_t = ph.t_s
+            self._meas = ph.measure()
+        return self._meas
+
+    def _boot_ms(self) -> int:
+        return int(self.vehicle.t_s * 1000) & 0xFFFFFFFF
+
+    def _attitude(self) -> tuple[float, ...]:
+        roll, pitch, yaw, p, q, r = self.vehicle.physics.attitude()
+        s = self.cfg.noise.att_sigma_rad
+        g = self._att_rng.gauss
+        return (roll + g(0, s), pitch + g(0, s), yaw + g(0, s), p, q, r)
+
+    @staticmethod
+    def _quaternion(roll: float, pitch: float, yaw: float) -> list[float]:
+        cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+        cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+        cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+        return [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+
+    def _global(self, pos: tuple[float, float, float]) -> tuple[int, int, float]:
+        p = self.cfg.px4
+        lat = p.home_lat_deg + math.degrees(pos[0] / _EARTH_RADIUS_M)
+        lon = p.home_lon_deg + math.degrees(
+            pos[1] / (_EARTH_RADIUS_M * math.cos(math.radians(p.home_lat_deg)))
+        )
+        return int(round(lat * 1e7)), int(round(lon * 1e7)), p.home_alt_m - pos[2]
+
+    def _send_heartbeat(self) -> None:
+        v = self.vehicle
+        base = v.mode.base_mode | (128 if v.armed else 0)
+        status = mavlink2.MAV_STATE_ACTIVE if v.armed else mavlink2.MAV_STATE_STANDBY
+        self.mav.heartbeat_send(
+            mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_PX4, base, v.mode.custom_mode,
+            status, 3,
+        )  # fmt: skip
+
+    def _battery_pct(self) -> int:
+        used = self.cfg.px4.battery_drain_pct_s * self.vehicle.armed_seconds()
+        return max(0, int(round(100 - used)))
+
+    def _send_sys_status(self) -> None:
+        health = _SENSORS_HEALTH | (_PREARM_CHECK if self.vehicle.armable else 0)
+        self.mav.sys_status_send(
+            _SENSORS_PRESENT, _SENSORS_ENABLED, health, 117, 16200, -100, self._battery_pct(),
+            0, 0, 0, 0, 0, 0, 0, 0, 1,
+        )  # fmt: skip
+
+    def _send_system_time(self) -> None:
+        self.mav.system_time_send(int(time.time() * 1e6), self._boot_ms())
+
+    def _send_ping(self) -> None:
+        self.mav.ping_send(int(self.vehicle.t_s * 1e6), self._ping_seq, 0, 0)
+        self._ping_seq += 1
+
+    def _send_gps_raw_int(self) -> None:
+        pos, vel = self._measured()
+        lat, lon, alt = self._global(pos)
+        speed = math.hypot(vel[0], vel[1])
+        cog = int(math.degrees(math.atan2(vel[1], vel[0])) % 360 * 100)
+        self.mav.gps_raw_int_send(
+            int(self.vehicle.t_s * 1e6), 3, lat, lon, int(alt * 1000), 70, 110,
+            int(speed * 100), cog, 10, int(alt * 1000), 900, 1780, 400, 0, 0,
+        )  # fmt: skip
+
+    def _send_attitude(self) -> None:
+        self.mav.attitude_send(self._boot_ms(), *self._attitude())
+
+    def _send_attitude_quaternion(self) -> None:
+        roll, pitch, yaw, p, q, r = self._attitude()
+        self.mav.attitude_quaternion_send(
+            self._boot_ms(), *self._quaternion(roll, pitch, yaw), p, q, r, [0.0] * 4
+        )
+
+    def _send_local_position_ned(self) -> None:
+        pos, vel = self._measured()
+        self.mav.local_position_ned_send(self._boot_ms(), *pos, *vel)
+
+    def _send_global_position_int(self) -> None:
+        pos, vel = self._measured()
+        lat, lon, alt = self._global(pos)
+        rel = -(pos[2] - self.vehicle.home_ned_m[2])
+        hdg = int(math.degrees(self.vehicle.physics.yaw_rad) % 360 * 100)
+        self.mav.global_position_int_send(
+            self._boot_ms(), lat, lon, int(alt * 1000), int(rel * 1000),
+            int(vel[0] * 100), int(vel[1] * 100), int(vel[2] * 100), hdg,
+        )  # fmt: skip
+
+    def _send_vfr_hud(self) -> None:
+        pos, vel = self._measured()
+        ph = self.vehicle.physics
+        heading = int(math.degrees(ph.yaw_rad) % 360)
+        throttle = 0
+        if self.vehicle.armed:
+            thrust_g = (ph.cfg.physics.gravity_m_s2 - ph.acc[2]) / ph.cfg.physics.gravity_m_s2
+            throttle = int(min(max(50 * thrust_g, 0), 100))
+        alt = self.cfg.px4.home_alt_m - pos[2]
+        self.mav.vfr_hud_send(0.0, math.hypot(vel[0], vel[1]), heading, throttle, alt, -vel[2])
+
+    def _send_position_target_local_ned(self) -> None:
+        tgt = self.vehicle.physics.target
+        self.mav.position_target_local_ned_send(
+            self._boot_ms(), mavlink2.MAV_FRAME_LOCAL_NED, 2552, *tgt.pos_ned_m,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, tgt.yaw_rad, 0.0,
+        )  # fmt: skip
+
+    def _send_battery_status(self) -> None:
+        self.mav.battery_status_send(
+            0, 1, 1, 32767, [16200] + [65535] * 9, -100, 0, -1, self._battery_pct(), 0, 1,
+            [0] * 4, 0, 0,
+        )  # fmt: skip
+
+    def _send_home_position(self) -> None:
+        home = self.vehicle.home_ned_m
+        lat, lon, alt = self._global(home)
+        self.mav.home_position_send(
+            lat, lon, int(alt * 1000), *home, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+            int(self.vehicle.t_s * 1e6),
+        )  # fmt: skip
+
+    def _send_extended_sys_state(self) -> None:
+        self.mav.extended_sys_state_send(0, int(self.vehicle.landed_state))
+
+    def _send_odometry(self) -> None:
+        pos, vel = self._measured()
+        roll, pitch, yaw, p, q, r = self._attitude()
+        n = self.cfg.noise
+        nan = float("nan")
+        pose_cov = [nan] * 21
+        pose_cov[0] = pose_cov[6] = pose_cov[11] = n.pos_sigma_m**2
+        pose_cov[15] = pose_cov[18] = pose_cov[20] = n.att_sigma_rad**2
+        vel_cov = [nan] * 21
+        vel_cov[0] = vel_cov[6] = vel_cov[11] = n.vel_sigma_m_s**2
+        self.mav.odometry_send(
+            int(self.vehicle.t_s * 1e6), mavlink2.MAV_FRAME_LOCAL_NED,
+            mavlink2.MAV_FRAME_LOCAL_NED, *pos, self._quaternion(roll, pitch, yaw), *vel,
+            p, q, r, pose_cov, vel_cov, 0, 8, 0,
+        )  # fmt: skip
+
+    def _send_autopilot_version(self) -> None:
+        custom = [0, 0, 0, 87, 145, 83, 163, 110]
+        self.mav.autopilot_version_send(
+            59647, 17826047, 17826047, 101854463, 1, custom, custom, [0] * 8, 0, 0,
+            5283920058631409231, [0] * 18,
+        )  # fmt: skip
+
+    def _send_param(self, name: str) -> None:
+        params = self.vehicle.params
+        found = params.get(name)
+        if found is None:
+            return
+        index, ptype, value = found
+        self.mav.param_value_send(
+            name.encode(), encode_param(value, ptype), ptype, len(params), index
+        )
