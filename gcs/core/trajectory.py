@@ -164,12 +164,13 @@ def sample_eight(shape: EightShape, t_ilc_s: float) -> Reference:
     Returns
     -------
     Reference
-        N + 1 samples, N = round(duration / t_ilc_s), first and last at the centre.
+        N + 1 samples, N = ceil(duration / t_ilc_s), first and last at the centre.
     """
     if not t_ilc_s > 0:
         raise TrajectoryError(f"t_ilc_s must be > 0, got {t_ilc_s}")
     duration = 2.0 * shape.hover_s + shape.ramp_s + shape.loops * shape.period_s
-    n = int(round(duration / t_ilc_s))
+    # ceil, not round: the last sample must not fall before the end of the motion
+    n = int(np.ceil(duration / t_ilc_s - 1e-9))
     t = np.arange(n + 1) * t_ilc_s
     s, sd, sdd = _phase(t, shape)
     a, b = shape.amplitude_north_m, shape.amplitude_east_m

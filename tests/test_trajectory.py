@@ -1,0 +1,212 @@
+"""Tests of gcs.core.trajectory: the eight-shape of the paper's Sec. V-D and its checks."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from gcs.core.trajectory import (
+    Box,
+    EightShape,
+    Reference,
+    _phase,
+    check_reference,
+    points_outside,
+    sample_eight,
+)
+from gcs.errors import TrajectoryError
+from gcs.io.config import load_trajectory
+
+ROOT = Path(__file__).resolve().parents[1]
+WIDE = Box((-10.0, 10.0), (-10.0, 10.0), (-10.0, 0.0))
+
+
+def eight() -> EightShape:
+    return load_trajectory(ROOT / "trajectories" / "eight.yaml").shape
+
+
+def horizontal_norm(v: np.ndarray) -> np.ndarray:
+    return np.sqrt(v[:, 0] ** 2 + v[:, 1] ** 2)
+
+
+def test_default_eight_speed_and_acceleration_as_in_the_paper():
+    ref = sample_eight(eight(), 0.05)
+    assert ref.t_ilc_s == pytest.approx(0.05)
+    assert ref.n_samples == round((2 * 1.0 + 2.0 + 2 * 5.0) / 0.05)
+    assert np.max(horizontal_norm(ref.vel_ned_m_s)) == pytest.approx(2.1, rel=0.05)
+    assert np.max(horizontal_norm(ref.acc_ned_m_s2)) == pytest.approx(4.0, rel=0.05)
+    # also from the position alone (finite differences on a fine grid)
+    fine = sample_eight(eight(), 0.001)
+    v = np.diff(fine.pos_ned_m, axis=0) / 0.001
+    a = np.diff(fine.pos_ned_m, 2, axis=0) / 0.001**2
+    assert np.max(horizontal_norm(v)) == pytest.approx(2.1, rel=0.05)
+    assert np.max(horizontal_norm(a)) == pytest.approx(4.0, rel=0.05)
+
+
+def test_default_eight_starts_and_ends_at_rest_at_the_same_point():
+    shape = eight()
+    ref = sample_eight(shape, 0.05)
+    np.testing.assert_allclose(ref.pos_ned_m[0], shape.center_ned_m, atol=1e-12)
+    np.testing.assert_allclose(ref.pos_ned_m[-1], shape.center_ned_m, atol=1e-12)
+    for arr in (ref.vel_ned_m_s, ref.acc_ned_m_s2):
+        np.testing.assert_allclose(arr[0], 0.0, atol=1e-12)
+        np.testing.assert_allclose(arr[-1], 0.0, atol=1e-12)
+    # hover phases: the first and last hover_s seconds stay at the centre
+    hover = ref.t_s <= shape.hover_s
+    np.testing.assert_allclose(ref.pos_ned_m[hover], np.tile(shape.center_ned_m, (hover.sum(), 1)))
+    # altitude constant, horizontal only
+    np.testing.assert_array_equal(ref.pos_ned_m[:, 2], -1.5)
+    np.testing.assert_array_equal(ref.vel_ned_m_s[:, 2], 0.0)
+    # the motion does go somewhere: the north excursion reaches the amplitude
+    assert np.max(np.abs(ref.pos_ned_m[:, 0])) == pytest.approx(shape.amplitude_north_m, rel=1e-2)
+    assert np.max(np.abs(ref.pos_ned_m[:, 1])) == pytest.approx(
+        shape.amplitude_east_m / 2, rel=1e-2
+    )
+
+
+def test_velocity_and_acceleration_match_numerical_derivatives():
+    h = 0.002
+    ref = sample_eight(eight(), h)
+    v_num = np.gradient(ref.pos_ned_m, h, axis=0)
+    a_num = np.gradient(ref.vel_ned_m_s, h, axis=0)
+    # central differences: error O(h^2 * jerk), jerk of the eight is tens of m/s^3
+    np.testing.assert_allclose(ref.vel_ned_m_s[1:-1], v_num[1:-1], atol=2e-3)
+    np.testing.assert_allclose(ref.acc_ned_m_s2[1:-1], a_num[1:-1], atol=2e-2)
+    # and on the ILC grid itself, more loosely
+    ref = sample_eight(eight(), 0.05)
+    v_num = np.gradient(ref.pos_ned_m, 0.05, axis=0)
+    np.testing.assert_allclose(ref.vel_ned_m_s[1:-1], v_num[1:-1], atol=0.05)
+
+
+def _first_time_over(values: np.ndarray, t: np.ndarray, limit: float) -> float:
+    for k in range(len(values)):
+        if values[k] > limit:
+            return float(t[k])
+    raise AssertionError("never over")
+
+
+def _message_time(message: str) -> float:
+    match = re.search(r"t = ([0-9.]+) s", message)
+    assert match, message
+    return float(match.group(1))
+
+
+def test_check_reference_accepts_the_default_eight_within_profile_limits():
+    ref = sample_eight(eight(), 0.05)
+    check_reference(ref, 3.0, 5.0, Box((-3.0, 3.0), (-3.0, 3.0), (-3.0, 0.0)))
+
+
+def test_check_reference_refuses_excessive_speed_naming_limit_and_time():
+    ref = sample_eight(eight(), 0.05)
+    speed = horizontal_norm(ref.vel_ned_m_s)
+    with pytest.raises(TrajectoryError) as info:
+        check_reference(ref, 1.5, 100.0, WIDE)
+    msg = str(info.value)
+    assert "speed" in msg and "1.5 m/s" in msg
+    assert f"{speed.max():.2f}" in msg
+    assert _message_time(msg) == pytest.approx(_first_time_over(speed, ref.t_s, 1.5), abs=0.006)
+
+
+def test_check_reference_refuses_excessive_acceleration_naming_limit_and_time():
+    ref = sample_eight(eight(), 0.05)
+    accel = horizontal_norm(ref.acc_ned_m_s2)
+    with pytest.raises(TrajectoryError) as info:
+        check_reference(ref, 100.0, 3.0, WIDE)
+    msg = str(info.value)
+    assert "acceleration" in msg and "3 m/s^2" in msg
+    assert _message_time(msg) == pytest.approx(_first_time_over(accel, ref.t_s, 3.0), abs=0.006)
+
+
+def test_check_reference_refuses_leaving_the_arena_naming_time():
+    ref = sample_eight(eight(), 0.05)
+    arena = Box((-1.0, 3.0), (-3.0, 3.0), (-3.0, 0.0))  # the eight reaches north -1.2
+    with pytest.raises(TrajectoryError) as info:
+        check_reference(ref, 100.0, 100.0, arena)
+    msg = str(info.value)
+    assert "arena" in msg
+    first = float(ref.t_s[np.flatnonzero(ref.pos_ned_m[:, 0] < -1.0)[0]])
+    assert _message_time(msg) == pytest.approx(first, abs=0.006)
+    # altitude: an arena whose floor is above the flight altitude
+    with pytest.raises(TrajectoryError, match=r"t = 0.00 s"):
+        check_reference(ref, 100.0, 100.0, Box((-3.0, 3.0), (-3.0, 3.0), (-1.0, 0.0)))
+
+
+def test_points_outside_by_hand():
+    box = Box((0.0, 1.0), (0.0, 1.0), (-1.0, 0.0))
+    pts = np.array([[0.5, 0.5, -0.5], [1.1, 0.5, -0.5], [0.5, 0.5, 0.2], [1.0, 0.0, -1.0]])
+    np.testing.assert_array_equal(points_outside(pts, box), [1, 2])
+    np.testing.assert_array_equal(points_outside(pts, box, tol_m=0.15), [2])
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"amplitude_north_m": 0.0},
+        {"amplitude_east_m": -1.0},
+        {"period_s": 0.0},
+        {"loops": 0},
+        {"ramp_s": -0.5},
+        {"hover_s": -1.0},
+        {"center_ned_m": (0.0, 0.0)},
+    ],
+)
+def test_bad_shapes_refused(kwargs):
+    with pytest.raises(TrajectoryError):
+        EightShape(**kwargs)
+
+
+def test_ramp_too_long_and_bad_sample_time_refused():
+    with pytest.raises(TrajectoryError):
+        sample_eight(EightShape(period_s=1.0, loops=1, ramp_s=2.0), 0.05)
+    with pytest.raises(TrajectoryError):
+        sample_eight(EightShape(), 0.0)
+
+
+shapes = st.builds(
+    EightShape,
+    center_ned_m=st.tuples(st.floats(-2, 2), st.floats(-2, 2), st.floats(-3, -0.5)),
+    amplitude_north_m=st.floats(0.1, 3.0),
+    amplitude_east_m=st.floats(0.1, 3.0),
+    period_s=st.floats(1.0, 10.0),
+    loops=st.integers(1, 3),
+    ramp_s=st.floats(0.0, 3.0),
+    hover_s=st.floats(0.0, 2.0),
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(shape=shapes, dt=st.sampled_from([0.01, 0.02, 0.05, 0.1]))
+def test_random_eights_start_and_end_at_rest_at_the_centre(shape, dt):
+    assume(shape.ramp_s <= shape.loops * shape.period_s)
+    ref = sample_eight(shape, dt)
+    assert isinstance(ref, Reference)
+    np.testing.assert_allclose(ref.t_s, np.arange(ref.n_samples + 1) * dt)
+    np.testing.assert_allclose(ref.pos_ned_m[0], shape.center_ned_m, atol=1e-9)
+    np.testing.assert_allclose(ref.pos_ned_m[-1], shape.center_ned_m, atol=1e-9)
+    if shape.ramp_s > 0 and shape.hover_s > 0:  # ramp_s = 0 is a deliberate velocity step
+        np.testing.assert_allclose(ref.vel_ned_m_s[[0, -1]], 0.0, atol=1e-9)
+    # the grid covers the whole manoeuvre
+    duration = 2 * shape.hover_s + shape.ramp_s + shape.loops * shape.period_s
+    assert ref.t_s[-1] >= duration - shape.hover_s - 1e-9
+
+
+@settings(max_examples=60, deadline=None)
+@given(shape=shapes)
+def test_random_eights_phase_is_monotone_and_makes_whole_loops(shape):
+    assume(shape.ramp_s <= shape.loops * shape.period_s)
+    duration = 2 * shape.hover_s + shape.ramp_s + shape.loops * shape.period_s
+    t = np.linspace(-0.5, duration + 0.5, 4001)
+    s, sd, sdd = _phase(t, shape)
+    assert np.all(np.diff(s) >= -1e-12)
+    assert np.all(sd >= 0)
+    assert np.all(sd <= 2 * np.pi / shape.period_s + 1e-12)
+    assert s[0] == 0.0
+    assert s[-1] == pytest.approx(2 * np.pi * shape.loops, rel=1e-12)
+    # rate is the derivative of the phase (trapezoid integration of sd)
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (sd[1:] + sd[:-1]) * np.diff(t))])
+    np.testing.assert_allclose(s, integral, atol=1e-3 * (1 + s[-1]))
