@@ -21,8 +21,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from gcs.errors import ProfileError
-from gcs.io.config import _read_yaml
 
 __all__ = [
     "PhysicsConfig",
@@ -50,7 +51,7 @@ class PhysicsConfig:
     ----------
     dt_s : float
         Integration step [s]; the mock steps the physics on this grid against the monotonic
-        clock (0.004 s = 250 Hz).
+        clock (0.005 s = 200 Hz).
     gravity_m_s2 : float
         Gravitational acceleration [m/s^2].
     drag_lin_1_s : float
@@ -69,7 +70,7 @@ class PhysicsConfig:
         [s] (link, estimator and mocap latency of a real system).
     """
 
-    dt_s: float = 0.004
+    dt_s: float = 0.005
     gravity_m_s2: float = 9.81
     drag_lin_1_s: float = 0.10
     drag_quad_1_m: float = 0.25
@@ -501,6 +502,21 @@ def _validate(cfg: MockConfig, where: str) -> None:
             raise ProfileError(f"{where}: field '{name}' {message}")
 
 
+def _read_yaml(path: Path) -> Any:
+    """Parse a YAML file. (gcs.io.config has the same reader, but importing it pulls in SciPy,
+    which would add seconds to the start of every mock process.)"""
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ProfileError(f"{path}: cannot read ({exc.strerror})") from exc
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ProfileError(f"{path}: malformed YAML{line}: {getattr(exc, 'problem', exc)}") from exc
+
+
 def load_mock_config(path: str | Path | None) -> MockConfig:
     """Read a mock profile (YAML); every missing field takes its default.
 
@@ -521,4 +537,4 @@ def load_mock_config(path: str | Path | None) -> MockConfig:
     """
     if path is None:
         return MockConfig()
-    return mock_config_from_dict(_read_yaml(Path(path), ProfileError), str(path))
+    return mock_config_from_dict(_read_yaml(Path(path)), str(path))

@@ -26,12 +26,12 @@ import math
 import random
 from collections import deque
 from dataclasses import dataclass, replace
-
-import numpy as np
-import scipy.optimize
-import scipy.signal
+from typing import TYPE_CHECKING
 
 from gcs.mock.config import DisturbanceConfig, MockConfig
+
+if TYPE_CHECKING:  # NumPy and SciPy are imported lazily: the real-time mock does not need them
+    import numpy as np
 
 __all__ = [
     "Target",
@@ -377,6 +377,9 @@ def eq11_step(t_s: np.ndarray) -> np.ndarray:
     ndarray, shape (N,)
         Response [-].
     """
+    import numpy as np
+    import scipy.signal
+
     t = np.asarray(t_s, dtype=float)
     tau = np.maximum(t - EQ11.delay_s, 0.0)
     _, y = scipy.signal.step(([0.08, 1.94], [1.0, 1.752, 2.01]), T=tau)
@@ -398,6 +401,8 @@ def second_order_step(t_s: np.ndarray, fit: StepFit) -> np.ndarray:
     ndarray, shape (N,)
         Response [-].
     """
+    import numpy as np
+
     t = np.maximum(np.asarray(t_s, dtype=float) - fit.delay_s, 0.0)
     wn, z = fit.wn_rad_s, fit.zeta
     if abs(z - 1.0) < 1e-6:
@@ -441,6 +446,8 @@ def step_response(
     y : ndarray, shape (N,)
         Position change along ``axis`` divided by ``amplitude_m`` [-].
     """
+    import numpy as np
+
     quiet = replace(
         cfg, disturbance=replace(cfg.disturbance, field_amplitude_m_s2=0.0, gust_sigma_m_s2=0.0)
     )
@@ -472,6 +479,9 @@ def fit_step_response(t_s: np.ndarray, y: np.ndarray) -> StepFit:
     StepFit
         Fitted natural frequency, damping, gain, delay and RMS residual.
     """
+    import numpy as np
+    import scipy.optimize
+
     t = np.asarray(t_s, dtype=float)
     y = np.asarray(y, dtype=float)
 

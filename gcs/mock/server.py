@@ -6,8 +6,9 @@ address from it and answers with a HEARTBEAT at once. ``gcs_port`` additionally 
 everything to a GCS listening on that port (QGroundControl style).
 
 The loop sleeps in ``select`` until the next physics step (``dt_s``, on a grid of the
-monotonic clock, so there is no drift), the next telemetry message or the next delayed
-datagram, whichever comes first; a datagram wakes it at once. Setpoints are time-stamped on
+monotonic clock, so there is no drift) or the next delayed datagram, whichever comes first;
+a datagram wakes it at once. Telemetry that is due goes out after each physics step, so a
+stream's timing jitter is at most one step. Setpoints are time-stamped on
 arrival and handed to the vehicle after the physics has caught up to that instant.
 """
 
@@ -178,9 +179,7 @@ class MockServer:
         next_tick = t0 + (math.floor((time.monotonic() - t0) / dt) + 1) * dt
         sock = self.sock
         while not self._stop and time.monotonic() < end:
-            deadline = next_tick
-            if self.peers:
-                deadline = min(deadline, min(s[1] for s in self._streams.values()))
+            deadline = next_tick  # telemetry goes out on the physics grid: one wake-up per step
             if self._delayed:
                 deadline = min(deadline, self._delayed[0][0])
             timeout = deadline - time.monotonic()

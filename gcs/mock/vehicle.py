@@ -280,6 +280,7 @@ class Vehicle:
         self.events: list[tuple[int, str]] = []
         self.mode_log: list[ModeChange] = []
         self.state_changed = False
+        self.mode_log.append(ModeChange(0.0, self.mode.name, False))
 
     # -- queries --------------------------------------------------------------------------
     @property
