@@ -381,9 +381,9 @@ def eq11_step(t_s: np.ndarray) -> np.ndarray:
     import scipy.signal
 
     t = np.asarray(t_s, dtype=float)
-    tau = np.maximum(t - EQ11.delay_s, 0.0)
-    _, y = scipy.signal.step(([0.08, 1.94], [1.0, 1.752, 2.01]), T=tau)
-    return np.where(t >= EQ11.delay_s, y, 0.0)
+    grid = np.linspace(0.0, max(float(t.max()), 1e-3), 4001)
+    _, y = scipy.signal.step(([0.08, 1.94], [1.0, 1.752, 2.01]), T=grid)
+    return np.interp(t - EQ11.delay_s, grid, y, left=0.0)
 
 
 def second_order_step(t_s: np.ndarray, fit: StepFit) -> np.ndarray:

@@ -1,0 +1,133 @@
+"""Mock drone commander as pure logic: PX4's arming, offboard and landing rules."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from gcs.mock.config import MockConfig
+from gcs.mock.vehicle import LandedState, MavResult, Mode, Vehicle, decode_param, encode_param
+
+CFG = MockConfig()
+
+
+def airborne(t_end_s: float = 5.0) -> Vehicle:
+    v = Vehicle(CFG)
+    assert v.arm(True) is MavResult.ACCEPTED
+    assert v.takeoff() is MavResult.ACCEPTED
+    v.update(t_end_s)
+    assert v.mode is Mode.HOLD and not v.landed
+    return v
+
+
+def stream(v: Vehicle, t0: float, t1: float, pos=(1.0, 0.0, -2.5)) -> None:
+    t = t0
+    while t < t1:
+        v.update(t)
+        v.on_setpoint(t, pos, 0.0)
+        t += 0.02
+
+
+def test_boots_disarmed_in_hold_on_the_ground() -> None:
+    v = Vehicle(CFG)
+    assert not v.armed and v.mode is Mode.HOLD and v.landed_state is LandedState.ON_GROUND
+    assert v.armable
+    assert Vehicle(replace(CFG, px4=replace(CFG.px4, initial_mode="POSCTL"))).mode is Mode.POSCTL
+
+
+def test_takeoff_climbs_to_mis_takeoff_alt_then_holds() -> None:
+    v = Vehicle(CFG)
+    v.arm(True)
+    v.takeoff()
+    v.update(0.5)
+    assert v.mode is Mode.TAKEOFF
+    v.update(6.0)
+    assert v.mode is Mode.HOLD and v.landed_state is LandedState.IN_AIR
+    assert abs(v.physics.pos[2] + CFG.px4.mis_takeoff_alt_m) < 0.15
+
+
+def test_offboard_refused_without_setpoints_accepted_with_a_stream() -> None:
+    v = airborne()
+    assert v.set_mode(Mode.OFFBOARD) is MavResult.TEMPORARILY_REJECTED
+    assert v.mode is Mode.HOLD
+    v.on_setpoint(v.t_s, (0.0, 0.0, -2.5), 0.0)
+    assert v.set_mode(Mode.OFFBOARD) is MavResult.ACCEPTED
+    assert v.mode is Mode.OFFBOARD and v.first_offboard_t_s is not None
+
+
+def test_stale_stream_is_refused_and_min_stream_is_honoured() -> None:
+    v = airborne()
+    v.on_setpoint(v.t_s, (0.0, 0.0, -2.5), 0.0)
+    v.update(v.t_s + CFG.px4.com_of_loss_t_s + 0.1)
+    assert v.set_mode(Mode.OFFBOARD) is MavResult.TEMPORARILY_REJECTED
+    cfg = replace(CFG, px4=replace(CFG.px4, offboard_min_stream_s=0.5))
+    w = Vehicle(cfg)
+    w.arm(True)
+    w.takeoff()
+    w.update(5.0)
+    stream(w, 5.0, 5.2)
+    assert w.set_mode(Mode.OFFBOARD) is MavResult.TEMPORARILY_REJECTED
+    stream(w, 5.2, 5.7)
+    assert w.set_mode(Mode.OFFBOARD) is MavResult.ACCEPTED
+
+
+def test_offboard_loss_falls_back_to_hold_after_com_of_loss_t_and_resumes() -> None:
+    v = airborne()
+    stream(v, 5.0, 6.0)
+    assert v.set_mode(Mode.OFFBOARD) is MavResult.ACCEPTED
+    stream(v, 6.0, 8.0)
+    last = v.last_setpoint_t_s
+    v.update(last + CFG.px4.com_of_loss_t_s - 0.05)
+    assert v.mode is Mode.OFFBOARD
+    v.update(last + CFG.px4.com_of_loss_t_s + 0.05)
+    assert v.mode is Mode.HOLD and v.failsafe and v.armed
+    held = list(v.physics.pos)
+    v.update(v.t_s + 3.0)
+    assert abs(v.physics.pos[0] - held[0]) < 0.3  # holds where it was
+    stream(v, v.t_s, v.t_s + 0.1)  # setpoints come back: PX4 resumes offboard
+    assert v.mode is Mode.OFFBOARD and not v.failsafe
+
+
+def test_land_then_auto_disarm_and_mode_after_disarm() -> None:
+    v = airborne()
+    stream(v, 5.0, 5.5)
+    v.set_mode(Mode.OFFBOARD)
+    stream(v, 5.5, 6.0)
+    assert v.arm(False) is MavResult.TEMPORARILY_REJECTED  # not in the air
+    assert v.land() is MavResult.ACCEPTED
+    v.update(6.5)
+    assert v.landed_state is LandedState.LANDING
+    t = 6.5
+    while not v.landed and t < 20:
+        t += 0.1
+        v.update(t)
+    assert v.landed and v.armed and v.landed_state is LandedState.ON_GROUND
+    v.update(t + CFG.px4.com_disarm_land_s + 0.05)
+    assert not v.armed
+    # PX4 returns to the operator's last armable mode (OFFBOARD in the SIH capture) ...
+    assert v.mode is Mode.OFFBOARD
+    # ... where arming is refused without setpoints
+    assert not v.armable and v.arm(True) is MavResult.TEMPORARILY_REJECTED
+    assert any(text == "Disarmed by landing" for _, text in v.events)
+
+
+def test_arming_rules() -> None:
+    v = airborne()
+    assert v.arm(True) is MavResult.ACCEPTED  # already armed: no change
+    assert v.arm(False, force=True) is MavResult.ACCEPTED and not v.armed  # kill in the air
+    w = Vehicle(CFG)
+    w.arm(True)
+    w.update(CFG.px4.com_disarm_prflt_s + 0.1)
+    assert not w.armed  # preflight auto-disarm
+
+
+def test_params_bytewise_and_effective() -> None:
+    v = Vehicle(CFG)
+    idx, ptype, value = v.params.get("COM_RC_IN_MODE")
+    assert ptype == 6 and value == 1.0
+    assert decode_param(encode_param(7, 6), 6) == 7.0
+    assert v.params.set("MIS_TAKEOFF_ALT", 1.5) is not None
+    v.arm(True)
+    v.takeoff()
+    v.update(6.0)
+    assert abs(v.physics.pos[2] + 1.5) < 0.15
+    assert v.params.get("NO_SUCH") is None and v.params.names == sorted(v.params.names)
