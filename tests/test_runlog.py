@@ -1,0 +1,333 @@
+"""Tests of gcs.io.runlog: the run directory, its atomic files and every refusal."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from synthetic import SHORT, profile
+
+from gcs.core.trajectory import sample_eight
+from gcs.errors import RunLogError
+from gcs.io.config import trajectory_from_dict
+from gcs.io.runlog import (
+    TRIAL_COLUMNS,
+    RunDir,
+    TrialRecord,
+    TrialStatus,
+    atomic_write_text,
+)
+
+
+def new_run(tmp_path: Path, algorithm: str = "smoother") -> RunDir:
+    return RunDir.create(tmp_path, profile(), trajectory_from_dict(SHORT), algorithm, "run")
+
+
+def read_csv(path: Path) -> tuple[list[str], np.ndarray]:
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    return rows[0], np.array(rows[1:], dtype=float)
+
+
+def record_for(run: RunDir, seed: int = 0, nan_after: int | None = None) -> TrialRecord:
+    ref = run.reference()
+    n = run.n_samples
+    rng = np.random.default_rng(seed)
+    pos = ref.pos_ned_m + rng.normal(0, 0.05, (n + 1, 3))
+    if nan_after is not None:
+        pos[nan_after:] = np.nan
+    sp = np.vstack([run.read_setpoints(0), ref.pos_ned_m[-1]])
+    return TrialRecord(
+        t_s=ref.t_s.copy(),
+        ref_ned_m=ref.pos_ned_m.copy(),
+        sp_ned_m=sp,
+        pos_ned_m=pos,
+        vel_ned_m_s=rng.normal(0, 1, (n + 1, 3)),
+        sp_sent_s=np.append(ref.t_s[:-1] + rng.uniform(0, 1e-3, n), np.nan),
+        interpolated=rng.uniform(size=n + 1) < 0.1,
+    )
+
+
+def complete(j: int) -> TrialStatus:
+    return TrialStatus(j, True, epos_m=0.1, max_err_m=0.2, interpolated_share=0.05)
+
+
+def tmp_files(path: Path) -> list[Path]:
+    return [p for p in path.rglob("*") if p.name.endswith(".tmp") or p.name.startswith(".")]
+
+
+# ------------------------------------------------------------------------------ creation
+
+
+def test_create_writes_manifest_reference_and_first_setpoints(tmp_path):
+    run = new_run(tmp_path)
+    assert run.path == tmp_path / "run"
+    manifest = json.loads((run.path / "manifest.json").read_text())
+    expected_ref = sample_eight(trajectory_from_dict(SHORT).shape, 0.05)
+    assert manifest["format"] == 1
+    assert manifest["algorithm"] == "smoother"
+    assert manifest["t_ilc_s"] == 0.05
+    assert manifest["n_samples"] == expected_ref.n_samples == round(5.0 / 0.05)
+    assert manifest["profile"] == profile().source
+    assert manifest["trajectory"] == SHORT
+    assert "numpy" in manifest["packages"] and manifest["gcs_version"]
+    header, table = read_csv(run.path / "reference.csv")
+    assert header == ["k", "t_s", "ref_north_m", "ref_east_m", "ref_down_m"]
+    np.testing.assert_array_equal(table[:, 0], np.arange(expected_ref.n_samples + 1))
+    np.testing.assert_allclose(table[:, 1], expected_ref.t_s, rtol=1e-8)
+    np.testing.assert_allclose(table[:, 2:], expected_ref.pos_ned_m, rtol=1e-8, atol=1e-12)
+    header, sp = read_csv(run.path / "setpoints-000.csv")
+    assert header == ["k", "t_s", "sp_north_m", "sp_east_m", "sp_down_m"]
+    assert sp.shape == (expected_ref.n_samples, 5)
+    np.testing.assert_allclose(sp[:, 2:], expected_ref.pos_ned_m[:-1], rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(run.read_setpoints(0), table[:-1, 2:])
+    assert (tmp_path / "latest").resolve() == run.path.resolve()
+    assert tmp_files(tmp_path) == []
+
+
+def test_open_round_trip(tmp_path):
+    run = new_run(tmp_path, "kilc")
+    again = RunDir.open(run.path)
+    assert again.manifest == run.manifest
+    assert again.algorithm == "kilc"
+    assert again.n_samples == run.n_samples and again.t_ilc_s == 0.05
+    assert again.profile().source == profile().source
+    assert again.trajectory().shape == trajectory_from_dict(SHORT).shape
+    np.testing.assert_array_equal(again.reference().pos_ned_m, run.reference().pos_ned_m)
+
+
+def test_create_with_existing_id_refused_and_default_ids_unique(tmp_path):
+    new_run(tmp_path)
+    with pytest.raises(RunLogError, match="exists"):
+        new_run(tmp_path)
+    a = RunDir.create(tmp_path, profile(), trajectory_from_dict(SHORT), "smoother")
+    b = RunDir.create(tmp_path, profile(), trajectory_from_dict(SHORT), "smoother")
+    assert a.path != b.path and a.path.is_dir() and b.path.is_dir()
+    assert "tiny" in a.path.name and "smoother" in a.path.name
+
+
+# ------------------------------------------------------------------------------ trials
+
+
+def test_trial_round_trip(tmp_path):
+    run = new_run(tmp_path)
+    rec = record_for(run)
+    run.write_trial(0, rec, complete(0))
+    back = run.read_trial(0)
+    for name in ("t_s", "ref_ned_m", "sp_ned_m", "pos_ned_m", "vel_ned_m_s"):
+        np.testing.assert_allclose(getattr(back, name), getattr(rec, name), rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(back.sp_sent_s[:-1], rec.sp_sent_s[:-1], rtol=1e-8)
+    assert np.isnan(back.sp_sent_s[-1])  # NaN in sp_sent_s (row N) is allowed
+    np.testing.assert_array_equal(back.interpolated, rec.interpolated)
+    header, _ = read_csv(run.path / "trial-000.csv")
+    assert tuple(header) == TRIAL_COLUMNS
+    status = run.read_status(0)
+    assert status.complete and status.trial == 0
+    assert (status.epos_m, status.max_err_m, status.interpolated_share) == (0.1, 0.2, 0.05)
+    assert tmp_files(run.path) == []
+
+
+def test_atomic_write_replaces_and_leaves_no_temp_file_on_failure(tmp_path):
+    target = tmp_path / "file.txt"
+    atomic_write_text(target, "first\n")
+    atomic_write_text(target, "second\n")
+    assert target.read_text() == "second\n"
+    with pytest.raises(TypeError):
+        atomic_write_text(target, 12345)  # type: ignore[arg-type]
+    assert target.read_text() == "second\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file.txt"]
+
+
+def test_incomplete_trial_not_learned_from_and_archived_when_reflown(tmp_path):
+    run = new_run(tmp_path)
+    rec_a = record_for(run, seed=1, nan_after=40)
+    run.write_trial(0, rec_a, TrialStatus(0, False, reason="watchdog"))
+    with pytest.raises(RunLogError, match="incomplete") as info:
+        run.read_trial(0)
+    assert "trial-000.csv" in str(info.value) and "watchdog" in str(info.value)
+    assert run.newest_complete() is None and run.next_trial() == 0
+    run.write_trial(0, record_for(run, seed=2), TrialStatus(0, False, reason="link lost"))
+    rec_c = record_for(run, seed=3)
+    run.write_trial(0, rec_c, complete(0))
+    aborted = run.path / "aborted"
+    assert sorted(p.name for p in aborted.iterdir()) == [
+        "trial-000-attempt-1.csv",
+        "trial-000-attempt-1.json",
+        "trial-000-attempt-2.csv",
+        "trial-000-attempt-2.json",
+    ]
+    first = json.loads((aborted / "trial-000-attempt-1.json").read_text())
+    assert first["status"] == "incomplete" and first["reason"] == "watchdog"
+    assert json.loads((aborted / "trial-000-attempt-2.json").read_text())["reason"] == "link lost"
+    _, table = read_csv(aborted / "trial-000-attempt-1.csv")
+    assert np.all(np.isnan(table[40:, 8:11])) and np.all(np.isfinite(table[:40, 8:11]))
+    np.testing.assert_allclose(run.read_trial(0).pos_ned_m, rec_c.pos_ned_m, rtol=1e-8)
+    assert run.newest_complete() == 0 and run.next_trial() == 1
+
+
+def test_complete_trial_never_overwritten(tmp_path):
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run, seed=1), complete(0))
+    before = {p.name: p.read_bytes() for p in run.path.iterdir() if p.is_file()}
+    for status in (complete(0), TrialStatus(0, False, reason="x")):
+        with pytest.raises(RunLogError, match="complete") as info:
+            run.write_trial(0, record_for(run, seed=9), status)
+        assert "trial-000.json" in str(info.value)
+    after = {p.name: p.read_bytes() for p in run.path.iterdir() if p.is_file()}
+    assert after == before
+    assert not (run.path / "aborted").exists()
+
+
+def test_wrong_length_record_refused(tmp_path):
+    run = new_run(tmp_path)
+    rec = record_for(run)
+    short = TrialRecord(*(getattr(rec, f)[:-3] for f in rec.__dataclass_fields__))
+    with pytest.raises(RunLogError, match="samples"):
+        run.write_trial(0, short, complete(0))
+    assert not (run.path / "trial-000.csv").exists()
+
+
+def test_newest_complete_and_next_trial(tmp_path):
+    run = new_run(tmp_path)
+    assert (run.newest_complete(), run.next_trial(), run.complete_trials()) == (None, 0, [])
+    run.write_trial(0, record_for(run), complete(0))
+    assert (run.newest_complete(), run.next_trial()) == (0, 1)
+    run.write_trial(1, record_for(run), TrialStatus(1, False, reason="ctrl-c"))
+    assert (run.newest_complete(), run.next_trial()) == (0, 1)
+    assert [s.complete for s in run.statuses()] == [True, False]
+    run.write_trial(1, record_for(run), complete(1))
+    run.write_trial(2, record_for(run), complete(2))
+    assert run.complete_trials() == [0, 1, 2]
+    assert (run.newest_complete(), run.next_trial()) == (2, 3)
+    # archived attempts in aborted/ are not trials
+    assert len(run.statuses()) == 3
+
+
+# ------------------------------------------------------------------------------ refusals
+
+
+def _edit_trial_csv(run: RunDir, edit) -> Path:
+    path = run.path / "trial-000.csv"
+    lines = path.read_text().splitlines()
+    lines = edit(lines)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _set_cell(lines: list[str], k: int, column: str, value: str) -> list[str]:
+    header = lines[0].split(",")
+    cells = lines[1 + k].split(",")
+    cells[header.index(column)] = value
+    lines[1 + k] = ",".join(cells)
+    return lines
+
+
+@pytest.mark.parametrize("column", ["pos_east_m", "ref_north_m", "vel_down_m_s", "sp_north_m"])
+def test_nan_in_trial_refused_naming_file_column_and_row(tmp_path, column):
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run), complete(0))
+    path = _edit_trial_csv(run, lambda lines: _set_cell(lines, 17, column, "nan"))
+    with pytest.raises(RunLogError) as info:
+        run.read_trial(0)
+    msg = str(info.value)
+    assert str(path) in msg and f"'{column}'" in msg and "k = 17" in msg
+
+
+def test_truncated_trial_refused(tmp_path):
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run), complete(0))
+    path = _edit_trial_csv(run, lambda lines: lines[:-5])
+    with pytest.raises(RunLogError) as info:
+        run.read_trial(0)
+    msg = str(info.value)
+    assert str(path) in msg and f"{run.n_samples + 1 - 5} rows" in msg
+    # a row cut in the middle (fewer values)
+    run2 = new_run(tmp_path / "b")
+    run2.write_trial(0, record_for(run2), complete(0))
+    path = _edit_trial_csv(run2, lambda lines: lines[:-1] + [lines[-1].rsplit(",", 4)[0]])
+    with pytest.raises(RunLogError, match="trial-000.csv"):
+        run2.read_trial(0)
+
+
+def test_wrong_time_grid_refused_naming_column(tmp_path):
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run), complete(0))
+    path = _edit_trial_csv(run, lambda lines: _set_cell(lines, 9, "t_s", "0.47"))
+    with pytest.raises(RunLogError) as info:
+        run.read_trial(0)
+    msg = str(info.value)
+    assert str(path) in msg and "'t_s'" in msg and "k = 9" in msg
+    _edit_trial_csv(run, lambda lines: _set_cell(lines, 9, "t_s", "0.45"))
+    run.read_trial(0)  # restored
+    _edit_trial_csv(run, lambda lines: _set_cell(lines, 9, "k", "10"))
+    with pytest.raises(RunLogError, match="'k'"):
+        run.read_trial(0)
+
+
+def test_bad_header_refused(tmp_path):
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run), complete(0))
+
+    def swap(lines):
+        lines[0] = lines[0].replace("pos_north_m,pos_east_m", "pos_east_m,pos_north_m")
+        return lines
+
+    path = _edit_trial_csv(run, swap)
+    with pytest.raises(RunLogError, match="header") as info:
+        run.read_trial(0)
+    assert str(path) in str(info.value)
+    (run.path / "setpoints-000.csv").write_text("k,t,n,e,d\n")
+    with pytest.raises(RunLogError, match="setpoints-000.csv"):
+        run.read_setpoints(0)
+
+
+def test_malformed_manifest_and_status_refused(tmp_path):
+    run = new_run(tmp_path)
+    mpath = run.path / "manifest.json"
+    good = mpath.read_text()
+    mpath.write_text(good[: len(good) // 2])
+    with pytest.raises(RunLogError, match="malformed JSON") as info:
+        RunDir.open(run.path)
+    assert str(mpath) in str(info.value)
+    data = json.loads(good)
+    del data["n_samples"]
+    mpath.write_text(json.dumps(data))
+    with pytest.raises(RunLogError, match="'n_samples'"):
+        RunDir.open(run.path)
+    mpath.unlink()
+    with pytest.raises(RunLogError, match="manifest.json"):
+        RunDir.open(run.path)
+    with pytest.raises(RunLogError, match="not a run directory"):
+        RunDir.open(tmp_path / "missing")
+    run2 = new_run(tmp_path / "b")
+    run2.write_trial(0, record_for(run2), complete(0))
+    (run2.path / "trial-000.json").write_text('{"trial": 0}')
+    with pytest.raises(RunLogError, match="trial-000.json"):
+        run2.read_trial(0)
+
+
+def test_setpoints_and_estimates(tmp_path):
+    run = new_run(tmp_path)
+    n = run.n_samples
+    sp = np.random.default_rng(5).normal(size=(n, 3))
+    run.write_setpoints(3, sp)
+    np.testing.assert_allclose(run.read_setpoints(3), sp, rtol=1e-8, atol=1e-12)
+    for bad in (sp[:-1], np.where(np.arange(n)[:, None] == 4, np.nan, sp)):
+        with pytest.raises(RunLogError):
+            run.write_setpoints(4, bad)
+    assert not (run.path / "setpoints-004.csv").exists()
+    with pytest.raises(RunLogError, match="setpoints-007.csv"):
+        run.read_setpoints(7)
+    d, p = np.random.default_rng(6).normal(size=(n, 2)), np.full((n, 2), 0.0123)
+    run.write_estimate(0, d, p)
+    d2, p2 = run.read_estimate(0)
+    np.testing.assert_allclose(d2, d, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(p2, p)
+    _, table = read_csv(run.path / "estimate-000.csv")
+    np.testing.assert_array_equal(table[:, 0], np.arange(1, n + 1))  # d(1..N)
+    with pytest.raises(RunLogError, match="estimate-001.csv"):
+        run.read_estimate(1)
+    assert tmp_files(run.path) == []
