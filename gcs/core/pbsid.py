@@ -320,14 +320,17 @@ def _shift(
     return [(u[: u.size - d], y[d:]) for u, y in exps]
 
 
-def _delay_criterion(fit: _Fit, d: int, p: int, max_delay: int) -> float:
+def _delay_criterion(fit: _Fit, d: int, p: int, max_delay: int, y_power: float) -> float:
     """AIC-like ``N log(RSS / N) + 6 n`` over original times ``k >= p + max_delay``."""
     skip = max_delay - d  # shifted index p + skip is original time p + max_delay
     e = np.concatenate([r[skip:] for r in fit.residuals])
     rss = float(e @ e)
     if not np.isfinite(rss):
         return np.inf
-    return e.size * np.log(max(rss, 1e-300) / e.size) + 2.0 * 3 * fit.n
+    # Floor at (1e-9 of the output) squared: exact (noise-free) fits tie instead of being
+    # ranked by rounding errors, and the tie goes to the longer delay.
+    floor = 1e-18 * e.size * y_power
+    return e.size * np.log(max(rss, floor) / e.size) + 2.0 * 3 * fit.n
 
 
 def identify(
@@ -403,7 +406,8 @@ def identify(
         raise IdentificationError("the output y is constant: nothing to identify")
 
     fits = {d: _fit(_shift(exps, d), p, f, order, regularisation, y_scale) for d in candidates}
-    crit = {d: _delay_criterion(fit, d, p, d_max) for d, fit in fits.items()}
+    y_power = float(np.mean(np.concatenate([y for _, y in exps]) ** 2))
+    crit = {d: _delay_criterion(fit, d, p, d_max, y_power) for d, fit in fits.items()}
     best = min(crit.values())
     # Longest delay statistically indistinguishable from the best (see step 1).
     d = max(d for d, c in crit.items() if c <= best + DELAY_TOLERANCE)
