@@ -153,16 +153,16 @@ def mock_command(
         float, typer.Option("--loss", min=0.0, max=0.99, help="Datagram loss fraction.")
     ] = 0.0,
     latency_ms: Annotated[
-        float, typer.Option("--latency-ms", min=0.0, help="Added one-way latency [ms].")
+        float, typer.Option("--latency-ms", min=0.0, help="Added one-way latency, ms.")
     ] = 0.0,
     dropout: Annotated[
-        str | None, typer.Option("--dropout", help="Telemetry dropout START:DURATION [s].")
+        str | None, typer.Option("--dropout", help="Telemetry dropout START:DURATION, s.")
     ] = None,
     link_loss_at: Annotated[
-        float | None, typer.Option("--link-loss-at", help="Lose the link for good at T [s].")
+        float | None, typer.Option("--link-loss-at", help="Lose the link for good at T, s.")
     ] = None,
     gust: Annotated[
-        str | None, typer.Option("--gust", help="Wind gust START:DURATION:VN:VE [s, s, m/s].")
+        str | None, typer.Option("--gust", help="Wind gust START:DURATION:VN:VE (s, s, m/s, m/s).")
     ] = None,
     stats_out: Annotated[
         Path | None, typer.Option("--stats-out", help="Write setpoint arrivals etc. (JSON).")
@@ -195,6 +195,29 @@ def mock_command(
         gcs mock --seed 3
 
         gcs mock --config profiles/mock.yaml --gust 5:2:0:3 --stats-out /tmp/mock.json
+    \f
+    Parameters
+    ----------
+    config : Path or None
+        Mock profile (YAML).
+    port : int
+        UDP port on 127.0.0.1 (0 = any free port).
+    gcs_port : int or None
+        Also send to a GCS listening on this port.
+    seed : int
+        Seed of gusts, noise and packet loss.
+    loss : float
+        Datagram loss fraction, both directions.
+    latency_ms : float
+        Added one-way latency [ms].
+    dropout : str or None
+        Telemetry dropout ``START:DURATION`` [s after the first OFFBOARD].
+    link_loss_at : float or None
+        Time of the permanent link loss [s after the first OFFBOARD].
+    gust : str or None
+        Wind gust ``START:DURATION:VN:VE`` [s, s, m/s, m/s].
+    stats_out : Path or None
+        JSON statistics file written on exit.
     """
     try:
         faults = Faults(
