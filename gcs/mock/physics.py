@@ -290,9 +290,7 @@ class QuadPhysics:
         if pos[2] >= 0.0 and vel[2] >= 0.0:
             pos[2] = 0.0
             vel[0] = vel[1] = vel[2] = 0.0
-            if acc[2] < 0.0:
-                pass  # pushing up: leaves the ground next step
-            else:
+            if acc[2] >= 0.0:  # not lifting off: no horizontal push either
                 acc[0] = acc[1] = 0.0
 
     # -- outputs --------------------------------------------------------------------------

@@ -350,7 +350,8 @@ class MockServer:
         self.sp_values.append((msg.x, msg.y, msg.z, msg.yaw, msg.time_boot_ms, msg.type_mask))
         v.update(t)
         if msg.coordinate_frame == mavlink2.MAV_FRAME_LOCAL_NED and msg.type_mask & 0b111 == 0:
-            v.on_setpoint(t, (msg.x, msg.y, msg.z), msg.yaw if not msg.type_mask & 1024 else 0.0)
+            yaw = math.nan if msg.type_mask & 1024 else msg.yaw  # NaN: keep the current yaw
+            v.on_setpoint(t, (msg.x, msg.y, msg.z), yaw)
         elif v.setpoint is not None:
             # proof of life only: the mock flies position setpoints, not velocity/acceleration
             v.on_setpoint(t, v.setpoint.pos_ned_m, v.setpoint.yaw_rad)
