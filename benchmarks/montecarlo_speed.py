@@ -1,0 +1,86 @@
+"""Benchmark of the Monte Carlo study (gcs.core.montecarlo.run_study).
+
+Prints one JSON line per case::
+
+    {"n": N, "blas_threads": "default"|"1", "seconds": median, "runs": k,
+     "trial_iterations": ..., "us_per_trial_iteration": ..., "load_avg_1min": ...}
+
+Each case is the whole default study (4 levels x 2 algorithms x 100 plants x 10 repeats x 30
+iterations, 31 trials each) with trial length N = 200 (the default), 400 and 800; the cost per
+trial iteration should grow no faster than N^2 (dense fixed operators) - the N = 400 and 800
+lines show it. Every case runs in a fresh subprocess so that ``OPENBLAS_NUM_THREADS`` can be
+set before numpy is imported: on a 2-core machine shared with other jobs, OpenBLAS's two
+threads can be much slower than one (busy-waiting threads); both are reported. The machine's
+1-minute load average is recorded next to each line.
+
+Usage: ``python benchmarks/montecarlo_speed.py`` (all cases) or
+``python benchmarks/montecarlo_speed.py --case N [runs]``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+CASES = [(200, 3), (400, 1), (800, 1)]
+
+
+def run_case(n: int, runs: int) -> dict:
+    from gcs.core.montecarlo import StudySettings, run_study
+
+    settings = StudySettings(n_samples=n)
+    times = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        run_study(settings)
+        times.append(time.perf_counter() - t0)
+    trial_iterations = (
+        len(settings.levels)
+        * len(settings.algorithms)
+        * settings.plants
+        * settings.repeats
+        * (settings.iterations + 1)
+    )
+    seconds = statistics.median(times)
+    return {
+        "n": n,
+        "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "default"),
+        "seconds": round(seconds, 3),
+        "runs": runs,
+        "min_seconds": round(min(times), 3),
+        "trial_iterations": trial_iterations,
+        "us_per_trial_iteration": round(1e6 * seconds / trial_iterations, 2),
+        "load_avg_1min": round(os.getloadavg()[0], 2),
+    }
+
+
+def main() -> None:
+    if len(sys.argv) >= 3 and sys.argv[1] == "--case":
+        runs = int(sys.argv[3]) if len(sys.argv) > 3 else 1
+        print(json.dumps(run_case(int(sys.argv[2]), runs)), flush=True)
+        return
+    for threads in (None, "1"):
+        env = dict(os.environ)
+        env.pop("OPENBLAS_NUM_THREADS", None)
+        if threads is not None:
+            env["OPENBLAS_NUM_THREADS"] = threads
+        for n, runs in CASES:
+            out = subprocess.run(
+                [sys.executable, __file__, "--case", str(n), str(runs)],
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            print(out.stdout.strip(), flush=True)
+
+
+if __name__ == "__main__":
+    main()
