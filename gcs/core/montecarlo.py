@@ -29,6 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.fft
 import scipy.linalg
 
 from gcs.core.estimators import KilcSettings, SmootherSettings, kilc_gains, smoother_operator
@@ -387,7 +388,7 @@ def _simulate(
     f_nom = lifted_matrix(_msd_model(settings.wn_rad_s, settings.zeta, dt), n)
     m_y, m_u = update_operator(f_nom, settings.we, settings.wdu, settings.wu)
     f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
-    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)  # linear, not circular
     f_true_fft = np.fft.rfft(f_true, nfft, axis=-1)[:, None, :]
     noise_rng = _rng(settings, level, 1)  # same stream for both algorithms
     if algorithm == "smoother":
