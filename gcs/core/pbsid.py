@@ -46,10 +46,15 @@ why PBSID works on closed-loop data where N4SID/MOESP do not.
 
 Caveats: the approximation ``Atilde^p ~ 0`` requires ``past`` samples to cover the slowest
 predictor mode. With pure output (measurement) noise the Kalman gain is small and
-``Atilde ~ A``, so ``past`` must cover the settling time of the plant itself (e.g. 0.96^p
-small, p ~ 60-100 at 20 Hz for the paper's loop). Long windows raise the variance; the
-``regularisation`` argument trades it for bias. Excitation must be rich (PRBS or multisine);
-the regression's input block is checked for rank.
+``Atilde ~ A``, so ``past`` would have to cover the settling time of the plant itself
+(0.957^p small, p ~ 60-100 at 20 Hz for the paper's loop); in practice the VARX fits the
+best order-p predictor and the default p = 20 gives pole errors of about 1 % at 1 cm noise
+(docs/identify.md). Long windows raise the variance; ``regularisation`` trades it for bias.
+Excitation must be rich: PRBS, or a multisine reaching close to Nyquist (a band-limited
+multisine leaves the input window matrix nearly singular at 20 Hz). The input block of the
+regression is checked for rank, and the state sequence for noise amplification along nearly
+collinear regressors (``MAX_STATE_GAIN``), which is how a band-limited reference under
+feedback shows up.
 """
 
 from __future__ import annotations
@@ -80,6 +85,8 @@ __all__ = [
 DELAY_TOLERANCE = 10.8
 #: Minimum ratio of usable windows to VARX parameters.
 SAMPLES_PER_PARAMETER = 4
+#: Largest allowed ratio of the first singular value of Gamma K Z to sqrt(future) x RMS(y).
+MAX_STATE_GAIN = 5.0
 #: Smallest singular value ratio of the (normalised) input window matrix.
 MIN_INPUT_CONDITION = 1e-7
 
@@ -123,7 +130,11 @@ class IdentificationResult:
 def _as_experiments(
     experiments: Sequence[tuple[np.ndarray, np.ndarray]],
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    if isinstance(experiments, tuple) and len(experiments) == 2 and np.ndim(experiments[0]) == 1:
+    if (
+        isinstance(experiments, tuple)
+        and len(experiments) == 2
+        and all(isinstance(a, np.ndarray) and a.ndim == 1 for a in experiments)
+    ):
         experiments = [experiments]  # a single (u, y) pair
     if len(experiments) == 0:
         raise IdentificationError("no experiments given: pass a list of (u, y) pairs")
@@ -285,6 +296,17 @@ def _fit(
     sv = S / np.sqrt(M.shape[1])
     if sv[0] <= 1e-12 * y_scale:
         raise IdentificationError("the output does not respond to the input (Gamma K Z is zero)")
+    # Row i of Gamma K Z is the prediction of y(k+i) from the past alone, so its RMS is of the
+    # order of the output's; far larger values mean the VARX fitted noise along nearly
+    # collinear regressor directions and the shift structure of Gamma K amplified it.
+    y_rms = float(np.sqrt(np.mean(np.concatenate([y for _, y in shifted]) ** 2)))
+    gain = float(sv[0] / (np.sqrt(f) * y_rms))
+    if gain > MAX_STATE_GAIN:
+        raise IdentificationError(
+            f"the regression is ill-conditioned (state sequence {gain:.0f} x the output "
+            f"level; past inputs and outputs nearly collinear, e.g. a band-limited reference "
+            f"under feedback): excite with PRBS on the setpoint or set regularisation > 0"
+        )
     n = _select_order(sv) if order is None else int(order)
     # State basis X = sv_n^(-1/2) U_n^T (Gamma K Z), i.e. S_n^(1/2) V_n^T up to the factor
     # windows^(1/4), so that the state scale does not depend on the record length.
