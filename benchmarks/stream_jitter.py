@@ -45,6 +45,10 @@ class CircleSource:
         """Return the circle (any ``j``)."""
         return self.setpoints
 
+    def hover_point_for(self, j: int) -> np.ndarray:
+        """Hover at the circle's first point."""
+        return self.setpoints[0]
+
     def record(self, j: int, recording: TrialRecording) -> None:
         """Keep the recording."""
         self.recording = recording

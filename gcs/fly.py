@@ -156,6 +156,21 @@ class RunSource:
             )
         return sp
 
+    def hover_point_for(self, j: int) -> np.ndarray:
+        """The trajectory's start point, where the vehicle hovers before every trial.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            Absolute local NED [m].
+        """
+        return self.run.reference().pos_ned_m[0]
+
     def record(self, j: int, recording: TrialRecording) -> None:
         """Write a complete trial, then learn the next trial's setpoints from it.
 

@@ -19,6 +19,8 @@ from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStart
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.flight.vehicle import Vehicle
+from gcs.mock.config import Faults
+from gcs.mock.process import MockProcess
 
 pytestmark = pytest.mark.e2e
 
@@ -44,6 +46,9 @@ class CircleSource:
         self.asked.append(j)
         return self.setpoints.copy()
 
+    def hover_point_for(self, j: int) -> np.ndarray:
+        return self.setpoints[0]
+
     def record(self, j: int, recording: TrialRecording) -> None:
         self.recorded.append((j, recording))
 
@@ -51,11 +56,9 @@ class CircleSource:
         self.incomplete.append((j, recording, reason))
 
 
-def _mock(tmp_path: Path, **faults: float):  # type: ignore[no-untyped-def]
-    process = pytest.importorskip("gcs.mock.process")
-    config = pytest.importorskip("gcs.mock.config")
-    return process.MockProcess(
-        config_path=None, seed=0, faults=config.Faults(**faults), stats_path=tmp_path / STATS
+def _mock(tmp_path: Path, **faults: float) -> MockProcess:
+    return MockProcess(
+        config_path=None, seed=0, faults=Faults(**faults), stats_path=tmp_path / STATS
     )
 
 

@@ -3,8 +3,9 @@
 Sequence: connect, wait for a valid local position, arm, take off to the altitude of the first
 setpoint, start offboard at the current position, move to the start point and settle. For each
 trial: fly it, hover at its end while ``source.record`` runs (in a worker thread), ask
-``source.setpoints_for`` for the next sequence (worker thread, still hovering), move to its start
-point and settle. After the last trial: land and disarm.
+``source.setpoints_for`` for the next sequence (worker thread, still hovering), move to its hover
+point (``source.hover_point_for``: the trajectory's start, where learning assumes the vehicle at
+rest before ``u(0)``) and settle. After the last trial: land and disarm.
 
 Safety: on Ctrl-C (``CancelledError``/``KeyboardInterrupt``), link loss, offboard rejection or any
 other exception after connecting, the vehicle is stopped (:meth:`Vehicle.emergency_stop`:
@@ -23,7 +24,7 @@ from typing import Protocol
 
 import numpy as np
 
-from gcs.errors import TrialAborted, VehicleError
+from gcs.errors import TrajectoryError, TrialAborted, VehicleError
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording, TrialRun, check_setpoints
 from gcs.flight.vehicle import Vehicle
@@ -56,6 +57,25 @@ class TrialSource(Protocol):
         -------
         ndarray, shape (N, 3)
             Absolute local NED setpoints [m]; setpoint k holds from t0 + k t_ilc_s.
+        """
+        ...
+
+    def hover_point_for(self, j: int) -> np.ndarray:
+        """Where the vehicle hovers, settled, before trial ``j`` starts.
+
+        The hover setpoint is the setpoint in force just before ``u(0)``; learning assumes the
+        vehicle at rest there, so it is the trajectory's start point, not ``u(0)`` (a learned
+        first setpoint generally differs from it).
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            Absolute local NED [m].
         """
         ...
 
@@ -219,23 +239,21 @@ async def fly_campaign(
     run: TrialRun | None = None
     j = first_trial
     try:
-        setpoints = check_setpoints(await asyncio.to_thread(source.setpoints_for, j))
+        hover, setpoints = await asyncio.to_thread(_plan, source, j)
         emit(Status("waiting for a valid local position"))
         await vehicle.wait_healthy_local_position()
-        altitude_m = -float(setpoints[0, 2])
+        altitude_m = -float(hover[2])
         emit(Status(f"arming and taking off to {altitude_m:.1f} m"))
         await vehicle.arm_and_takeoff(altitude_m)
         emit(Status("starting offboard"))
         await vehicle.start_offboard_at_current_position()
         for number, j in enumerate(range(first_trial, first_trial + iterations), start=1):
             if number > 1:
-                setpoints = check_setpoints(
-                    await vehicle.hover_while(
-                        asyncio.to_thread(source.setpoints_for, j), f"setpoints of trial {j}"
-                    )
+                hover, setpoints = await vehicle.hover_while(
+                    asyncio.to_thread(_plan, source, j), f"setpoints of trial {j}"
                 )
             emit(Status(f"moving to the start point of trial {j}"))
-            await vehicle.goto(setpoints[0], settings.transit_speed_m_s)
+            await vehicle.goto(hover, settings.transit_speed_m_s)
             n = setpoints.shape[0]
             emit(TrialStarted(j, number, iterations, n, n * t_ilc_s))
 
@@ -269,6 +287,15 @@ async def fly_campaign(
         raise
     finally:
         await vehicle.close()
+
+
+def _plan(source: TrialSource, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """Trial j's hover point and checked setpoints (blocking: runs in a worker thread)."""
+    setpoints = check_setpoints(source.setpoints_for(j))
+    hover = np.asarray(source.hover_point_for(j), dtype=float).reshape(3)
+    if not np.all(np.isfinite(hover)):
+        raise TrajectoryError(f"hover point of trial {j} is not finite: {hover.tolist()}")
+    return hover, setpoints
 
 
 def _describe(exc: BaseException) -> str:

@@ -60,7 +60,7 @@ class FlightSettings:
     takeoff_timeout_s: float = 30.0
     land_timeout_s: float = 60.0
     command_timeout_s: float = 5.0
-    settle_tolerance_m: float = 0.15
+    settle_tolerance_m: float = 0.05
     settle_time_s: float = 1.0
     settle_timeout_s: float = 20.0
     transit_speed_m_s: float = 1.0
