@@ -82,6 +82,8 @@ def faults_cli_args(faults: Faults) -> list[str]:
         args += ["--dropout", f"{faults.dropout_start_s!r}:{faults.dropout_duration_s!r}"]
     if faults.link_loss_at_s is not None:
         args += ["--link-loss-at", repr(faults.link_loss_at_s)]
+    if faults.link_loss_duration_s is not None:
+        args += ["--link-loss-for", repr(faults.link_loss_duration_s)]
     if faults.gust_start_s is not None:
         args += [
             "--gust",
@@ -159,7 +161,11 @@ def mock_command(
         str | None, typer.Option("--dropout", help="Telemetry dropout START:DURATION, s.")
     ] = None,
     link_loss_at: Annotated[
-        float | None, typer.Option("--link-loss-at", help="Lose the link for good at T, s.")
+        float | None, typer.Option("--link-loss-at", help="Lose the link at T, s.")
+    ] = None,
+    link_loss_for: Annotated[
+        float | None,
+        typer.Option("--link-loss-for", min=0.0, help="Link loss duration, s (default: for good)."),
     ] = None,
     gust: Annotated[
         str | None, typer.Option("--gust", help="Wind gust START:DURATION:VN:VE (s, s, m/s, m/s).")
@@ -183,8 +189,8 @@ def mock_command(
     Faults: ``--loss`` and ``--latency-ms`` apply from the start and to both directions. The
     times of ``--dropout``, ``--link-loss-at`` and ``--gust`` count in seconds from the
     moment the vehicle first enters OFFBOARD. A dropout silences the telemetry streams
-    (heartbeats and command replies go on); a link loss silences everything for good; a gust
-    blows the given north/east wind through the drag.
+    (heartbeats and command replies go on); a link loss silences everything, for good or for
+    ``--link-loss-for`` seconds; a gust blows the given north/east wind through the drag.
 
     SIGTERM or Ctrl-C stops it; with ``--stats-out`` it then writes, atomically, a JSON file
     with the arrival time (monotonic clock) and value of every position setpoint, the mode
@@ -213,7 +219,9 @@ def mock_command(
     dropout : str or None
         Telemetry dropout ``START:DURATION`` [s after the first OFFBOARD].
     link_loss_at : float or None
-        Time of the permanent link loss [s after the first OFFBOARD].
+        Time of the link loss [s after the first OFFBOARD].
+    link_loss_for : float or None
+        Duration of the link loss [s]; None: for good.
     gust : str or None
         Wind gust ``START:DURATION:VN:VE`` [s, s, m/s, m/s].
     stats_out : Path or None
@@ -226,6 +234,7 @@ def mock_command(
             dropout_start_s=parse_dropout(dropout)[0] if dropout else None,
             dropout_duration_s=parse_dropout(dropout)[1] if dropout else None,
             link_loss_at_s=link_loss_at,
+            link_loss_duration_s=link_loss_for,
             gust_start_s=parse_gust(gust)[0] if gust else None,
             gust_duration_s=parse_gust(gust)[1] if gust else None,
             gust_vn_m_s=parse_gust(gust)[2] if gust else 0.0,

@@ -311,7 +311,9 @@ class Faults:
         Telemetry dropout window: no streamed telemetry (heartbeats, ACKs and replies still go
         out) from ``start`` for ``duration`` seconds.
     link_loss_at_s : float or None
-        From this time on nothing is sent or received any more (the link is gone for good).
+        From this time on nothing is sent or received any more.
+    link_loss_duration_s : float or None
+        How long the link loss lasts [s]; None: the link is gone for good.
     gust_start_s, gust_duration_s : float or None
         Wind gust window.
     gust_vn_m_s, gust_ve_m_s : float
@@ -323,6 +325,7 @@ class Faults:
     dropout_start_s: float | None = None
     dropout_duration_s: float | None = None
     link_loss_at_s: float | None = None
+    link_loss_duration_s: float | None = None
     gust_start_s: float | None = None
     gust_duration_s: float | None = None
     gust_vn_m_s: float = 0.0
@@ -333,7 +336,7 @@ class Faults:
             raise ValueError(f"loss fraction must be in [0, 1), got {self.loss_fraction}")
         if not 0.0 <= self.latency_ms <= 10_000.0:
             raise ValueError(f"latency must be in [0, 10000] ms, got {self.latency_ms}")
-        for name in ("dropout_duration_s", "gust_duration_s"):
+        for name in ("dropout_duration_s", "gust_duration_s", "link_loss_duration_s"):
             value = getattr(self, name)
             if value is not None and value < 0:
                 raise ValueError(f"{name} must be >= 0, got {value}")
@@ -370,10 +373,11 @@ class Faults:
         -------
         bool
         """
-        return (
-            t_offboard_s is not None
-            and self.link_loss_at_s is not None
-            and t_offboard_s >= self.link_loss_at_s
+        if t_offboard_s is None or self.link_loss_at_s is None:
+            return False
+        since = t_offboard_s - self.link_loss_at_s
+        return since >= 0.0 and (
+            self.link_loss_duration_s is None or since < self.link_loss_duration_s
         )
 
     def wind_ned_m_s(self, t_offboard_s: float | None) -> tuple[float, float]:

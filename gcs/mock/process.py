@@ -118,6 +118,9 @@ class MockProcess:
             stderr=self._stderr,
             text=True,
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            # own session: a Ctrl-C in the terminal reaches gcs, which lands the mock, and not
+            # the mock itself (which would die before it could be landed)
+            start_new_session=True,
         )
         self.pid = self._proc.pid
         self._reader = threading.Thread(target=self._read_stdout, daemon=True)
