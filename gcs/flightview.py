@@ -138,6 +138,10 @@ def fly_with_display(
         if isinstance(event, Status):
             progress.console.print(f"[dim]{event.text}[/]")
         elif isinstance(event, TrialStarted):
+            progress.console.print(
+                f"trial {event.trial} started: {event.n_setpoints} setpoints, "
+                f"{event.duration_s:.1f} s ({event.number}/{event.iterations})"
+            )
             progress.update(
                 task,
                 description=f"trial {event.trial} ({event.number}/{event.iterations})",

@@ -134,3 +134,26 @@ def test_learned_setpoints_respect_the_arena(tmp_path: Path) -> None:
     sp = run.read_setpoints(1)
     bounds = run.profile().arena.bounds()
     assert np.all(sp >= bounds[:, 0] - 1e-9) and np.all(sp <= bounds[:, 1] + 1e-9)
+
+
+def test_montecarlo_prints_tables_and_writes_json(tmp_path: Path) -> None:
+    out = tmp_path / "mc.json"
+    result = invoke(
+        "montecarlo", "--levels", "0.05,0.2", "--plants", "4", "--repeats", "2",
+        "--iterations", "21", "--json", out,
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "0.84±0.10" in result.output  # the paper's Table II value beside ours
+    rows = json.loads(out.read_text())
+    assert {(r["algorithm"], r["uncertainty"]) for r in rows} == {
+        (a, u) for a in ("smoother", "kilc") for u in (0.05, 0.2)
+    }
+    keys = {"algorithm", "uncertainty", "first_mean", "first_std", "steady_mean", "steady_std"}
+    for r in rows:
+        assert keys | {"excluded", "excluded_rule"} <= set(r)
+        assert r["steady_mean"] < r["first_mean"]  # learning reduced the error
+
+
+def test_montecarlo_refuses_bad_levels() -> None:
+    result = invoke("montecarlo", "--levels", "0.05,abc")
+    assert result.exit_code == 2 and "not a list of numbers" in result.output

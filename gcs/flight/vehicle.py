@@ -666,18 +666,7 @@ class Vehicle:
             self._offboard_started = False
         on_ground = self.landed_state == LandedState.ON_GROUND
         if self.armed and not on_ground:
-            await attempt("land", action.land)
-            try:
-                await self._wait_until(
-                    lambda: self.landed_state == LandedState.ON_GROUND,
-                    self.settings.land_timeout_s,
-                    "landing",
-                    in_control=False,
-                )
-                on_ground = True
-            except VehicleError as exc:
-                _log.warning("emergency stop: %s", exc)
-                notes.append(str(exc))
+            on_ground = await self._land_with_retries(lambda: attempt("land", action.land), notes)
         if on_ground and self.armed and self.connected:
             await attempt("disarm", action.disarm)
             with contextlib.suppress(VehicleError):
@@ -692,6 +681,33 @@ class Vehicle:
         if on_ground and not self.armed:
             return "landed and disarmed"
         return "; ".join(notes) or ("on the ground, armed" if on_ground else "airborne")
+
+    async def _land_with_retries(
+        self, send_land: Callable[[], Awaitable[bool]], notes: list[str]
+    ) -> bool:
+        """Command LAND until the vehicle is on the ground or ``land_timeout_s`` passes.
+
+        A land command lost in a link outage is sent again once the vehicle is heard from and
+        still not landing, so that a temporary loss of the link does not leave it hovering.
+        """
+        deadline_s = time.monotonic() + self.settings.land_timeout_s
+        last_try_s = -math.inf
+        while self.landed_state != LandedState.ON_GROUND:
+            now_s = time.monotonic()
+            if now_s >= deadline_s:
+                break
+            heard = self.connected and self.telemetry_age_s() < self.settings.max_telemetry_age_s
+            if heard and self.flight_mode != FlightMode.LAND and now_s - last_try_s > 1.0:
+                last_try_s = now_s
+                await send_land()
+            changed = self._changed  # woken by any state change of the mirror
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(min(deadline_s - now_s, 0.5)):
+                    await changed.wait()
+        if self.landed_state == LandedState.ON_GROUND:
+            return True
+        notes.append(f"not on the ground after {self.settings.land_timeout_s:g} s")
+        return False
 
     @staticmethod
     def _require(plugin: _T | None) -> _T:

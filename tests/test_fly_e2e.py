@@ -1,0 +1,156 @@
+"""End to end: ``gcs fly`` flies the mock drone through the real MAVSDK over UDP loopback."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+from synthetic import SHORT
+
+from gcs.io.runlog import RunDir
+from gcs.mock.config import Faults
+from gcs.mock.process import MockProcess
+
+pytestmark = pytest.mark.e2e
+ROOT = Path(__file__).resolve().parents[1]
+FLIGHT_TIMEOUT_S = 180
+
+
+def gcs(*args: object, **kwargs) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "gcs", *map(str, args)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={**os.environ, "COLUMNS": "120", "PYTHONUNBUFFERED": "1"},
+        **kwargs,
+    )
+
+
+def finish(proc: subprocess.Popen) -> tuple[int, str]:
+    out, _ = proc.communicate(timeout=FLIGHT_TIMEOUT_S)
+    return proc.returncode, out
+
+
+def wait_for_line(proc: subprocess.Popen, text: str) -> list[str]:
+    """Read the process's output until a line contains ``text`` (the event we wait for)."""
+    seen = []
+    for line in proc.stdout:
+        seen.append(line)
+        if text in line:
+            return seen
+    raise AssertionError(f"'{text}' never printed; output:\n{''.join(seen)}")
+
+
+@pytest.fixture
+def tiny(tmp_path: Path) -> Path:
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(SHORT))
+    return path
+
+
+def final_state(stats_path: Path) -> dict:
+    stats = json.loads(stats_path.read_text())
+    return stats["modes"][-1]
+
+
+def test_fly_mock_learns_and_reports(tmp_path: Path, tiny: Path) -> None:
+    run_path = tmp_path / "run"
+    code, out = finish(gcs("fly", "--mock", "--iter", 2, "--trajectory", tiny, "--run", run_path))
+    assert code == 0, out
+    assert "landed and disarmed" in out
+    run = RunDir.open(run_path)
+    assert run.complete_trials() == [0, 1]
+    assert (run_path / "setpoints-002.csv").exists()  # learned after the last trial
+    assert (run_path / "estimate-001.csv").exists()
+    record = run.read_trial(1)
+    assert record.n_samples == run.n_samples
+    code, out = finish(gcs("report", run_path, "--json"))
+    assert code == 0, out
+    rows = json.loads(out)
+    assert [r["iteration"] for r in rows] == [0, 1]
+    assert rows[1]["epos_m"] < 0.6 * rows[0]["epos_m"], rows
+
+
+def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
+    tmp_path: Path, tiny: Path
+) -> None:
+    run_path = tmp_path / "run"
+    stats = tmp_path / "stats.json"
+    with MockProcess(seed=1, stats_path=stats) as mock:
+        proc = gcs(
+            "fly", "--connect", mock.url, "--iter", 2, "--trajectory", tiny, "--run", run_path
+        )
+        wait_for_line(proc, "trial 1 started")
+        proc.send_signal(signal.SIGINT)
+        code, out = finish(proc)
+        assert code != 0, out
+        assert "landed and disarmed" in out, out
+        run = RunDir.open(run_path)
+        assert run.complete_trials() == [0]
+        status = run.read_status(1)
+        assert not status.complete and "interrupt" in status.reason
+        assert run.read_status(0).complete  # completed trial kept intact
+
+        code, out = finish(gcs("fly", "--connect", mock.url, "--resume", run_path, "--iter", 1))
+        assert code == 0, out
+    run = RunDir.open(run_path)
+    assert run.complete_trials() == [0, 1]
+    assert (run_path / "aborted" / "trial-001-attempt-1.json").exists()
+    last = final_state(stats)
+    assert last["armed"] is False
+
+
+def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: Path) -> None:
+    run_path = tmp_path / "run"
+    stats = tmp_path / "stats.json"
+    # 4 s after the first OFFBOARD: inside trial 0 (take-off hover and settling come first)
+    faults = Faults(link_loss_at_s=4.0, link_loss_duration_s=2.0)
+    with MockProcess(seed=2, stats_path=stats, faults=faults) as mock:
+        code, out = finish(
+            gcs("fly", "--connect", mock.url, "--iter", 2, "--trajectory", tiny, "--run", run_path)
+        )
+    assert code == 2, out
+    assert "landed and disarmed" in out, out
+    run = RunDir.open(run_path)
+    status = run.read_status(0)
+    assert not status.complete and status.reason
+    assert run.complete_trials() == []
+    assert final_state(stats)["armed"] is False
+
+
+def test_out_of_arena_trajectory_is_refused_before_connecting(tmp_path: Path) -> None:
+    wide = dict(SHORT, amplitude_north_m=2.9, period_s=8.0)  # leaves the 3 m arena with margin
+    path = tmp_path / "wide.yaml"
+    wide["center_ned_m"] = [1.0, 0.0, -1.5]
+    path.write_text(yaml.safe_dump(wide))
+    code, out = finish(gcs("fly", "--connect", "udpout://127.0.0.1:9", "--trajectory", path))
+    assert code == 2
+    assert "leaves the arena" in out and "t = " in out
+    assert len(out.strip().splitlines()) == 1
+    assert not (ROOT / "logs" / "latest").is_symlink() or "wide" not in os.readlink(
+        ROOT / "logs" / "latest"
+    )
+
+
+def test_unreachable_vehicle_is_one_clear_line(tmp_path: Path, tiny: Path) -> None:
+    code, out = finish(
+        gcs(
+            "fly",
+            "--connect",
+            "udpout://127.0.0.1:9",
+            "--trajectory",
+            tiny,
+            "--run",
+            tmp_path / "run",
+        )  # fmt: skip
+    )
+    assert code == 2
+    assert "error:" in out and "no autopilot" in out.lower() or "unreachable" in out.lower()
