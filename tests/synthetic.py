@@ -18,7 +18,7 @@ SHORT = {
     "center_ned_m": [0.0, 0.0, -1.5],
     "amplitude_north_m": 0.6,
     "amplitude_east_m": 0.6,
-    "period_s": 3.0,
+    "period_s": 4.0,
     "loops": 1,
     "ramp_s": 1.0,
     "hover_s": 0.5,

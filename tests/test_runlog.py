@@ -70,7 +70,8 @@ def test_create_writes_manifest_reference_and_first_setpoints(tmp_path):
     assert manifest["format"] == 1
     assert manifest["algorithm"] == "smoother"
     assert manifest["t_ilc_s"] == 0.05
-    assert manifest["n_samples"] == expected_ref.n_samples == round(5.0 / 0.05)
+    duration_s = 2 * SHORT["hover_s"] + SHORT["ramp_s"] + SHORT["loops"] * SHORT["period_s"]
+    assert manifest["n_samples"] == expected_ref.n_samples == round(duration_s / 0.05)
     assert manifest["profile"] == profile().source
     assert manifest["trajectory"] == SHORT
     assert "numpy" in manifest["packages"] and manifest["gcs_version"]

@@ -49,6 +49,9 @@ class FlightSettings:
     max_telemetry_age_s : float
         A trial (or a move, or a hover) aborts when the newest position sample is older than
         this [s].
+    link_regain_s : float
+        How long an emergency stop waits for a lost link to come back (to land the vehicle)
+        before leaving it to its own failsafe [s].
     yaw_deg : float
         Constant yaw of all position setpoints [deg, NED, 0 = north].
     """
@@ -66,6 +69,7 @@ class FlightSettings:
     transit_speed_m_s: float = 1.0
     max_setpoint_late_s: float = 0.1
     max_telemetry_age_s: float = 0.5
+    link_regain_s: float = 10.0
     yaw_deg: float = 0.0
 
     def __post_init__(self) -> None:

@@ -692,11 +692,17 @@ class Vehicle:
         """
         deadline_s = time.monotonic() + self.settings.land_timeout_s
         last_try_s = -math.inf
+        last_heard_s = time.monotonic()
         while self.landed_state != LandedState.ON_GROUND:
             now_s = time.monotonic()
+            heard = self.connected and self.telemetry_age_s() < self.settings.max_telemetry_age_s
+            if heard:
+                last_heard_s = now_s
+            elif now_s - last_heard_s > self.settings.link_regain_s:
+                notes.append(f"link not back within {self.settings.link_regain_s:g} s")
+                return False
             if now_s >= deadline_s:
                 break
-            heard = self.connected and self.telemetry_age_s() < self.settings.max_telemetry_age_s
             if heard and self.flight_mode != FlightMode.LAND and now_s - last_try_s > 1.0:
                 last_try_s = now_s
                 await send_land()
