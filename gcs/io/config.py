@@ -343,14 +343,15 @@ class TrajectorySpec:
     ----------
     name : str
         Trajectory name.
-    shape : EightShape
-        Shape parameters.
+    shape : EightShape or None
+        Shape parameters; None for a sequence that is not an eight (identification
+        excitation), whose reference is given to :meth:`RunDir.create` directly.
     source : dict
         The parsed YAML as read, stored in run manifests.
     """
 
     name: str
-    shape: EightShape
+    shape: EightShape | None
     source: dict
 
 
