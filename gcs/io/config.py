@@ -12,13 +12,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from gcs.core.estimators import KilcSettings, SmootherSettings
 from gcs.core.model import DiscreteModel, from_state_space, from_transfer_function
 from gcs.core.trajectory import Box, EightShape
 from gcs.core.update import UpdateWeights
 from gcs.errors import GcsError, ProfileError, TrajectoryError
+from gcs.io.yamlfile import read_yaml
 
 __all__ = [
     "LearningConfig",
@@ -194,19 +193,6 @@ class Profile:
         return self.model_x, self.model_y
 
 
-def _read_yaml(path: Path, error: type[GcsError]) -> Any:
-    try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise error(f"{path}: cannot read ({exc.strerror})") from exc
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f" at line {mark.line + 1}" if mark is not None else ""
-        raise error(f"{path}: malformed YAML{line}: {getattr(exc, 'problem', exc)}") from exc
-
-
 def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
     try:
         if f.has("num") or f.has("den"):
@@ -332,7 +318,7 @@ def load_profile(path: str | Path) -> Profile:
     -------
     Profile
     """
-    return profile_from_dict(_read_yaml(Path(path), ProfileError), str(path))
+    return profile_from_dict(read_yaml(Path(path), ProfileError), str(path))
 
 
 @dataclass(frozen=True)
@@ -408,4 +394,4 @@ def load_trajectory(path: str | Path) -> TrajectorySpec:
     -------
     TrajectorySpec
     """
-    return trajectory_from_dict(_read_yaml(Path(path), TrajectoryError), str(path))
+    return trajectory_from_dict(read_yaml(Path(path), TrajectoryError), str(path))

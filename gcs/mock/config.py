@@ -21,9 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from gcs.errors import ProfileError
+from gcs.io.yamlfile import read_yaml
 
 __all__ = [
     "PhysicsConfig",
@@ -506,21 +505,6 @@ def _validate(cfg: MockConfig, where: str) -> None:
             raise ProfileError(f"{where}: field '{name}' {message}")
 
 
-def _read_yaml(path: Path) -> Any:
-    """Parse a YAML file. (gcs.io.config has the same reader, but importing it pulls in SciPy,
-    which would add seconds to the start of every mock process.)"""
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ProfileError(f"{path}: cannot read ({exc.strerror})") from exc
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ProfileError(f"{path}: malformed YAML{line}: {getattr(exc, 'problem', exc)}") from exc
-
-
 def load_mock_config(path: str | Path | None) -> MockConfig:
     """Read a mock profile (YAML); every missing field takes its default.
 
@@ -541,4 +525,4 @@ def load_mock_config(path: str | Path | None) -> MockConfig:
     """
     if path is None:
         return MockConfig()
-    return mock_config_from_dict(_read_yaml(Path(path)), str(path))
+    return mock_config_from_dict(read_yaml(Path(path), ProfileError), str(path))

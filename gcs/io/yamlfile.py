@@ -1,0 +1,39 @@
+"""Reading a YAML file with one-line errors. Light on imports: the mock drone uses it too."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from gcs.errors import GcsError
+
+__all__ = ["read_yaml"]
+
+
+def read_yaml(path: Path, error: type[GcsError]) -> Any:
+    """Parse a YAML file; failures raise ``error`` naming the file (and the line).
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    error : type
+        Exception class to raise (e.g. ProfileError, TrajectoryError).
+
+    Returns
+    -------
+    Any
+        The parsed document.
+    """
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise error(f"{path}: cannot read ({exc.strerror})") from exc
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f" at line {mark.line + 1}" if mark is not None else ""
+        raise error(f"{path}: malformed YAML{line}: {getattr(exc, 'problem', exc)}") from exc
