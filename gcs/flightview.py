@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from rich.console import Console
@@ -16,7 +16,7 @@ from gcs.io.config import load_profile, load_trajectory
 from gcs.io.runlog import RunDir
 from gcs.report import metrics_table
 
-__all__ = ["fly_with_display", "vehicle_url"]
+__all__ = ["fly_with_display", "live_progress", "vehicle_url"]
 
 
 @contextlib.contextmanager
@@ -73,6 +73,57 @@ def _open_run(
     return prepare_run(logs, profile, trajectory, algorithm or profile.learning.algorithm, run_path)
 
 
+def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]:
+    """A rich progress bar for a campaign and the event callback that drives it.
+
+    Status lines are printed dimmed, each trial start is printed with its length, the bar
+    follows the setpoint index with the live error, and an incomplete trial is printed in red.
+    Use the progress as a context manager around the flight.
+
+    Parameters
+    ----------
+    console : Console
+        Terminal output.
+
+    Returns
+    -------
+    progress : Progress
+        The (transient) progress display.
+    on_event : callable
+        Campaign event callback for :func:`gcs.flight.campaign.fly_campaign`.
+    """
+    progress = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.fields[err]}"),
+        TimeRemainingColumn(),
+        console=console,
+        transient=True,
+    )
+    task = progress.add_task("waiting", total=1, err="")
+
+    def on_event(event: object) -> None:
+        if isinstance(event, Status):
+            progress.console.print(f"[dim]{event.text}[/]")
+        elif isinstance(event, TrialStarted):
+            progress.console.print(
+                f"trial {event.trial} started: {event.n_setpoints} setpoints, "
+                f"{event.duration_s:.1f} s ({event.number}/{event.iterations})"
+            )
+            progress.update(
+                task,
+                description=f"trial {event.trial} ({event.number}/{event.iterations})",
+                total=event.n_setpoints,
+                completed=0,
+            )
+        elif isinstance(event, TrialProgress):
+            progress.update(task, completed=event.k, err=f"error {event.err_m:.3f} m")
+        elif isinstance(event, TrialFinished) and not event.recording.complete:
+            progress.console.print(f"[red]trial {event.trial} incomplete[/]")
+
+    return progress, on_event
+
+
 def fly_with_display(
     *,
     console: Console,
@@ -124,34 +175,7 @@ def fly_with_display(
     run = _open_run(resume, run_path, logs, profile_path, trajectory_path, algorithm)
     settings = flight_settings(run.profile())
     console.print(f"run [bold]{run.path}[/] ({run.algorithm}), next trial {run.next_trial()}")
-    progress = Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.fields[err]}"),
-        TimeRemainingColumn(),
-        console=console,
-        transient=True,
-    )
-    task = progress.add_task("waiting", total=1, err="")
-
-    def on_event(event: object) -> None:
-        if isinstance(event, Status):
-            progress.console.print(f"[dim]{event.text}[/]")
-        elif isinstance(event, TrialStarted):
-            progress.console.print(
-                f"trial {event.trial} started: {event.n_setpoints} setpoints, "
-                f"{event.duration_s:.1f} s ({event.number}/{event.iterations})"
-            )
-            progress.update(
-                task,
-                description=f"trial {event.trial} ({event.number}/{event.iterations})",
-                total=event.n_setpoints,
-                completed=0,
-            )
-        elif isinstance(event, TrialProgress):
-            progress.update(task, completed=event.k, err=f"error {event.err_m:.3f} m")
-        elif isinstance(event, TrialFinished) and not event.recording.complete:
-            progress.console.print(f"[red]trial {event.trial} incomplete[/]")
+    progress, on_event = live_progress(console)
 
     def on_row(rows: list[IterationMetrics]) -> None:
         r = rows[-1]
