@@ -28,6 +28,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode="markdown",  # reflow docstring paragraphs to the terminal width
 )
 console = Console()
 err_console = Console(stderr=True)
@@ -96,7 +97,7 @@ def learn(
 
     Estimates the repetitive disturbance D of the newest complete trial (RTS smoother or
     K-ILC), solves the input update of eq. (8) with the run's limits, and writes
-    setpoints-<j+1>.csv and estimate-<j>.csv. Deterministic and idempotent; a log with NaNs,
+    `setpoints-<j+1>.csv` and `estimate-<j>.csv`. Deterministic and idempotent; a log with NaNs,
     a wrong length or time grid, or a mismatching profile is refused and nothing is written.
 
     Example: gcs learn logs/latest
@@ -296,3 +297,12 @@ def montecarlo(
     console.print(f"[dim]{elapsed:.1f} s[/]")
     if json_path is not None:
         atomic_write_text(json_path, json.dumps(study_json(rows, settings), indent=2) + "\n")
+
+
+def _register_mock() -> None:
+    from gcs.mock.cli import mock_command
+
+    app.command("mock")(one_line_errors(mock_command))
+
+
+_register_mock()
