@@ -67,7 +67,7 @@ def test_antx_profile_loads_with_eq11_model_and_table_one_settings():
     assert p.flight == antx_data()["flight"]
     ratio = p.flight["stream_rate_hz"] * p.t_ilc_s  # documented: integer multiple of 1/t_ilc
     assert ratio == pytest.approx(round(ratio)) and round(ratio) >= 1
-    assert p.identification["excitation"] == "multisine"
+    assert p.identification["excitation"] == "prbs"
     assert p.source == antx_data()
 
 
