@@ -234,6 +234,113 @@ def fly(
 
 @app.command()
 @one_line_errors
+def identify(
+    mock: Annotated[
+        bool,
+        typer.Option("--mock", help="Fly the experiments on the mock drone (free loopback port)."),
+    ] = False,
+    connect: Annotated[
+        str | None,
+        typer.Option(
+            help="MAVSDK connection URL of a real vehicle or PX4 SITL, e.g. udpin://0.0.0.0:14540.",
+        ),
+    ] = None,
+    from_log: Annotated[
+        Path | None,
+        typer.Option(
+            "--from-log",
+            help="Identify offline from this identification run directory (nothing is flown).",
+        ),
+    ] = None,
+    profile: Annotated[
+        Path | None,
+        typer.Option(
+            help="Input profile: its 'identification' section sets the experiments and PBSID, "
+            "and the output is a copy of it with new models. Default: profiles/antx.yaml when "
+            "flying, the run's own profile with --from-log.",
+        ),
+    ] = None,
+    axis: Annotated[
+        str | None,
+        typer.Option(
+            help="x (north), y (east) or both (excited at once, independent seeds). Default: "
+            "both when flying, the axes the run excited with --from-log.",
+        ),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Write the identified profile here (default: RUN_DIR/identified.yaml)."),
+    ] = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            help="Write identify_validation.png (measured vs simulated) and identify_bode.png."
+        ),
+    ] = None,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            help="Excitation seed (overrides identification.seed); also seeds the mock's gusts."
+        ),
+    ] = None,
+    run_dir: Annotated[
+        Path | None, typer.Option("--run", help="Create the identification run exactly here.")
+    ] = None,
+    logs: Annotated[Path, typer.Option(help="Parent directory of new runs.")] = DEFAULT_LOGS,
+    mock_config: Annotated[
+        Path | None, typer.Option(help="Mock drone settings (YAML) for --mock.")
+    ] = None,
+) -> None:
+    """Identify the closed loop "position setpoint -> position" with PBSID and write a profile.
+
+    Flies two experiments from hover (take off, settle at identification.center_ned_m, fly,
+    settle again, fly, land): trial 0 to fit the model and trial 1, with other seeds, to
+    validate it. Each adds a PRBS (or multisine) of identification.amplitude_m to the hover
+    setpoint on the chosen axes for identification.duration_s; setpoints that would leave the
+    arena are refused before take-off. The run directory (algorithm 'identify') keeps both
+    trials, so --from-log can identify again offline.
+
+    Per axis, PBSID-opt (docs/identify.md) fits an innovation model on trial 0 with the
+    profile's past/future windows, chooses the order and the input delay, and simulates it
+    free-running on trial 1. The table shows order, delay, poles, wn and zeta (Tustin), the
+    continuous transfer function, and the validation VAF and fit beside the VAF of the
+    profile's own model. The output profile is the input profile with model (x) and model_y
+    (y) replaced by the identified discrete state spaces; 'gcs fly --profile' uses it as is.
+
+    Too little data, a constant or non-exciting input, NaNs or an incomplete trial are
+    refused with one line and exit code 2; no profile is written then.
+
+    Examples: gcs identify --mock --out profiles/mock-identified.yaml --plot plots/;
+    gcs identify --from-log logs/latest --axis x --out x-only.yaml
+    """
+    from gcs.identifyview import identify_with_display
+
+    if sum((mock, connect is not None, from_log is not None)) != 1:
+        raise typer.BadParameter("give exactly one of --mock, --connect and --from-log")
+    if axis is not None and axis not in ("x", "y", "both"):
+        raise typer.BadParameter("must be x, y or both", param_hint="--axis")
+    if from_log is not None and (run_dir is not None or mock_config is not None):
+        raise typer.BadParameter("--run and --mock-config need a flight, not --from-log")
+    identify_with_display(
+        console=console,
+        err_console=err_console,
+        profile_path=profile,
+        axis=axis,
+        out=out,
+        from_log=from_log,
+        plot=plot,
+        seed=seed,
+        connect=connect,
+        use_mock=mock,
+        mock_config=mock_config,
+        logs=logs,
+        run_path=run_dir,
+        default_profile=DEFAULT_PROFILE,
+    )
+
+
+@app.command()
+@one_line_errors
 def montecarlo(
     levels: Annotated[
         str, typer.Option(help="Uncertainty levels (std of wn and zeta, fraction of nominal).")
