@@ -1,0 +1,197 @@
+"""The terminal side of ``gcs identify``: fly or read the experiments, show and write the result."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from gcs.identification import (
+    AxisResult,
+    create_identification_run,
+    fly_identification,
+    identification_settings,
+    identified_profile_text,
+    identify_run,
+    plan_experiments,
+    write_identification_plots,
+    write_identified_profile,
+)
+from gcs.io.config import Profile, load_profile
+from gcs.io.runlog import RunDir
+
+__all__ = ["results_table", "identify_with_display"]
+
+OUT_NAME = "identified.yaml"
+
+
+def _poly(c: np.ndarray) -> str:
+    n = len(c) - 1
+    terms = []
+    for i, v in enumerate(c):
+        p = n - i
+        s = "" if p == 0 else ("s" if p == 1 else f"s^{p}")
+        terms.append(f"{v:.4g}" + (f" {s}" if s else ""))
+    return " + ".join(terms).replace("+ -", "- ")
+
+
+def _poles(z: np.ndarray) -> str:
+    z = z[np.argsort(-np.abs(z))]
+    seen = []
+    for p in z:
+        if p.imag < -1e-12:
+            continue
+        seen.append(f"{p.real:.4f} ± {p.imag:.4f}j" if abs(p.imag) > 1e-12 else f"{p.real:.4f}")
+    return ", ".join(seen)
+
+
+def results_table(results: Sequence[AxisResult], profile_name: str) -> Table:
+    """The identification result per axis as a rich table.
+
+    Columns: axis, order, delay [samples] and [s], discrete poles, dominant continuous pair
+    (wn, zeta; Tustin), the Tustin transfer function, and on the validation experiment the VAF
+    and NRMSE fit of the identified model and the VAF of the profile's model.
+
+    Parameters
+    ----------
+    results : sequence of AxisResult
+        Identified axes.
+    profile_name : str
+        Name of the input profile (column title of the comparison).
+
+    Returns
+    -------
+    Table
+    """
+    table = Table(title="PBSID closed loop setpoint -> position (validation on trial 1)")
+    for col in ("axis", "order", "delay", "discrete poles", "wn [rad/s]", "zeta"):
+        table.add_column(col, justify="right" if col not in ("axis",) else "left")
+    table.add_column("G(s) (Tustin)", overflow="fold")
+    table.add_column("VAF [%]", justify="right")
+    table.add_column("fit [%]", justify="right")
+    table.add_column(f"VAF {profile_name} [%]", justify="right")
+    for r in results:
+        d = r.result.delay_samples
+        table.add_row(
+            r.axis,
+            str(r.result.order),
+            f"{d} ({d * r.model.dt_s:.2f} s)",
+            _poles(np.linalg.eigvals(r.model.A)),
+            "-" if r.wn_rad_s is None else f"{r.wn_rad_s:.3f}",
+            "-" if r.zeta is None else f"{r.zeta:.3f}",
+            f"({_poly(r.num)}) / ({_poly(r.den)}) e^(-{d * r.model.dt_s:.2f} s)",
+            f"{r.vaf_pct:.2f}",
+            f"{r.fit_pct:.1f}",
+            f"{r.vaf_profile_pct:.2f}",
+        )
+    return table
+
+
+def identify_with_display(
+    *,
+    console: Console,
+    err_console: Console,
+    profile_path: Path | None,
+    axis: str | None,
+    out: Path | None,
+    from_log: Path | None,
+    plot: Path | None,
+    seed: int | None,
+    connect: str | None,
+    use_mock: bool,
+    mock_config: Path | None,
+    logs: Path,
+    run_path: Path | None,
+    default_profile: Path,
+) -> Path:
+    """Fly the two experiments (or read them), identify, print, write profile and plots.
+
+    Parameters
+    ----------
+    console : Console
+        Terminal output.
+    err_console : Console
+        Where "wrote ..." lines go.
+    profile_path : Path or None
+        Input profile; None: ``default_profile`` when flying, the run's profile offline.
+    axis : str or None
+        ``x``, ``y`` or ``both``; None: both when flying, the run's axes offline.
+    out : Path or None
+        Output profile; None writes ``identified.yaml`` in the run directory.
+    from_log : Path or None
+        Identification run directory to identify from offline (nothing is flown).
+    plot : Path or None
+        Directory for the validation and Bode PNGs.
+    seed : int or None
+        Excitation seed (overrides the profile's); also the mock drone's seed.
+    connect : str or None
+        URL of a real vehicle.
+    use_mock : bool
+        Fly the mock drone.
+    mock_config : Path or None
+        Mock drone settings.
+    logs : Path
+        Parent of the new identification run.
+    run_path : Path or None
+        Exact path of the new run.
+    default_profile : Path
+        Profile used when flying without ``profile_path``.
+
+    Returns
+    -------
+    Path
+        The profile written.
+    """
+    if from_log is not None:
+        run = RunDir.open(from_log)
+        if profile_path is None:
+            profile: Profile = run.profile()
+            where = f"{run.path}/manifest.json:profile"
+        else:
+            profile, where = load_profile(profile_path), str(profile_path)
+        settings = identification_settings(profile, where)
+    else:
+        from gcs.flightview import live_progress, vehicle_url
+        from gcs.fly import flight_settings
+
+        path = profile_path or default_profile
+        profile, where = load_profile(path), str(path)
+        settings = identification_settings(profile, where, seed)
+        flight = flight_settings(profile)
+        experiments = plan_experiments(
+            settings, profile.t_ilc_s, axis or "both", profile.arena, where
+        )
+        run_root, run_id = (logs, None) if run_path is None else (run_path.parent, run_path.name)
+        run = create_identification_run(run_root, profile, settings, experiments, run_id)
+        n = settings.n_samples(profile.t_ilc_s)
+        console.print(
+            f"identification run [bold]{run.path}[/]: {settings.excitation} "
+            f"{settings.amplitude_m:g} m on {', '.join(experiments.axes)}, two experiments of "
+            f"{n} samples ({n * profile.t_ilc_s:.1f} s) around {experiments.center_ned_m.tolist()}"
+        )
+        progress, on_event = live_progress(console)
+        mock_seed = settings.seed if seed is None else seed
+        with vehicle_url(connect, use_mock, mock_config, mock_seed, console) as url, progress:
+            fly_identification(url, run, flight, on_event)
+    results = identify_run(run, settings, profile, axis)
+    console.print(results_table(results, profile.name))
+    for r in results:
+        wn = "-" if r.wn_rad_s is None else f"{r.wn_rad_s:.3f} rad/s"
+        zeta = "-" if r.zeta is None else f"{r.zeta:.3f}"
+        console.print(
+            f"axis {r.axis}: order {r.result.order}, delay {r.result.delay_samples} samples, "
+            f"wn {wn}, zeta {zeta}, validation VAF {r.vaf_pct:.2f} %, fit {r.fit_pct:.1f} % "
+            f"({profile.name}'s model: VAF {r.vaf_profile_pct:.2f} %)",
+            highlight=False,
+        )
+    target = Path(out) if out is not None else run.path / OUT_NAME
+    text = identified_profile_text(profile, results, str(run.path), str(target))
+    write_identified_profile(target, text)
+    console.print(f"wrote profile {target}")
+    if plot is not None:
+        for p in write_identification_plots(results, profile, plot):
+            err_console.print(f"wrote {p}")
+    return target
