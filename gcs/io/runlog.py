@@ -206,6 +206,7 @@ class RunDir:
     def __init__(self, path: Path, manifest: dict[str, Any]) -> None:
         self.path = Path(path)
         self.manifest = manifest
+        self._reference: Reference | None = None  # reference.csv never changes once written
 
     # ----------------------------------------------------------------- creation
     @classmethod
@@ -340,6 +341,11 @@ class RunDir:
 
         Velocity and acceleration are central differences of the recorded positions.
         """
+        if self._reference is None:
+            self._reference = self._read_reference()
+        return self._reference
+
+    def _read_reference(self) -> Reference:
         path = self.path / "reference.csv"
         table = _read_csv(path, REFERENCE_COLUMNS)
         self._check_grid(path, table, self.n_samples + 1)
