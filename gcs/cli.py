@@ -216,20 +216,23 @@ def fly(
         raise typer.BadParameter("give exactly one of --mock and --connect")
     if resume is not None and run_dir is not None:
         raise typer.BadParameter("give at most one of --run and --resume")
-    fly_with_display(
-        console=console,
-        iterations=iterations,
-        connect=connect,
-        mock_config=mock_config,
-        seed=seed,
-        profile_path=profile,
-        trajectory_path=trajectory,
-        algorithm=algorithm,
-        run_path=run_dir,
-        resume=resume,
-        logs=logs,
-        use_mock=mock,
-    )
+    try:
+        fly_with_display(
+            console=console,
+            iterations=iterations,
+            connect=connect,
+            mock_config=mock_config,
+            seed=seed,
+            profile_path=profile,
+            trajectory_path=trajectory,
+            algorithm=algorithm,
+            run_path=run_dir,
+            resume=resume,
+            logs=logs,
+            use_mock=mock,
+        )
+    except KeyboardInterrupt:  # the vehicle was landed first; the hint is already printed
+        raise typer.Exit(130) from None
 
 
 @app.command()

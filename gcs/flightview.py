@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from gcs.core.metrics import IterationMetrics
+from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
 from gcs.fly import flight_settings, fly_run, prepare_run
 from gcs.io.config import load_profile, load_trajectory
@@ -185,11 +186,21 @@ def fly_with_display(
             f"{delta}, max {r.max_err_m:.3f} m"
         )
 
-    with (
-        vehicle_url(connect, use_mock, mock_config, seed, console) as url,
-        progress,
-    ):
-        fly_run(url, run, iterations, settings, on_event, on_row)
+    try:
+        with (
+            vehicle_url(connect, use_mock, mock_config, seed, console) as url,
+            progress,
+        ):
+            fly_run(url, run, iterations, settings, on_event, on_row)
+    except KeyboardInterrupt:
+        console.print(
+            f"interrupted; completed trials are in {run.path}. "
+            f"Continue with: gcs fly --resume {run.path}"
+        )
+        raise
+    except GcsError as exc:
+        console.print(f"[dim]completed trials are in {run.path}[/]")
+        raise exc
     from gcs.report import run_metrics
 
     console.print(metrics_table(run_metrics(run), f"{run.path.name} ({run.algorithm})"))
