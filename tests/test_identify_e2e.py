@@ -1,0 +1,70 @@
+"""End to end: ``gcs identify --mock`` flies two short PRBS experiments and writes a profile."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from gcs.core.model import dc_gain, simulate
+from gcs.core.pbsid import natural_frequency_damping
+from gcs.io.config import load_profile
+from gcs.io.runlog import RunDir
+from gcs.mock.config import load_mock_config
+from gcs.mock.physics import measure_axes, step_response
+
+pytestmark = pytest.mark.e2e
+ROOT = Path(__file__).resolve().parents[1]
+TIMEOUT_S = 120
+
+
+def test_identify_mock_writes_a_profile_close_to_the_mock(tmp_path: Path) -> None:
+    data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
+    data["identification"]["duration_s"] = 15.0  # two 15 s experiments: about 50 s in all
+    profile_path = tmp_path / "short.yaml"
+    profile_path.write_text(yaml.safe_dump(data))
+    # The mock's repeatable disturbance field depends on the position: around the hover point
+    # its gradient acts as an extra spring and changes the local closed loop (docs/identify.md,
+    # "On the mock drone"). Switched off here, the true loop is measure_axes' (gusts stay).
+    mock = yaml.safe_load((ROOT / "profiles" / "mock.yaml").read_text())
+    mock["disturbance"]["field_amplitude_m_s2"] = 0.0
+    mock_path = tmp_path / "mock.yaml"
+    mock_path.write_text(yaml.safe_dump(mock))
+    out = tmp_path / "identified.yaml"
+    run_path = tmp_path / "ident"
+    proc = subprocess.run(
+        [sys.executable, "-m", "gcs", "identify", "--mock", "--profile", profile_path,
+         "--mock-config", mock_path, "--run", run_path, "--out", out],
+        cwd=ROOT, capture_output=True, text=True, timeout=TIMEOUT_S,
+        env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
+    )  # fmt: skip
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0, text
+    assert "landed and disarmed" in text
+    for axis in ("x", "y"):
+        assert f"axis {axis}: order" in text and "validation VAF" in text
+    run = RunDir.open(run_path)
+    assert run.complete_trials() == [0, 1] and run.algorithm == "identify"
+    assert f"wrote profile {out}" in text
+
+    profile = load_profile(out)
+    assert profile.name == "antx-identified"
+    cfg = load_mock_config(mock_path)
+    fits = measure_axes(cfg)
+    for axis, model in enumerate(profile.models()):
+        # Compared by step response rather than by wn and zeta: 15 s of data under gusts give
+        # third-order models whose dominant pair trades damping against the extra real pole
+        # (one run: y zeta 0.82 against 0.67, step response within 0.074 RMS).
+        wn, zeta = natural_frequency_damping(model)
+        info = (axis, wn, zeta, fits[axis])
+        # the mock's true small-signal step response (physics alone, no disturbances)
+        t, y_true = step_response(cfg, axis)
+        y_hat = np.concatenate([[0.0], simulate(model, np.ones(t.size - 1))])
+        rms = float(np.sqrt(np.mean((y_hat - y_true) ** 2)))
+        assert rms < 0.1, (rms, info)  # per unit step, over 12 s
+        assert dc_gain(model) == pytest.approx(fits[axis].gain, rel=0.15), info
