@@ -67,7 +67,7 @@ class MockProcess:
         stats_path: str | Path | None = None,
         port: int = 0,
         gcs_port: int | None = None,
-        ready_timeout_s: float = 15.0,
+        ready_timeout_s: float = 30.0,
         stop_timeout_s: float = 5.0,
     ) -> None:
         self.config_path = None if config_path is None else Path(config_path)
