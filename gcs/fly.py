@@ -90,7 +90,9 @@ def prepare_run(
     return RunDir.create(logs, profile, trajectory, algorithm)
 
 
-def to_record(run: RunDir, recording: TrialRecording) -> TrialRecord:
+def to_record(
+    run: RunDir, recording: TrialRecording, ref_ned_m: np.ndarray | None = None
+) -> TrialRecord:
     """A flight recording as a row-per-sample trial record of the run.
 
     Parameters
@@ -99,16 +101,20 @@ def to_record(run: RunDir, recording: TrialRecording) -> TrialRecord:
         The run (for its reference).
     recording : TrialRecording
         What the flight layer sent and measured.
+    ref_ned_m : ndarray, shape (N+1, 3), optional
+        Reference rows of the record; default the run's reference (an identification
+        experiment passes its own excitation).
 
     Returns
     -------
     TrialRecord
     """
-    ref = run.reference()
+    if ref_ned_m is None:
+        ref_ned_m = run.reference().pos_ned_m
     sp = recording.setpoints_ned_m
     return TrialRecord(
-        t_s=ref.t_s,
-        ref_ned_m=ref.pos_ned_m,
+        t_s=np.arange(run.n_samples + 1) * run.t_ilc_s,
+        ref_ned_m=ref_ned_m,
         sp_ned_m=np.vstack([sp, sp[-1]]),
         pos_ned_m=recording.pos_ned_m,
         vel_ned_m_s=recording.vel_ned_m_s,

@@ -51,8 +51,10 @@ from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogErro
 from gcs.flight.campaign import fly_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
+from gcs.fly import to_record
 from gcs.io.config import Profile, TrajectorySpec, _Fields, profile_from_dict
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus, atomic_write_text
+from gcs.report import save_figure
 
 __all__ = [
     "AXES",
@@ -395,16 +397,7 @@ def create_identification_run(
 
 def _to_record(run: RunDir, j: int, recording: TrialRecording) -> TrialRecord:
     sp = run.read_setpoints(j)
-    sp_rows = np.vstack([sp, sp[-1]])
-    return TrialRecord(
-        t_s=np.arange(run.n_samples + 1) * run.t_ilc_s,
-        ref_ned_m=sp_rows,  # an excitation is its own reference
-        sp_ned_m=np.vstack([recording.setpoints_ned_m, recording.setpoints_ned_m[-1]]),
-        pos_ned_m=recording.pos_ned_m,
-        vel_ned_m_s=recording.vel_ned_m_s,
-        sp_sent_s=np.append(recording.sent_s, np.nan),
-        interpolated=recording.interpolated,
-    )
+    return to_record(run, recording, np.vstack([sp, sp[-1]]))  # the excitation is its reference
 
 
 @dataclass
@@ -828,17 +821,6 @@ def frequency_response(model: DiscreteModel, f_hz: np.ndarray) -> np.ndarray:
     return out * z ** (-model.delay_samples)
 
 
-def _save(fig: object, path: Path) -> Path:
-    import matplotlib.pyplot as plt
-
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.tight_layout()
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
-    return path
-
-
 def write_identification_plots(
     results: Sequence[AxisResult], profile: Profile, out_dir: Path
 ) -> list[Path]:
@@ -882,7 +864,7 @@ def write_identification_plots(
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
     axs[-1, 0].set_xlabel("t [s]")
-    paths.append(_save(fig, out_dir / "identify_validation.png"))
+    paths.append(save_figure(fig, out_dir / "identify_validation.png"))
 
     dt = profile.t_ilc_s
     f = np.logspace(-2, math.log10(0.45 / dt), 300)
@@ -903,5 +885,5 @@ def write_identification_plots(
     for ax in (ax_m, ax_p):
         ax.grid(True, which="both", alpha=0.3)
     ax_m.legend(fontsize=8)
-    paths.append(_save(fig, out_dir / "identify_bode.png"))
+    paths.append(save_figure(fig, out_dir / "identify_bode.png"))
     return paths

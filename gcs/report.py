@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 from rich.markup import escape
 from rich.table import Table
@@ -13,7 +14,14 @@ from gcs.errors import RunLogError
 from gcs.io.runlog import RunDir, TrialRecord
 from gcs.learn import trial_errors
 
-__all__ = ["run_metrics", "metrics_table", "metrics_json", "write_plots", "complete_records"]
+__all__ = [
+    "run_metrics",
+    "metrics_table",
+    "metrics_json",
+    "write_plots",
+    "complete_records",
+    "save_figure",
+]
 
 
 def complete_records(run: RunDir) -> dict[int, TrialRecord]:
@@ -136,7 +144,7 @@ def write_plots(run: RunDir, out_dir: Path, iterations: list[int] | None = None)
     ax.set_aspect("equal")
     ax.legend()
     ax.set_title("Horizontal path per iteration")
-    paths.append(_save(fig, out_dir / "xy.png"))
+    paths.append(save_figure(fig, out_dir / "xy.png"))
 
     fig, ax = plt.subplots(figsize=(8, 4))
     ax.plot(ref.t_s, ref.pos_ned_m[:, 0], "k--", lw=1.5, label="reference")
@@ -147,7 +155,7 @@ def write_plots(run: RunDir, out_dir: Path, iterations: list[int] | None = None)
     ax.set_ylabel("north [m]")
     ax.legend()
     ax.set_title("North position per iteration")
-    paths.append(_save(fig, out_dir / "north_t.png"))
+    paths.append(save_figure(fig, out_dir / "north_t.png"))
 
     rows = run_metrics(run)
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -156,11 +164,24 @@ def write_plots(run: RunDir, out_dir: Path, iterations: list[int] | None = None)
     ax.set_ylabel("e_pos,j [m]")
     ax.grid(True, which="both", alpha=0.3)
     ax.set_title(f"Average position error ({run.algorithm})")
-    paths.append(_save(fig, out_dir / "epos.png"))
+    paths.append(save_figure(fig, out_dir / "epos.png"))
     return paths
 
 
-def _save(fig, path: Path) -> Path:
+def save_figure(fig: Any, path: Path) -> Path:
+    """Write a matplotlib figure as PNG atomically (temporary file + rename) and close it.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    path : Path
+        Destination (.png).
+
+    Returns
+    -------
+    Path
+    """
     import matplotlib.pyplot as plt
 
     tmp = path.with_name(f".{path.name}.tmp.png")
