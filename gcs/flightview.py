@@ -180,10 +180,13 @@ def fly_with_display(
 
     def on_row(rows: list[IterationMetrics]) -> None:
         r = rows[-1]
-        delta = "" if r.delta_pct is None else f", {r.delta_pct:5.1f} % better than j-1"
+        delta = ""
+        if len(rows) > 1:  # signed, unlike Table IV's |change|: a worse trial shows as +
+            change = 100.0 * (r.epos_m - rows[-2].epos_m) / rows[-2].epos_m
+            delta = f", {change:+.1f} % vs previous"
         progress.console.print(
-            f"trial {r.iteration}: e_pos {r.epos_m:.4f} m = {r.epos_pct:5.1f} % of e_pos,0"
-            f"{delta}, max {r.max_err_m:.3f} m"
+            f"trial {r.iteration}: e_pos {r.epos_m:.4f} m ({r.epos_pct:5.1f} % of j=0{delta}), "
+            f"max {r.max_err_m:.3f} m"
         )
 
     try:
