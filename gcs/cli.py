@@ -85,81 +85,6 @@ def main(
 
 @app.command()
 @one_line_errors
-def learn(
-    run_dir: Annotated[Path, typer.Argument(help="Run directory, e.g. logs/latest.")],
-    algorithm: Algorithm = None,
-    profile: Annotated[
-        Path | None,
-        typer.Option(help="Profile that must match the one recorded in the run's manifest."),
-    ] = None,
-) -> None:
-    """Learn from the newest complete trial and write the next trial's setpoints.
-
-    Estimates the repetitive disturbance D of the newest complete trial (RTS smoother or
-    K-ILC), solves the input update of eq. (8) with the run's limits, and writes
-    `setpoints-<j+1>.csv` and `estimate-<j>.csv`. Deterministic and idempotent; a log with NaNs,
-    a wrong length or time grid, or a mismatching profile is refused and nothing is written.
-
-    Example: gcs learn logs/latest
-    """
-    from gcs.io.runlog import RunDir
-    from gcs.learn import learn_run
-
-    _check_algorithm(algorithm)
-    run = RunDir.open(run_dir)
-    outcome = learn_run(run, algorithm, profile)
-    console.print(
-        f"learned from trial {outcome.trial} ({run.algorithm}); "
-        f"setpoints for trial {outcome.next_trial}: {outcome.setpoints_path} "
-        f"[dim](solver {'/'.join(outcome.methods)}, "
-        f"{outcome.active_constraints} active limits)[/]"
-    )
-
-
-@app.command()
-@one_line_errors
-def report(
-    run_dir: Annotated[Path, typer.Argument(help="Run directory, e.g. logs/latest.")],
-    as_json: Annotated[
-        bool,
-        typer.Option(
-            "--json",
-            help="Print a JSON list of {iteration, epos_m, epos_pct, delta_pct, max_err_m}.",
-        ),
-    ] = False,
-    plot: Annotated[
-        Path | None,
-        typer.Option(help="Write PNG figures (xy paths, north(t), e_pos by iteration) here."),
-    ] = None,
-) -> None:
-    """Show the learning table of a run: one row per complete trial.
-
-    Columns as the paper's Table IV: e_pos,j (eq. 10), e_pos,j / e_pos,0, the relative change
-    from the previous trial, and the largest horizontal error.
-
-    Example: gcs report logs/latest --plot plots/
-    """
-    from gcs.io.runlog import RunDir
-    from gcs.report import metrics_json, metrics_table, run_metrics, write_plots
-
-    run = RunDir.open(run_dir)
-    rows = run_metrics(run)
-    if as_json:
-        typer.echo(json.dumps(metrics_json(rows), indent=2))
-    else:
-        console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})"))
-    if plot is not None:
-        for path in write_plots(run, plot):
-            err_console.print(f"wrote {path}")
-
-
-def run() -> None:  # pragma: no cover - console-script entry point alias
-    """Entry point."""
-    app()
-
-
-@app.command()
-@one_line_errors
 def fly(
     iterations: Annotated[int, typer.Option("--iter", "-n", min=1, help="Trials to fly.")] = 3,
     mock: Annotated[
@@ -233,6 +158,81 @@ def fly(
         )
     except KeyboardInterrupt:  # the vehicle was landed first; the hint is already printed
         raise typer.Exit(130) from None
+
+
+@app.command()
+@one_line_errors
+def learn(
+    run_dir: Annotated[Path, typer.Argument(help="Run directory, e.g. logs/latest.")],
+    algorithm: Algorithm = None,
+    profile: Annotated[
+        Path | None,
+        typer.Option(help="Profile that must match the one recorded in the run's manifest."),
+    ] = None,
+) -> None:
+    """Learn from the newest complete trial and write the next trial's setpoints.
+
+    Estimates the repetitive disturbance D of the newest complete trial (RTS smoother or
+    K-ILC), solves the input update of eq. (8) with the run's limits, and writes
+    `setpoints-<j+1>.csv` and `estimate-<j>.csv`. Deterministic and idempotent; a log with NaNs,
+    a wrong length or time grid, or a mismatching profile is refused and nothing is written.
+
+    Example: gcs learn logs/latest
+    """
+    from gcs.io.runlog import RunDir
+    from gcs.learn import learn_run
+
+    _check_algorithm(algorithm)
+    run = RunDir.open(run_dir)
+    outcome = learn_run(run, algorithm, profile)
+    console.print(
+        f"learned from trial {outcome.trial} ({run.algorithm}); "
+        f"setpoints for trial {outcome.next_trial}: {outcome.setpoints_path} "
+        f"[dim](solver {'/'.join(outcome.methods)}, "
+        f"{outcome.active_constraints} active limits)[/]"
+    )
+
+
+@app.command()
+@one_line_errors
+def report(
+    run_dir: Annotated[Path, typer.Argument(help="Run directory, e.g. logs/latest.")],
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help="Print a JSON list of {iteration, epos_m, epos_pct, delta_pct, max_err_m}.",
+        ),
+    ] = False,
+    plot: Annotated[
+        Path | None,
+        typer.Option(help="Write PNG figures (xy paths, north(t), e_pos by iteration) here."),
+    ] = None,
+) -> None:
+    """Show the learning table of a run: one row per complete trial.
+
+    Columns as the paper's Table IV: e_pos,j (eq. 10), e_pos,j / e_pos,0, the relative change
+    from the previous trial, and the largest horizontal error.
+
+    Example: gcs report logs/latest --plot plots/
+    """
+    from gcs.io.runlog import RunDir
+    from gcs.report import metrics_json, metrics_table, run_metrics, write_plots
+
+    run = RunDir.open(run_dir)
+    rows = run_metrics(run)
+    if as_json:
+        typer.echo(json.dumps(metrics_json(rows), indent=2))
+    else:
+        console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})"))
+    if plot is not None:
+        for path in write_plots(run, plot):
+            err_console.print(f"wrote {path}")
+
+
+def run() -> None:  # pragma: no cover - console-script entry point alias
+    """Entry point."""
+    app()
 
 
 @app.command()
