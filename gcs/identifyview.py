@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from gcs.identification import (
@@ -23,7 +24,7 @@ from gcs.identification import (
 from gcs.io.config import Profile, load_profile
 from gcs.io.runlog import RunDir
 
-__all__ = ["results_table", "identify_with_display"]
+__all__ = ["results_table", "model_lines", "identify_with_display"]
 
 OUT_NAME = "identified.yaml"
 
@@ -49,11 +50,11 @@ def _poles(z: np.ndarray) -> str:
 
 
 def results_table(results: Sequence[AxisResult], profile_name: str) -> Table:
-    """The identification result per axis as a rich table.
+    """The identification result per axis as a rich table (fits an 80-column terminal).
 
-    Columns: axis, order, delay [samples] and [s], discrete poles, dominant continuous pair
-    (wn, zeta; Tustin), the Tustin transfer function, and on the validation experiment the VAF
-    and NRMSE fit of the identified model and the VAF of the profile's model.
+    Columns: axis, order, delay [samples] and [s], dominant continuous pair (wn, zeta; Tustin),
+    and on the validation experiment the VAF and NRMSE fit of the identified model and the VAF
+    of the profile's model. :func:`model_lines` gives the transfer functions and poles.
 
     Parameters
     ----------
@@ -66,28 +67,45 @@ def results_table(results: Sequence[AxisResult], profile_name: str) -> Table:
     -------
     Table
     """
-    table = Table(title="PBSID closed loop setpoint -> position (validation on trial 1)")
-    for col in ("axis", "order", "delay", "discrete poles", "wn [rad/s]", "zeta"):
-        table.add_column(col, justify="right" if col not in ("axis",) else "left")
-    table.add_column("G(s) (Tustin)", overflow="fold")
-    table.add_column("VAF [%]", justify="right")
-    table.add_column("fit [%]", justify="right")
-    table.add_column(f"VAF {profile_name} [%]", justify="right")
+    table = Table(title="PBSID: setpoint -> position, validated on trial 1")
+    for col in ("axis", "order", "delay", "wn [rad/s]", "zeta", "VAF [%]", "fit [%]"):
+        table.add_column(escape(col), justify="left" if col == "axis" else "right", no_wrap=True)
+    table.add_column(escape(f"VAF {profile_name} [%]"), justify="right")
     for r in results:
         d = r.result.delay_samples
         table.add_row(
             r.axis,
             str(r.result.order),
             f"{d} ({d * r.model.dt_s:.2f} s)",
-            _poles(np.linalg.eigvals(r.model.A)),
             "-" if r.wn_rad_s is None else f"{r.wn_rad_s:.3f}",
             "-" if r.zeta is None else f"{r.zeta:.3f}",
-            f"({_poly(r.num)}) / ({_poly(r.den)}) e^(-{d * r.model.dt_s:.2f} s)",
             f"{r.vaf_pct:.2f}",
             f"{r.fit_pct:.1f}",
             f"{r.vaf_profile_pct:.2f}",
         )
     return table
+
+
+def model_lines(results: Sequence[AxisResult]) -> list[str]:
+    """Per axis: the Tustin transfer function with its delay, and the discrete poles.
+
+    Parameters
+    ----------
+    results : sequence of AxisResult
+        Identified axes.
+
+    Returns
+    -------
+    list of str
+    """
+    lines = []
+    for r in results:
+        delay_s = r.result.delay_samples * r.model.dt_s
+        lines.append(
+            f"{r.axis}: G(s) = ({_poly(r.num)}) / ({_poly(r.den)}) e^(-{delay_s:.2f} s); "
+            f"poles z = {_poles(np.linalg.eigvals(r.model.A))}"
+        )
+    return lines
 
 
 def identify_with_display(
@@ -178,15 +196,8 @@ def identify_with_display(
             fly_identification(url, run, flight, on_event)
     results = identify_run(run, settings, profile, axis)
     console.print(results_table(results, profile.name))
-    for r in results:
-        wn = "-" if r.wn_rad_s is None else f"{r.wn_rad_s:.3f} rad/s"
-        zeta = "-" if r.zeta is None else f"{r.zeta:.3f}"
-        console.print(
-            f"axis {r.axis}: order {r.result.order}, delay {r.result.delay_samples} samples, "
-            f"wn {wn}, zeta {zeta}, validation VAF {r.vaf_pct:.2f} %, fit {r.fit_pct:.1f} % "
-            f"({profile.name}'s model: VAF {r.vaf_profile_pct:.2f} %)",
-            highlight=False,
-        )
+    for line in model_lines(results):
+        console.print(line, highlight=False)
     target = Path(out) if out is not None else run.path / OUT_NAME
     text = identified_profile_text(profile, results, str(run.path), str(target))
     write_identified_profile(target, text)

@@ -104,7 +104,7 @@ def test_from_log_recovers_the_closed_loop_and_writes_a_usable_profile(
     plots = tmp_path / "plots"
     result = invoke("identify", "--from-log", run.path, "--out", out, "--plot", plots)
     assert result.exit_code == 0, result.output
-    assert "VAF" in result.output and "axis x" in result.output and "axis y" in result.output
+    assert "VAF" in result.output and "x: G(s)" in result.output and "y: G(s)" in result.output
     assert (plots / "identify_validation.png").stat().st_size > 1000
     assert (plots / "identify_bode.png").stat().st_size > 1000
     text = out.read_text()

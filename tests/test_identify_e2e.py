@@ -46,8 +46,9 @@ def test_identify_mock_writes_a_profile_close_to_the_mock(tmp_path: Path) -> Non
     text = proc.stdout + proc.stderr
     assert proc.returncode == 0, text
     assert "landed and disarmed" in text
+    assert "VAF [%]" in text  # the results table
     for axis in ("x", "y"):
-        assert f"axis {axis}: order" in text and "validation VAF" in text
+        assert f"{axis}: G(s) = (" in text and "poles z =" in text
     run = RunDir.open(run_path)
     assert run.complete_trials() == [0, 1] and run.algorithm == "identify"
     assert f"wrote profile {out}" in text
