@@ -7,6 +7,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from gcs.core.metrics import IterationMetrics
@@ -105,7 +106,7 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
 
     def on_event(event: object) -> None:
         if isinstance(event, Status):
-            progress.console.print(f"[dim]{event.text}[/]")
+            progress.console.print(f"[dim]{escape(event.text)}[/]")
         elif isinstance(event, TrialStarted):
             progress.console.print(
                 f"trial {event.trial} started: {event.n_setpoints} setpoints, "
