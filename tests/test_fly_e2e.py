@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from synthetic import SHORT
+from synthetic import SHORT, ci_profile
 
 from gcs.io.runlog import RunDir
 from gcs.mock.config import Faults
@@ -63,7 +63,20 @@ def final_state(stats_path: Path) -> dict:
 
 def test_fly_mock_learns_and_reports(tmp_path: Path, tiny: Path) -> None:
     run_path = tmp_path / "run"
-    code, out = finish(gcs("fly", "--mock", "--iter", 2, "--trajectory", tiny, "--run", run_path))
+    code, out = finish(
+        gcs(
+            "fly",
+            "--mock",
+            "--iter",
+            2,
+            "--trajectory",
+            tiny,
+            "--run",
+            run_path,
+            "--profile",
+            ci_profile(tmp_path),
+        )
+    )
     assert code == 0, out
     assert "landed and disarmed" in out
     run = RunDir.open(run_path)
@@ -115,7 +128,19 @@ def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: P
     faults = Faults(link_loss_at_s=4.0, link_loss_duration_s=2.0)
     with MockProcess(seed=2, stats_path=stats, faults=faults) as mock:
         code, out = finish(
-            gcs("fly", "--connect", mock.url, "--iter", 2, "--trajectory", tiny, "--run", run_path)
+            gcs(
+                "fly",
+                "--connect",
+                mock.url,
+                "--iter",
+                2,
+                "--trajectory",
+                tiny,
+                "--run",
+                run_path,
+                "--profile",
+                ci_profile(tmp_path),
+            )  # fmt: skip
         )
     assert code == 2, out
     assert "landed and disarmed" in out, out

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from synthetic import CI_FLIGHT
 
 from gcs.core.model import dc_gain, simulate
 from gcs.core.pbsid import natural_frequency_damping
@@ -25,6 +26,7 @@ TIMEOUT_S = 120
 
 def test_identify_mock_writes_a_profile_close_to_the_mock(tmp_path: Path) -> None:
     data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
+    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
     data["identification"]["duration_s"] = 15.0  # two 15 s experiments: about 50 s in all
     profile_path = tmp_path / "short.yaml"
     profile_path.write_text(yaml.safe_dump(data))
