@@ -24,7 +24,14 @@ from gcs.io.config import Profile, TrajectorySpec
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
 from gcs.learn import learn_run, trial_errors
 
-__all__ = ["RunSource", "flight_settings", "prepare_run", "to_record", "fly_run"]
+__all__ = [
+    "RunSource",
+    "flyable_setpoints",
+    "flight_settings",
+    "prepare_run",
+    "to_record",
+    "fly_run",
+]
 
 
 def flight_settings(profile: Profile) -> FlightSettings:
@@ -123,6 +130,33 @@ def to_record(
     )
 
 
+def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
+    """Trial j's setpoints from the run directory, refused if any leaves the profile's arena.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run.
+    j : int
+        Trial index.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        Absolute local NED [m].
+    """
+    sp = run.read_setpoints(j)
+    arena = run.profile().arena
+    outside = points_outside(sp, arena)
+    if outside.size:
+        k = outside[0]
+        raise TrajectoryError(
+            f"setpoints-{j:03d}.csv: setpoint k = {k} {np.round(sp[k], 3).tolist()} is "
+            f"outside the arena {arena}; not flown"
+        )
+    return sp
+
+
 @dataclass
 class RunSource:
     """Trial source of the flight layer backed by a run directory.
@@ -151,16 +185,7 @@ class RunSource:
         ndarray, shape (N, 3)
             Absolute local NED [m].
         """
-        sp = self.run.read_setpoints(j)
-        profile = self.run.profile()
-        outside = points_outside(sp, profile.arena)
-        if outside.size:
-            k = outside[0]
-            raise TrajectoryError(
-                f"setpoints-{j:03d}.csv: setpoint k = {k} {np.round(sp[k], 3).tolist()} is "
-                f"outside the arena {profile.arena}; not flown"
-            )
-        return sp
+        return flyable_setpoints(self.run, j)
 
     def hover_point_for(self, j: int) -> np.ndarray:
         """The trajectory's start point, where the vehicle hovers before every trial.

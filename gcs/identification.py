@@ -51,7 +51,7 @@ from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogErro
 from gcs.flight.campaign import fly_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
-from gcs.fly import to_record
+from gcs.fly import flyable_setpoints, to_record
 from gcs.io.config import Profile, TrajectorySpec, _Fields, profile_from_dict
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus, atomic_write_text
 from gcs.report import save_figure
@@ -427,15 +427,7 @@ class IdentificationSource:
         -------
         ndarray, shape (N, 3)
         """
-        sp = self.run.read_setpoints(j)
-        arena = self.run.profile().arena
-        bad = points_outside(sp, arena)
-        if bad.size:
-            raise TrajectoryError(
-                f"setpoints-{j:03d}.csv: setpoint k = {int(bad[0])} is outside the arena "
-                f"{arena}; not flown"
-            )
-        return sp
+        return flyable_setpoints(self.run, j)
 
     def hover_point_for(self, j: int) -> np.ndarray:
         """The hover point (identification coordinates are relative to it).
