@@ -279,7 +279,7 @@ def test_excitation_is_independent_per_axis_and_experiment() -> None:
     assert np.allclose(fit[:, 2], center[2]) and np.allclose(val[:, 2], center[2])
     signals = [fit[:, 0], fit[:, 1], val[:, 0], val[:, 1]]
     for s, c in zip(signals, [0, 1, 0, 1], strict=True):
-        assert np.allclose(np.abs(s - center[c]), 0.3)  # a PRBS of +/- amplitude_m
+        assert np.allclose(np.abs(s - center[c]), settings.amplitude_m)  # PRBS of +/- level
     for i in range(4):
         for k in range(i + 1, 4):
             assert abs(np.corrcoef(signals[i], signals[k])[0, 1]) < 0.2
