@@ -89,10 +89,16 @@ def _best_lag_correlation(measured: np.ndarray, commanded: np.ndarray) -> tuple[
 def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     source = CircleSource()
     events: list[object] = []
+    stamps: list[float] = []
+
+    def on_event(event: object) -> None:
+        events.append(event)
+        stamps.append(time.monotonic())
+
     started = time.monotonic()
     with _mock(tmp_path) as mock:
-        asyncio.run(fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event=events.append))
-    assert time.monotonic() - started < 40.0
+        asyncio.run(fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event=on_event))
+    assert time.monotonic() - started < 50.0
     assert source.asked == [0, 1]
     assert [j for j, _ in source.recorded] == [0, 1] and not source.incomplete
     n = source.setpoints.shape[0]
@@ -114,6 +120,12 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     assert TrialProgress in kinds
     texts = [e.text for e in events if isinstance(e, Status)]
     assert texts[-1] == "landed and disarmed"
+    # each trial starts after holding the start point (the initial reset), not before
+    holds = [i for i, e in enumerate(events) if isinstance(e, Status) and "holding" in e.text]
+    starts = [i for i, e in enumerate(events) if isinstance(e, TrialStarted)]
+    assert len(holds) == 2 and all(h < s for h, s in zip(holds, starts, strict=True))
+    for h, s in zip(holds, starts, strict=True):
+        assert stamps[s] - stamps[h] >= SETTINGS.hover_before_trial_s
     assert _final_mode(tmp_path)["armed"] is False
 
 
@@ -121,7 +133,9 @@ def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
     source = CircleSource(duration_s=8.0)
     events: list[object] = []
     started = time.monotonic()
-    with _mock(tmp_path, link_loss_at_s=4.0) as mock:  # noqa: SIM117
+    # 4 s after the mock starts the trial would be under way without the hold before it
+    loss_at_s = 4.0 + SETTINGS.hover_before_trial_s
+    with _mock(tmp_path, link_loss_at_s=loss_at_s) as mock:  # noqa: SIM117
         with pytest.raises((TrialAborted, VehicleError)):
             asyncio.run(
                 fly_campaign(mock.url, source, 1, 0, SETTINGS, T_ILC_S, on_event=events.append)

@@ -49,6 +49,8 @@ def test_sends_per_sample_rejects_non_multiples(rate_hz: float, t_ilc_s: float) 
         {"settle_tolerance_m": float("inf")},
         {"stream_rate_hz": 1.0},
         {"yaw_deg": float("nan")},
+        {"hover_before_trial_s": -1.0},
+        {"hover_before_trial_s": float("inf")},
     ],
 )
 def test_settings_validation(kwargs: dict[str, float]) -> None:
@@ -59,6 +61,14 @@ def test_settings_validation(kwargs: dict[str, float]) -> None:
 def test_settings_accepts_negative_yaw_and_gap_is_two_periods() -> None:
     s = FlightSettings(yaw_deg=-90.0, telemetry_rate_hz=50.0)
     assert s.telemetry_gap_s == pytest.approx(0.04)
+
+
+def test_settings_hold_before_trial_may_be_zero_and_covers_the_loop() -> None:
+    assert FlightSettings(hover_before_trial_s=0.0).hover_before_trial_s == 0.0
+    s = FlightSettings()
+    # default hold (with the settle window) covers the 2 % settling time of eq. (11)'s loop
+    wn, zeta = 1.418, 0.618
+    assert s.settle_time_s + s.hover_before_trial_s >= 4.0 / (zeta * wn)
 
 
 def test_check_setpoints() -> None:

@@ -13,6 +13,7 @@ import pytest
 import yaml
 from synthetic import SHORT, ci_profile
 
+from gcs.flight.settings import FlightSettings
 from gcs.io.runlog import RunDir
 from gcs.mock.config import Faults
 from gcs.mock.process import MockProcess
@@ -124,8 +125,10 @@ def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
 def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: Path) -> None:
     run_path = tmp_path / "run"
     stats = tmp_path / "stats.json"
-    # 4 s after the first OFFBOARD: inside trial 0 (take-off hover and settling come first)
-    faults = Faults(link_loss_at_s=4.0, link_loss_duration_s=2.0)
+    # 4 s after the first OFFBOARD plus the hold before the trial: inside trial 0 (take-off
+    # hover, settling and the hold come first)
+    loss_at_s = 4.0 + FlightSettings().hover_before_trial_s
+    faults = Faults(link_loss_at_s=loss_at_s, link_loss_duration_s=2.0)
     with MockProcess(seed=2, stats_path=stats, faults=faults) as mock:
         code, out = finish(
             gcs(

@@ -5,7 +5,8 @@ setpoint, start offboard at the current position, move to the start point and se
 trial: fly it, hover at its end while ``source.record`` runs (in a worker thread), ask
 ``source.setpoints_for`` for the next sequence (worker thread, still hovering), move to its hover
 point (``source.hover_point_for``: the trajectory's start, where learning assumes the vehicle at
-rest before ``u(0)``) and settle. After the last trial: land and disarm.
+rest before ``u(0)``), settle, and hold it for ``settings.hover_before_trial_s`` so that every
+trial starts from the same state. After the last trial: land and disarm.
 
 Safety: on Ctrl-C (``CancelledError``/``KeyboardInterrupt``), link loss, offboard rejection or any
 other exception after connecting, the vehicle is stopped (:meth:`Vehicle.emergency_stop`:
@@ -254,6 +255,12 @@ async def fly_campaign(
                 )
             emit(Status(f"moving to the start point of trial {j}"))
             await vehicle.goto(hover, settings.transit_speed_m_s)
+            if settings.hover_before_trial_s > 0:
+                # the initial reset of ILC: let the state the previous trial left decay
+                emit(Status(f"holding the start point for {settings.hover_before_trial_s:g} s"))
+                await vehicle.hover_while(
+                    asyncio.sleep(settings.hover_before_trial_s), f"the hold before trial {j}"
+                )
             n = setpoints.shape[0]
             emit(TrialStarted(j, number, iterations, n, n * t_ilc_s))
 
