@@ -25,9 +25,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from mock_learning_offline import fly
+from mock_learning_offline import fly, learn
 
-from gcs.core.learning import learning_step
 from gcs.core.pbsid import identify, natural_frequency_damping, simulate_free, vaf
 from gcs.core.trajectory import sample_eight
 from gcs.errors import ModelError
@@ -37,7 +36,6 @@ from gcs.identification import (
     plan_experiments,
 )
 from gcs.io.config import Profile, load_profile, load_trajectory
-from gcs.learn import learning_inputs
 from gcs.mock.config import MockConfig, load_mock_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,17 +69,9 @@ def eight_response(cfg: MockConfig, scale: float, axis: int) -> complex:
     return complex(cy[0], cy[1]) / complex(cu[0], cu[1])
 
 
-def learn(profile: Profile, cfg: MockConfig, seed: int, trials: int = 4) -> list[float]:
-    """e_pos,j / e_pos,0 [%] for j = 1 .. trials - 1."""
-    ref = sample_eight(SHAPE, profile.t_ilc_s)
-    inputs = learning_inputs(profile, "smoother")
-    sp, states, e = ref.pos_ned_m[:-1].copy(), None, []
-    for j in range(trials):
-        pos = fly(cfg, sp, ref.pos_ned_m[0], profile.t_ilc_s, seed=seed + j)
-        e.append(float(np.hypot(*(pos[1:, :2] - ref.pos_ned_m[1:, :2]).T).mean()))
-        step = learning_step(inputs, ref.pos_ned_m[:, :2], sp[:, :2], pos[:, :2], states)
-        states = step.kilc_states
-        sp = np.column_stack([step.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
+def learn_pct(profile: Profile, cfg: MockConfig, seed: int) -> list[float]:
+    """e_pos,j / e_pos,0 [%] for j = 1..3 (smoother)."""
+    e = learn(cfg, "smoother", trials=4, profile=profile, seed=seed)
     return [round(100 * x / e[0], 2) for x in e[1:]]
 
 
@@ -126,8 +116,8 @@ def phasor(h: complex) -> dict:
 
 def learning_row(profile: Profile) -> dict:
     return {
-        "no_gusts_pct": learn(profile, QUIET, 200),
-        "gust_seeds_pct": [learn(profile, MOCK, 300 + 10 * k) for k in range(3)],
+        "no_gusts_pct": learn_pct(profile, QUIET, 200),
+        "gust_seeds_pct": [learn_pct(profile, MOCK, 300 + 10 * k) for k in range(3)],
     }
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from gcs.core.learning import learning_step
 from gcs.core.trajectory import sample_eight
-from gcs.io.config import load_profile, load_trajectory
+from gcs.io.config import Profile, load_profile, load_trajectory
 from gcs.learn import learning_inputs
 from gcs.mock.config import MockConfig, load_mock_config
 from gcs.mock.physics import QuadPhysics, Target
@@ -45,14 +45,21 @@ def fly(
     return pos
 
 
-def learn(cfg: MockConfig, algorithm: str, trials: int = 8) -> list[float]:
-    profile = load_profile(ROOT / "profiles" / "antx.yaml")
+def learn(
+    cfg: MockConfig,
+    algorithm: str,
+    trials: int = 8,
+    profile: Profile | None = None,
+    seed: int = 100,
+) -> list[float]:
+    """e_pos,j [m] for j = 0 .. trials - 1; trial j flown with gust seed ``seed + j``."""
+    profile = profile or load_profile(ROOT / "profiles" / "antx.yaml")
     ref = sample_eight(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, profile.t_ilc_s)
     inputs = learning_inputs(profile, algorithm)
     sp = ref.pos_ned_m[:-1].copy()
     states, out = None, []
     for j in range(trials):
-        pos = fly(cfg, sp, ref.pos_ned_m[0], profile.t_ilc_s, seed=100 + j)
+        pos = fly(cfg, sp, ref.pos_ned_m[0], profile.t_ilc_s, seed=seed + j)
         err = np.hypot(*(pos[1:, :2] - ref.pos_ned_m[1:, :2]).T).mean()
         out.append(float(err))
         step = learning_step(inputs, ref.pos_ned_m[:, :2], sp[:, :2], pos[:, :2], states)
