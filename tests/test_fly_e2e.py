@@ -40,6 +40,24 @@ def finish(proc: subprocess.Popen) -> tuple[int, str]:
     return proc.returncode, out
 
 
+def fly_two_trials(tmp: Path, trajectory: Path, run: Path, *vehicle: object) -> tuple[int, str]:
+    """``gcs fly <vehicle> --iter 2`` on ``trajectory`` with the CI profile, run to the end."""
+    return finish(
+        gcs(
+            "fly",
+            *vehicle,
+            "--iter",
+            2,
+            "--trajectory",
+            trajectory,
+            "--run",
+            run,
+            "--profile",
+            ci_profile(tmp),
+        )  # fmt: skip
+    )
+
+
 def wait_for_line(proc: subprocess.Popen, text: str) -> list[str]:
     """Read the process's output until a line contains ``text`` (the event we wait for)."""
     seen = []
@@ -64,20 +82,7 @@ def final_state(stats_path: Path) -> dict:
 
 def test_fly_mock_learns_and_reports(tmp_path: Path, tiny: Path) -> None:
     run_path = tmp_path / "run"
-    code, out = finish(
-        gcs(
-            "fly",
-            "--mock",
-            "--iter",
-            2,
-            "--trajectory",
-            tiny,
-            "--run",
-            run_path,
-            "--profile",
-            ci_profile(tmp_path),
-        )
-    )
+    code, out = fly_two_trials(tmp_path, tiny, run_path, "--mock")
     assert code == 0, out
     assert "landed and disarmed" in out
     run = RunDir.open(run_path)
@@ -130,21 +135,7 @@ def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: P
     loss_at_s = 4.0 + FlightSettings().hover_before_trial_s
     faults = Faults(link_loss_at_s=loss_at_s, link_loss_duration_s=2.0)
     with MockProcess(seed=2, stats_path=stats, faults=faults) as mock:
-        code, out = finish(
-            gcs(
-                "fly",
-                "--connect",
-                mock.url,
-                "--iter",
-                2,
-                "--trajectory",
-                tiny,
-                "--run",
-                run_path,
-                "--profile",
-                ci_profile(tmp_path),
-            )  # fmt: skip
-        )
+        code, out = fly_two_trials(tmp_path, tiny, run_path, "--connect", mock.url)
     assert code == 2, out
     assert "landed and disarmed" in out, out
     run = RunDir.open(run_path)
