@@ -12,7 +12,6 @@ Usage: ``.venv/bin/python benchmarks/stream_jitter.py [--duration 20]``
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 import logging
 import sys
@@ -21,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs.flight.campaign import fly_campaign
+from gcs.flight.campaign import run_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.mock.config import Faults
@@ -70,7 +69,7 @@ def run_one(rate_hz: float, t_ilc_s: float, duration_s: float, workdir: Path) ->
     source = CircleSource(duration_s, t_ilc_s)
     stats_path = workdir / f"stats-{rate_hz:g}-{t_ilc_s:g}.json"
     with MockProcess(config_path=None, seed=0, faults=Faults(), stats_path=stats_path) as mock:
-        asyncio.run(fly_campaign(mock.url, source, 1, 0, settings, t_ilc_s))
+        run_campaign(mock.url, source, 1, 0, settings, t_ilc_s)
     rec = source.recording
     assert rec is not None and rec.complete
     arrivals = setpoint_arrivals_s(stats_path)

@@ -131,8 +131,8 @@ def fly(
 
     Safety: Ctrl-C, a lost link, an offboard rejection or any error mid-trial stops streaming,
     holds, lands and disarms; completed trials stay on disk, the interrupted one is marked
-    incomplete, and --resume continues from the last complete trial. Setpoints outside the
-    profile's arena are never sent.
+    incomplete, and --resume continues from the last complete trial. A second Ctrl-C while
+    the vehicle lands is ignored. Setpoints outside the profile's arena are never sent.
 
     Examples: gcs fly --mock --iter 3;
     gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc

@@ -7,7 +7,6 @@ answers from the run directory and learns with :func:`gcs.learn.learn_run`, the 
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -17,7 +16,7 @@ import numpy as np
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trajectory import check_reference, points_outside
 from gcs.errors import ProfileError, RunLogError, TrajectoryError
-from gcs.flight.campaign import fly_campaign
+from gcs.flight.campaign import run_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec
@@ -283,5 +282,5 @@ def fly_run(
     if first > 0 and not (run.path / f"setpoints-{first:03d}.csv").exists():
         raise RunLogError(f"{run.path}: no setpoints for trial {first}; run 'gcs learn' first")
     source = RunSource(run, on_row)
-    asyncio.run(fly_campaign(url, source, iterations, first, settings, run.t_ilc_s, on_event))
+    run_campaign(url, source, iterations, first, settings, run.t_ilc_s, on_event)
     return source

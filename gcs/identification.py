@@ -24,7 +24,6 @@ Data conventions (as everywhere in gcs): row k of a trial holds the setpoint ``u
 
 from __future__ import annotations
 
-import asyncio
 import copy
 import math
 from collections.abc import Callable, Sequence
@@ -48,7 +47,7 @@ from gcs.core.pbsid import (
 )
 from gcs.core.trajectory import Reference, points_outside
 from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogError, TrajectoryError
-from gcs.flight.campaign import fly_campaign
+from gcs.flight.campaign import run_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.fly import flyable_setpoints, to_record
@@ -503,7 +502,7 @@ def fly_identification(
     """
     center = np.asarray(_run_source(run)["center_ned_m"], dtype=float)
     source = IdentificationSource(run, center)
-    asyncio.run(fly_campaign(url, source, 2, 0, settings, run.t_ilc_s, on_event))
+    run_campaign(url, source, 2, 0, settings, run.t_ilc_s, on_event)
 
 
 # --------------------------------------------------------------------------- identification

@@ -127,6 +127,30 @@ def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
     assert last["armed"] is False
 
 
+def test_more_ctrl_c_while_stopping_cannot_leave_the_vehicle_in_the_air(
+    tmp_path: Path, tiny: Path
+) -> None:
+    # an operator who finds the landing slow presses Ctrl-C again, then sends SIGTERM
+    run_path = tmp_path / "run"
+    stats = tmp_path / "stats.json"
+    with MockProcess(seed=3, stats_path=stats) as mock:
+        proc = gcs(
+            "fly", "--connect", mock.url, "--iter", 1, "--trajectory", tiny, "--run", run_path
+        )
+        wait_for_line(proc, "trial 0 started")
+        proc.send_signal(signal.SIGINT)
+        wait_for_line(proc, "aborting")  # printed as the emergency stop begins
+        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signal.SIGTERM)
+        code, out = finish(proc)
+    assert code == 130, out
+    assert "interrupt 2 ignored" in out and "interrupt 3 ignored" in out, out
+    assert "emergency stop: landed and disarmed" in out, out
+    status = RunDir.open(run_path).read_status(0)  # the partial trial is still recorded
+    assert not status.complete and "interrupt" in status.reason
+    assert final_state(stats)["armed"] is False
+
+
 def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: Path) -> None:
     run_path = tmp_path / "run"
     stats = tmp_path / "stats.json"

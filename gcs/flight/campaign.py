@@ -12,7 +12,8 @@ Safety: on Ctrl-C (``CancelledError``/``KeyboardInterrupt``), link loss, offboar
 other exception after connecting, the vehicle is stopped (:meth:`Vehicle.emergency_stop`:
 streaming stops, Hold, land, disarm on the ground); a trial that was in flight is handed to
 ``source.record_incomplete`` with its partial recording; then the exception is re-raised.
-Completed trials were handed to ``source.record`` already.
+Completed trials were handed to ``source.record`` already. :func:`run_campaign` runs a campaign
+from synchronous code (a command line) so that a second Ctrl-C cannot cut that stop short.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from typing import Protocol
 import numpy as np
 
 from gcs.errors import TrajectoryError, TrialAborted, VehicleError
+from gcs.flight.interrupts import run_guarded
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording, TrialRun, check_setpoints
 from gcs.flight.vehicle import Vehicle
@@ -38,6 +40,7 @@ __all__ = [
     "Status",
     "CampaignEvent",
     "fly_campaign",
+    "run_campaign",
 ]
 
 _log = logging.getLogger(__name__)
@@ -294,6 +297,55 @@ async def fly_campaign(
         raise
     finally:
         await vehicle.close()
+
+
+def run_campaign(
+    url: str,
+    source: TrialSource,
+    iterations: int,
+    first_trial: int,
+    settings: FlightSettings,
+    t_ilc_s: float,
+    on_event: EventCallback | None = None,
+) -> None:
+    """Fly a campaign from synchronous code: :func:`fly_campaign` under :func:`run_guarded`.
+
+    The first Ctrl-C (or SIGTERM) cancels the campaign, which stops the vehicle; any further one
+    while it is stopping is reported as a :class:`Status` event and otherwise ignored, so the
+    hold, landing and disarm run to their end (each bounded by the settings' timeouts).
+
+    Parameters
+    ----------
+    url : str
+        MAVSDK connection URL of the vehicle.
+    source : TrialSource
+        Supplies each trial's setpoints and takes each recording.
+    iterations : int
+        Number of trials to fly, >= 1.
+    first_trial : int
+        Index ``j`` of the first trial.
+    settings : FlightSettings
+        Flight settings.
+    t_ilc_s : float
+        ILC sample time [s].
+    on_event : callable, optional
+        Receives the campaign events, and the notice of a repeated Ctrl-C.
+
+    Raises
+    ------
+    KeyboardInterrupt
+        Interrupted by Ctrl-C or SIGTERM; the vehicle was stopped first.
+    VehicleError, TrialAborted
+        As :func:`fly_campaign`.
+    """
+
+    def on_repeat(count: int) -> None:
+        if on_event is not None:
+            on_event(Status(f"interrupt {count} ignored: stopping the vehicle (land, disarm)"))
+
+    run_guarded(
+        fly_campaign(url, source, iterations, first_trial, settings, t_ilc_s, on_event), on_repeat
+    )
 
 
 def _plan(source: TrialSource, j: int) -> tuple[np.ndarray, np.ndarray]:
