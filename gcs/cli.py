@@ -327,22 +327,25 @@ def identify(
         raise typer.BadParameter("must be x, y or both", param_hint="--axis")
     if from_log is not None and (run_dir is not None or mock_config is not None):
         raise typer.BadParameter("--run and --mock-config need a flight, not --from-log")
-    identify_with_display(
-        console=console,
-        err_console=err_console,
-        profile_path=profile,
-        axis=axis,
-        out=out,
-        from_log=from_log,
-        plot=plot,
-        seed=seed,
-        connect=connect,
-        use_mock=mock,
-        mock_config=mock_config,
-        logs=logs,
-        run_path=run_dir,
-        default_profile=DEFAULT_PROFILE,
-    )
+    try:
+        identify_with_display(
+            console=console,
+            err_console=err_console,
+            profile_path=profile,
+            axis=axis,
+            out=out,
+            from_log=from_log,
+            plot=plot,
+            seed=seed,
+            connect=connect,
+            use_mock=mock,
+            mock_config=mock_config,
+            logs=logs,
+            run_path=run_dir,
+            default_profile=DEFAULT_PROFILE,
+        )
+    except KeyboardInterrupt:  # the vehicle was landed first; the run is named above
+        raise typer.Exit(130) from None
 
 
 @app.command()

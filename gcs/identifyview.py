@@ -192,8 +192,12 @@ def identify_with_display(
         )
         progress, on_event = live_progress(console)
         mock_seed = settings.seed if seed is None else seed
-        with vehicle_url(connect, use_mock, mock_config, mock_seed, console) as url, progress:
-            fly_identification(url, run, flight, on_event)
+        try:
+            with vehicle_url(connect, use_mock, mock_config, mock_seed, console) as url, progress:
+                fly_identification(url, run, flight, on_event)
+        except KeyboardInterrupt:
+            console.print(f"interrupted; no profile written. The experiments are in {run.path}")
+            raise
     results = identify_run(run, settings, profile, axis)
     console.print(results_table(results, profile.name))
     for line in model_lines(results):

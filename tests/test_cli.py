@@ -157,3 +157,18 @@ def test_montecarlo_prints_tables_and_writes_json(tmp_path: Path) -> None:
 def test_montecarlo_refuses_bad_levels() -> None:
     result = invoke("montecarlo", "--levels", "0.05,abc")
     assert result.exit_code == 2 and "not a list of numbers" in result.output
+
+
+def test_identify_interrupted_exits_130_and_writes_no_profile(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt  # what run_campaign raises after landing the vehicle
+
+    monkeypatch.setattr("gcs.identifyview.fly_identification", interrupted)
+    run = tmp_path / "ident"
+    result = invoke("identify", "--connect", "udpout://127.0.0.1:9", "--run", run)
+    assert result.exit_code == 130, result.output
+    assert "interrupted; no profile written" in result.output
+    assert (run / "manifest.json").exists()  # the run is kept for the experiments flown
+    assert not (run / "identified.yaml").exists()
