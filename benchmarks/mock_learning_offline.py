@@ -2,9 +2,11 @@
 
 Flies the default eight through ``gcs.mock.physics.QuadPhysics`` directly: setpoint k is
 commanded at k t_ilc, the measured position sampled at k t_ilc, the learning step is the one
-``gcs fly`` runs. Varies only the mock's non-repeatable parts (gusts, mocap noise) and prints,
-per case, e_pos,j / e_pos,0 for j = 0..7 and the repeatability of the vehicle: the RMS
-difference between two flights of identical setpoints with different gust seeds.
+``gcs fly`` runs. Varies the mock's non-repeatable parts (gusts, mocap noise), then, without
+them, takes away its repeatable nonlinear parts (the position-dependent field, the quadratic
+drag) one after the other; ``learning_model_mismatch.py`` goes on from there with exact linear
+loops. Prints, per case, e_pos,j / e_pos,0 for j = 0..7 and the repeatability of the vehicle:
+the RMS difference between two flights of identical setpoints with different gust seeds.
 
 Usage: .venv/bin/python benchmarks/mock_learning_offline.py
 """
@@ -78,6 +80,12 @@ def repeatability_m(cfg: MockConfig) -> float:
 
 def main() -> None:
     base = load_mock_config(ROOT / "profiles" / "mock.yaml")
+    quiet = replace(
+        base,
+        disturbance=replace(base.disturbance, gust_sigma_m_s2=0.0),
+        noise=replace(base.noise, pos_sigma_m=0.0, vel_sigma_m_s=0.0),
+    )
+    no_field = replace(quiet, disturbance=replace(quiet.disturbance, field_amplitude_m_s2=0.0))
     cases = {
         "mock defaults": base,
         "no gusts": replace(base, disturbance=replace(base.disturbance, gust_sigma_m_s2=0.0)),
@@ -87,10 +95,11 @@ def main() -> None:
                 base.disturbance, gust_sigma_m_s2=0.5 * base.disturbance.gust_sigma_m_s2
             ),
         ),
-        "no gusts, no noise": replace(
-            base,
-            disturbance=replace(base.disturbance, gust_sigma_m_s2=0.0),
-            noise=replace(base.noise, pos_sigma_m=0.0, vel_sigma_m_s=0.0),
+        "no gusts, no noise": quiet,
+        # what the repeatable nonlinear parts cost: the field, then the quadratic drag too
+        "no gusts, no noise, no field": no_field,
+        "no gusts, no noise, no field, no quadratic drag": replace(
+            no_field, physics=replace(no_field.physics, drag_quad_1_m=0.0)
         ),
     }
     for name, cfg in cases.items():
