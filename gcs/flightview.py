@@ -78,9 +78,9 @@ def _open_run(
 def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]:
     """A rich progress bar for a campaign and the event callback that drives it.
 
-    Status lines are printed dimmed, each trial start is printed with its length, the bar
-    follows the setpoint index with the live error, and an incomplete trial is printed in red.
-    Use the progress as a context manager around the flight.
+    Status lines are printed dimmed (warnings in yellow), each trial start is printed with its
+    length, the bar follows the setpoint index with the live error, and an incomplete trial is
+    printed in red. Use the progress as a context manager around the flight.
 
     Parameters
     ----------
@@ -105,7 +105,9 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
     task = progress.add_task("waiting", total=1, err="")
 
     def on_event(event: object) -> None:
-        if isinstance(event, Status):
+        if isinstance(event, Status) and event.warning:
+            progress.console.print(f"[bold yellow]warning:[/] {escape(event.text)}")
+        elif isinstance(event, Status):
             progress.console.print(f"[dim]{escape(event.text)}[/]")
         elif isinstance(event, TrialStarted):
             progress.console.print(

@@ -85,6 +85,8 @@ def test_fly_mock_learns_and_reports(tmp_path: Path, tiny: Path) -> None:
     code, out = fly_two_trials(tmp_path, tiny, run_path, "--mock")
     assert code == 0, out
     assert "landed and disarmed" in out
+    # read from the mock over MAVLink's parameter protocol: PX4's default, no link-loss landing
+    assert "warning: NAV_DLL_ACT = 0 (disabled)" in out, out
     run = RunDir.open(run_path)
     assert run.complete_trials() == [0, 1]
     assert (run_path / "setpoints-002.csv").exists()  # learned after the last trial

@@ -28,6 +28,7 @@ import numpy as np
 
 from gcs.errors import TrajectoryError, TrialAborted, VehicleError
 from gcs.flight.interrupts import run_guarded
+from gcs.flight.preflight import LINK_LOSS_PARAMS, link_loss_warnings
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording, TrialRun, check_setpoints
 from gcs.flight.vehicle import Vehicle
@@ -118,9 +119,12 @@ class Status:
     ----------
     text : str
         Human-readable, one line.
+    warning : bool
+        Something the operator should act on or know before going on (shown as a warning).
     """
 
     text: str
+    warning: bool = False
 
 
 @dataclass(frozen=True)
@@ -244,6 +248,8 @@ async def fly_campaign(
     j = first_trial
     try:
         hover, setpoints = await asyncio.to_thread(_plan, source, j)
+        for warning in link_loss_warnings(await vehicle.read_int_params(LINK_LOSS_PARAMS)):
+            emit(Status(warning, warning=True))
         emit(Status("waiting for a valid local position"))
         await vehicle.wait_healthy_local_position()
         altitude_m = -float(hover[2])
@@ -341,7 +347,8 @@ def run_campaign(
 
     def on_repeat(count: int) -> None:
         if on_event is not None:
-            on_event(Status(f"interrupt {count} ignored: stopping the vehicle (land, disarm)"))
+            text = f"interrupt {count} ignored: stopping the vehicle (land, disarm)"
+            on_event(Status(text, warning=True))
 
     run_guarded(
         fly_campaign(url, source, iterations, first_trial, settings, t_ilc_s, on_event), on_repeat

@@ -29,6 +29,7 @@ from mavsdk.asyncio import (
 )
 from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
+from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync
 
 from gcs.errors import VehicleError
@@ -337,6 +338,35 @@ class Vehicle:
             result = getattr(exc, "result", None)
             name = getattr(result, "name", None) or str(exc)
             raise VehicleError(f"{what} failed: {name}") from None
+
+    async def read_int_params(self, names: tuple[str, ...]) -> dict[str, int | None]:
+        """Read integer parameters of the autopilot; None for each one it does not answer.
+
+        Parameters
+        ----------
+        names : tuple of str
+            PX4 parameter names.
+
+        Returns
+        -------
+        dict of str to int or None
+        """
+        if self._system is None:
+            raise VehicleError("reading parameters: not connected")
+        param = ParamAsync(self._system)
+        values: dict[str, int | None] = {}
+        try:
+            for name in names:
+                try:
+                    values[name] = await self._command(
+                        f"read {name}", lambda name=name: param.get_param_int(name)
+                    )
+                except VehicleError as exc:
+                    _log.warning("%s", exc)
+                    values[name] = None
+        finally:
+            param.destroy()
+        return values
 
     # ------------------------------------------------------------------ flight
 
