@@ -6,6 +6,7 @@ Each test starts its own mock process on a free port (``--port 0``) and runs in 
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import socket
 import time
@@ -135,7 +136,10 @@ def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
     started = time.monotonic()
     # 4 s after the mock starts the trial would be under way without the hold before it
     loss_at_s = 4.0 + SETTINGS.hover_before_trial_s
-    with _mock(tmp_path, link_loss_at_s=loss_at_s) as mock:  # noqa: SIM117
+    config = tmp_path / "mock.yaml"  # a vehicle set up to land on a lost link
+    config.write_text("px4:\n  nav_dll_act: 3\n  com_dl_loss_t_s: 3.0\n")
+    faults = Faults(link_loss_at_s=loss_at_s)
+    with MockProcess(config, faults=faults, stats_path=tmp_path / STATS) as mock:  # noqa: SIM117
         with pytest.raises((TrialAborted, VehicleError)):
             asyncio.run(
                 fly_campaign(mock.url, source, 1, 0, SETTINGS, T_ILC_S, on_event=events.append)
@@ -149,9 +153,14 @@ def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
     measured = np.isfinite(rec.pos_ned_m[:, 0])
     assert 0 < measured.sum() < len(measured)  # some of it, not all of it
     assert any(isinstance(e, Status) and e.text.startswith("emergency stop") for e in events)
-    # The link is gone for good, so nothing we send arrives: the mock's offboard-loss failsafe
-    # (COM_OF_LOSS_T) must have taken the vehicle out of OFFBOARD.
-    assert _final_mode(tmp_path)["mode"] != "OFFBOARD"
+    # The link is gone for good, so nothing we send arrives: the vehicle's own failsafes act.
+    # The offboard-loss failsafe (COM_OF_LOSS_T) holds, then the data-link-loss failsafe
+    # (COM_DL_LOSS_T, NAV_DLL_ACT = 3) lands, and the land detector disarms.
+    modes = json.loads((tmp_path / STATS).read_text())["modes"]
+    last_offboard = max(i for i, m in enumerate(modes) if m["mode"] == "OFFBOARD" and m["armed"])
+    armed_modes = [m["mode"] for m in modes[last_offboard + 1 :] if m["armed"]]
+    assert [mode for mode, _ in itertools.groupby(armed_modes)] == ["HOLD", "LAND"], modes
+    assert modes[-1]["armed"] is False, modes
 
 
 def test_cancellation_mid_trial_lands_and_marks_incomplete(tmp_path: Path) -> None:

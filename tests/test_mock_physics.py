@@ -133,3 +133,5 @@ def test_profile_defaults_and_errors(tmp_path) -> None:  # type: ignore[no-untyp
         load_mock_config(bad)
     with pytest.raises(ProfileError, match="initial_mode"):
         mock_config_from_dict({"px4": {"initial_mode": "ACRO"}})
+    with pytest.raises(ProfileError, match=r"px4\.nav_dll_act.*the actions the mock models"):
+        mock_config_from_dict({"px4": {"nav_dll_act": 2}})

@@ -131,3 +131,61 @@ def test_params_bytewise_and_effective() -> None:
     v.update(6.0)
     assert abs(v.physics.pos[2] + 1.5) < 0.15
     assert v.params.get("NO_SUCH") is None and v.params.names == sorted(v.params.names)
+
+
+DL_LOSS_T_S = 2.0
+
+
+def heard_until(action: int, t_last_s: float) -> Vehicle:
+    """Airborne in OFFBOARD with ``NAV_DLL_ACT = action``; GCS heartbeats at 1 Hz until t_last."""
+    cfg = replace(CFG, px4=replace(CFG.px4, nav_dll_act=action, com_dl_loss_t_s=DL_LOSS_T_S))
+    v = Vehicle(cfg)
+    v.arm(True)
+    v.takeoff()
+    t = 0.0
+    while t <= t_last_s:
+        v.update(t)
+        v.on_gcs_heartbeat(t)
+        t += 1.0
+    stream(v, t_last_s, t_last_s + 0.5)
+    assert v.set_mode(Mode.OFFBOARD) is MavResult.ACCEPTED
+    return v
+
+
+def test_data_link_loss_with_nav_dll_act_3_lands_and_disarms() -> None:
+    v = heard_until(3, 6.0)
+    stream(v, v.t_s, 6.0 + DL_LOSS_T_S - 0.05)  # setpoints still arrive, heartbeats do not
+    assert v.mode is Mode.OFFBOARD and not v.data_link_lost
+    stream(v, v.t_s, 6.0 + DL_LOSS_T_S + 0.05)
+    assert v.mode is Mode.LAND and v.data_link_lost
+    stream(v, v.t_s, v.t_s + 1.0)  # the setpoints do not take it back: it keeps landing
+    assert v.mode is Mode.LAND
+    v.update(v.t_s + 10.0)
+    assert v.landed and not v.armed
+    assert any("no connection to ground control, landing" in text for _, text in v.events)
+
+
+def test_data_link_loss_with_nav_dll_act_1_holds_until_the_link_returns() -> None:
+    v = heard_until(1, 6.0)
+    stream(v, v.t_s, 6.0 + DL_LOSS_T_S + 0.05)
+    assert v.mode is Mode.HOLD and v.failsafe and v.data_link_lost
+    stream(v, v.t_s, v.t_s + 1.0)  # setpoints alone do not end a data-link failsafe
+    assert v.mode is Mode.HOLD
+    v.on_gcs_heartbeat(v.t_s)
+    stream(v, v.t_s, v.t_s + 0.1)
+    assert v.mode is Mode.OFFBOARD and not v.failsafe and not v.data_link_lost
+
+
+def test_data_link_loss_with_the_px4_default_changes_nothing() -> None:
+    v = heard_until(0, 6.0)
+    stream(v, v.t_s, 6.0 + 3 * DL_LOSS_T_S)
+    assert v.mode is Mode.OFFBOARD and v.armed and v.data_link_lost
+
+
+def test_no_failsafe_before_a_ground_station_was_ever_heard() -> None:
+    cfg = replace(CFG, px4=replace(CFG.px4, nav_dll_act=3, com_dl_loss_t_s=DL_LOSS_T_S))
+    v = Vehicle(cfg)
+    v.arm(True)
+    v.takeoff()
+    v.update(20.0)
+    assert v.mode is Mode.HOLD and v.armed and not v.data_link_lost

@@ -36,10 +36,14 @@ __all__ = [
     "load_mock_config",
     "mock_config_from_dict",
     "MODES",
+    "DLL_ACTIONS",
 ]
 
 MODES = ("HOLD", "POSCTL")
 """Flight modes the mock may boot in (PX4 v1.16 without RC boots in HOLD, with RC in POSCTL)."""
+
+DLL_ACTIONS = (0, 1, 3)
+"""``NAV_DLL_ACT`` values the mock models: disabled, Hold, Land."""
 
 
 @dataclass(frozen=True)
@@ -245,6 +249,12 @@ class Px4Config:
         Descent speed in LAND [m/s] (``MPC_LAND_SPEED``).
     mpc_tko_speed_m_s : float
         Climb speed in TAKEOFF [m/s] (``MPC_TKO_SPEED``).
+    nav_dll_act : int
+        Data-link-loss action (``NAV_DLL_ACT``): 0 disabled (PX4's default), 1 Hold, 3 Land;
+        the mock models these three.
+    com_dl_loss_t_s : float
+        Data-link-loss timeout [s] (``COM_DL_LOSS_T``): time without a ground station's
+        heartbeat, once one was heard, before ``nav_dll_act`` is taken.
     battery_drain_pct_s : float
         Battery percentage consumed per second while armed [%/s].
     home_lat_deg, home_lon_deg, home_alt_m : float
@@ -262,6 +272,8 @@ class Px4Config:
     land_detect_s: float = 1.0
     mpc_land_speed_m_s: float = 0.7
     mpc_tko_speed_m_s: float = 1.5
+    nav_dll_act: int = 0
+    com_dl_loss_t_s: float = 10.0
     battery_drain_pct_s: float = 0.05
     home_lat_deg: float = 47.3977431
     home_lon_deg: float = 8.5455947
@@ -498,6 +510,12 @@ def _validate(cfg: MockConfig, where: str) -> None:
         ("px4.mis_takeoff_alt_m", cfg.px4.mis_takeoff_alt_m > 0, "must be > 0"),
         ("px4.mpc_land_speed_m_s", cfg.px4.mpc_land_speed_m_s > 0, "must be > 0"),
         ("px4.mpc_tko_speed_m_s", cfg.px4.mpc_tko_speed_m_s > 0, "must be > 0"),
+        (
+            "px4.nav_dll_act",
+            cfg.px4.nav_dll_act in DLL_ACTIONS,
+            "must be 0 (disabled), 1 (Hold) or 3 (Land): the actions the mock models",
+        ),
+        ("px4.com_dl_loss_t_s", cfg.px4.com_dl_loss_t_s > 0, "must be > 0"),
         ("rates.heartbeat_hz", cfg.rates.heartbeat_hz > 0, "must be > 0 (MAVSDK needs it)"),
     ]
     for name, ok, message in checks:

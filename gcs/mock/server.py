@@ -356,6 +356,12 @@ class MockServer:
             # proof of life only: the mock flies position setpoints, not velocity/acceleration
             v.on_setpoint(t, v.setpoint.pos_ned_m, v.setpoint.yaw_rad)
 
+    def _on_heartbeat(self, msg: Any) -> None:
+        if msg.type == mavlink2.MAV_TYPE_GCS:  # not our own echo, not a companion computer
+            t = time.monotonic() - self.t0
+            self.vehicle.update(t)
+            self.vehicle.on_gcs_heartbeat(t)
+
     def _on_command_long(self, msg: Any) -> None:
         if not self._for_me(msg):
             return

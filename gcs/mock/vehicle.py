@@ -22,6 +22,10 @@ Behaviour copied from PX4 v1.16 (commander sources and the SIH capture in
   ``land_detect_s`` of ground contact; auto-disarm ``COM_DISARM_LAND`` later, after which the
   mode returns to the last operator mode that allows arming (OFFBOARD in the capture).
 - Armed on the ground without taking off: auto-disarm after ``COM_DISARM_PRFLT``.
+- Data-link loss: armed and in the air, no ground-station heartbeat for ``COM_DL_LOSS_T``
+  after one was heard takes ``NAV_DLL_ACT``: 0 nothing (PX4's default), 1 Hold (left for
+  OFFBOARD again when setpoints return, like the offboard-loss fallback), 3 Land (stays
+  landing). Other values, which PARAM_SET may store, are not modelled and land.
 - Home is set at arming to the current position.
 """
 
@@ -137,7 +141,8 @@ class Px4Params:
     """PX4 parameters the mock serves, sorted by name as PX4 indexes them.
 
     The ones the mock models (``MIS_TAKEOFF_ALT``, ``COM_OF_LOSS_T``, ``COM_DISARM_LAND``,
-    ``COM_DISARM_PRFLT``, ``MPC_LAND_SPEED``, ``MPC_TKO_SPEED``) take effect when set. The
+    ``COM_DISARM_PRFLT``, ``MPC_LAND_SPEED``, ``MPC_TKO_SPEED``, ``NAV_DLL_ACT``,
+    ``COM_DL_LOSS_T``) take effect when set. The
     others carry the values of the PX4 v1.16 SIH capture so that a GCS reading them sees a
     plausible vehicle; setting them has no effect.
 
@@ -162,7 +167,8 @@ class Px4Params:
             "COM_RC_IN_MODE": (integer, 1),
             "NAV_RCL_ACT": (integer, 2),
             "COM_RCL_EXCEPT": (integer, 0),
-            "NAV_DLL_ACT": (integer, 0),
+            "NAV_DLL_ACT": (integer, p.nav_dll_act),
+            "COM_DL_LOSS_T": (real, p.com_dl_loss_t_s),
             "COM_ARM_WO_GPS": (integer, 1),
             "EKF2_GPS_CTRL": (integer, 7),
             "EKF2_HGT_REF": (integer, 1),
@@ -277,6 +283,8 @@ class Vehicle:
         self._stream_start_t_s = -math.inf
         self.setpoint: Target | None = None
         self.first_offboard_t_s: float | None = None
+        self.last_gcs_heartbeat_t_s: float | None = None
+        self.data_link_lost = False
         self.events: list[tuple[int, str]] = []
         self.mode_log: list[ModeChange] = []
         self.state_changed = False
@@ -366,6 +374,19 @@ class Vehicle:
         self.setpoint = Target(pos_ned_m, yaw)
         if self.mode is Mode.OFFBOARD and self.armed:
             self.physics.command(t_s, self.setpoint)
+
+    def on_gcs_heartbeat(self, t_s: float) -> None:
+        """A ground station's HEARTBEAT arrived: the data link is up.
+
+        Parameters
+        ----------
+        t_s : float
+            Arrival time [s] on the vehicle clock.
+        """
+        self.last_gcs_heartbeat_t_s = t_s
+        if self.data_link_lost:
+            self.data_link_lost = False
+            self.events.append((6, "Data link regained"))
 
     def arm(self, arm: bool, force: bool = False) -> MavResult:
         """MAV_CMD_COMPONENT_ARM_DISARM.
@@ -474,11 +495,13 @@ class Vehicle:
             self.failsafe
             and self.user_mode is Mode.OFFBOARD
             and self.cfg.px4.offboard_resume
+            and not self.data_link_lost
             and self.offboard_signal(t)
         ):
             self.failsafe = False
             self.events.append((6, "Offboard signal regained"))
             self._enter(Mode.OFFBOARD)
+        self._check_data_link(t)
         # land detector
         if self.landed:
             if self.armed and ph.pos[2] < -0.1:
@@ -521,6 +544,29 @@ class Vehicle:
                     self._disarm("Disarmed by auto preflight disarming")
 
     # -- internals ------------------------------------------------------------------------
+    def _check_data_link(self, t: float) -> None:
+        """PX4's data-link-loss failsafe (``COM_DL_LOSS_T``, ``NAV_DLL_ACT``)."""
+        heard = self.last_gcs_heartbeat_t_s
+        if (
+            self.data_link_lost
+            or heard is None
+            or not self.armed
+            or self.landed
+            or t - heard <= self.params["COM_DL_LOSS_T"]
+        ):
+            return
+        self.data_link_lost = True
+        action = int(self.params["NAV_DLL_ACT"])
+        if action == 0:
+            self.events.append((4, "No connection to the ground control station"))
+        elif action == 1:
+            self.failsafe = True
+            self.events.append((4, "Failsafe activated: no connection to ground control, holding"))
+            self._enter(Mode.HOLD)
+        else:
+            self.events.append((4, "Failsafe activated: no connection to ground control, landing"))
+            self.set_mode(Mode.LAND)
+
     def _disarm(self, reason: str) -> None:
         self._armed_total_s += self.t_s - self.t_armed_s
         self.armed = False
