@@ -69,7 +69,7 @@ async def _guarded(main: Coroutine[Any, Any, T], on_repeat: Callable[[int], None
         elif on_repeat is not None and not task.done():
             on_repeat(count)
 
-    previous = {}
+    previous: dict[signal.Signals, Any] = {}
     for sig in STOP_SIGNALS:
         handler = signal.getsignal(sig)
         try:
