@@ -50,7 +50,7 @@ Algorithm = Annotated[
 
 
 def one_line_errors(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Report a GcsError as one line on stderr and exit with code 2."""
+    """Report a GcsError as one line on stderr and exit with code 2; Ctrl-C exits with 130."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -61,6 +61,8 @@ def one_line_errors(func: Callable[..., Any]) -> Callable[..., Any]:
                 f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True
             )
             raise typer.Exit(2) from None
+        except KeyboardInterrupt:  # a flight landed the vehicle and said where its run is
+            raise typer.Exit(130) from None
 
     return wrapper
 
@@ -144,23 +146,20 @@ def fly(
         raise typer.BadParameter("give exactly one of --mock and --connect")
     if resume is not None and run_dir is not None:
         raise typer.BadParameter("give at most one of --run and --resume")
-    try:
-        fly_with_display(
-            console=console,
-            iterations=iterations,
-            connect=connect,
-            mock_config=mock_config,
-            seed=seed,
-            profile_path=profile,
-            trajectory_path=trajectory,
-            algorithm=algorithm,
-            run_path=run_dir,
-            resume=resume,
-            logs=logs,
-            use_mock=mock,
-        )
-    except KeyboardInterrupt:  # the vehicle was landed first; the hint is already printed
-        raise typer.Exit(130) from None
+    fly_with_display(
+        console=console,
+        iterations=iterations,
+        connect=connect,
+        mock_config=mock_config,
+        seed=seed,
+        profile_path=profile,
+        trajectory_path=trajectory,
+        algorithm=algorithm,
+        run_path=run_dir,
+        resume=resume,
+        logs=logs,
+        use_mock=mock,
+    )
 
 
 @app.command()
@@ -327,25 +326,22 @@ def identify(
         raise typer.BadParameter("must be x, y or both", param_hint="--axis")
     if from_log is not None and (run_dir is not None or mock_config is not None):
         raise typer.BadParameter("--run and --mock-config need a flight, not --from-log")
-    try:
-        identify_with_display(
-            console=console,
-            err_console=err_console,
-            profile_path=profile,
-            axis=axis,
-            out=out,
-            from_log=from_log,
-            plot=plot,
-            seed=seed,
-            connect=connect,
-            use_mock=mock,
-            mock_config=mock_config,
-            logs=logs,
-            run_path=run_dir,
-            default_profile=DEFAULT_PROFILE,
-        )
-    except KeyboardInterrupt:  # the vehicle was landed first; the run is named above
-        raise typer.Exit(130) from None
+    identify_with_display(
+        console=console,
+        err_console=err_console,
+        profile_path=profile,
+        axis=axis,
+        out=out,
+        from_log=from_log,
+        plot=plot,
+        seed=seed,
+        connect=connect,
+        use_mock=mock,
+        mock_config=mock_config,
+        logs=logs,
+        run_path=run_dir,
+        default_profile=DEFAULT_PROFILE,
+    )
 
 
 @app.command()
