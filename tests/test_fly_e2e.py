@@ -153,6 +153,44 @@ def test_more_ctrl_c_while_stopping_cannot_leave_the_vehicle_in_the_air(
     assert final_state(stats)["armed"] is False
 
 
+def test_low_battery_before_a_trial_lands_and_keeps_the_run_resumable(
+    tmp_path: Path, tiny: Path
+) -> None:
+    # a battery that drains 3 %/s armed: ~75 % when trial 0 starts, ~50 % before trial 1
+    profile = yaml.safe_load(ci_profile(tmp_path).read_text())
+    profile["flight"]["min_battery_pct"] = 60
+    profile_path = tmp_path / "low-battery.yaml"
+    profile_path.write_text(yaml.safe_dump(profile))
+    mock_config = tmp_path / "mock.yaml"
+    mock_config.write_text("px4:\n  battery_drain_pct_s: 3.0\n")
+    run_path = tmp_path / "run"
+    stats = tmp_path / "stats.json"
+    with MockProcess(mock_config, seed=4, stats_path=stats) as mock:
+        code, out = finish(
+            gcs(
+                "fly",
+                "--connect",
+                mock.url,
+                "--iter",
+                2,
+                "--trajectory",
+                tiny,
+                "--run",
+                run_path,
+                "--profile",
+                profile_path,
+            )
+        )
+    assert code == 2, out
+    assert "before trial 1, below flight.min_battery_pct (60 %)" in out, out
+    assert "landed and disarmed" in out, out
+    run = RunDir.open(run_path)
+    assert run.complete_trials() == [0]
+    assert not (run_path / "trial-001.json").exists()  # never started: nothing to mark
+    assert run.next_trial() == 1 and (run_path / "setpoints-001.csv").exists()
+    assert final_state(stats)["armed"] is False
+
+
 def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: Path) -> None:
     run_path = tmp_path / "run"
     stats = tmp_path / "stats.json"

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -42,6 +43,7 @@ __all__ = [
     "CampaignEvent",
     "fly_campaign",
     "run_campaign",
+    "check_battery",
 ]
 
 _log = logging.getLogger(__name__)
@@ -252,6 +254,7 @@ async def fly_campaign(
             emit(Status(warning, warning=True))
         emit(Status("waiting for a valid local position"))
         await vehicle.wait_healthy_local_position()
+        check_battery(vehicle.battery_pct, settings.min_battery_pct, "taking off")
         altitude_m = -float(hover[2])
         emit(Status(f"arming and taking off to {altitude_m:.1f} m"))
         await vehicle.arm_and_takeoff(altitude_m)
@@ -262,6 +265,7 @@ async def fly_campaign(
                 hover, setpoints = await vehicle.hover_while(
                     asyncio.to_thread(_plan, source, j), f"setpoints of trial {j}"
                 )
+            check_battery(vehicle.battery_pct, settings.min_battery_pct, f"trial {j}")
             emit(Status(f"moving to the start point of trial {j}"))
             await vehicle.goto(hover, settings.transit_speed_m_s)
             if settings.hover_before_trial_s > 0:
@@ -362,6 +366,30 @@ def _plan(source: TrialSource, j: int) -> tuple[np.ndarray, np.ndarray]:
     if not np.all(np.isfinite(hover)):
         raise TrajectoryError(f"hover point of trial {j} is not finite: {hover.tolist()}")
     return hover, setpoints
+
+
+def check_battery(level_pct: float, min_pct: float, before: str) -> None:
+    """Refuse to go on with less charge than ``min_pct`` (the campaign's stop then lands).
+
+    Parameters
+    ----------
+    level_pct : float
+        Remaining charge the battery reports [%]; NaN (not reported) passes.
+    min_pct : float
+        ``FlightSettings.min_battery_pct`` [%].
+    before : str
+        What would come next, for the message ("taking off", "trial 3").
+
+    Raises
+    ------
+    VehicleError
+        One line naming the level, the setting and what to do.
+    """
+    if math.isfinite(level_pct) and level_pct < min_pct:
+        raise VehicleError(
+            f"battery at {level_pct:.0f} % before {before}, below flight.min_battery_pct "
+            f"({min_pct:g} %): swap it and continue with --resume"
+        )
 
 
 def _describe(exc: BaseException) -> str:

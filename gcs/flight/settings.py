@@ -10,7 +10,7 @@ from gcs.errors import ProfileError
 __all__ = ["FlightSettings"]
 
 #: Fields not required to be positive (checked on their own).
-_SIGNED = ("yaw_deg", "hover_before_trial_s")
+_SIGNED = ("yaw_deg", "hover_before_trial_s", "min_battery_pct")  # zero allowed
 
 
 @dataclass(frozen=True)
@@ -66,6 +66,13 @@ class FlightSettings:
         before leaving it to its own failsafe [s].
     yaw_deg : float
         Constant yaw of all position setpoints [deg, NED, 0 = north].
+    min_battery_pct : float
+        Take off and start each trial only with at least this much charge left, as the
+        battery reports it [%] (0 = no check; a battery that reports no level is not checked).
+        Below it the campaign lands with a one-line error and keeps the completed trials:
+        swap the battery and ``--resume``. The default leaves a trial and a landing of margin
+        above PX4's own low-battery failsafe (``BAT_LOW_THR`` 15 %, ``BAT_CRIT_THR`` 7 %),
+        which would otherwise end a trial half-way.
     """
 
     stream_rate_hz: float = 60.0
@@ -84,12 +91,15 @@ class FlightSettings:
     max_telemetry_age_s: float = 0.5
     link_regain_s: float = 10.0
     yaw_deg: float = 0.0
+    min_battery_pct: float = 30.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
             if f.name == "yaw_deg" and not math.isfinite(value):
                 raise ProfileError(f"flight.{f.name}: must be finite, got {value}")
+            if f.name == "min_battery_pct" and not 0 <= value <= 100:
+                raise ProfileError(f"flight.{f.name}: must be in [0, 100], got {value}")
             if f.name == "hover_before_trial_s" and not (math.isfinite(value) and value >= 0):
                 raise ProfileError(f"flight.{f.name}: must be finite and >= 0, got {value}")
             if f.name not in _SIGNED and not (math.isfinite(value) and value > 0):

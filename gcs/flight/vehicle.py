@@ -119,6 +119,7 @@ class Vehicle:
         self.landed_state: LandedState = LandedState.UNKNOWN
         self.connected: bool = False
         self.local_position_ok: bool = False
+        self.battery_pct: float = math.nan  # remaining charge [%]; NaN until reported
         self.target_ned_m: np.ndarray | None = None
         self._streaming_stopped = False
         self._offboard_started = False
@@ -178,6 +179,7 @@ class Vehicle:
             self._watch_armed,
             self._watch_landed_state,
             self._watch_health,
+            self._watch_battery,
         ):
             self._tasks.append(asyncio.create_task(watch(), name=f"gcs-{watch.__name__}"))
         telemetry = self._telemetry
@@ -260,6 +262,11 @@ class Vehicle:
             if health.is_local_position_ok != self.local_position_ok:
                 self.local_position_ok = health.is_local_position_ok
                 self._notify()
+
+    async def _watch_battery(self) -> None:
+        assert self._telemetry is not None
+        async for battery in self._telemetry.subscribe_battery():
+            self.battery_pct = float(battery.remaining_percent)
 
     @contextlib.contextmanager
     def record_telemetry(self) -> Iterator[list[TelemetrySample]]:
