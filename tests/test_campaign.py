@@ -13,6 +13,7 @@ from gcs.flight.campaign import check_battery
 def test_enough_charge_an_unreported_level_or_no_limit_pass() -> None:
     check_battery(30.0, 30.0, "trial 1")
     check_battery(math.nan, 30.0, "taking off")
+    check_battery(-1.0, 30.0, "taking off")  # MAVLink's "not reported"
     check_battery(0.0, 0.0, "trial 1")
 
 

@@ -374,7 +374,8 @@ def check_battery(level_pct: float, min_pct: float, before: str) -> None:
     Parameters
     ----------
     level_pct : float
-        Remaining charge the battery reports [%]; NaN (not reported) passes.
+        Remaining charge the battery reports [%]; NaN or negative (MAVLink's -1: not
+        reported) passes.
     min_pct : float
         ``FlightSettings.min_battery_pct`` [%].
     before : str
@@ -385,7 +386,7 @@ def check_battery(level_pct: float, min_pct: float, before: str) -> None:
     VehicleError
         One line naming the level, the setting and what to do.
     """
-    if math.isfinite(level_pct) and level_pct < min_pct:
+    if math.isfinite(level_pct) and 0.0 <= level_pct < min_pct:
         raise VehicleError(
             f"battery at {level_pct:.0f} % before {before}, below flight.min_battery_pct "
             f"({min_pct:g} %): swap it and continue with --resume"
