@@ -68,6 +68,16 @@ def wait_for_line(proc: subprocess.Popen, text: str) -> list[str]:
     raise AssertionError(f"'{text}' never printed; output:\n{''.join(seen)}")
 
 
+def interrupted_flight(url: str, trajectory: Path, run: Path, iterations: int, at: str):
+    """``gcs fly --connect url`` sent Ctrl-C once ``at`` is printed; the process, still running."""
+    proc = gcs(
+        "fly", "--connect", url, "--iter", iterations, "--trajectory", trajectory, "--run", run
+    )
+    wait_for_line(proc, at)
+    proc.send_signal(signal.SIGINT)
+    return proc
+
+
 @pytest.fixture
 def tiny(tmp_path: Path) -> Path:
     path = tmp_path / "tiny.yaml"
@@ -106,11 +116,7 @@ def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
     run_path = tmp_path / "run"
     stats = tmp_path / "stats.json"
     with MockProcess(seed=1, stats_path=stats) as mock:
-        proc = gcs(
-            "fly", "--connect", mock.url, "--iter", 2, "--trajectory", tiny, "--run", run_path
-        )
-        wait_for_line(proc, "trial 1 started")
-        proc.send_signal(signal.SIGINT)
+        proc = interrupted_flight(mock.url, tiny, run_path, 2, at="trial 1 started")
         code, out = finish(proc)
         assert code != 0, out
         assert "landed and disarmed" in out, out
@@ -136,11 +142,7 @@ def test_more_ctrl_c_while_stopping_cannot_leave_the_vehicle_in_the_air(
     run_path = tmp_path / "run"
     stats = tmp_path / "stats.json"
     with MockProcess(seed=3, stats_path=stats) as mock:
-        proc = gcs(
-            "fly", "--connect", mock.url, "--iter", 1, "--trajectory", tiny, "--run", run_path
-        )
-        wait_for_line(proc, "trial 0 started")
-        proc.send_signal(signal.SIGINT)
+        proc = interrupted_flight(mock.url, tiny, run_path, 1, at="trial 0 started")
         wait_for_line(proc, "aborting")  # printed as the emergency stop begins
         proc.send_signal(signal.SIGINT)
         proc.send_signal(signal.SIGTERM)

@@ -142,9 +142,8 @@ class Px4Params:
 
     The ones the mock models (``MIS_TAKEOFF_ALT``, ``COM_OF_LOSS_T``, ``COM_DISARM_LAND``,
     ``COM_DISARM_PRFLT``, ``MPC_LAND_SPEED``, ``MPC_TKO_SPEED``, ``NAV_DLL_ACT``,
-    ``COM_DL_LOSS_T``) take effect when set. The
-    others carry the values of the PX4 v1.16 SIH capture so that a GCS reading them sees a
-    plausible vehicle; setting them has no effect.
+    ``COM_DL_LOSS_T``) take effect when set. The others carry the values of the PX4 v1.16 SIH
+    capture so that a GCS reading them sees a plausible vehicle; setting them has no effect.
 
     Parameters
     ----------
