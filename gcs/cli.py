@@ -136,8 +136,11 @@ def fly(
     incomplete, and --resume continues from the last complete trial. A second Ctrl-C while
     the vehicle lands is ignored. Setpoints outside the profile's arena are never sent.
 
-    Examples: gcs fly --mock --iter 3;
-    gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc
+    Examples:
+
+        gcs fly --mock --iter 3
+
+        gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc
     """
     from gcs.flightview import fly_with_display
 
@@ -315,8 +318,11 @@ def identify(
     Too little data, a constant or non-exciting input, NaNs or an incomplete trial are
     refused with one line and exit code 2; no profile is written then.
 
-    Examples: gcs identify --mock --out profiles/mock-identified.yaml --plot plots/;
-    gcs identify --from-log logs/latest --axis x --out x-only.yaml
+    Examples:
+
+        gcs identify --mock --out profiles/mock-identified.yaml --plot plots/
+
+        gcs identify --from-log logs/latest --axis x --out x-only.yaml
     """
     from gcs.identifyview import identify_with_display
 
