@@ -116,6 +116,8 @@ def from_transfer_function(
     """
     num = np.atleast_1d(np.asarray(num, dtype=float))
     den = np.atleast_1d(np.asarray(den, dtype=float))
+    if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
+        raise ModelError(f"num and den must be finite, got num={num.tolist()} den={den.tolist()}")
     num = np.trim_zeros(num, "f")
     den = np.trim_zeros(den, "f")
     if den.size == 0 or num.size == 0:
