@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from gcs.core.metrics import epos
-from gcs.core.model import from_transfer_function, simulate
+from gcs.core.model import DiscreteModel, simulate
 from gcs.core.trajectory import EightShape, sample_eight
 from gcs.io.config import load_profile, load_trajectory
 
@@ -34,9 +34,9 @@ VARIANTS: tuple[dict[str, float], ...] = (
 )
 
 
-def initial_error(shape: EightShape, t_ilc_s: float) -> dict[str, float]:
-    """Duration, vmax, amax and e_pos,0 of eq. (11) flying ``shape`` with U_0 = reference."""
-    model = from_transfer_function([0.08, 1.94], [1.0, 1.752, 2.01], 0.25, t_ilc_s)
+def initial_error(shape: EightShape, model: DiscreteModel) -> dict[str, float]:
+    """Duration, vmax, amax and e_pos,0 of ``model`` flying ``shape`` with U_0 = reference."""
+    t_ilc_s = model.dt_s
     r = sample_eight(shape, t_ilc_s).pos_ned_m[:, :2]
     y = r[0] + simulate(model, r[:-1] - r[0])  # from hover at the start point
     v = np.diff(r, axis=0) / t_ilc_s
@@ -50,10 +50,10 @@ def initial_error(shape: EightShape, t_ilc_s: float) -> dict[str, float]:
 
 
 def main() -> None:
-    t_ilc_s = load_profile(ROOT / "profiles" / "antx.yaml").t_ilc_s
+    model = load_profile(ROOT / "profiles" / "antx.yaml").model_x  # eq. (11)
     shape = load_trajectory(ROOT / "trajectories" / "eight.yaml").shape
     for changed in VARIANTS:
-        row = {"changed": changed, **initial_error(replace(shape, **changed), t_ilc_s)}
+        row = {"changed": changed, **initial_error(replace(shape, **changed), model)}
         print(json.dumps(row))
 
 
