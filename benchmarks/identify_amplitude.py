@@ -27,14 +27,14 @@ from pathlib import Path
 import numpy as np
 from mock_learning_offline import fly, learn
 
-from gcs.core.pbsid import identify, natural_frequency_damping, simulate_free, vaf
-from gcs.core.trajectory import sample_eight
-from gcs.errors import ModelError
-from gcs.identification import (
+from gcs.app.identify import (
     frequency_response,
     identification_settings,
     plan_experiments,
 )
+from gcs.core.pbsid import identify, natural_frequency_damping, simulate_free, vaf
+from gcs.core.trajectory import sample_eight
+from gcs.errors import ModelError
 from gcs.io.config import Profile, load_profile, load_trajectory
 from gcs.mock.config import MockConfig, load_mock_config
 

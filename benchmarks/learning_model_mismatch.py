@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
+from gcs.app.learn import learning_inputs
 from gcs.core.learning import learning_step
 from gcs.core.model import DiscreteModel, from_transfer_function, simulate
 from gcs.core.trajectory import sample_eight
 from gcs.io.config import Profile, load_profile, load_trajectory
-from gcs.learn import learning_inputs
 
 ROOT = Path(__file__).resolve().parents[1]
 EQ11_NUM, EQ11_DEN, EQ11_DELAY_S = [0.08, 1.94], [1.0, 1.752, 2.01], 0.25

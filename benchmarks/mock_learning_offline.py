@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
+from gcs.app.learn import learning_inputs
 from gcs.core.learning import learning_step
 from gcs.core.trajectory import sample_eight
 from gcs.io.config import Profile, load_profile, load_trajectory
-from gcs.learn import learning_inputs
 from gcs.mock.config import MockConfig, load_mock_config
 from gcs.mock.physics import QuadPhysics, Target
 

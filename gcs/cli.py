@@ -142,7 +142,7 @@ def fly(
 
         gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc
     """
-    from gcs.flightview import fly_with_display
+    from gcs.app.fly_view import fly_with_display
 
     _check_algorithm(algorithm)
     if mock == (connect is not None):
@@ -184,8 +184,8 @@ def learn(
 
     Example: gcs learn logs/latest
     """
+    from gcs.app.learn import learn_run
     from gcs.io.runlog import RunDir
-    from gcs.learn import learn_run
 
     _check_algorithm(algorithm)
     run = RunDir.open(run_dir)
@@ -221,8 +221,8 @@ def report(
 
     Example: gcs report logs/latest --plot plots/
     """
+    from gcs.app.report import metrics_json, metrics_table, run_metrics, write_plots
     from gcs.io.runlog import RunDir
-    from gcs.report import metrics_json, metrics_table, run_metrics, write_plots
 
     run = RunDir.open(run_dir)
     rows = run_metrics(run)
@@ -324,7 +324,7 @@ def identify(
 
         gcs identify --from-log logs/latest --axis x --out x-only.yaml
     """
-    from gcs.identifyview import identify_with_display
+    from gcs.app.identify_view import identify_with_display
 
     if sum((mock, connect is not None, from_log is not None)) != 1:
         raise typer.BadParameter("give exactly one of --mock, --connect and --from-log")
@@ -387,9 +387,9 @@ def montecarlo(
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from rich.progress import Progress
 
+    from gcs.app.study_view import study_json, study_tables
     from gcs.core.montecarlo import StudySettings, run_study
     from gcs.io.runlog import atomic_write_text
-    from gcs.studyview import study_json, study_tables
 
     try:
         level_values = tuple(float(v) for v in levels.split(",") if v.strip())

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
+from gcs.app.learn import trial_errors
 from gcs.core.model import DiscreteModel, from_transfer_function, simulate
 from gcs.io.config import Profile, load_profile, load_trajectory, trajectory_from_dict
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
-from gcs.learn import trial_errors
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = {
@@ -65,7 +65,7 @@ def fly_synthetic(run: RunDir, j: int, seed: int = 0) -> TrialRecord:
 
 def make_run(tmp: Path, algorithm: str = "smoother", trials: int = 1) -> RunDir:
     """A run of the tiny eight with ``trials`` simulated complete trials and learning between."""
-    from gcs.learn import learn_run
+    from gcs.app.learn import learn_run
 
     run = RunDir.create(tmp, profile(), trajectory_from_dict(SHORT), algorithm, run_id="run")
     for j in range(trials):

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from synthetic import make_run, true_plants
 
+from gcs.app.fly import RunSource, flight_settings, prepare_run, to_record
 from gcs.core.model import simulate
 from gcs.errors import ProfileError, TrajectoryError
 from gcs.flight.trial import TrialRecording
-from gcs.fly import RunSource, flight_settings, prepare_run, to_record
 from gcs.io.config import profile_from_dict
 from gcs.io.runlog import RunDir
 

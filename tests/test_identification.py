@@ -13,11 +13,7 @@ import yaml
 from synthetic import ROOT
 from typer.testing import CliRunner
 
-from gcs.cli import app
-from gcs.core.model import from_transfer_function, markov_parameters, simulate
-from gcs.core.pbsid import continuous_poles
-from gcs.errors import ProfileError, TrajectoryError
-from gcs.identification import (
+from gcs.app.identify import (
     IdentifySettings,
     create_identification_run,
     frequency_response,
@@ -25,6 +21,10 @@ from gcs.identification import (
     identify_run,
     plan_experiments,
 )
+from gcs.cli import app
+from gcs.core.model import from_transfer_function, markov_parameters, simulate
+from gcs.core.pbsid import continuous_poles
+from gcs.errors import ProfileError, TrajectoryError
 from gcs.io.config import load_profile, profile_from_dict
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
 
@@ -148,8 +148,8 @@ def test_the_identified_profile_flies_learning(run: RunDir, tmp_path: Path) -> N
     """``gcs fly --profile`` uses it as is: the learning step runs on a run made with it."""
     from synthetic import SHORT, fly_synthetic
 
+    from gcs.app.learn import learn_run
     from gcs.io.config import trajectory_from_dict
-    from gcs.learn import learn_run
 
     out = tmp_path / "id.yaml"
     assert invoke("identify", "--from-log", run.path, "--out", out).exit_code == 0

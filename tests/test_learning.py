@@ -1,4 +1,4 @@
-"""Tests of the learning step (gcs.core.learning) and of learning on a run (gcs.learn)."""
+"""Tests of the learning step (gcs.core.learning) and of learning on a run (gcs.app.learn)."""
 
 from __future__ import annotations
 
@@ -10,13 +10,13 @@ import pytest
 import yaml
 from synthetic import ROOT, SHORT, fly_synthetic, profile
 
+from gcs.app.learn import learn_run, learning_inputs, trial_errors
 from gcs.core.learning import learning_step
 from gcs.core.model import lifted_matrix, relative_degree, simulate
 from gcs.core.trajectory import sample_eight
 from gcs.errors import RunLogError
 from gcs.io.config import profile_from_dict, trajectory_from_dict
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
-from gcs.learn import learn_run, learning_inputs, trial_errors
 
 
 def fly_perfect(run: RunDir, j: int, disturbance: bool = False) -> TrialRecord:

@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from gcs.identification import (
+from gcs.app.identify import (
     AxisResult,
     create_identification_run,
     fly_identification,
@@ -172,8 +172,8 @@ def identify_with_display(
             profile, where = load_profile(profile_path), str(profile_path)
         settings = identification_settings(profile, where)
     else:
-        from gcs.flightview import live_progress, vehicle_url
-        from gcs.fly import flight_settings
+        from gcs.app.fly import flight_settings
+        from gcs.app.fly_view import live_progress, vehicle_url
 
         path = profile_path or default_profile
         profile, where = load_profile(path), str(path)

@@ -9,10 +9,10 @@ from typing import Any
 from rich.markup import escape
 from rich.table import Table
 
+from gcs.app.learn import trial_errors
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.errors import RunLogError
 from gcs.io.runlog import RunDir, TrialRecord
-from gcs.learn import trial_errors
 
 __all__ = [
     "run_metrics",

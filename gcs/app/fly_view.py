@@ -10,13 +10,13 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+from gcs.app.fly import flight_settings, fly_run, prepare_run
+from gcs.app.report import metrics_table
 from gcs.core.metrics import IterationMetrics
 from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
-from gcs.fly import flight_settings, fly_run, prepare_run
 from gcs.io.config import load_profile, load_trajectory
 from gcs.io.runlog import RunDir
-from gcs.report import metrics_table
 
 __all__ = ["fly_with_display", "live_progress", "vehicle_url"]
 
@@ -207,7 +207,7 @@ def fly_with_display(
     except GcsError as exc:
         console.print(f"[dim]completed trials are in {run.path}[/]")
         raise exc
-    from gcs.report import run_metrics
+    from gcs.app.report import run_metrics
 
     console.print(metrics_table(run_metrics(run), f"{run.path.name} ({run.algorithm})"))
     return run

@@ -1,7 +1,7 @@
 """``gcs fly``: a run directory as the flight layer's trial source, and the live display.
 
 The flight layer asks for "the next sequence" and hands back recordings; :class:`RunSource`
-answers from the run directory and learns with :func:`gcs.learn.learn_run`, the same function
+answers from the run directory and learns with :func:`gcs.app.learn.learn_run`, the same function
 ``gcs learn`` calls. Everything here runs in worker threads while the vehicle hovers.
 """
 
@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gcs.app.learn import learn_run, trial_errors
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trajectory import check_reference, points_outside
 from gcs.errors import ProfileError, RunLogError, TrajectoryError
@@ -21,7 +22,6 @@ from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
-from gcs.learn import learn_run, trial_errors
 
 __all__ = [
     "RunSource",

@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from gcs.app.fly import flyable_setpoints, to_record
+from gcs.app.report import save_figure
 from gcs.core.excitation import multisine, prbs
 from gcs.core.model import DiscreteModel
 from gcs.core.pbsid import (
@@ -50,10 +52,8 @@ from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogErro
 from gcs.flight.campaign import run_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
-from gcs.fly import flyable_setpoints, to_record
 from gcs.io.config import Profile, TrajectorySpec, _Fields, profile_from_dict
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus, atomic_write_text
-from gcs.report import save_figure
 
 __all__ = [
     "AXES",
@@ -452,7 +452,7 @@ class IdentificationSource:
         recording : TrialRecording
             The complete recording.
         """
-        from gcs.learn import trial_errors
+        from gcs.app.learn import trial_errors
 
         record = _to_record(self.run, j, recording)
         e, m = trial_errors(record)
