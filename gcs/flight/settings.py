@@ -39,12 +39,36 @@ class FlightSettings:
         Guard around each single MAVSDK command (arm, land, offboard start/stop...) [s]. MAVSDK
         itself gives up after 2 s without an ACK; this bounds the wait if it does not.
     settle_tolerance_m : float
-        A hover counts as settled when the measured position stays within this distance of the
-        target [m].
+        Smallest settle tolerance on the distance from the target [m]. The tolerance in use
+        is derived from the hover measured before the first trial (``gcs.flight.hover``:
+        1.5 times the largest distance seen), never below this. Also the altitude
+        tolerance of the take-off.
+    settle_speed_m_s : float
+        Smallest settle tolerance on the speed (displacement over 1 s) [m/s]; the one in use
+        is 1.5 times the measured hover's 95th-percentile speed, never below this.
     settle_time_s : float
-        ... for this long without interruption [s].
+        A hover counts as settled when distance and speed have stayed within their
+        tolerances for this long without interruption [s, vehicle time].
     settle_timeout_s : float
-        Time allowed for settling after a move before it is an error [s].
+        Time allowed for settling after a move [s]. When it runs out the hover of that time
+        is judged like the first one: a vehicle that hovers is flown on (with its tolerances
+        widened to the new measurement, and a warning); one that drifts, oscillates or
+        hovers beyond ``hover_max_offset_m`` is an error.
+    hover_measure_s : float
+        Length of the hover measured at the start point before the first trial of a
+        session, after the ``hover_before_trial_s`` hold [s, vehicle time]. It gives the
+        settle tolerances and the wander reported to the operator. GPS wander has
+        correlation times of several seconds: measure at least 10 s on such a vehicle.
+    hover_max_offset_m : float
+        A vehicle whose hover gets further than this from its setpoint is refused [m]. The
+        GPS-navigated PX4 SITL vehicle of ``shared/data/px4-sitl`` reached 0.98 m.
+    hover_max_drift_m_s : float
+        A hover whose least-squares trend moves away from the setpoint faster than this is
+        refused as drifting [m/s]. PX4 SITL with GPS (``shared/``): up to 0.14 m/s over its
+        8 s hovers, up to 0.22 m/s over the 1 s hovers that start its trials.
+    hover_max_oscillation_m : float
+        A hover with a sustained oscillation (three or more cycles in the window, half of
+        the motion or more) of larger amplitude than this is refused [m].
     hover_before_trial_s : float
         Hover at the start point for this long after settling, before each trial starts [s]
         (0 = start at once). ILC assumes every trial starts from the same state (the paper's
@@ -83,8 +107,13 @@ class FlightSettings:
     land_timeout_s: float = 60.0
     command_timeout_s: float = 5.0
     settle_tolerance_m: float = 0.05
+    settle_speed_m_s: float = 0.1
     settle_time_s: float = 1.0
     settle_timeout_s: float = 20.0
+    hover_measure_s: float = 10.0
+    hover_max_offset_m: float = 1.5
+    hover_max_drift_m_s: float = 0.3
+    hover_max_oscillation_m: float = 0.1
     hover_before_trial_s: float = 4.0
     transit_speed_m_s: float = 1.0
     max_setpoint_late_s: float = 0.1
@@ -104,6 +133,10 @@ class FlightSettings:
                 raise ProfileError(f"flight.{f.name}: must be finite and >= 0, got {value}")
             if f.name not in _SIGNED and not (math.isfinite(value) and value > 0):
                 raise ProfileError(f"flight.{f.name}: must be finite and positive, got {value}")
+        if self.hover_measure_s < 1.0:
+            raise ProfileError(
+                f"flight.hover_measure_s: a hover needs at least 1 s, got {self.hover_measure_s:g}"
+            )
         if self.stream_rate_hz < 2.0:
             raise ProfileError(
                 f"flight.stream_rate_hz: PX4 needs more than 2 Hz, got {self.stream_rate_hz:g}"
