@@ -135,3 +135,7 @@ def test_profile_defaults_and_errors(tmp_path) -> None:  # type: ignore[no-untyp
         mock_config_from_dict({"px4": {"initial_mode": "ACRO"}})
     with pytest.raises(ProfileError, match=r"px4\.nav_dll_act.*the actions the mock models"):
         mock_config_from_dict({"px4": {"nav_dll_act": 2}})
+    with pytest.raises(ProfileError, match=r"px4\.ekf2_ev_ctrl.*bitmask"):
+        mock_config_from_dict({"px4": {"ekf2_ev_ctrl": 16}})
+    with pytest.raises(ProfileError, match=r"px4\.ekf2_hgt_ref"):
+        mock_config_from_dict({"px4": {"ekf2_hgt_ref": 4}})

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from gcs.mock.config import MockConfig
+import pytest
+
+from gcs.mock.cli import faults_cli_args
+from gcs.mock.config import Faults, MockConfig
 from gcs.mock.vehicle import LandedState, MavResult, Mode, Vehicle, decode_param, encode_param
 
 CFG = MockConfig()
@@ -133,6 +136,20 @@ def test_params_bytewise_and_effective() -> None:
     assert v.params.get("NO_SUCH") is None and v.params.names == sorted(v.params.names)
 
 
+def test_ekf2_params_default_to_the_sih_capture_and_come_from_the_profile() -> None:
+    from px4_data import capture
+
+    captured = capture().params  # PX4 v1.16 SIH as MAVSDK read it
+    v = Vehicle(CFG)
+    for name in ("EKF2_GPS_CTRL", "EKF2_HGT_REF"):
+        _, ptype, value = v.params.get(name)
+        assert ptype == 6 and value == captured[name]
+    assert v.params.get("EKF2_EV_CTRL")[2] == 0.0  # PX4's default (not read in the capture)
+    vision = replace(CFG.px4, ekf2_gps_ctrl=0, ekf2_ev_ctrl=15, ekf2_hgt_ref=3)
+    w = Vehicle(replace(CFG, px4=vision))
+    assert [w.params[n] for n in ("EKF2_GPS_CTRL", "EKF2_EV_CTRL", "EKF2_HGT_REF")] == [0, 15, 3]
+
+
 DL_LOSS_T_S = 2.0
 
 
@@ -189,3 +206,11 @@ def test_no_failsafe_before_a_ground_station_was_ever_heard() -> None:
     v.takeoff()
     v.update(20.0)
     assert v.mode is Mode.HOLD and v.armed and not v.data_link_lost
+
+
+def test_clock_rate_is_a_fault_of_the_run_passed_on_the_command_line() -> None:
+    assert faults_cli_args(Faults(clock_rate=0.9)) == ["--clock-rate", "0.9"]
+    assert faults_cli_args(Faults()) == []
+    for rate in (0.0, 0.05, 11.0):
+        with pytest.raises(ValueError, match="clock rate"):
+            Faults(clock_rate=rate)

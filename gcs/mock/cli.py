@@ -84,6 +84,8 @@ def faults_cli_args(faults: Faults) -> list[str]:
         args += ["--link-loss-at", repr(faults.link_loss_at_s)]
     if faults.link_loss_duration_s is not None:
         args += ["--link-loss-for", repr(faults.link_loss_duration_s)]
+    if faults.clock_rate != 1.0:
+        args += ["--clock-rate", repr(faults.clock_rate)]
     if faults.gust_start_s is not None:
         args += [
             "--gust",
@@ -173,6 +175,15 @@ def mock_command(
     stats_out: Annotated[
         Path | None, typer.Option("--stats-out", help="Write setpoint arrivals etc. (JSON).")
     ] = None,
+    clock_rate: Annotated[
+        float,
+        typer.Option(
+            "--clock-rate",
+            min=0.1,
+            max=10.0,
+            help="Vehicle seconds per wall second, like a simulator under load (e.g. 0.9).",
+        ),
+    ] = 1.0,
 ) -> None:
     """Run a mock PX4 quadrotor that MAVSDK cannot tell from the real one.
 
@@ -192,15 +203,22 @@ def mock_command(
     (heartbeats and command replies go on); a link loss silences everything, for good or for
     ``--link-loss-for`` seconds; a gust blows the given north/east wind through the drag.
 
+    ``--clock-rate R`` runs the vehicle's clock at R times the wall clock, as a simulator
+    that cannot keep up (PX4 SITL in lockstep on a loaded machine: 0.72-0.9): physics, PX4
+    timeouts, stream rates and every time stamp the mock sends follow it; fault times count
+    on it.
+
     SIGTERM or Ctrl-C stops it; with ``--stats-out`` it then writes, atomically, a JSON file
-    with the arrival time (monotonic clock) and value of every position setpoint, the mode
-    changes and packet counters.
+    with the arrival time (monotonic clock and vehicle time) and value of every position
+    setpoint, the mode changes and packet counters.
 
     Examples:
 
         gcs mock --seed 3
 
         gcs mock --config profiles/mock.yaml --gust 5:2:0:3 --stats-out /tmp/mock.json
+
+        gcs mock --clock-rate 0.8
     \f
     Parameters
     ----------
@@ -226,6 +244,8 @@ def mock_command(
         Wind gust ``START:DURATION:VN:VE`` [s, s, m/s, m/s].
     stats_out : Path or None
         JSON statistics file written on exit.
+    clock_rate : float
+        Vehicle time per wall-clock second.
     """
     try:
         faults = Faults(
@@ -239,6 +259,7 @@ def mock_command(
             gust_duration_s=parse_gust(gust)[1] if gust else None,
             gust_vn_m_s=parse_gust(gust)[2] if gust else 0.0,
             gust_ve_m_s=parse_gust(gust)[3] if gust else 0.0,
+            clock_rate=clock_rate,
         )
     except ValueError as exc:
         if isinstance(exc, GcsError):

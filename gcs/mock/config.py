@@ -259,6 +259,16 @@ class Px4Config:
         Battery percentage consumed per second while armed [%/s].
     home_lat_deg, home_lon_deg, home_alt_m : float
         Global origin of the local frame (WGS84 degrees, AMSL metres).
+    ekf2_gps_ctrl : int
+        ``EKF2_GPS_CTRL``, GPS aiding bitmask (0 position, 1 altitude, 2 velocity, 3 dual
+        antenna heading): what a GCS reads as the navigation source; the physics does not
+        change with it. Default 7, as in the SIH capture (PX4's default).
+    ekf2_ev_ctrl : int
+        ``EKF2_EV_CTRL``, external vision aiding bitmask (0 horizontal position, 1 vertical
+        position, 2 velocity, 3 yaw). Default 0 (PX4's default; the capture does not read it).
+    ekf2_hgt_ref : int
+        ``EKF2_HGT_REF``, height reference: 0 barometer, 1 GPS, 2 range sensor, 3 vision.
+        Default 1, as in the SIH capture.
     """
 
     system_id: int = 1
@@ -278,6 +288,9 @@ class Px4Config:
     home_lat_deg: float = 47.3977431
     home_lon_deg: float = 8.5455947
     home_alt_m: float = 489.244
+    ekf2_gps_ctrl: int = 7
+    ekf2_ev_ctrl: int = 0
+    ekf2_hgt_ref: int = 1
 
 
 @dataclass(frozen=True)
@@ -312,6 +325,8 @@ class MockConfig:
 class Faults:
     """Injected faults of one run. Times are seconds after the vehicle first enters OFFBOARD.
 
+    Times count on the vehicle's clock, which runs at ``clock_rate`` times the wall clock.
+
     Parameters
     ----------
     loss_fraction : float
@@ -329,6 +344,10 @@ class Faults:
         Wind gust window.
     gust_vn_m_s, gust_ve_m_s : float
         Wind speed north and east during the gust [m/s]; it acts through the drag.
+    clock_rate : float
+        Vehicle time per wall-clock second, like a simulator under load (PX4 SITL lockstep
+        was seen at 0.72-0.9): the physics, the PX4 timeouts, the stream rates and every time
+        stamp sent run on ``clock_rate x`` the wall clock. The link's latency stays wall time.
     """
 
     loss_fraction: float = 0.0
@@ -341,6 +360,7 @@ class Faults:
     gust_duration_s: float | None = None
     gust_vn_m_s: float = 0.0
     gust_ve_m_s: float = 0.0
+    clock_rate: float = 1.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.loss_fraction < 1.0:
@@ -351,6 +371,8 @@ class Faults:
             value = getattr(self, name)
             if value is not None and value < 0:
                 raise ValueError(f"{name} must be >= 0, got {value}")
+        if not 0.1 <= self.clock_rate <= 10.0:
+            raise ValueError(f"clock rate must be in [0.1, 10], got {self.clock_rate}")
         if (self.dropout_start_s is None) != (self.dropout_duration_s is None):
             raise ValueError("dropout needs both a start and a duration")
         if (self.gust_start_s is None) != (self.gust_duration_s is None):
@@ -516,6 +538,9 @@ def _validate(cfg: MockConfig, where: str) -> None:
             "must be 0 (disabled), 1 (Hold) or 3 (Land): the actions the mock models",
         ),
         ("px4.com_dl_loss_t_s", cfg.px4.com_dl_loss_t_s > 0, "must be > 0"),
+        ("px4.ekf2_gps_ctrl", 0 <= cfg.px4.ekf2_gps_ctrl <= 15, "must be a bitmask in [0, 15]"),
+        ("px4.ekf2_ev_ctrl", 0 <= cfg.px4.ekf2_ev_ctrl <= 15, "must be a bitmask in [0, 15]"),
+        ("px4.ekf2_hgt_ref", cfg.px4.ekf2_hgt_ref in (0, 1, 2, 3), "must be 0, 1, 2 or 3"),
         ("rates.heartbeat_hz", cfg.rates.heartbeat_hz > 0, "must be > 0 (MAVSDK needs it)"),
     ]
     for name, ok, message in checks:

@@ -10,6 +10,11 @@ monotonic clock, so there is no drift) or the next delayed datagram, whichever c
 a datagram wakes it at once. Telemetry that is due goes out after each physics step, so a
 stream's timing jitter is at most one step. Setpoints are time-stamped on
 arrival and handed to the vehicle after the physics has caught up to that instant.
+
+Vehicle time. The vehicle's clock is ``Faults.clock_rate`` times the monotonic clock since
+boot (1 by default): the physics, the PX4 timeouts, the stream periods and every time stamp
+sent (``time_boot_ms``, ``time_usec``, TIMESYNC) run on it, as in a simulator that is slower
+(or faster) than real time. Only the injected link latency is wall time.
 """
 
 from __future__ import annotations
@@ -142,6 +147,7 @@ class MockServer:
         self._telemetry_now = False
         self._stop = False
         self.t0 = time.monotonic()
+        self.clock_rate = self.faults.clock_rate
         self._streams: dict[str, list[float]] = {}
         for name in STREAMS:
             self._set_rate(name, getattr(cfg.rates, f"{name}_hz"))
@@ -151,6 +157,7 @@ class MockServer:
         self._att_rng = random.Random(seed + 0xA77)
         # statistics
         self.sp_t: list[float] = []
+        self.sp_t_vehicle: list[float] = []
         self.sp_values: list[tuple[float, float, float, float, int, int]] = []
         self.counts = {"rx": 0, "tx": 0, "rx_dropped": 0, "tx_dropped": 0, "steps": 0}
         self.max_lag_s = 0.0
@@ -173,7 +180,7 @@ class MockServer:
         duration_s : float or None
             Stop after this many seconds (None: until stopped).
         """
-        dt = self.vehicle.physics.dt_s
+        dt = self.vehicle.physics.dt_s / self.clock_rate  # wall time per physics step
         t0 = self.t0
         end = math.inf if duration_s is None else time.monotonic() + duration_s
         next_tick = t0 + (math.floor((time.monotonic() - t0) / dt) + 1) * dt
@@ -196,7 +203,7 @@ class MockServer:
                 next_tick = t0 + (math.floor((now - t0) / dt) + 1) * dt
             self._after_update()
             if self.peers:
-                self._send_streams(now)
+                self._send_streams(self._t(now))
         self.sock.close()
 
     def stats(self) -> dict[str, Any]:
@@ -216,9 +223,11 @@ class MockServer:
             "port": self.port,
             "faults": dataclasses.asdict(self.faults),
             "boot_monotonic_s": self.t0,
-            "first_offboard_monotonic_s": None if first is None else self.t0 + first,
+            "clock_rate": self.clock_rate,
+            "first_offboard_monotonic_s": None if first is None else self._wall(first),
             "setpoints": {
                 "t_rx_monotonic_s": self.sp_t,
+                "t_rx_vehicle_s": self.sp_t_vehicle,
                 "north_m": list(cols[0]),
                 "east_m": list(cols[1]),
                 "down_m": list(cols[2]),
@@ -227,7 +236,12 @@ class MockServer:
                 "type_mask": list(cols[5]),
             },
             "modes": [
-                {"t_monotonic_s": self.t0 + m.t_s, "mode": m.mode, "armed": m.armed}
+                {
+                    "t_monotonic_s": self._wall(m.t_s),
+                    "t_vehicle_s": m.t_s,
+                    "mode": m.mode,
+                    "armed": m.armed,
+                }  # fmt: skip
                 for m in v.mode_log
             ],
             "packets": {k: self.counts[k] for k in ("rx", "tx", "rx_dropped", "tx_dropped")},
@@ -239,7 +253,12 @@ class MockServer:
 
     # -- time -----------------------------------------------------------------------------
     def _t(self, now: float | None = None) -> float:
-        return (time.monotonic() if now is None else now) - self.t0
+        """Vehicle time [s] at a monotonic time (default: now)."""
+        return ((time.monotonic() if now is None else now) - self.t0) * self.clock_rate
+
+    def _wall(self, t_s: float) -> float:
+        """Monotonic time [s] of a vehicle time."""
+        return self.t0 + t_s / self.clock_rate
 
     def _t_offboard(self) -> float | None:
         first = self.vehicle.first_offboard_t_s
@@ -249,7 +268,7 @@ class MockServer:
         v = self.vehicle
         v.physics.wind_ne_m_s = self.faults.wind_ned_m_s(self._t_offboard())
         before = v.physics.t_s
-        v.update(now - self.t0)
+        v.update(self._t(now))
         steps = int(round((v.physics.t_s - before) / v.physics.dt_s))
         self.counts["steps"] += steps
         if steps > 1:
@@ -344,9 +363,10 @@ class MockServer:
         if msg.target_system not in (0, self.sysid):
             return
         now = time.monotonic()
-        t = now - self.t0
+        t = self._t(now)
         v = self.vehicle
         self.sp_t.append(now)
+        self.sp_t_vehicle.append(t)
         self.sp_values.append((msg.x, msg.y, msg.z, msg.yaw, msg.time_boot_ms, msg.type_mask))
         v.update(t)
         if msg.coordinate_frame == mavlink2.MAV_FRAME_LOCAL_NED and msg.type_mask & 0b111 == 0:
@@ -358,7 +378,7 @@ class MockServer:
 
     def _on_heartbeat(self, msg: Any) -> None:
         if msg.type == mavlink2.MAV_TYPE_GCS:  # not our own echo, not a companion computer
-            t = time.monotonic() - self.t0
+            t = self._t()
             self.vehicle.update(t)
             self.vehicle.on_gcs_heartbeat(t)
 
@@ -469,13 +489,13 @@ class MockServer:
             self.mav.ping_send(msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent())
 
     def _on_timesync(self, msg: Any) -> None:
-        if msg.tc1 == 0:
-            self.mav.timesync_send(time.monotonic_ns(), msg.ts1)
+        if msg.tc1 == 0:  # a request: answer with our clock (PX4: time since boot) in ns
+            self.mav.timesync_send(int(self._t() * 1e9), msg.ts1)
 
     # -- transmission ---------------------------------------------------------------------
     def _set_rate(self, name: str, rate_hz: float) -> None:
-        period = 1.0 / rate_hz if rate_hz > 0 else math.inf
-        self._streams[name] = [period, time.monotonic() + min(period, 0.05)]
+        period = 1.0 / rate_hz if rate_hz > 0 else math.inf  # vehicle time, as PX4's streams
+        self._streams[name] = [period, self._t() + min(period, 0.05)]
 
     def _send_streams(self, now: float) -> None:
         for name, stream in self._streams.items():

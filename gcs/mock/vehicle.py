@@ -142,8 +142,10 @@ class Px4Params:
 
     The ones the mock models (``MIS_TAKEOFF_ALT``, ``COM_OF_LOSS_T``, ``COM_DISARM_LAND``,
     ``COM_DISARM_PRFLT``, ``MPC_LAND_SPEED``, ``MPC_TKO_SPEED``, ``NAV_DLL_ACT``,
-    ``COM_DL_LOSS_T``) take effect when set. The others carry the values of the PX4 v1.16 SIH
-    capture so that a GCS reading them sees a plausible vehicle; setting them has no effect.
+    ``COM_DL_LOSS_T``) take effect when set. ``EKF2_GPS_CTRL``, ``EKF2_EV_CTRL`` and
+    ``EKF2_HGT_REF`` come from the profile (``px4.ekf2_*``): they say what the vehicle navigates
+    on, for a GCS to read. The others carry the values of the PX4 v1.16 SIH capture so that a
+    GCS reading them sees a plausible vehicle; setting them has no effect.
 
     Parameters
     ----------
@@ -169,8 +171,9 @@ class Px4Params:
             "NAV_DLL_ACT": (integer, p.nav_dll_act),
             "COM_DL_LOSS_T": (real, p.com_dl_loss_t_s),
             "COM_ARM_WO_GPS": (integer, 1),
-            "EKF2_GPS_CTRL": (integer, 7),
-            "EKF2_HGT_REF": (integer, 1),
+            "EKF2_GPS_CTRL": (integer, p.ekf2_gps_ctrl),
+            "EKF2_EV_CTRL": (integer, p.ekf2_ev_ctrl),
+            "EKF2_HGT_REF": (integer, p.ekf2_hgt_ref),
             "MPC_XY_P": (real, 0.95),
             "MPC_Z_P": (real, 1.0),
             "MPC_XY_VEL_P_ACC": (real, 1.8),
