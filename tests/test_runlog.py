@@ -19,6 +19,7 @@ from gcs.io.runlog import (
     TrialRecord,
     TrialStatus,
     atomic_write_text,
+    json_safe,
 )
 
 
@@ -332,3 +333,26 @@ def test_setpoints_and_estimates(tmp_path):
     with pytest.raises(RunLogError, match="estimate-001.csv"):
         run.read_estimate(1)
     assert tmp_files(run.path) == []
+
+
+def test_sessions_take_the_next_number_update_their_own_and_never_overwrite(tmp_path):
+    run = new_run(tmp_path)
+    assert run.sessions() == []
+    first = run.write_session(None, {"first_trial": 0, "tolerance_m": float("nan")})
+    assert first == 1
+    record = json.loads((run.path / "session-001.json").read_text())  # strict JSON: no NaN
+    assert record == {"session": 1, "first_trial": 0, "tolerance_m": None}
+    # another process took number 2 meanwhile (a resumed run flown twice at once)
+    (run.path / "session-002.json").write_text('{"session": 2, "first_trial": 3}')
+    second = run.write_session(None, {"first_trial": 3})
+    assert second == 3
+    assert json.loads((run.path / "session-002.json").read_text())["first_trial"] == 3
+    assert run.write_session(first, {"first_trial": 0, "tolerance_m": 0.4}) == 1
+    assert [s["session"] for s in run.sessions()] == [1, 2, 3]
+    assert run.sessions()[0]["tolerance_m"] == 0.4
+    assert not list(run.path.glob(".*tmp"))  # no temporary file left behind
+
+
+def test_json_safe() -> None:
+    value = {"a": (1.0, float("inf")), "b": np.float64("nan"), "c": np.int64(3), "d": "x"}
+    assert json_safe(value) == {"a": [1.0, None], "b": None, "c": 3, "d": "x"}

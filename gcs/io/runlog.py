@@ -9,10 +9,15 @@ Layout of ``logs/<run-id>/`` (documented for users in the README)::
                            velocity on the grid, send times, interpolation flags
     trial-JJJ.json         its status ("complete" or "incomplete" and why) and metrics
     estimate-JJJ.csv       disturbance estimate learned from trial JJJ (and K-ILC variance)
+    session-SSS.json       one per flight session (each ``gcs fly``/``--resume``): the vehicle's
+                           navigation source, the hover measured before its first trial and
+                           the settle tolerances derived from it
     aborted/               earlier incomplete attempts of a trial, kept when it is re-flown
 
 Every file is written atomically (temporary file in the same directory, then ``os.replace``),
-and a trial counts as complete only once its ``.json`` says so; it is written after the CSV.
+and a trial counts as complete only once its ``.json`` says so; it is written after the CSV. A
+new session record takes the next free number by a hard link that fails if the name exists, so
+that no session ever overwrites another's.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import os
 import platform
 import tempfile
@@ -36,7 +42,14 @@ from gcs.core.trajectory import Reference, sample_eight
 from gcs.errors import RunLogError
 from gcs.io.config import Profile, TrajectorySpec, profile_from_dict, trajectory_from_dict
 
-__all__ = ["TrialRecord", "TrialStatus", "RunDir", "atomic_write_text", "TRIAL_COLUMNS"]
+__all__ = [
+    "TrialRecord",
+    "TrialStatus",
+    "RunDir",
+    "atomic_write_text",
+    "json_safe",
+    "TRIAL_COLUMNS",
+]
 
 TRIAL_COLUMNS = (
     "k", "t_s",
@@ -73,6 +86,29 @@ def atomic_write_text(path: Path, text: str) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with NaN and infinities as None and tuples as lists (strict JSON).
+
+    Parameters
+    ----------
+    value : Any
+        Nested dicts, lists, tuples and scalars.
+
+    Returns
+    -------
+    Any
+    """
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer | np.bool_):
+        return value.item()
+    return value
 
 
 def _csv_text(columns: tuple[str, ...], table: np.ndarray) -> str:
@@ -541,6 +577,58 @@ class RunDir:
                 f"{path}: column 't_s' does not match t_ilc_s = {self.t_ilc_s:g} s "
                 f"(k = {worst}: {table[worst, 1]!r})"
             )
+
+    # ----------------------------------------------------------------- sessions
+    def write_session(self, number: int | None, data: dict[str, Any]) -> int:
+        """Record a flight session: a new ``session-SSS.json``, or an update of one's own.
+
+        Parameters
+        ----------
+        number : int or None
+            None for a new session (it takes the next free number; an existing record is
+            never replaced), else the number this session was given before.
+        data : dict
+            The record (NaN becomes null).
+
+        Returns
+        -------
+        int
+            The session's number.
+        """
+
+        def text(n: int) -> str:
+            return json.dumps(json_safe({"session": n, **data}), indent=2) + "\n"
+
+        if number is not None:
+            atomic_write_text(self._file("session", number, "json"), text(number))
+            return number
+        number = len(self.sessions()) + 1
+        tmp = self.path / f".session-new.{os.getpid()}.tmp"
+        try:
+            while True:
+                atomic_write_text(tmp, text(number))
+                try:
+                    os.link(tmp, self._file("session", number, "json"))  # fails if it exists
+                    return number
+                except FileExistsError:
+                    number += 1
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    def sessions(self) -> list[dict[str, Any]]:
+        """Every session record of the run, by number.
+
+        Returns
+        -------
+        list of dict
+        """
+        out = []
+        for path in sorted(self.path.glob("session-[0-9][0-9][0-9].json")):
+            try:
+                out.append(json.loads(path.read_text()))
+            except (OSError, json.JSONDecodeError) as exc:
+                raise RunLogError(f"{path}: unreadable session record ({exc})") from exc
+        return out
 
     # ----------------------------------------------------------------- estimates
     def write_estimate(self, j: int, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray) -> None:
