@@ -206,7 +206,8 @@ def report(
         bool,
         typer.Option(
             "--json",
-            help="Print a JSON list of {iteration, epos_m, epos_pct, delta_pct, max_err_m}.",
+            help="Print a JSON list of {iteration, epos_m, epos_pct, delta_pct, max_err_m, "
+            "vehicle_time_rate}.",
         ),
     ] = False,
     plot: Annotated[
@@ -217,19 +218,33 @@ def report(
     """Show the learning table of a run: one row per complete trial.
 
     Columns as the paper's Table IV: e_pos,j (eq. 10), e_pos,j / e_pos,0, the relative change
-    from the previous trial, and the largest horizontal error.
+    from the previous trial, and the largest horizontal error; then the rate at which the
+    vehicle's clock ran against the wall clock in that trial (1.000 for a real vehicle; a
+    simulator under load runs slower). Below the table, one line per flight session: the
+    vehicle's navigation source, the hover measured before its first trial and the settle
+    tolerance derived from it.
 
     Example: gcs report logs/latest --plot plots/
     """
-    from gcs.app.report import metrics_json, metrics_table, run_metrics, write_plots
+    from gcs.app.report import (
+        metrics_json,
+        metrics_table,
+        run_metrics,
+        session_lines,
+        trial_clock_rates,
+        write_plots,
+    )
     from gcs.io.runlog import RunDir
 
     run = RunDir.open(run_dir)
     rows = run_metrics(run)
+    rates = trial_clock_rates(run)
     if as_json:
-        typer.echo(json.dumps(metrics_json(rows), indent=2))
+        typer.echo(json.dumps(metrics_json(rows, rates), indent=2))
     else:
-        console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})"))
+        console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})", rates))
+        for line in session_lines(run):
+            console.print(escape(line), highlight=False)
     if plot is not None:
         for path in write_plots(run, plot):
             err_console.print(f"wrote {path}")

@@ -44,7 +44,10 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     rows = json.loads(result.output)
     assert [r["iteration"] for r in rows] == [0, 1]
-    assert set(rows[0]) == {"iteration", "epos_m", "epos_pct", "delta_pct", "max_err_m"}
+    assert set(rows[0]) == {
+        "iteration", "epos_m", "epos_pct", "delta_pct", "max_err_m", "vehicle_time_rate"
+    }  # fmt: skip
+    assert rows[0]["vehicle_time_rate"] is None  # simulated trials: no vehicle clock
     assert rows[0]["epos_pct"] == pytest.approx(100.0)
     assert rows[0]["delta_pct"] is None
     assert rows[1]["epos_m"] < 0.5 * rows[0]["epos_m"]  # learning helped

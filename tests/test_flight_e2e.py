@@ -16,7 +16,14 @@ import numpy as np
 import pytest
 
 from gcs.errors import TrialAborted, VehicleError
-from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted, fly_campaign
+from gcs.flight.campaign import (
+    FlightSession,
+    Status,
+    TrialFinished,
+    TrialProgress,
+    TrialStarted,
+    fly_campaign,
+)
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.flight.vehicle import Vehicle
@@ -29,7 +36,7 @@ T_ILC_S = 0.05
 # watchdog limits tolerant of a loaded CI machine (see tests/synthetic.py: CI_FLIGHT)
 SETTINGS = FlightSettings(
     settle_time_s=0.5, settle_tolerance_m=0.2, connect_timeout_s=5.0,
-    max_setpoint_late_s=0.4, max_telemetry_age_s=1.0,
+    max_setpoint_late_s=0.4, max_telemetry_age_s=1.0, hover_measure_s=3.0,
 )  # fmt: skip
 
 
@@ -46,6 +53,7 @@ class CircleSource:
         self.asked: list[int] = []
         self.recorded: list[tuple[int, TrialRecording]] = []
         self.incomplete: list[tuple[int, TrialRecording, str]] = []
+        self.sessions: list[FlightSession] = []
 
     def setpoints_for(self, j: int) -> np.ndarray:
         self.asked.append(j)
@@ -59,6 +67,9 @@ class CircleSource:
 
     def record_incomplete(self, j: int, recording: TrialRecording, reason: str) -> None:
         self.incomplete.append((j, recording, reason))
+
+    def record_session(self, session: FlightSession) -> None:
+        self.sessions.append(session)
 
 
 def _mock(tmp_path: Path, **faults: float) -> MockProcess:
@@ -127,6 +138,19 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     assert len(holds) == 2 and all(h < s for h, s in zip(holds, starts, strict=True))
     for h, s in zip(holds, starts, strict=True):
         assert stamps[s] - stamps[h] >= SETTINGS.hover_before_trial_s
+    # the hover before trial 0 was measured (after the hold), judged and handed over once
+    assert stamps[starts[0]] - stamps[holds[0]] >= (
+        SETTINGS.hover_before_trial_s + SETTINGS.hover_measure_s
+    )
+    (session,) = source.sessions
+    (hover,) = session.hovers
+    assert hover.verdict.ok and hover.why == "measurement" and hover.before_trial == 0
+    assert hover.stats.duration_s == pytest.approx(SETTINGS.hover_measure_s, abs=0.1)
+    assert session.tolerance_m >= SETTINGS.settle_tolerance_m
+    assert session.navigation.name == "GPS"  # the mock reports PX4's EKF2 defaults
+    assert hover.clock_rate == pytest.approx(1.0, abs=1e-3)
+    for _, rec in source.recorded:
+        assert rec.clock is not None and rec.clock.rate == pytest.approx(1.0, abs=1e-3)
     assert _final_mode(tmp_path)["armed"] is False
 
 
@@ -134,8 +158,9 @@ def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
     source = CircleSource(duration_s=8.0)
     events: list[object] = []
     started = time.monotonic()
-    # 4 s after the mock starts the trial would be under way without the hold before it
-    loss_at_s = 4.0 + SETTINGS.hover_before_trial_s
+    # 4 s after the mock starts the trial would be under way without the hold and the hover
+    # measurement before it
+    loss_at_s = 4.0 + SETTINGS.hover_before_trial_s + SETTINGS.hover_measure_s
     config = tmp_path / "mock.yaml"  # a vehicle set up to land on a lost link
     config.write_text("px4:\n  nav_dll_act: 3\n  com_dl_loss_t_s: 3.0\n")
     faults = Faults(link_loss_at_s=loss_at_s)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from gcs.errors import ProfileError, TrajectoryError, TrialAborted
+from gcs.flight.clock import VehicleClock
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import (
     TrialRun,
@@ -51,6 +52,11 @@ def test_sends_per_sample_rejects_non_multiples(rate_hz: float, t_ilc_s: float) 
         {"yaw_deg": float("nan")},
         {"hover_before_trial_s": -1.0},
         {"hover_before_trial_s": float("inf")},
+        {"hover_measure_s": 0.5},
+        {"hover_max_offset_m": 0.0},
+        {"hover_max_drift_m_s": -0.1},
+        {"hover_max_oscillation_m": float("nan")},
+        {"settle_speed_m_s": 0.0},
     ],
 )
 def test_settings_validation(kwargs: dict[str, float]) -> None:
@@ -156,9 +162,20 @@ def test_align_rejects_unsorted_and_handles_empty() -> None:
 
 
 class FakeVehicle:
-    """Just enough of Vehicle for TrialRun: first-order response, telemetry at 50 Hz."""
+    """Just enough of Vehicle for TrialRun: first-order response, telemetry at 50 Hz.
 
-    def __init__(self, telemetry_hz: float = 50.0, drop: tuple[float, float] | None = None):
+    Its clock runs at ``rate`` times the wall clock; telemetry comes every ``1 / telemetry_hz``
+    of vehicle time, stamped with it. ``motion(t_vehicle_s)``, when given, is the position
+    reported instead of the first-order response.
+    """
+
+    def __init__(
+        self,
+        telemetry_hz: float = 50.0,
+        drop: tuple[float, float] | None = None,
+        rate: float = 1.0,
+        motion=None,  # type: ignore[no-untyped-def]
+    ):
         self.sent: list[tuple[float, np.ndarray]] = []
         self.pos = np.zeros(3)
         self.target = np.zeros(3)
@@ -168,6 +185,13 @@ class FakeVehicle:
         self.period_s = 1.0 / telemetry_hz
         self.drop = drop  # (start, end) relative to the first setpoint: no samples then
         self.t_first: float | None = None
+        self.rate = rate
+        self.motion = motion
+        self.boot_s = time.monotonic() - 100.0  # booted a while ago
+        self.clock = VehicleClock()
+
+    def vehicle_time(self, wall_s: float) -> float:
+        return (wall_s - self.boot_s) * self.rate
 
     async def send_setpoint(self, pos_ned_m: np.ndarray) -> None:
         now = time.monotonic()
@@ -177,6 +201,11 @@ class FakeVehicle:
 
     def control_problem(self) -> str | None:
         return self.problem
+
+    def clock_fit(self):  # type: ignore[no-untyped-def]
+        fit = self.clock.fit()
+        assert fit is not None
+        return fit
 
     @contextlib.contextmanager
     def record_telemetry(self):  # type: ignore[no-untyped-def]
@@ -192,7 +221,7 @@ class FakeVehicle:
         i = 0
         while True:
             i += 1
-            delay = t0 + i * self.period_s - time.monotonic()
+            delay = t0 + i * self.period_s / self.rate - time.monotonic()
             await asyncio.sleep(max(delay, 0))
             self.pos = self.pos + 0.5 * (self.target - self.pos)
             now = time.monotonic()
@@ -200,7 +229,10 @@ class FakeVehicle:
                 rel = now - self.t_first
                 if self.drop[0] <= rel < self.drop[1]:
                     continue
-            sample = TelemetrySample(now, tuple(self.pos), (0.0, 0.0, 0.0))
+            stamp_s = round(self.vehicle_time(now) * 1000) / 1000  # time_boot_ms
+            v = self.clock.add(stamp_s, now)
+            pos = tuple(self.motion(v)) if self.motion is not None else tuple(self.pos)
+            sample = TelemetrySample(now, pos, (0.0, 0.0, 0.0), v)  # type: ignore[arg-type]
             self.latest = sample
             for r in self._recorders:
                 r.append(sample)
@@ -209,7 +241,7 @@ class FakeVehicle:
 async def _with_telemetry(vehicle: FakeVehicle, coro):  # type: ignore[no-untyped-def]
     feeder = asyncio.create_task(vehicle.telemetry())
     try:
-        while vehicle.latest is None:
+        while vehicle.clock.fit() is None or vehicle.clock.fit().span_s < 0.2:
             await asyncio.sleep(0.005)
         return await coro
     finally:
@@ -298,3 +330,19 @@ def test_trial_aborts_on_late_setpoint() -> None:
             await fly
 
     asyncio.run(_with_telemetry(vehicle, scenario()))
+
+
+def test_trial_streams_and_records_on_the_vehicle_clock() -> None:
+    # a simulator at 0.9x real time reporting x = its own time: setpoints must change every
+    # t_ilc of vehicle time (not 0.9 t_ilc), and y(k) must be the position at v0 + k t_ilc
+    settings = FlightSettings(stream_rate_hz=60, telemetry_rate_hz=50)
+    vehicle = FakeVehicle(rate=0.9, motion=lambda v: (v, 0.0, -2.0))
+    sp = _circle(16)
+    rec = asyncio.run(_with_telemetry(vehicle, fly_trial(vehicle, sp, 0.05, settings)))
+    assert rec.complete and rec.clock is not None
+    assert rec.clock.rate == pytest.approx(0.9, abs=0.01)
+    first_sends = np.array([t for t, _ in vehicle.sent][::3][:16])
+    steps = np.diff(vehicle.vehicle_time(first_sends))
+    assert np.median(steps) == pytest.approx(0.05, abs=0.002), steps
+    np.testing.assert_allclose(rec.pos_ned_m[:, 0], rec.t0_vehicle_s + rec.t_s, atol=1e-6)
+    np.testing.assert_allclose(rec.sent_s, rec.t_s[:-1], atol=0.03)

@@ -9,9 +9,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
-from synthetic import SHORT, ci_profile
+from synthetic import CI_FLIGHT, SHORT, ci_profile
 
 from gcs.flight.settings import FlightSettings
 from gcs.io.runlog import RunDir
@@ -71,8 +72,9 @@ def wait_for_line(proc: subprocess.Popen, text: str) -> list[str]:
 def interrupted_flight(url: str, trajectory: Path, run: Path, iterations: int, at: str):
     """``gcs fly --connect url`` sent Ctrl-C once ``at`` is printed; the process, still running."""
     proc = gcs(
-        "fly", "--connect", url, "--iter", iterations, "--trajectory", trajectory, "--run", run
-    )
+        "fly", "--connect", url, "--iter", iterations, "--trajectory", trajectory, "--run", run,
+        "--profile", ci_profile(run.parent),
+    )  # fmt: skip
     wait_for_line(proc, at)
     proc.send_signal(signal.SIGINT)
     return proc
@@ -90,24 +92,69 @@ def final_state(stats_path: Path) -> dict:
     return stats["modes"][-1]
 
 
-def test_fly_mock_learns_and_reports(tmp_path: Path, tiny: Path) -> None:
+def arrivals_on_the_vehicle_clock(stats: dict, setpoints: np.ndarray, t0_vehicle_s: float):
+    """(k, vehicle time of the first arrival of setpoint k - t0) for every change of setpoint."""
+    sp = stats["setpoints"]
+    t = np.array(sp["t_rx_vehicle_s"])
+    ne = np.column_stack([sp["north_m"], sp["east_m"]])
+    ks, times = [], []
+    i = int(np.searchsorted(t, t0_vehicle_s - 0.1))
+    for k in range(1, len(setpoints)):
+        if np.allclose(setpoints[k, :2], setpoints[k - 1, :2], atol=1e-6):
+            continue  # the same value again: no arrival marks its start
+        match = np.flatnonzero(np.all(np.abs(ne[i:] - setpoints[k, :2]) < 1e-5, axis=1))
+        assert match.size, k
+        i += int(match[0])
+        ks.append(k)
+        times.append(t[i] - t0_vehicle_s)
+    return np.array(ks), np.array(times)
+
+
+def test_fly_on_a_slow_simulator_streams_records_and_learns_on_the_vehicle_clock(
+    tmp_path: Path, tiny: Path
+) -> None:
+    # the mock's clock at 0.9x wall time, like PX4 SITL in lockstep on a loaded machine
     run_path = tmp_path / "run"
-    code, out = fly_two_trials(tmp_path, tiny, run_path, "--mock")
+    stats_path = tmp_path / "stats.json"
+    with MockProcess(seed=0, faults=Faults(clock_rate=0.9), stats_path=stats_path) as mock:
+        code, out = fly_two_trials(tmp_path, tiny, run_path, "--connect", mock.url)
     assert code == 0, out
     assert "landed and disarmed" in out
-    # read from the mock over MAVLink's parameter protocol: PX4's default, no link-loss landing
+    # read from the mock over MAVLink's parameter protocol: PX4's defaults
     assert "warning: NAV_DLL_ACT = 0 (disabled)" in out, out
+    assert "navigation: GPS (EKF2_GPS_CTRL 7 (position, altitude, velocity)" in out, out
+    assert "hover at the start point: " in out and "settle tolerances: " in out, out
+    for j in (0, 1):
+        assert f"trial {j} flown: vehicle clock 0.90" in out, out
+        assert f"warning: trial {j}: the vehicle's clock ran at 0.900x wall time" in out, out
     run = RunDir.open(run_path)
     assert run.complete_trials() == [0, 1]
-    assert (run_path / "setpoints-002.csv").exists()  # learned after the last trial
-    assert (run_path / "estimate-001.csv").exists()
-    record = run.read_trial(1)
-    assert record.n_samples == run.n_samples
+    (session,) = run.sessions()
+    assert session["hovers"][0]["verdict"]["ok"] and session["navigation"]["source"] == "GPS"
+    assert session["hovers"][0]["clock_rate"] == pytest.approx(0.9, abs=0.002)
+    stats = json.loads(stats_path.read_text())
+    assert stats["clock_rate"] == 0.9
+    for j in (0, 1):
+        extra = run.read_status(j).extra
+        assert extra["vehicle_time_rate"] == pytest.approx(0.9, abs=0.002) and extra["session"] == 1
+        # setpoint k reached the vehicle at t0 + k t_ilc_s on its own clock, not 0.9 t_ilc_s
+        ks, arrived = arrivals_on_the_vehicle_clock(
+            stats, run.read_setpoints(j), extra["t0_vehicle_s"]
+        )
+        assert ks.size > 50
+        slope, intercept = np.polyfit(ks, arrived, 1)
+        assert slope == pytest.approx(run.t_ilc_s, rel=0.005), slope
+        assert abs(intercept) < 0.01 and np.median(np.abs(arrived - ks * run.t_ilc_s)) < 0.005
+        record = run.read_trial(j)  # the recorded send times, on the same grid
+        assert np.median(np.abs(record.sp_sent_s[:-1] - record.t_s[:-1])) < 0.005
+    # learning used both trials
+    assert (run_path / "setpoints-002.csv").exists() and (run_path / "estimate-001.csv").exists()
     code, out = finish(gcs("report", run_path, "--json"))
     assert code == 0, out
     rows = json.loads(out)
     assert [r["iteration"] for r in rows] == [0, 1]
     assert rows[1]["epos_m"] < 0.6 * rows[0]["epos_m"], rows
+    assert rows[1]["vehicle_time_rate"] == pytest.approx(0.9, abs=0.002)
 
 
 def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
@@ -126,7 +173,9 @@ def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
         assert not status.complete and "interrupt" in status.reason
         assert run.read_status(0).complete  # completed trial kept intact
 
-        code, out = finish(gcs("fly", "--connect", mock.url, "--resume", run_path, "--iter", 1))
+        code, out = finish(
+            gcs("fly", "--connect", mock.url, "--resume", run_path, "--iter", 1)
+        )  # the resumed run flies with the profile recorded in it
         assert code == 0, out
     run = RunDir.open(run_path)
     assert run.complete_trials() == [0, 1]
@@ -196,9 +245,9 @@ def test_low_battery_before_a_trial_lands_and_keeps_the_run_resumable(
 def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: Path) -> None:
     run_path = tmp_path / "run"
     stats = tmp_path / "stats.json"
-    # 4 s after the first OFFBOARD plus the hold before the trial: inside trial 0 (take-off
-    # hover, settling and the hold come first)
-    loss_at_s = 4.0 + FlightSettings().hover_before_trial_s
+    # 4 s after the first OFFBOARD plus the hold and the hover measurement before the trial:
+    # inside trial 0 (take-off hover, the move, the hold and the measurement come first)
+    loss_at_s = 4.0 + FlightSettings().hover_before_trial_s + CI_FLIGHT["hover_measure_s"]
     faults = Faults(link_loss_at_s=loss_at_s, link_loss_duration_s=2.0)
     with MockProcess(seed=2, stats_path=stats, faults=faults) as mock:
         code, out = fly_two_trials(tmp_path, tiny, run_path, "--connect", mock.url)

@@ -8,8 +8,9 @@ answers from the run directory and learns with :func:`gcs.app.learn.learn_run`, 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -17,7 +18,7 @@ from gcs.app.learn import learn_run, trial_errors
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trajectory import check_reference, points_outside
 from gcs.errors import ProfileError, RunLogError, TrajectoryError
-from gcs.flight.campaign import run_campaign
+from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec
@@ -29,6 +30,8 @@ __all__ = [
     "flight_settings",
     "prepare_run",
     "to_record",
+    "trial_extra",
+    "session_record",
     "fly_run",
 ]
 
@@ -129,6 +132,63 @@ def to_record(
     )
 
 
+def trial_extra(recording: TrialRecording, session: int | None) -> dict[str, Any]:
+    """Timing of a flown trial for its sidecar: send delays, vehicle clock, flight session.
+
+    Parameters
+    ----------
+    recording : TrialRecording
+        What the flight layer sent and measured.
+    session : int or None
+        Number of the session record it was flown in.
+
+    Returns
+    -------
+    dict
+        ``max_send_late_s``, ``vehicle_time_rate`` (vehicle-time / wall-time rate of the
+        trial, None if unknown), ``clock_latency_p50_s`` (median receipt delay above the
+        clock fit), ``t0_vehicle_s`` (the trial's k = 0 on the vehicle's clock: time since
+        boot for PX4, to find the trial in its own log), ``session``.
+    """
+    clock = recording.clock
+    return {
+        "max_send_late_s": recording.max_send_late_s,
+        "t0_vehicle_s": recording.t0_vehicle_s,
+        "vehicle_time_rate": None if clock is None else clock.rate,
+        "clock_latency_p50_s": None if clock is None else clock.latency_p50_s,
+        "session": session,
+    }
+
+
+def session_record(session: FlightSession) -> dict[str, Any]:
+    """A flight session as the JSON object of ``session-SSS.json``.
+
+    Parameters
+    ----------
+    session : FlightSession
+        What the campaign found out about the vehicle.
+
+    Returns
+    -------
+    dict
+        ``url``, ``first_trial``, ``navigation`` (source name, line, parameters),
+        ``tolerance_m``, ``speed_tolerance_m_s`` and ``hovers`` (statistics, verdict and
+        clock rate of each judged hover), plus ``written_utc``.
+    """
+    from datetime import UTC, datetime
+
+    nav = session.navigation
+    return {
+        "url": session.url,
+        "first_trial": session.first_trial,
+        "navigation": {"source": nav.name, "text": nav.text, "params": nav.params},
+        "tolerance_m": session.tolerance_m,
+        "speed_tolerance_m_s": session.speed_tolerance_m_s,
+        "hovers": [asdict(h) for h in session.hovers],
+        "written_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+
+
 def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
     """Trial j's setpoints from the run directory, refused if any leaves the profile's arena.
 
@@ -166,10 +226,13 @@ class RunSource:
         The run being flown.
     on_row : callable, optional
         Called with the Table IV rows of the run after each complete trial is recorded.
+    session : int or None
+        Number of this flight session's record in the run (set by :meth:`record_session`).
     """
 
     run: RunDir
     on_row: Callable[[list[IterationMetrics]], None] | None = None
+    session: int | None = None
 
     def setpoints_for(self, j: int) -> np.ndarray:
         """Trial j's setpoints from the run directory, refused if any leaves the arena.
@@ -213,10 +276,9 @@ class RunSource:
         """
         record = to_record(self.run, recording)
         e, m = trial_errors(record)
-        extra = {"max_send_late_s": recording.max_send_late_s}
         status = TrialStatus(
-            j, True, epos_m=e, max_err_m=m,
-            interpolated_share=recording.interpolated_share, extra=extra,
+            j, True, epos_m=e, max_err_m=m, interpolated_share=recording.interpolated_share,
+            extra=trial_extra(recording, self.session),
         )  # fmt: skip
         self.run.write_trial(j, record, status)
         learn_run(self.run)
@@ -237,9 +299,20 @@ class RunSource:
         """
         record = to_record(self.run, recording)
         status = TrialStatus(
-            j, False, reason=reason, interpolated_share=recording.interpolated_share
-        )
+            j, False, reason=reason, interpolated_share=recording.interpolated_share,
+            extra=trial_extra(recording, self.session),
+        )  # fmt: skip
         self.run.write_trial(j, record, status)
+
+    def record_session(self, session: FlightSession) -> None:
+        """Write (or update) this flight session's record in the run directory.
+
+        Parameters
+        ----------
+        session : FlightSession
+            Navigation source, hover measurements, settle tolerances.
+        """
+        self.session = self.run.write_session(self.session, session_record(session))
 
     def rows(self) -> list[IterationMetrics]:
         """Table IV rows of the complete trials so far (from the sidecars)."""

@@ -79,8 +79,9 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
     """A rich progress bar for a campaign and the event callback that drives it.
 
     Status lines are printed dimmed (warnings in yellow), each trial start is printed with its
-    length, the bar follows the setpoint index with the live error, and an incomplete trial is
-    printed in red. Use the progress as a context manager around the flight.
+    length, the bar follows the setpoint index with the live error, each flown trial is
+    printed with its vehicle-time rate, and an incomplete trial in red. Use the progress as a
+    context manager around the flight.
 
     Parameters
     ----------
@@ -124,6 +125,10 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
             progress.update(task, completed=event.k, err=f"error {event.err_m:.3f} m")
         elif isinstance(event, TrialFinished) and not event.recording.complete:
             progress.console.print(f"[red]trial {event.trial} incomplete[/]")
+        elif isinstance(event, TrialFinished):
+            clock = event.recording.clock
+            rate = "unknown" if clock is None else f"{clock.rate:.3f}x wall time"
+            progress.console.print(f"trial {event.trial} flown: vehicle clock {rate}")
 
     return progress, on_event
 
@@ -207,7 +212,8 @@ def fly_with_display(
     except GcsError as exc:
         console.print(f"[dim]completed trials are in {run.path}[/]")
         raise exc
-    from gcs.app.report import run_metrics
+    from gcs.app.report import run_metrics, trial_clock_rates
 
-    console.print(metrics_table(run_metrics(run), f"{run.path.name} ({run.algorithm})"))
+    title = f"{run.path.name} ({run.algorithm})"
+    console.print(metrics_table(run_metrics(run), title, trial_clock_rates(run)))
     return run

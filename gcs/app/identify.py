@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gcs.app.fly import flyable_setpoints, to_record
+from gcs.app.fly import flyable_setpoints, session_record, to_record, trial_extra
 from gcs.app.report import save_figure
 from gcs.core.excitation import multisine, prbs
 from gcs.core.model import DiscreteModel
@@ -49,7 +49,7 @@ from gcs.core.pbsid import (
 )
 from gcs.core.trajectory import Reference, points_outside
 from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogError, TrajectoryError
-from gcs.flight.campaign import run_campaign
+from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec, _Fields, profile_from_dict
@@ -409,10 +409,13 @@ class IdentificationSource:
         The identification run (from :func:`create_identification_run`).
     center_ned_m : ndarray, shape (3,)
         Hover point before each experiment [m].
+    session : int or None
+        Number of this flight session's record in the run (set by :meth:`record_session`).
     """
 
     run: RunDir
     center_ned_m: np.ndarray
+    session: int | None = None
 
     def setpoints_for(self, j: int) -> np.ndarray:
         """Experiment j's setpoints, refused if any leaves the arena.
@@ -458,7 +461,7 @@ class IdentificationSource:
         e, m = trial_errors(record)
         status = TrialStatus(
             j, True, epos_m=e, max_err_m=m, interpolated_share=recording.interpolated_share,
-            extra={"max_send_late_s": recording.max_send_late_s},
+            extra=trial_extra(recording, self.session),
         )  # fmt: skip
         self.run.write_trial(j, record, status)
 
@@ -476,9 +479,20 @@ class IdentificationSource:
         """
         record = _to_record(self.run, j, recording)
         status = TrialStatus(
-            j, False, reason=reason, interpolated_share=recording.interpolated_share
-        )
+            j, False, reason=reason, interpolated_share=recording.interpolated_share,
+            extra=trial_extra(recording, self.session),
+        )  # fmt: skip
         self.run.write_trial(j, record, status)
+
+    def record_session(self, session: FlightSession) -> None:
+        """Write (or update) this flight session's record in the run directory.
+
+        Parameters
+        ----------
+        session : FlightSession
+            Navigation source, hover measurements, settle tolerances.
+        """
+        self.session = self.run.write_session(self.session, session_record(session))
 
 
 def fly_identification(

@@ -16,6 +16,8 @@ from gcs.io.runlog import RunDir, TrialRecord
 
 __all__ = [
     "run_metrics",
+    "trial_clock_rates",
+    "session_lines",
     "metrics_table",
     "metrics_json",
     "write_plots",
@@ -58,7 +60,62 @@ def run_metrics(run: RunDir) -> list[IterationMetrics]:
     return iteration_table([e for e, _ in errors], [m for _, m in errors], list(records))
 
 
-def metrics_table(rows: list[IterationMetrics], title: str = "") -> Table:
+def trial_clock_rates(run: RunDir) -> dict[int, float | None]:
+    """The vehicle-time / wall-time rate each trial was flown at, from the sidecars.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+
+    Returns
+    -------
+    dict of int to float or None
+        By trial index; None where it was not recorded (runs flown before it was).
+    """
+    rates: dict[int, float | None] = {}
+    for status in run.statuses():
+        rate = (status.extra or {}).get("vehicle_time_rate")
+        rates[status.trial] = None if rate is None else float(rate)
+    return rates
+
+
+def session_lines(run: RunDir) -> list[str]:
+    """One line per flight session: trials, navigation source, hover and settle tolerances.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+
+    Returns
+    -------
+    list of str
+    """
+    lines = []
+    for s in run.sessions():
+        nav = (s.get("navigation") or {}).get("source", "unknown")
+        line = f"session {s.get('session')} (from trial {s.get('first_trial')}): navigation {nav}"
+        hovers = s.get("hovers") or []
+        if hovers:
+            stats = hovers[0].get("stats") or {}
+            line += (
+                f"; hover {stats.get('offset_m', float('nan')):.2f} m off, at most "
+                f"{stats.get('distance_max_m', float('nan')):.2f} m, "
+                f"{100 * stats.get('noise_m', float('nan')):.1f} cm fast noise"
+            )
+        tolerance = s.get("tolerance_m")
+        if tolerance is not None:
+            line += f"; settle tolerance {tolerance:.2f} m"
+        lines.append(line)
+    return lines
+
+
+def metrics_table(
+    rows: list[IterationMetrics],
+    title: str = "",
+    rates: dict[int, float | None] | None = None,
+) -> Table:
     """A rich table with one row per trial (the columns of the paper's Table IV).
 
     Parameters
@@ -67,35 +124,58 @@ def metrics_table(rows: list[IterationMetrics], title: str = "") -> Table:
         The rows.
     title : str
         Table title.
+    rates : dict of int to float or None, optional
+        Vehicle-time rate per trial (:func:`trial_clock_rates`): adds a column when one is
+        known.
 
     Returns
     -------
     rich.table.Table
     """
     table = Table(title=title or None)
-    for header in ("j", "e_pos [m]", "e_pos/e_pos0 [%]", "|Δe_pos|/prev [%]", "max err [m]"):
-        table.add_column(escape(header), justify="right", no_wrap=True)
+    headers = ["j", "e_pos [m]", "e_pos/e_pos0 [%]", "|Δe_pos|/prev [%]", "max err [m]"]
+    if rates is not None and all(rate is None for rate in rates.values()):
+        rates = None  # a run flown before rates were recorded
+    if rates is not None:
+        headers.append("clock [x]")
+    for header in headers:
+        # headers may wrap in a narrow terminal; the numbers never do
+        table.add_column(
+            escape(header), justify="right", min_width=len(header) if header == "j" else 6
+        )
     for r in rows:
         delta = "-" if r.delta_pct is None else f"{r.delta_pct:.2f}"
-        table.add_row(
+        cells = [
             str(r.iteration), f"{r.epos_m:.4f}", f"{r.epos_pct:.2f}", delta, f"{r.max_err_m:.4f}"
-        )
+        ]  # fmt: skip
+        if rates is not None:
+            rate = rates.get(r.iteration)
+            cells.append("-" if rate is None else f"{rate:.3f}")
+        table.add_row(*cells)
     return table
 
 
-def metrics_json(rows: list[IterationMetrics]) -> list[dict]:
+def metrics_json(
+    rows: list[IterationMetrics], rates: dict[int, float | None] | None = None
+) -> list[dict]:
     """Rows as JSON objects with keys iteration, epos_m, epos_pct, delta_pct, max_err_m.
 
     Parameters
     ----------
     rows : list of IterationMetrics
         The rows.
+    rates : dict of int to float or None, optional
+        Vehicle-time rate per trial: adds the key ``vehicle_time_rate`` (null if unknown).
 
     Returns
     -------
     list of dict
     """
-    return [asdict(r) for r in rows]
+    out = [asdict(r) for r in rows]
+    if rates is not None:
+        for row in out:
+            row["vehicle_time_rate"] = rates.get(row["iteration"])
+    return out
 
 
 def write_plots(run: RunDir, out_dir: Path, iterations: list[int] | None = None) -> list[Path]:

@@ -1,12 +1,18 @@
 """A campaign: take off, fly trial after trial (asking the source for each sequence), land.
 
-Sequence: connect, wait for a valid local position, arm, take off to the altitude of the first
-setpoint, start offboard at the current position, move to the start point and settle. For each
-trial: fly it, hover at its end while ``source.record`` runs (in a worker thread), ask
+Sequence: connect, read what the vehicle navigates on (EKF2 parameters) and what it does on a
+lost link, wait for a valid local position, arm, take off to the altitude of the first setpoint,
+start offboard at the current position, move to the start point, hold it for
+``settings.hover_before_trial_s`` and measure the hover there for ``settings.hover_measure_s``
+(:mod:`gcs.flight.hover`): a vehicle that drifts or oscillates is refused, any other gives the
+settle tolerances, and the measurement goes to ``source.record_session``. For each trial: fly
+it, hover at its end while ``source.record`` runs (in a worker thread), ask
 ``source.setpoints_for`` for the next sequence (worker thread, still hovering), move to its hover
 point (``source.hover_point_for``: the trajectory's start, where learning assumes the vehicle at
 rest before ``u(0)``), settle, and hold it for ``settings.hover_before_trial_s`` so that every
-trial starts from the same state. After the last trial: land and disarm.
+trial starts from the same state. A settle that times out is judged like the first hover:
+flown on with wider tolerances (and a warning), or refused. After the last trial: land and
+disarm. Every trial's vehicle-time rate is checked (:func:`gcs.flight.clock.rate_warning`).
 
 Safety: on Ctrl-C (``CancelledError``/``KeyboardInterrupt``), link loss, offboard rejection or any
 other exception after connecting, the vehicle is stopped (:meth:`Vehicle.emergency_stop`:
@@ -22,17 +28,25 @@ import asyncio
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
 
 from gcs.errors import TrajectoryError, TrialAborted, VehicleError
+from gcs.flight.clock import rate_warning
+from gcs.flight.hover import HoverStats, HoverVerdict, hover_stats, judge_hover
 from gcs.flight.interrupts import run_guarded
-from gcs.flight.preflight import LINK_LOSS_PARAMS, link_loss_warnings
+from gcs.flight.preflight import (
+    LINK_LOSS_PARAMS,
+    NAV_PARAMS,
+    NavigationSource,
+    link_loss_warnings,
+    navigation_source,
+)
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording, TrialRun, check_setpoints
-from gcs.flight.vehicle import Vehicle
+from gcs.flight.vehicle import TelemetrySample, Vehicle, sample_arrays
 
 __all__ = [
     "TrialSource",
@@ -40,6 +54,8 @@ __all__ = [
     "TrialProgress",
     "TrialFinished",
     "Status",
+    "HoverRecord",
+    "FlightSession",
     "CampaignEvent",
     "fly_campaign",
     "run_campaign",
@@ -109,6 +125,16 @@ class TrialSource(Protocol):
             The partial recording (``complete=False``; NaN after the last sample).
         reason : str
             Why the trial stopped, one line.
+        """
+        ...
+
+    def record_session(self, session: FlightSession) -> None:
+        """Take what the campaign learned about the vehicle (called again when it changes).
+
+        Parameters
+        ----------
+        session : FlightSession
+            Navigation source, hover measurements and settle tolerances so far.
         """
         ...
 
@@ -193,6 +219,63 @@ class TrialFinished:
     recording: TrialRecording
 
 
+@dataclass(frozen=True)
+class HoverRecord:
+    """One judged hover at a start point.
+
+    Parameters
+    ----------
+    before_trial : int
+        The trial it preceded.
+    why : str
+        ``"measurement"`` (before the first trial) or ``"settle timeout"`` (a settle that ran
+        out of time, judged again).
+    target_ned_m : tuple of float
+        The hover point, local NED [m].
+    stats : HoverStats
+        Its statistics.
+    verdict : HoverVerdict
+        The verdict and the tolerances it gives.
+    clock_rate : float
+        Vehicle-time / wall-time rate during the hover (NaN if unknown).
+    """
+
+    before_trial: int
+    why: str
+    target_ned_m: tuple[float, float, float]
+    stats: HoverStats
+    verdict: HoverVerdict
+    clock_rate: float
+
+
+@dataclass(frozen=True)
+class FlightSession:
+    """What one campaign found out about the vehicle, for the run directory.
+
+    Parameters
+    ----------
+    url : str
+        Connection URL.
+    first_trial : int
+        The campaign's first trial.
+    navigation : NavigationSource
+        What EKF2 navigates on.
+    hovers : tuple of HoverRecord
+        The hover measured before the first trial, then every re-judged one.
+    tolerance_m : float
+        Settle tolerance on the distance in force now [m].
+    speed_tolerance_m_s : float
+        Settle tolerance on the speed in force now [m/s].
+    """
+
+    url: str
+    first_trial: int
+    navigation: NavigationSource
+    hovers: tuple[HoverRecord, ...] = ()
+    tolerance_m: float = math.nan
+    speed_tolerance_m_s: float = math.nan
+
+
 CampaignEvent = Status | TrialStarted | TrialProgress | TrialFinished
 EventCallback = Callable[[CampaignEvent], None]
 
@@ -252,6 +335,9 @@ async def fly_campaign(
         hover, setpoints = await asyncio.to_thread(_plan, source, j)
         for warning in link_loss_warnings(await vehicle.read_int_params(LINK_LOSS_PARAMS)):
             emit(Status(warning, warning=True))
+        navigation = navigation_source(await vehicle.read_int_params(NAV_PARAMS))
+        emit(Status(navigation.text, warning=navigation.warning))
+        session = FlightSession(url, first_trial, navigation)
         emit(Status("waiting for a valid local position"))
         await vehicle.wait_healthy_local_position()
         check_battery(vehicle.battery_pct, settings.min_battery_pct, "taking off")
@@ -268,12 +354,28 @@ async def fly_campaign(
             check_battery(vehicle.battery_pct, settings.min_battery_pct, f"trial {j}")
             emit(Status(f"moving to the start point of trial {j}"))
             await vehicle.goto(hover, settings.transit_speed_m_s)
-            if settings.hover_before_trial_s > 0:
-                # the initial reset of ILC: let the state the previous trial left decay
-                emit(Status(f"holding the start point for {settings.hover_before_trial_s:g} s"))
+            if number == 1:
+                record = await _measure_hover(vehicle, hover, j, settings, emit)
+                session = _with_hover(session, record)
                 await vehicle.hover_while(
-                    asyncio.sleep(settings.hover_before_trial_s), f"the hold before trial {j}"
+                    asyncio.to_thread(source.record_session, session), "recording the hover"
                 )
+                if not record.verdict.ok:
+                    raise VehicleError(
+                        f"the vehicle does not hold the start point {_fmt(hover)}: it "
+                        f"{record.verdict.reason}"
+                    )
+            else:
+                record = await _settle(vehicle, hover, j, session, settings, emit)
+                if record is not None:
+                    session = _with_hover(session, record)
+                    await vehicle.hover_while(
+                        asyncio.to_thread(source.record_session, session), "recording the hover"
+                    )
+                if settings.hover_before_trial_s > 0:
+                    # the initial reset of ILC: let the state the previous trial left decay
+                    emit(Status(f"holding the start point for {settings.hover_before_trial_s:g} s"))
+                    await vehicle.hold(settings.hover_before_trial_s, f"the hold before trial {j}")
             n = setpoints.shape[0]
             emit(TrialStarted(j, number, iterations, n, n * t_ilc_s))
 
@@ -284,6 +386,10 @@ async def fly_campaign(
             recording = await run.fly()
             run = None  # handed over below: no longer "in flight"
             emit(TrialFinished(j, recording))
+            if recording.clock is not None:
+                warning = rate_warning(j, recording.clock.rate, n * t_ilc_s, t_ilc_s)
+                if warning is not None:
+                    emit(Status(warning, warning=True))
             await vehicle.hover_while(
                 asyncio.to_thread(source.record, j, recording), f"recording trial {j}"
             )
@@ -357,6 +463,113 @@ def run_campaign(
     run_guarded(
         fly_campaign(url, source, iterations, first_trial, settings, t_ilc_s, on_event), on_repeat
     )
+
+
+async def _measure_hover(
+    vehicle: Vehicle,
+    target: np.ndarray,
+    j: int,
+    settings: FlightSettings,
+    emit: EventCallback,
+) -> HoverRecord:
+    """Hold the start point (the initial reset), then measure and judge the hover there.
+
+    A hover still approaching the point is measured again, up to two more times.
+    """
+    hold_s, measure_s = settings.hover_before_trial_s, settings.hover_measure_s
+    emit(Status(f"holding the start point for {hold_s:g} s, then measuring the hover for "
+                f"{measure_s:g} s"))  # fmt: skip
+    if hold_s > 0:
+        await vehicle.hold(hold_s, "the hold before the hover measurement")
+    for _ in range(3):
+        samples = await vehicle.hold(measure_s, "the hover measurement")
+        record = _judge(samples, target, j, "measurement", vehicle, settings)
+        if record.verdict.kind != "approaching":
+            break
+    emit(
+        Status(
+            f"hover at the start point: {record.stats.describe()}", warning=not record.verdict.ok
+        )
+    )
+    if record.verdict.ok:
+        v = record.verdict
+        emit(Status(f"settle tolerances: {v.tolerance_m:.2f} m, {v.speed_tolerance_m_s:.2f} m/s"))
+    return record
+
+
+async def _settle(
+    vehicle: Vehicle,
+    target: np.ndarray,
+    j: int,
+    session: FlightSession,
+    settings: FlightSettings,
+    emit: EventCallback,
+) -> HoverRecord | None:
+    """Settle at the start point; judge the hover if that times out (None when it settled)."""
+    with vehicle.record_telemetry() as samples:
+        if await vehicle.settle(target, session.tolerance_m, session.speed_tolerance_m_s):
+            return None
+        recent = _last(samples, settings.hover_measure_s)
+    record = _judge(recent, target, j, "settle timeout", vehicle, settings)
+    if not record.verdict.ok:
+        raise VehicleError(
+            f"the vehicle did not settle at the start point {_fmt(target)} of trial {j} within "
+            f"{settings.settle_timeout_s:g} s: it {record.verdict.reason}"
+        )
+    emit(
+        Status(
+            f"trial {j}: not settled within {settings.settle_timeout_s:g} s "
+            f"({session.tolerance_m:.2f} m, {session.speed_tolerance_m_s:.2f} m/s); the hover "
+            f"now: {record.stats.describe()}; flying on with tolerances "
+            f"{max(session.tolerance_m, record.verdict.tolerance_m):.2f} m, "
+            f"{max(session.speed_tolerance_m_s, record.verdict.speed_tolerance_m_s):.2f} m/s",
+            warning=True,
+        )
+    )
+    return record
+
+
+def _judge(
+    samples: list[TelemetrySample],
+    target: np.ndarray,
+    j: int,
+    why: str,
+    vehicle: Vehicle,
+    settings: FlightSettings,
+) -> HoverRecord:
+    """Statistics and verdict of a hover recorded as samples."""
+    t, pos = sample_arrays(samples)
+    try:
+        stats = hover_stats(t, pos, target)
+    except ValueError as exc:
+        raise VehicleError(f"cannot measure the hover at {_fmt(target)}: {exc}") from None
+    fit = vehicle.clock.fit()
+    rate = fit.rate if fit is not None else math.nan
+    target_t = (float(target[0]), float(target[1]), float(target[2]))
+    return HoverRecord(j, why, target_t, stats, judge_hover(stats, settings), rate)
+
+
+def _last(samples: list[TelemetrySample], duration_s: float) -> list[TelemetrySample]:
+    """The samples of the last ``duration_s`` of vehicle time."""
+    if not samples:
+        return []
+    newest = max(s.t_vehicle_s for s in samples)
+    return [s for s in samples if s.t_vehicle_s >= newest - duration_s]
+
+
+def _with_hover(session: FlightSession, record: HoverRecord) -> FlightSession:
+    """The session with one more judged hover; tolerances only ever widen."""
+    v = record.verdict
+    return replace(
+        session,
+        hovers=session.hovers + (record,),
+        tolerance_m=float(np.fmax(session.tolerance_m, v.tolerance_m)),
+        speed_tolerance_m_s=float(np.fmax(session.speed_tolerance_m_s, v.speed_tolerance_m_s)),
+    )
+
+
+def _fmt(ned_m: np.ndarray) -> str:
+    return "NED (" + ", ".join(f"{x:.2f}" for x in ned_m) + ") m"
 
 
 def _plan(source: TrialSource, j: int) -> tuple[np.ndarray, np.ndarray]:

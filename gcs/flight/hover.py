@@ -143,7 +143,7 @@ class HoverVerdict:
         target: measure again), ``"oscillating"``, ``"drifting"`` or ``"off"`` (beyond
         ``hover_max_offset_m``).
     reason : str
-        One line saying why (empty when ``ok``).
+        Why, one line that follows "the vehicle ..." (empty when ``ok``).
     tolerance_m : float
         Settle tolerance on the distance from the target [m].
     speed_tolerance_m_s : float
@@ -341,7 +341,7 @@ def judge_hover(stats: HoverStats, settings: FlightSettings) -> HoverVerdict:
         if not stats.drift_away:
             return refuse(
                 "approaching",
-                f"still approaching the point at {stats.drift_m_s:.2f} m/s "
+                f"is still approaching the point at {stats.drift_m_s:.2f} m/s "
                 f"(flight.hover_max_drift_m_s {s.hover_max_drift_m_s:g} m/s)",
             )
         return refuse(

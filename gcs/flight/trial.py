@@ -1,17 +1,26 @@
 """Fly one trial: stream a setpoint sequence on a fixed grid and record the response on it.
 
-Streaming (zero-order hold). Setpoint ``k`` holds for one ILC sample from ``t0 + k t_ilc_s``.
-With ``stream_rate_hz = m / t_ilc_s`` the stream has ``m`` ticks per sample; tick ``i`` goes out
-at the absolute deadline ``t0 + i / stream_rate_hz`` on ``time.monotonic()`` (the asyncio loop
-clock) and carries setpoint ``i // m``. The first tick of each sample is exactly on the sample
-boundary, so the vehicle sees a true ZOH; the repeats keep MAVSDK's own 20 Hz re-send from firing
-in between (it is reset by every send). After the last setpoint the final one is repeated (hover)
-until a telemetry sample at or after ``t0 + N t_ilc_s`` has arrived, so that ``y(N)`` is measured.
+Everything runs on the vehicle's clock (``gcs.flight.clock``): the ILC model and the sample
+grid are in the vehicle's time, and a simulator under load runs that clock slower than the
+wall clock (PX4 SITL in lockstep: 0.72-0.9x). Streaming on the wall clock would then fly the
+manoeuvre faster in the vehicle's physics than it was designed (by 1/rate), against a model
+whose time base is the vehicle's, and differently in every trial as the load changes.
 
-Recording. Position samples are stamped on receipt. They are aligned to the grid
-``t_k = t0 + k t_ilc_s`` (k = 0..N) by linear interpolation between the two neighbouring samples;
-a grid point whose neighbours are more than 2 telemetry periods apart is flagged
-"interpolated across a gap". The first-send time of each setpoint is kept too.
+Streaming (zero-order hold). Setpoint ``k`` holds for one ILC sample from vehicle time
+``v0 + k t_ilc_s``. With ``stream_rate_hz = m / t_ilc_s`` the stream has ``m`` ticks per sample;
+tick ``i`` goes out at the local time of vehicle time ``v0 + i t_ilc_s / m`` through the current
+clock fit (an absolute deadline on ``time.monotonic()``, refitted about once a second) and
+carries setpoint ``i // m``. The first tick of each sample is on the sample boundary, so the
+vehicle sees a true ZOH; the repeats keep MAVSDK's own 20 Hz re-send from firing in between (it
+is reset by every send). After the last setpoint the final one is repeated (hover) until a
+sample stamped at or after ``v0 + N t_ilc_s`` has arrived, so that ``y(N)`` is measured.
+
+Recording. Position samples carry the vehicle's time stamps; they are aligned to the grid
+``v0 + k t_ilc_s`` (k = 0..N) by linear interpolation between the two neighbouring samples, so
+receipt jitter does not enter the data. A grid point whose neighbours are more than 2
+telemetry periods apart is flagged "interpolated across a gap". The first-send time of each
+setpoint is kept too, mapped to vehicle time, and the trial's own clock fit (its vehicle-time
+rate) comes with the recording.
 
 Watchdog (checked after every send): a setpoint sent more than ``max_setpoint_late_s`` after its
 deadline, position telemetry older than ``max_telemetry_age_s``, link loss, or any flight mode
@@ -20,8 +29,8 @@ attribute holds the partial recording (``complete=False``).
 
 Progress. ``on_progress(k, n, err_m)`` is called at most 10 times a second; ``err_m`` is the
 horizontal distance between the newest measured position and the setpoint that was in force
-when that sample was received. It is a live indicator only: it includes the closed loop's lag
-and is not the ILC tracking error (which needs the reference, unknown to this layer).
+at its time stamp. It is a live indicator only: it includes the closed loop's lag and is not
+the ILC tracking error (which needs the reference, unknown to this layer).
 """
 
 from __future__ import annotations
@@ -34,6 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gcs.errors import TrajectoryError, TrialAborted
+from gcs.flight.clock import ClockFit, fit_clock
 from gcs.flight.settings import FlightSettings
 from gcs.flight.vehicle import TelemetrySample, Vehicle, sleep_until
 
@@ -52,23 +62,28 @@ ProgressCallback = Callable[[int, int, float], None]
 
 PROGRESS_PERIOD_S = 0.1
 LEAD_TICKS = 2  # t0 lies this many stream periods after the trial is entered
+REFIT_S = 1.0  # the clock fit behind the deadlines is renewed this often [s, vehicle time]
 
 
 @dataclass(frozen=True)
 class TrialRecording:
     """What one trial sent and measured, on the ILC sample grid.
 
+    All times are on the vehicle's clock, relative to the trial's start ``v0`` (when setpoint 0
+    takes over), except ``t0_monotonic_s``.
+
     Parameters
     ----------
     t_s : ndarray, shape (N+1,)
-        Grid times ``k t_ilc_s`` relative to t0 [s].
+        Grid times ``k t_ilc_s`` relative to v0 [s].
     pos_ned_m : ndarray, shape (N+1, 3)
         Measured position at the grid times, local NED [m]; NaN where no sample brackets the
         grid time (only in incomplete recordings).
     vel_ned_m_s : ndarray, shape (N+1, 3)
         Measured velocity at the grid times, local NED [m/s]; NaN like ``pos_ned_m``.
     sent_s : ndarray, shape (N,)
-        Time the first send of each setpoint was issued, relative to t0 [s]; NaN if never sent.
+        Time the first send of each setpoint was issued, relative to v0 [s, vehicle time]; NaN
+        if never sent.
     interpolated : ndarray of bool, shape (N+1,)
         Grid point interpolated between samples more than 2 telemetry periods apart.
     complete : bool
@@ -80,7 +95,7 @@ class TrialRecording:
     t_ilc_s : float
         ILC sample time [s].
     raw_t_s : ndarray, shape (M,)
-        Receipt times of the raw position samples relative to t0 [s].
+        Vehicle time stamps of the raw position samples relative to v0 [s], sorted.
     raw_pos_ned_m : ndarray, shape (M, 3)
         Raw positions, local NED [m].
     raw_vel_ned_m_s : ndarray, shape (M, 3)
@@ -88,7 +103,13 @@ class TrialRecording:
     max_send_late_s : float
         Largest delay of a send after its deadline [s].
     t0_monotonic_s : float
-        t0 on ``time.monotonic()`` [s] (CLOCK_MONOTONIC, comparable with other local processes).
+        The start on ``time.monotonic()`` [s] (CLOCK_MONOTONIC, comparable with other local
+        processes): where the clock fit put vehicle time v0.
+    t0_vehicle_s : float
+        v0, the start in continuous vehicle time [s].
+    clock : ClockFit or None
+        Fit of the vehicle clock over the trial's own samples: ``clock.rate`` is the trial's
+        vehicle-time / wall-time rate (None with fewer than two samples).
     """
 
     t_s: np.ndarray
@@ -105,6 +126,8 @@ class TrialRecording:
     raw_vel_ned_m_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     max_send_late_s: float = 0.0
     t0_monotonic_s: float = math.nan
+    t0_vehicle_s: float = math.nan
+    clock: ClockFit | None = None
 
     @property
     def n_setpoints(self) -> int:
@@ -253,6 +276,7 @@ class TrialRun:
         self.on_progress = on_progress
         n = self.setpoints_ned_m.shape[0]
         self.t0: float | None = None
+        self.v0: float | None = None
         self.sent_abs_s = np.full(n, np.nan)
         self.max_send_late_s = 0.0
         self.samples: list[TelemetrySample] = []
@@ -269,22 +293,28 @@ class TrialRun:
         ------
         TrialAborted
             The watchdog fired; ``.recording`` holds the partial recording.
+        VehicleError
+            No clock fit yet (no time-stamped samples).
         """
         vehicle, settings, sp = self.vehicle, self.settings, self.setpoints_ned_m
         n, m = sp.shape[0], self.sends_per_sample
-        period_s = 1.0 / settings.stream_rate_hz
-        t_end = None
+        tick_s = self.t_ilc_s / m  # vehicle time between ticks
+        refit_ticks = max(1, round(REFIT_S / tick_s))
         next_progress_s = 0.0
+        fit = vehicle.clock_fit()
         with vehicle.record_telemetry() as samples:
             self.samples = samples
-            self.t0 = t0 = time.monotonic() + LEAD_TICKS * period_s
-            t_end = t0 + n * self.t_ilc_s
+            self.t0 = time.monotonic() + LEAD_TICKS / settings.stream_rate_hz
+            self.v0 = v0 = float(fit.to_vehicle(self.t0))
+            v_end = v0 + n * self.t_ilc_s
             i = 0
             while True:
-                deadline_s = t0 + i * period_s
+                if i % refit_ticks == 0:
+                    fit = vehicle.clock_fit()
+                deadline_s = float(fit.to_local(v0 + i * tick_s))
                 await sleep_until(deadline_s)
                 k = i // m
-                if k >= n and samples and samples[-1].t_s >= t_end:
+                if k >= n and samples and samples[-1].t_vehicle_s >= v_end:
                     break  # y(N) is measured
                 issued_s = time.monotonic()
                 await vehicle.send_setpoint(sp[min(k, n - 1)])
@@ -309,18 +339,18 @@ class TrialRun:
         return self.recording(None)
 
     def _live_error_m(self) -> float:
-        """Horizontal distance of the newest sample from the setpoint in force at its receipt."""
-        if not self.samples or self.t0 is None:
+        """Horizontal distance of the newest sample from the setpoint in force at its stamp."""
+        if not self.samples or self.v0 is None:
             return math.nan
         sample = self.samples[-1]
         n = self.setpoints_ned_m.shape[0]
-        k = min(max(math.floor((sample.t_s - self.t0) / self.t_ilc_s), 0), n - 1)
+        k = min(max(math.floor((sample.t_vehicle_s - self.v0) / self.t_ilc_s), 0), n - 1)
         d_n = sample.pos_ned_m[0] - self.setpoints_ned_m[k, 0]
         d_e = sample.pos_ned_m[1] - self.setpoints_ned_m[k, 1]
         return math.hypot(d_n, d_e)
 
     def recording(self, abort_reason: str | None) -> TrialRecording:
-        """The recording so far, aligned to the grid.
+        """The recording so far, aligned to the grid in vehicle time.
 
         Parameters
         ----------
@@ -336,35 +366,49 @@ class TrialRun:
         sp = self.setpoints_ned_m
         n = sp.shape[0]
         grid_rel_s = np.arange(n + 1) * self.t_ilc_s
-        t0 = self.t0 if self.t0 is not None else math.nan
-        samples = list(self.samples)
-        raw_t = np.array([s.t_s for s in samples], dtype=float) - t0
+        v0 = self.v0 if self.v0 is not None else math.nan
+        samples = sorted(self.samples, key=lambda s: s.t_vehicle_s)
+        raw_v = np.array([s.t_vehicle_s for s in samples], dtype=float)
         raw_pos = np.array([s.pos_ned_m for s in samples], dtype=float).reshape(-1, 3)
         raw_vel = np.array([s.vel_ned_m_s for s in samples], dtype=float).reshape(-1, 3)
+        clock = _trial_clock(raw_v, np.array([s.t_s for s in samples], dtype=float))
         gap_s = self.settings.telemetry_gap_s
-        if self.t0 is None:
+        if self.v0 is None:
             pos = np.full((n + 1, 3), np.nan)
             vel = np.full((n + 1, 3), np.nan)
             gap = np.zeros(n + 1, dtype=bool)
         else:
-            pos, gap = align_to_grid(raw_t, raw_pos, grid_rel_s, gap_s)
-            vel, _ = align_to_grid(raw_t, raw_vel, grid_rel_s, gap_s)
+            pos, gap = align_to_grid(raw_v - v0, raw_pos, grid_rel_s, gap_s)
+            vel, _ = align_to_grid(raw_v - v0, raw_vel, grid_rel_s, gap_s)
+        sent_v = np.full(n, np.nan)
+        if clock is not None:
+            sent_v = clock.to_vehicle(self.sent_abs_s) - v0
         return TrialRecording(
             t_s=grid_rel_s,
             pos_ned_m=pos,
             vel_ned_m_s=vel,
-            sent_s=self.sent_abs_s - t0,
+            sent_s=sent_v,
             interpolated=gap,
             complete=abort_reason is None,
             abort_reason=abort_reason,
             setpoints_ned_m=sp.copy(),
             t_ilc_s=self.t_ilc_s,
-            raw_t_s=raw_t,
+            raw_t_s=raw_v - v0,
             raw_pos_ned_m=raw_pos,
             raw_vel_ned_m_s=raw_vel,
             max_send_late_s=self.max_send_late_s,
-            t0_monotonic_s=t0,
+            t0_monotonic_s=self.t0 if self.t0 is not None else math.nan,
+            t0_vehicle_s=v0,
+            clock=clock,
         )
+
+
+def _trial_clock(vehicle_t_s: np.ndarray, receipt_t_s: np.ndarray) -> ClockFit | None:
+    """Clock fit over one trial's samples (sorted by vehicle time), None if too few."""
+    try:
+        return fit_clock(vehicle_t_s, receipt_t_s)
+    except ValueError:
+        return None
 
 
 async def fly_trial(

@@ -1,16 +1,22 @@
 """One MAVSDK connection to a PX4 multirotor, flown by position setpoints in local NED.
 
 :class:`Vehicle` owns the ``Mavsdk`` instance, the Action/Offboard/Telemetry plugins and a few
-background tasks that mirror the vehicle's state (position and velocity stamped on receipt with
-``time.monotonic()``, flight mode, armed, landed state, link). Every wait is an event wait on
-that mirror with a timeout, never a fixed sleep; every command is guarded by a timeout so that a
-dead link cannot hang the caller. MAVSDK errors become one-line :class:`gcs.errors.VehicleError`.
+background tasks that mirror the vehicle's state (position and velocity, flight mode, armed,
+landed state, link). Every wait is an event wait on that mirror with a timeout, never a fixed
+sleep; every command is guarded by a timeout so that a dead link cannot hang the caller. MAVSDK
+errors become one-line :class:`gcs.errors.VehicleError`.
+
+Position samples carry two times: the receipt time on ``time.monotonic()`` and the vehicle's own
+time stamp. MAVSDK's ``position_velocity_ned`` has no time stamp, so LOCAL_POSITION_NED is read
+raw through MAVSDK's MavlinkDirect plugin (its ``time_boot_ms``); :attr:`Vehicle.clock` makes
+that a continuous vehicle time and fits it to the local clock (:mod:`gcs.flight.clock`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import math
 import time
@@ -28,14 +34,17 @@ from mavsdk.asyncio import (
     System,
 )
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync
 
 from gcs.errors import VehicleError
+from gcs.flight.clock import ClockFit, VehicleClock
+from gcs.flight.hover import SPEED_SPAN_S, is_settled
 from gcs.flight.settings import FlightSettings
 
-__all__ = ["TelemetrySample", "Vehicle", "sleep_until", "min_jerk"]
+__all__ = ["TelemetrySample", "Vehicle", "sample_arrays", "sleep_until", "min_jerk"]
 
 _log = logging.getLogger(__name__)
 _mavsdk_log = logging.getLogger("gcs.flight.mavsdk")
@@ -66,11 +75,36 @@ class TelemetrySample(NamedTuple):
         Position in local NED [m].
     vel_ned_m_s : tuple of 3 float
         Velocity in local NED [m/s].
+    t_vehicle_s : float
+        The vehicle's time stamp as a continuous vehicle time [s] (see
+        :class:`gcs.flight.clock.VehicleClock`).
     """
 
     t_s: float
     pos_ned_m: tuple[float, float, float]
     vel_ned_m_s: tuple[float, float, float]
+    t_vehicle_s: float
+
+
+def sample_arrays(samples: list[TelemetrySample]) -> tuple[np.ndarray, np.ndarray]:
+    """Vehicle times and positions of samples, sorted by vehicle time.
+
+    Parameters
+    ----------
+    samples : list of TelemetrySample
+        Samples in receipt order.
+
+    Returns
+    -------
+    t_vehicle_s : ndarray, shape (M,)
+        Continuous vehicle times [s], non-decreasing.
+    pos_ned_m : ndarray, shape (M, 3)
+        Positions, local NED [m].
+    """
+    t = np.array([s.t_vehicle_s for s in samples], dtype=float)
+    pos = np.array([s.pos_ned_m for s in samples], dtype=float).reshape(-1, 3)
+    order = np.argsort(t, kind="stable")  # a reordered datagram keeps its own time
+    return t[order], pos[order]
 
 
 async def sleep_until(deadline_s: float) -> None:
@@ -121,6 +155,7 @@ class Vehicle:
         self.local_position_ok: bool = False
         self.battery_pct: float = math.nan  # remaining charge [%]; NaN until reported
         self.target_ned_m: np.ndarray | None = None
+        self.clock = VehicleClock()
         self._streaming_stopped = False
         self._offboard_started = False
         self._recorders: list[list[TelemetrySample]] = []
@@ -131,6 +166,7 @@ class Vehicle:
         self._action: ActionAsync | None = None
         self._offboard: OffboardAsync | None = None
         self._telemetry: TelemetryAsync | None = None
+        self._direct: MavlinkDirectAsync | None = None
         self.url: str | None = None
 
     # ------------------------------------------------------------------ connection
@@ -171,6 +207,7 @@ class Vehicle:
         self._action = ActionAsync(system)
         self._offboard = OffboardAsync(system)
         self._telemetry = TelemetryAsync(system)
+        self._direct = MavlinkDirectAsync(system)
         self.connected = await system.is_connected()
         for watch in (
             self._watch_position,
@@ -201,7 +238,7 @@ class Vehicle:
         for plugin in (self._action, self._offboard, self._telemetry):
             if plugin is not None:
                 plugin.destroy()
-        self._action = self._offboard = self._telemetry = None
+        self._action = self._offboard = self._telemetry = self._direct = None
         if self._mavsdk is not None:
             self._mavsdk.destroy()
             self._mavsdk = None
@@ -214,15 +251,18 @@ class Vehicle:
         event.set()
 
     async def _watch_position(self) -> None:
-        assert self._telemetry is not None
-        async for pv in self._telemetry.subscribe_position_velocity_ned():
-            p, v = pv.position, pv.velocity
-            sample = TelemetrySample(
-                time.monotonic(),
-                (p.north_m, p.east_m, p.down_m),
-                (v.north_m_s, v.east_m_s, v.down_m_s),
-            )
-            self.latest = sample
+        assert self._direct is not None
+        async for message in self._direct.subscribe_message("LOCAL_POSITION_NED"):
+            receipt_s = time.monotonic()
+            f = json.loads(message.fields_json)
+            pos = (float(f["x"]), float(f["y"]), float(f["z"]))
+            vel = (float(f["vx"]), float(f["vy"]), float(f["vz"]))
+            if not all(math.isfinite(x) for x in pos + vel):
+                continue  # an estimator without a position: not a sample
+            t_vehicle_s = self.clock.add(f["time_boot_ms"] / 1000.0, receipt_s)
+            sample = TelemetrySample(receipt_s, pos, vel, t_vehicle_s)
+            if self.latest is None or t_vehicle_s >= self.latest.t_vehicle_s:
+                self.latest = sample
             for recorder in self._recorders:
                 recorder.append(sample)
             self._notify()
@@ -284,6 +324,23 @@ class Vehicle:
         finally:
             self._recorders.remove(samples)
 
+    def clock_fit(self) -> ClockFit:
+        """The current fit of the vehicle's clock to the local one (sliding window).
+
+        Returns
+        -------
+        ClockFit
+
+        Raises
+        ------
+        VehicleError
+            No position samples at two vehicle times yet.
+        """
+        fit = self.clock.fit()
+        if fit is None:
+            raise VehicleError("no time-stamped position samples from the vehicle yet")
+        return fit
+
     def telemetry_age_s(self) -> float:
         """Age of the newest position sample [s] (infinite before the first one)."""
         return math.inf if self.latest is None else time.monotonic() - self.latest.t_s
@@ -311,8 +368,8 @@ class Vehicle:
     ) -> None:
         """Wait (on state-change events) until ``predicate()`` holds.
 
-        Raises VehicleError on timeout, on link loss, and, with ``in_control``, on any
-        :meth:`control_problem`.
+        Raises :class:`_WaitTimeout` (a VehicleError) on timeout, VehicleError on link loss
+        and, with ``in_control``, on any :meth:`control_problem`.
         """
         deadline_s = time.monotonic() + timeout_s
         while not predicate():
@@ -323,7 +380,7 @@ class Vehicle:
                 raise VehicleError(f"{problem} while waiting for {what}")
             remaining_s = deadline_s - time.monotonic()
             if remaining_s <= 0:
-                raise VehicleError(f"{what} did not happen within {timeout_s:g} s")
+                raise _WaitTimeout(f"{what} did not happen within {timeout_s:g} s")
             # Wake up at least at the telemetry-age limit so that silence is noticed.
             changed = self._changed
             with contextlib.suppress(TimeoutError):
@@ -516,12 +573,12 @@ class Vehicle:
         )
 
     async def goto(self, ned_m: Any, speed_m_s: float) -> None:
-        """Move in a straight line to ``ned_m`` and settle there in hover.
+        """Move in a straight line to ``ned_m`` (no waiting there: see :meth:`settle`).
 
         The move starts at the current target (else the measured position), follows a
-        minimum-jerk profile whose peak speed is ``speed_m_s``, is streamed at
-        ``settings.stream_rate_hz`` against absolute deadlines, and ends with
-        :meth:`settle`.
+        minimum-jerk profile whose peak speed is ``speed_m_s`` and is streamed at
+        ``settings.stream_rate_hz`` against absolute deadlines (wall clock: a transit is not
+        learned from).
 
         Parameters
         ----------
@@ -533,7 +590,7 @@ class Vehicle:
         Raises
         ------
         VehicleError
-            Lost control during the move (see :meth:`control_problem`) or did not settle.
+            Lost control during the move (see :meth:`control_problem`).
         """
         target = np.asarray(ned_m, dtype=float).reshape(3)
         if self.target_ned_m is not None:
@@ -553,43 +610,84 @@ class Vehicle:
             if problem is not None:
                 raise VehicleError(f"{problem} while moving to {_fmt(target)}")
             await self.send_setpoint(start + min_jerk(i / n_ticks) * (target - start))
-        await self.settle(target)
 
-    async def settle(self, ned_m: Any) -> None:
-        """Wait until the measured position stays within tolerance of ``ned_m``.
+    async def settle(self, ned_m: Any, tolerance_m: float, speed_tolerance_m_s: float) -> bool:
+        """Hover at ``ned_m`` until settled: distance and speed within tolerance for a while.
+
+        Settled means :func:`gcs.flight.hover.is_settled` over ``settings.settle_time_s`` of
+        vehicle time: every sample within ``tolerance_m`` of the point and every speed (over
+        1 s) within ``speed_tolerance_m_s``.
 
         Parameters
         ----------
         ned_m : array_like, shape (3,)
             Hover point in local NED [m].
+        tolerance_m : float
+            Largest distance from the point [m].
+        speed_tolerance_m_s : float
+            Largest speed [m/s].
+
+        Returns
+        -------
+        bool
+            True once settled; False when ``settings.settle_timeout_s`` ran out first (the
+            caller judges that hover: a loose hover is no error by itself).
 
         Raises
         ------
         VehicleError
-            Not settled (``settings.settle_tolerance_m`` for ``settings.settle_time_s``) within
-            ``settings.settle_timeout_s``, or lost control meanwhile.
+            Lost control meanwhile.
         """
         target = np.asarray(ned_m, dtype=float).reshape(3)
         s = self.settings
-        inside_since: list[float | None] = [None]
+        # samples enough for the window and its speed span at up to twice the requested rate
+        keep = math.ceil((s.settle_time_s + SPEED_SPAN_S) * 2 * s.telemetry_rate_hz) + 2
+        with self.record_telemetry() as samples:
 
-        def settled() -> bool:
-            if self.latest is None:
-                return False
-            error_m = float(np.linalg.norm(np.asarray(self.latest.pos_ned_m) - target))
-            if error_m > s.settle_tolerance_m:
-                inside_since[0] = None
-                return False
-            if inside_since[0] is None:
-                inside_since[0] = self.latest.t_s
-            return self.latest.t_s - inside_since[0] >= s.settle_time_s
+            def settled() -> bool:
+                t, pos = sample_arrays(samples[-keep:])
+                return is_settled(t, pos, target, tolerance_m, speed_tolerance_m_s, s.settle_time_s)
 
-        await self._wait_until(
-            settled,
-            s.settle_timeout_s,
-            f"settling within {s.settle_tolerance_m:g} m of {_fmt(target)}",
-            in_control=True,
-        )
+            try:
+                await self._wait_until(
+                    settled, s.settle_timeout_s, f"settling at {_fmt(target)}", in_control=True
+                )
+            except _WaitTimeout:
+                return False
+        return True
+
+    async def hold(self, duration_s: float, what: str) -> list[TelemetrySample]:
+        """Hover at the current target for ``duration_s`` of vehicle time, watching it.
+
+        Parameters
+        ----------
+        duration_s : float
+            How long, on the vehicle's clock [s] (a simulator slower than real time takes
+            longer in wall time).
+        what : str
+            Name of the hold for error messages.
+
+        Returns
+        -------
+        list of TelemetrySample
+            The samples received during the hold.
+
+        Raises
+        ------
+        VehicleError
+            Control was lost (see :meth:`control_problem`) before the hold ended.
+        """
+        await self.hold_position()
+        rate = self.clock_fit().rate
+        with self.record_telemetry() as samples:
+            end_s = self.clock.latest_s + duration_s
+            await self._wait_until(
+                lambda: self.clock.latest_s >= end_s,
+                duration_s / rate + 2 * self.settings.max_telemetry_age_s,
+                what,
+                in_control=True,
+            )
+            return list(samples)
 
     async def hold_position(self) -> np.ndarray:
         """Hover at the current target: re-send it so MAVSDK keeps re-sending it at 20 Hz.
@@ -757,6 +855,10 @@ class Vehicle:
         if plugin is None:
             raise VehicleError("not connected")
         return plugin
+
+
+class _WaitTimeout(VehicleError):
+    """A wait of :meth:`Vehicle._wait_until` ran out of time (control was not lost)."""
 
 
 def _fmt(ned_m: np.ndarray) -> str:
