@@ -68,8 +68,10 @@ def link_loss_warnings(params: dict[str, int | None]) -> list[str]:
     return []
 
 
-NAV_PARAMS = ("EKF2_GPS_CTRL", "EKF2_EV_CTRL", "EKF2_HGT_REF")
-"""The PX4 integer parameters :func:`navigation_source` reads."""
+NAV_PARAMS = ("EKF2_GPS_CTRL", "EKF2_HGT_REF", "EKF2_EV_CTRL")
+"""The PX4 integer parameters :func:`navigation_source` reads. ``EKF2_EV_CTRL`` comes last: it
+is the one PX4 before v1.14 lacks, and MAVSDK's parameter reads queue behind a read that goes
+unanswered (measured on the replayed PX4 capture, tests/test_px4_replay.py)."""
 
 HGT_REF_NAMES = {0: "barometer", 1: "GPS", 2: "range sensor", 3: "vision"}
 """PX4's ``EKF2_HGT_REF`` values."""
@@ -135,9 +137,9 @@ def navigation_source(params: dict[str, int | None]) -> NavigationSource:
         ``vision`` likewise for ``EKF2_EV_CTRL``.
     """
     values = {name: params.get(name) for name in NAV_PARAMS}
-    gps_ctrl, ev_ctrl, hgt_ref = (values[n] for n in NAV_PARAMS)
+    gps_ctrl, hgt_ref, ev_ctrl = (values[n] for n in NAV_PARAMS)
     if gps_ctrl is None or ev_ctrl is None:
-        missing = ", ".join(n for n in NAV_PARAMS[:2] if values[n] is None)
+        missing = ", ".join(n for n in ("EKF2_GPS_CTRL", "EKF2_EV_CTRL") if values[n] is None)
         text = (
             f"navigation source unknown: could not read {missing} (not PX4 v1.14 or later?); "
             "the hover measurement below tells how well the vehicle holds a point"
