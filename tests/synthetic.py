@@ -82,13 +82,13 @@ def eight_trajectory():
 #: Watchdog limits for end-to-end flights on a loaded 2-core CI machine, where other test
 #: workers can starve the flight process for more than the default 0.1 s. The watchdog itself
 #: is tested with its defaults in tests/test_flight_trial.py. The hover measurement before the
-#: first trial is 3 s instead of 10 s: the indoor mock's hover (gusts of 1.5 s correlation)
-#: shows in 3 s, and every e2e flight would otherwise take 7 s longer.
+#: first trial is 2 s instead of 10 s: the indoor mock's hover (gusts of 1.5 s correlation)
+#: shows in 2 s, and every e2e flight would otherwise take 8 s longer.
 CI_FLIGHT = {
     "stream_rate_hz": 60,
     "max_setpoint_late_s": 0.4,
     "max_telemetry_age_s": 1.0,
-    "hover_measure_s": 3.0,
+    "hover_measure_s": 2.0,
 }
 
 

@@ -24,6 +24,7 @@ from gcs.flight.campaign import (
     TrialStarted,
     fly_campaign,
 )
+from gcs.flight.hover import SPEED_SPAN_S
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.flight.vehicle import Vehicle
@@ -36,7 +37,7 @@ T_ILC_S = 0.05
 # watchdog limits tolerant of a loaded CI machine (see tests/synthetic.py: CI_FLIGHT)
 SETTINGS = FlightSettings(
     settle_time_s=0.5, settle_tolerance_m=0.2, connect_timeout_s=5.0,
-    max_setpoint_late_s=0.4, max_telemetry_age_s=1.0, hover_measure_s=3.0,
+    max_setpoint_late_s=0.4, max_telemetry_age_s=1.0, hover_measure_s=2.0,
 )  # fmt: skip
 
 
@@ -138,8 +139,10 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     assert len(holds) == 2 and all(h < s for h, s in zip(holds, starts, strict=True))
     for h, s in zip(holds, starts, strict=True):
         assert stamps[s] - stamps[h] >= SETTINGS.hover_before_trial_s
-    # the hover before trial 0 was measured (after the hold), judged and handed over once
-    assert stamps[starts[0]] - stamps[holds[0]] >= (
+    # the hover before trial 0 was measured (after a hold of its own), judged and handed over
+    (measuring,) = [i for i, t in enumerate(events) if getattr(t, "text", "").startswith("meas")]
+    assert measuring < holds[0]
+    assert stamps[holds[0]] - stamps[measuring] >= (
         SETTINGS.hover_before_trial_s + SETTINGS.hover_measure_s
     )
     (session,) = source.sessions
@@ -158,9 +161,10 @@ def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
     source = CircleSource(duration_s=8.0)
     events: list[object] = []
     started = time.monotonic()
-    # 4 s after the mock starts the trial would be under way without the hold and the hover
-    # measurement before it
-    loss_at_s = 4.0 + SETTINGS.hover_before_trial_s + SETTINGS.hover_measure_s
+    # 4 s after the first OFFBOARD plus what comes before trial 0: the hold and the hover
+    # measurement, the shortest settle (its window and 1 s of speed span) and the hold
+    loss_at_s = 4.0 + 2 * SETTINGS.hover_before_trial_s + SETTINGS.hover_measure_s
+    loss_at_s += SETTINGS.settle_time_s + SPEED_SPAN_S
     config = tmp_path / "mock.yaml"  # a vehicle set up to land on a lost link
     config.write_text("px4:\n  nav_dll_act: 3\n  com_dl_loss_t_s: 3.0\n")
     faults = Faults(link_loss_at_s=loss_at_s)

@@ -245,9 +245,10 @@ def test_low_battery_before_a_trial_lands_and_keeps_the_run_resumable(
 def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: Path) -> None:
     run_path = tmp_path / "run"
     stats = tmp_path / "stats.json"
-    # 4 s after the first OFFBOARD plus the hold and the hover measurement before the trial:
-    # inside trial 0 (take-off hover, the move, the hold and the measurement come first)
-    loss_at_s = 4.0 + FlightSettings().hover_before_trial_s + CI_FLIGHT["hover_measure_s"]
+    # 4 s after the first OFFBOARD plus what comes before trial 0: the hold and the hover
+    # measurement, the shortest settle (its window and 1 s of speed span) and the hold
+    s = FlightSettings(**CI_FLIGHT)
+    loss_at_s = 4.0 + 2 * s.hover_before_trial_s + s.hover_measure_s + s.settle_time_s + 1.0
     faults = Faults(link_loss_at_s=loss_at_s, link_loss_duration_s=2.0)
     with MockProcess(seed=2, stats_path=stats, faults=faults) as mock:
         code, out = fly_two_trials(tmp_path, tiny, run_path, "--connect", mock.url)

@@ -35,7 +35,7 @@ def test_px4_defaults_as_captured_are_gps() -> None:
     assert source.gps and not source.vision and source.name == "GPS"
     assert source.height == "GPS" and not source.warning
     assert source.text.startswith("navigation: GPS (EKF2_GPS_CTRL 7 (position, altitude, ")
-    assert "EKF2_EV_CTRL 0 (off)" in source.text and "wander by decimetres" in source.text
+    assert "EKF2_EV_CTRL 0 (off)" in source.text and "wanders by decimetres" in source.text
     assert "\n" not in source.text
 
 

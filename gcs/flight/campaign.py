@@ -5,12 +5,12 @@ lost link, wait for a valid local position, arm, take off to the altitude of the
 start offboard at the current position, move to the start point, hold it for
 ``settings.hover_before_trial_s`` and measure the hover there for ``settings.hover_measure_s``
 (:mod:`gcs.flight.hover`): a vehicle that drifts or oscillates is refused, any other gives the
-settle tolerances, and the measurement goes to ``source.record_session``. For each trial: fly
-it, hover at its end while ``source.record`` runs (in a worker thread), ask
-``source.setpoints_for`` for the next sequence (worker thread, still hovering), move to its hover
-point (``source.hover_point_for``: the trajectory's start, where learning assumes the vehicle at
-rest before ``u(0)``), settle, and hold it for ``settings.hover_before_trial_s`` so that every
-trial starts from the same state. A settle that times out is judged like the first hover:
+settle tolerances, and the measurement goes to ``source.record_session``. For each trial: move
+to its hover point (``source.hover_point_for``: the trajectory's start, where learning assumes
+the vehicle at rest before ``u(0)``), settle, and hold it for ``settings.hover_before_trial_s``
+so that every trial starts from the same state; fly it, hover at its end while
+``source.record`` runs (in a worker thread), ask ``source.setpoints_for`` for the next sequence
+(worker thread, still hovering). A settle that times out is judged like the first hover:
 flown on with wider tolerances (and a warning), or refused. After the last trial: land and
 disarm. Every trial's vehicle-time rate is checked (:func:`gcs.flight.clock.rate_warning`).
 
@@ -35,7 +35,7 @@ import numpy as np
 
 from gcs.errors import TrajectoryError, TrialAborted, VehicleError
 from gcs.flight.clock import rate_warning
-from gcs.flight.hover import HoverStats, HoverVerdict, hover_stats, judge_hover
+from gcs.flight.hover import HoverStats, HoverVerdict, hover_stats, judge_hover, widened
 from gcs.flight.interrupts import run_guarded
 from gcs.flight.preflight import (
     LINK_LOSS_PARAMS,
@@ -356,7 +356,8 @@ async def fly_campaign(
             await vehicle.goto(hover, settings.transit_speed_m_s)
             if number == 1:
                 record = await _measure_hover(vehicle, hover, j, settings, emit)
-                session = _with_hover(session, record)
+                v = record.verdict
+                session = _with_hover(session, record, v.tolerance_m, v.speed_tolerance_m_s)
                 await vehicle.hover_while(
                     asyncio.to_thread(source.record_session, session), "recording the hover"
                 )
@@ -365,17 +366,19 @@ async def fly_campaign(
                         f"the vehicle does not hold the start point {_fmt(hover)}: it "
                         f"{record.verdict.reason}"
                     )
-            else:
-                record = await _settle(vehicle, hover, j, session, settings, emit)
-                if record is not None:
-                    session = _with_hover(session, record)
-                    await vehicle.hover_while(
-                        asyncio.to_thread(source.record_session, session), "recording the hover"
-                    )
-                if settings.hover_before_trial_s > 0:
-                    # the initial reset of ILC: let the state the previous trial left decay
-                    emit(Status(f"holding the start point for {settings.hover_before_trial_s:g} s"))
-                    await vehicle.hold(settings.hover_before_trial_s, f"the hold before trial {j}")
+            record = await _settle(vehicle, hover, j, session, settings, emit)
+            if record is not None:
+                tolerances = widened(
+                    session.tolerance_m, session.speed_tolerance_m_s, record.stats, settings
+                )
+                session = _with_hover(session, record, *tolerances)
+                await vehicle.hover_while(
+                    asyncio.to_thread(source.record_session, session), "recording the hover"
+                )
+            if settings.hover_before_trial_s > 0:
+                # the initial reset of ILC: let the state the previous trial left decay
+                emit(Status(f"holding the start point for {settings.hover_before_trial_s:g} s"))
+                await vehicle.hold(settings.hover_before_trial_s, f"the hold before trial {j}")
             n = setpoints.shape[0]
             emit(TrialStarted(j, number, iterations, n, n * t_ilc_s))
 
@@ -477,8 +480,8 @@ async def _measure_hover(
     A hover still approaching the point is measured again, up to two more times.
     """
     hold_s, measure_s = settings.hover_before_trial_s, settings.hover_measure_s
-    emit(Status(f"holding the start point for {hold_s:g} s, then measuring the hover for "
-                f"{measure_s:g} s"))  # fmt: skip
+    emit(Status(f"measuring the hover at the start point for {measure_s:g} s, after {hold_s:g} s "
+                "to settle"))  # fmt: skip
     if hold_s > 0:
         await vehicle.hold(hold_s, "the hold before the hover measurement")
     for _ in range(3):
@@ -516,13 +519,15 @@ async def _settle(
             f"the vehicle did not settle at the start point {_fmt(target)} of trial {j} within "
             f"{settings.settle_timeout_s:g} s: it {record.verdict.reason}"
         )
+    tolerance_m, speed_m_s = widened(
+        session.tolerance_m, session.speed_tolerance_m_s, record.stats, settings
+    )
     emit(
         Status(
             f"trial {j}: not settled within {settings.settle_timeout_s:g} s "
             f"({session.tolerance_m:.2f} m, {session.speed_tolerance_m_s:.2f} m/s); the hover "
-            f"now: {record.stats.describe()}; flying on with tolerances "
-            f"{max(session.tolerance_m, record.verdict.tolerance_m):.2f} m, "
-            f"{max(session.speed_tolerance_m_s, record.verdict.speed_tolerance_m_s):.2f} m/s",
+            f"now: {record.stats.describe()}; flying on with tolerances {tolerance_m:.2f} m, "
+            f"{speed_m_s:.2f} m/s",
             warning=True,
         )
     )
@@ -557,14 +562,15 @@ def _last(samples: list[TelemetrySample], duration_s: float) -> list[TelemetrySa
     return [s for s in samples if s.t_vehicle_s >= newest - duration_s]
 
 
-def _with_hover(session: FlightSession, record: HoverRecord) -> FlightSession:
-    """The session with one more judged hover; tolerances only ever widen."""
-    v = record.verdict
+def _with_hover(
+    session: FlightSession, record: HoverRecord, tolerance_m: float, speed_tolerance_m_s: float
+) -> FlightSession:
+    """The session with one more judged hover and the settle tolerances now in force."""
     return replace(
         session,
         hovers=session.hovers + (record,),
-        tolerance_m=float(np.fmax(session.tolerance_m, v.tolerance_m)),
-        speed_tolerance_m_s=float(np.fmax(session.speed_tolerance_m_s, v.speed_tolerance_m_s)),
+        tolerance_m=tolerance_m,
+        speed_tolerance_m_s=speed_tolerance_m_s,
     )
 
 

@@ -6,7 +6,13 @@ position, wandering slowly at up to 0.2-0.4 m/s while its estimate settles, with
 noise. Nothing here assumes either: before the first trial the campaign measures the hover at
 the start point (:func:`hover_stats`), refuses a vehicle that does not hold position at all
 (:func:`judge_hover`: drifting away, oscillating, or too far off), and derives from the
-measurement the tolerances of the settle test before every later trial (:func:`is_settled`).
+measurement the tolerances of the settle test before every trial (:func:`is_settled`): the
+vehicle must be as close to the point as it is half of the time (the median distance, at least
+``settle_tolerance_m``) and no faster than its hover (1.5 times the 95th-percentile speed, at
+least ``settle_speed_m_s``) for ``settle_time_s``. The settle thereby picks a typical moment of
+the hover to start the trial's initial-reset hold from, on any vehicle: a mocap-grade one is
+held to centimetres (the floor), a GPS one to its own decimetres. When a settle times out
+(the wander grew), the hover is judged again and the tolerances widen (:func:`widened`).
 
 Every function takes arrays in and gives numbers out (no MAVSDK, no clock), so they are tested
 on recorded hovers.
@@ -43,6 +49,7 @@ __all__ = [
     "NOISE_SPAN_S",
     "MIN_CYCLES",
     "TOLERANCE_FACTOR",
+    "widened",
     "OSCILLATION_SHARE",
 ]
 
@@ -57,8 +64,7 @@ MAX_OSCILLATION_HZ = 5.0
 OSCILLATION_SHARE = 0.5
 """A sinusoid explaining at least this share of the detrended variance is an oscillation."""
 TOLERANCE_FACTOR = 1.5
-"""Settle tolerances are this factor times the largest distance and the 95th-percentile
-speed measured in the hover (with the settings' floors)."""
+"""The settle's speed tolerance is this factor times the hover's 95th-percentile speed."""
 MIN_SAMPLES = 10
 
 
@@ -76,6 +82,8 @@ class HoverStats:
         Mean position minus target, north, east, down [m].
     offset_m : float
         3-D length of ``offset_ned_m`` [m].
+    distance_p50_m : float
+        Median 3-D distance from the target [m].
     distance_p95_m : float
         95th percentile of the 3-D distance from the target [m].
     distance_max_m : float
@@ -100,6 +108,7 @@ class HoverStats:
     n_samples: int
     offset_ned_m: tuple[float, float, float]
     offset_m: float
+    distance_p50_m: float
     distance_p95_m: float
     distance_max_m: float
     noise_m: float
@@ -286,6 +295,7 @@ def hover_stats(t_s: object, pos_ned_m: object, target_ned_m: object) -> HoverSt
         n_samples=int(t.size),
         offset_ned_m=(float(offset[0]), float(offset[1]), float(offset[2])),
         offset_m=float(np.linalg.norm(offset)),
+        distance_p50_m=float(np.median(dist)),
         distance_p95_m=float(np.percentile(dist, 95)),
         distance_max_m=float(dist.max()),
         noise_m=float(np.sqrt(np.mean(np.sum(noise**2, axis=1)))),
@@ -307,7 +317,7 @@ def judge_hover(stats: HoverStats, settings: FlightSettings) -> HoverVerdict:
     a drift away from the target faster than ``hover_max_drift_m_s`` (the same drift towards
     it is ``"approaching"``: the vehicle has not arrived yet); a hover that gets further than
     ``hover_max_offset_m`` from the target. Anything else is a vehicle that hovers, however
-    loosely: its tolerances are ``TOLERANCE_FACTOR`` times the largest distance and the
+    loosely: its settle tolerances are the median distance and ``TOLERANCE_FACTOR`` times the
     95th-percentile speed measured, at least ``settle_tolerance_m`` and ``settle_speed_m_s``.
 
     Parameters
@@ -322,7 +332,7 @@ def judge_hover(stats: HoverStats, settings: FlightSettings) -> HoverVerdict:
     HoverVerdict
     """
     s = settings
-    tolerance_m = max(s.settle_tolerance_m, TOLERANCE_FACTOR * stats.distance_max_m)
+    tolerance_m = max(s.settle_tolerance_m, stats.distance_p50_m)
     speed_m_s = max(s.settle_speed_m_s, TOLERANCE_FACTOR * stats.speed_p95_m_s)
 
     def refuse(kind: str, reason: str) -> HoverVerdict:
@@ -356,6 +366,37 @@ def judge_hover(stats: HoverStats, settings: FlightSettings) -> HoverVerdict:
             f"(flight.hover_max_offset_m {s.hover_max_offset_m:g} m)",
         )
     return HoverVerdict(True, "ok", "", tolerance_m, speed_m_s)
+
+
+def widened(
+    tolerance_m: float, speed_tolerance_m_s: float, stats: HoverStats, settings: FlightSettings
+) -> tuple[float, float]:
+    """Settle tolerances after a settle timed out on a vehicle that hovers (never narrower).
+
+    The hover had been judged on a window where the vehicle stayed further out than the
+    median distance measured before; the distance tolerance becomes the 95th percentile of
+    that window, so that the next settle finds the vehicle within it most of the time.
+
+    Parameters
+    ----------
+    tolerance_m : float
+        Distance tolerance so far [m].
+    speed_tolerance_m_s : float
+        Speed tolerance so far [m/s].
+    stats : HoverStats
+        The hover of the settle that timed out.
+    settings : FlightSettings
+        Floors (``settle_tolerance_m``, ``settle_speed_m_s``).
+
+    Returns
+    -------
+    tolerance_m, speed_tolerance_m_s : float
+    """
+    verdict = judge_hover(stats, settings)
+    return (
+        max(tolerance_m, stats.distance_p95_m, verdict.tolerance_m),
+        max(speed_tolerance_m_s, verdict.speed_tolerance_m_s),
+    )
 
 
 def is_settled(

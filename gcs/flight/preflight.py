@@ -162,6 +162,6 @@ def navigation_source(params: dict[str, int | None]) -> NavigationSource:
         return NavigationSource(gps, vision, height, text, True, values)
     text = f"navigation: {source.name} ({detail})"
     if gps and not vision:
-        text += "; GPS positions wander by decimetres: expect a loose hover and trials that repeat"
-        text += " poorly"
+        text += "; a GPS position often wanders by decimetres: the hover measured below says"
+        text += " how much"
     return NavigationSource(gps, vision, height, text, False, values)
