@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs.flight.campaign import run_campaign
+from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.mock.config import Faults
@@ -56,6 +56,9 @@ class CircleSource:
         """Keep the partial recording."""
         self.recording = recording
 
+    def record_session(self, session: FlightSession) -> None:
+        """Nothing to keep: the hover measurement is not what this benchmark is about."""
+
 
 def setpoint_arrivals_s(stats_path: Path) -> np.ndarray:
     """Setpoint arrival times [s, CLOCK_MONOTONIC] from the mock's stats file."""
@@ -65,7 +68,9 @@ def setpoint_arrivals_s(stats_path: Path) -> np.ndarray:
 
 def run_one(rate_hz: float, t_ilc_s: float, duration_s: float, workdir: Path) -> dict:
     """Fly one trial at ``rate_hz`` and measure the stream the mock received."""
-    settings = FlightSettings(stream_rate_hz=rate_hz, settle_time_s=0.5, settle_tolerance_m=0.2)
+    settings = FlightSettings(
+        stream_rate_hz=rate_hz, settle_time_s=0.5, settle_tolerance_m=0.2, hover_measure_s=2.0
+    )
     source = CircleSource(duration_s, t_ilc_s)
     stats_path = workdir / f"stats-{rate_hz:g}-{t_ilc_s:g}.json"
     with MockProcess(config_path=None, seed=0, faults=Faults(), stats_path=stats_path) as mock:
