@@ -678,12 +678,13 @@ class Vehicle:
             Control was lost (see :meth:`control_problem`) before the hold ended.
         """
         await self.hold_position()
-        rate = self.clock_fit().rate
+        fit = self.clock_fit()
         with self.record_telemetry() as samples:
-            end_s = self.clock.latest_s + duration_s
+            # until a sample stamped duration_s after the vehicle's "now" (not its last sample)
+            end_s = float(fit.to_vehicle(time.monotonic())) + duration_s
             await self._wait_until(
                 lambda: self.clock.latest_s >= end_s,
-                duration_s / rate + 2 * self.settings.max_telemetry_age_s,
+                duration_s / fit.rate + 2 * self.settings.max_telemetry_age_s,
                 what,
                 in_control=True,
             )
