@@ -26,6 +26,7 @@ from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
 
 __all__ = [
     "RunSource",
+    "SessionRecorder",
     "flyable_setpoints",
     "flight_settings",
     "prepare_run",
@@ -216,8 +217,29 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
     return sp
 
 
+class SessionRecorder:
+    """What the run-directory trial sources share: the record of their flight session.
+
+    Subclasses provide ``run`` (:class:`RunDir`) and ``session`` (int or None, the record's
+    number once written).
+    """
+
+    run: RunDir
+    session: int | None
+
+    def record_session(self, session: FlightSession) -> None:
+        """Write (or update) this flight session's record in the run directory.
+
+        Parameters
+        ----------
+        session : FlightSession
+            Navigation source, hover measurements, settle tolerances.
+        """
+        self.session = self.run.write_session(self.session, session_record(session))
+
+
 @dataclass
-class RunSource:
+class RunSource(SessionRecorder):
     """Trial source of the flight layer backed by a run directory.
 
     Parameters
@@ -303,16 +325,6 @@ class RunSource:
             extra=trial_extra(recording, self.session),
         )  # fmt: skip
         self.run.write_trial(j, record, status)
-
-    def record_session(self, session: FlightSession) -> None:
-        """Write (or update) this flight session's record in the run directory.
-
-        Parameters
-        ----------
-        session : FlightSession
-            Navigation source, hover measurements, settle tolerances.
-        """
-        self.session = self.run.write_session(self.session, session_record(session))
 
     def rows(self) -> list[IterationMetrics]:
         """Table IV rows of the complete trials so far (from the sidecars)."""

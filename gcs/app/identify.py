@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gcs.app.fly import flyable_setpoints, session_record, to_record, trial_extra
+from gcs.app.fly import SessionRecorder, flyable_setpoints, to_record, trial_extra
 from gcs.app.report import save_figure
 from gcs.core.excitation import multisine, prbs
 from gcs.core.model import DiscreteModel
@@ -49,7 +49,7 @@ from gcs.core.pbsid import (
 )
 from gcs.core.trajectory import Reference, points_outside
 from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogError, TrajectoryError
-from gcs.flight.campaign import FlightSession, run_campaign
+from gcs.flight.campaign import run_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec, _Fields, profile_from_dict
@@ -400,7 +400,7 @@ def _to_record(run: RunDir, j: int, recording: TrialRecording) -> TrialRecord:
 
 
 @dataclass
-class IdentificationSource:
+class IdentificationSource(SessionRecorder):
     """Trial source of the flight layer for the two identification experiments.
 
     Parameters
@@ -483,16 +483,6 @@ class IdentificationSource:
             extra=trial_extra(recording, self.session),
         )  # fmt: skip
         self.run.write_trial(j, record, status)
-
-    def record_session(self, session: FlightSession) -> None:
-        """Write (or update) this flight session's record in the run directory.
-
-        Parameters
-        ----------
-        session : FlightSession
-            Navigation source, hover measurements, settle tolerances.
-        """
-        self.session = self.run.write_session(self.session, session_record(session))
 
 
 def fly_identification(
