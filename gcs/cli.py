@@ -125,11 +125,16 @@ def fly(
 ) -> None:
     """Fly N learning trials: take off, fly, learn, fly again, land.
 
-    Connects through MAVSDK, waits for a healthy local position, arms, takes off to the
-    trajectory's altitude, flies to the start point and settles in hover. Each trial streams
-    its setpoints against absolute deadlines, records the measured position on the sample
-    grid, learns the next trial's setpoints while hovering (the same step as 'gcs learn') and
-    prints the new row of the e_pos table. After the last trial it lands and disarms.
+    Connects through MAVSDK, says what the vehicle navigates on (GPS, vision: PX4's EKF2
+    parameters), waits for a healthy local position, arms, takes off to the trajectory's
+    altitude and flies to the start point. There it measures the hover (flight.hover_measure_s,
+    10 s): a vehicle that drifts or oscillates is refused; any other sets how close and how
+    still the vehicle must be before each trial (the settle), printed and kept in the run's
+    session-SSS.json. Each trial streams its setpoints on the vehicle's own clock (PX4's time
+    stamps: a simulator slower than real time still flies the trajectory as designed),
+    records the measured position on the sample grid, learns the next trial's setpoints while
+    hovering (the same step as 'gcs learn') and prints the new row of the e_pos table and the
+    vehicle's clock rate. After the last trial it lands and disarms.
 
     Safety: Ctrl-C, a lost link, an offboard rejection or any error mid-trial stops streaming,
     holds, lands and disarms; completed trials stay on disk, the interrupted one is marked

@@ -53,6 +53,8 @@ def test_record_writes_the_trial_and_learns_the_next(tmp_path: Path) -> None:
     assert rows[-1][1].epos_m < 0.5 * rows[-1][0].epos_m  # learned between the trials
     status = run.read_status(1)
     assert status.extra["max_send_late_s"] == 0.0
+    assert status.extra["max_sent_offset_s"] == pytest.approx(0.001)  # sent 1 ms after k t_ilc
+    assert status.extra["vehicle_time_rate"] is None and status.extra["session"] is None
 
 
 def test_to_record_holds_the_last_setpoint_and_marks_the_unsent_row(tmp_path: Path) -> None:

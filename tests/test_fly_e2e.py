@@ -137,6 +137,7 @@ def test_fly_on_a_slow_simulator_streams_records_and_learns_on_the_vehicle_clock
     for j in (0, 1):
         extra = run.read_status(j).extra
         assert extra["vehicle_time_rate"] == pytest.approx(0.9, abs=0.002) and extra["session"] == 1
+        assert 0.0 <= extra["max_sent_offset_s"] < CI_FLIGHT["max_setpoint_late_s"]
         # setpoint k reached the vehicle at t0 + k t_ilc_s on its own clock, not 0.9 t_ilc_s
         ks, arrived = arrivals_on_the_vehicle_clock(
             stats, run.read_setpoints(j), extra["t0_vehicle_s"]

@@ -146,14 +146,18 @@ def trial_extra(recording: TrialRecording, session: int | None) -> dict[str, Any
     Returns
     -------
     dict
-        ``max_send_late_s``, ``vehicle_time_rate`` (vehicle-time / wall-time rate of the
-        trial, None if unknown), ``clock_latency_p50_s`` (median receipt delay above the
+        ``max_send_late_s``, ``max_sent_offset_s`` (largest distance of a setpoint's first send
+        from its sample boundary, on the vehicle's clock: how well the stream kept to the
+        vehicle's grid), ``vehicle_time_rate`` (vehicle-time / wall-time rate of the trial,
+        None if unknown), ``clock_latency_p50_s`` (median receipt delay above the
         clock fit), ``t0_vehicle_s`` (the trial's k = 0 on the vehicle's clock: time since
         boot for PX4, to find the trial in its own log), ``session``.
     """
     clock = recording.clock
+    offset = np.abs(recording.sent_s - recording.t_s[:-1])
     return {
         "max_send_late_s": recording.max_send_late_s,
+        "max_sent_offset_s": float(np.nanmax(offset)) if np.any(np.isfinite(offset)) else None,
         "t0_vehicle_s": recording.t0_vehicle_s,
         "vehicle_time_rate": None if clock is None else clock.rate,
         "clock_latency_p50_s": None if clock is None else clock.latency_p50_s,

@@ -229,7 +229,8 @@ class VehicleClock:
     Parameters
     ----------
     window_s : float
-        Vehicle time kept for the fit [s].
+        Vehicle time kept for the fit [s]: long enough to average latency out, short enough to
+        follow a simulator that changes speed (the flight layer uses 10 s).
     wrap_s : float
         Period of the raw counter [s] (``time_boot_ms``: :data:`BOOT_MS_WRAP_S`).
     restart_jump_s : float

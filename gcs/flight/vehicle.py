@@ -155,7 +155,7 @@ class Vehicle:
         self.local_position_ok: bool = False
         self.battery_pct: float = math.nan  # remaining charge [%]; NaN until reported
         self.target_ned_m: np.ndarray | None = None
-        self.clock = VehicleClock()
+        self.clock = VehicleClock(window_s=10.0)
         self._streaming_stopped = False
         self._offboard_started = False
         self._recorders: list[list[TelemetrySample]] = []
@@ -682,9 +682,11 @@ class Vehicle:
         with self.record_telemetry() as samples:
             # until a sample stamped duration_s after the vehicle's "now" (not its last sample)
             end_s = float(fit.to_vehicle(time.monotonic())) + duration_s
+            # twice the expected wall time: a simulator may slow down meanwhile (silence is the
+            # watchdog's to catch, not the timeout's)
             await self._wait_until(
                 lambda: self.clock.latest_s >= end_s,
-                duration_s / fit.rate + 2 * self.settings.max_telemetry_age_s,
+                2 * duration_s / fit.rate + 2 * self.settings.max_telemetry_age_s,
                 what,
                 in_control=True,
             )
