@@ -312,7 +312,8 @@ async def fly_campaign(
     Raises
     ------
     VehicleError
-        Unreachable vehicle, refused command, lost link, failed settling.
+        Unreachable vehicle, refused command, lost link, a hover refused (drifting,
+        oscillating, too far off).
     TrialAborted
         The trial watchdog fired (the trial went to ``source.record_incomplete``).
     asyncio.CancelledError
