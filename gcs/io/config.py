@@ -8,6 +8,7 @@ safety limit must not silently fall back to a default.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,6 +32,8 @@ __all__ = [
 ]
 
 ALGORITHMS = ("smoother", "kilc")
+#: A trajectory's name becomes part of a run directory's name.
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
 
 class _Fields:
@@ -111,6 +114,22 @@ class _Fields:
                     raise self.fail(key, f"must contain only finite numbers, got {v!r}")
             out.append([float(v) for v in row])
         return out
+
+    def mapping(self, key: str) -> dict:
+        """An optional section passed on as a dict (checked by its user), refused if not one."""
+        value = self.raw(key, None)
+        if value is None:
+            return {}
+        if not isinstance(value, dict):
+            raise self.fail(key, f"must be a mapping, got {value!r}")
+        return dict(value)
+
+    def text(self, key: str) -> str | None:
+        """An optional free text (``description``)."""
+        value = self.raw(key, None)
+        if value is not None and not isinstance(value, str):
+            raise self.fail(key, f"must be a string, got {value!r}")
+        return value
 
     def sub(self, key: str, default: Any = ...) -> _Fields:
         value = self.raw(key, default)
@@ -295,11 +314,11 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
         max_speed_m_s=vehicle.number("max_speed_m_s", positive=True),
         max_accel_m_s2=vehicle.number("max_accel_m_s2", positive=True),
         arena=box,
-        flight=dict(f.raw("flight", {}) or {}),
-        identification=dict(f.raw("identification", {}) or {}),
+        flight=f.mapping("flight"),
+        identification=f.mapping("identification"),
         source=data,
     )
-    f.raw("description", None)
+    f.text("description")
     vehicle.done()
     arena.done()
     f.done()
@@ -365,7 +384,13 @@ def trajectory_from_dict(data: Any, where: str = "<trajectory>") -> TrajectorySp
             raise
         raise TrajectoryError(f"{where}: {exc}") from exc
     name = f.string("name")
-    f.raw("description", None)
+    if not _NAME.match(name):
+        raise f.fail(
+            "name",
+            f"must be 1 to 64 letters, digits, '.', '_' or '-' (it names run directories), "
+            f"got {name!r}",
+        )
+    f.text("description")
     f.done()
     return TrajectorySpec(name=name, shape=shape, source=data)
 

@@ -31,6 +31,8 @@ def read_yaml(path: Path, error: type[GcsError]) -> Any:
         text = Path(path).read_text()
     except OSError as exc:
         raise error(f"{path}: cannot read ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not UTF-8 text (byte {exc.start})") from exc
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError as exc:
