@@ -45,8 +45,10 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     rows = json.loads(result.output)
     assert [r["iteration"] for r in rows] == [0, 1]
     assert set(rows[0]) == {
-        "iteration", "epos_m", "epos_pct", "delta_pct", "max_err_m", "vehicle_time_rate"
+        "iteration", "status", "reason", "epos_m", "epos_pct", "delta_pct", "max_err_m",
+        "vehicle_time_rate",
     }  # fmt: skip
+    assert rows[0]["status"] == "complete" and rows[0]["reason"] is None
     assert rows[0]["vehicle_time_rate"] is None  # simulated trials: no vehicle clock
     assert rows[0]["epos_pct"] == pytest.approx(100.0)
     assert rows[0]["delta_pct"] is None
@@ -60,8 +62,8 @@ def test_report_table_and_plots(tmp_path: Path) -> None:
     result = invoke("report", run.path, "--plot", tmp_path / "plots")
     assert result.exit_code == 0, result.output
     assert "e_pos [m]" in result.output
-    for name in ("xy.png", "north_t.png", "epos.png"):
-        data = (tmp_path / "plots" / name).read_bytes()
+    for name in ("xy", "position", "setpoints", "error", "epos", "disturbance"):
+        data = (tmp_path / "plots" / f"{name}.png").read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
 
 
