@@ -17,7 +17,13 @@ import numpy as np
 
 from gcs.app.learn import check_learnable, check_learned, differing_field, learn_run, trial_errors
 from gcs.core.metrics import IterationMetrics, iteration_table
-from gcs.core.trajectory import Reference, check_reference, points_outside, sample_eight
+from gcs.core.trajectory import (
+    MAX_SAMPLES,
+    Reference,
+    check_reference,
+    points_outside,
+    sample_eight,
+)
 from gcs.errors import PathError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.settings import FlightSettings
@@ -218,11 +224,20 @@ def plan_fly(
 def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Reference:
     if trajectory.shape is None:
         raise TrajectoryError(f"{where}: not an eight (an identification excitation)")
+    duration = trajectory.shape.duration_s
+    if not duration / profile.t_ilc_s <= MAX_SAMPLES:  # before the arrays are made
+        raise TrajectoryError(
+            f"{where}: a trial of {duration:g} s has more than {MAX_SAMPLES} samples of "
+            f"{profile.t_ilc_s:g} s"
+        )
     try:
-        ref = sample_eight(trajectory.shape, profile.t_ilc_s)
+        with np.errstate(over="raise", invalid="raise"):
+            ref = sample_eight(trajectory.shape, profile.t_ilc_s)
         check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)
     except TrajectoryError as exc:
         raise TrajectoryError(f"{where}: {exc}") from None
+    except FloatingPointError as exc:
+        raise TrajectoryError(f"{where}: its numbers overflow when sampled ({exc})") from None
     return ref
 
 

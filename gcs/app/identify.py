@@ -46,7 +46,7 @@ from gcs.core.pbsid import (
     to_continuous_tf,
     vaf,
 )
-from gcs.core.trajectory import Reference, points_outside
+from gcs.core.trajectory import MAX_SAMPLES, Reference, points_outside
 from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import run_campaign
 from gcs.flight.settings import FlightSettings
@@ -205,6 +205,10 @@ def identification_settings(
         if f_max >= nyquist:
             raise f.fail("f_max_hz", f"must be below Nyquist {nyquist:g} Hz, got {f_max:g}")
     duration = f.number("duration_s", d.duration_s, positive=True)
+    if duration / profile.t_ilc_s > MAX_SAMPLES:
+        raise f.fail(
+            "duration_s", f"gives more than {MAX_SAMPLES} samples of {profile.t_ilc_s:g} s"
+        )
     past = f.integer("past", d.past)
     if past < 1:
         raise f.fail("past", f"must be >= 1, got {past}")

@@ -18,7 +18,7 @@ from gcs.core.learning import LearningInputs, learning_step
 from gcs.core.metrics import epos, max_error
 from gcs.core.model import relative_degree
 from gcs.core.trajectory import Reference, check_setpoints
-from gcs.errors import RunLogError, TrajectoryError
+from gcs.errors import GcsError, ProfileError, RunLogError, TrajectoryError
 from gcs.io.config import Profile, load_profile
 from gcs.io.runlog import RunDir, TrialRecord
 
@@ -190,19 +190,21 @@ def check_learnable(profile: Profile, ref: Reference, algorithm: str, where: str
     ProfileError, ModelError, UpdateInfeasible
         Naming the profile.
     """
-    from gcs.errors import GcsError, ProfileError
-
     try:
-        step = learning_step(
-            learning_inputs(profile, algorithm),
-            ref.pos_ned_m[:, :2], ref.pos_ned_m[:-1, :2], ref.pos_ned_m[:, :2],
-        )  # fmt: skip
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            step = learning_step(
+                learning_inputs(profile, algorithm),
+                ref.pos_ned_m[:, :2], ref.pos_ned_m[:-1, :2], ref.pos_ned_m[:, :2],
+            )  # fmt: skip
         sp = np.column_stack([step.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
         check_learned(sp, profile, ref)
     except GcsError as exc:
         raise type(exc)(f"{where}: learning cannot start on this trajectory: {exc}") from None
-    except ValueError as exc:
-        raise ProfileError(f"{where}: learning cannot start on this trajectory: {exc}") from None
+    except (ValueError, ArithmeticError, RuntimeError) as exc:  # a solver that fails numerically
+        raise ProfileError(
+            f"{where}: learning cannot start on this trajectory: {exc} (check learning.weights "
+            "and the models)"
+        ) from None
 
 
 def _kilc_prior(run: RunDir, j: int) -> tuple[KilcState, KilcState] | None:
@@ -247,20 +249,28 @@ def learn_run(
     if np.max(np.abs(record.ref_ned_m - ref.pos_ned_m)) > 1e-6:
         raise RunLogError(f"{run.path}/trial-{j:03d}.csv: reference columns differ from the run's")
     kilc_prior = _kilc_prior(run, j) if run.algorithm == "kilc" else None
-    step = learning_step(
-        learning_inputs(profile, run.algorithm),
-        ref.pos_ned_m[:, :2],
-        record.sp_ned_m[:-1, :2],
-        record.pos_ned_m[:, :2],
-        kilc_prior,
-    )
+    try:
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            step = learning_step(
+                learning_inputs(profile, run.algorithm),
+                ref.pos_ned_m[:, :2],
+                record.sp_ned_m[:-1, :2],
+                record.pos_ned_m[:, :2],
+                kilc_prior,
+            )
+    except (ArithmeticError, RuntimeError) as exc:  # GcsErrors pass: they name their cause
+        if isinstance(exc, GcsError):
+            raise
+        raise RunLogError(
+            f"{run.path}/trial-{j:03d}.csv: the learning update failed on this trial ({exc}); "
+            "nothing written"
+        ) from None
     sp = np.column_stack([step.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
     try:  # the QP keeps these limits; this guards against a solver that did not
         check_learned(sp, profile, ref)
     except TrajectoryError as exc:
         raise RunLogError(f"{run.path}: learned from trial {j}: {exc}; nothing written") from None
-    run.write_estimate(j, step.d_hat_ne_m, step.p_ne_m2)
-    path = run.write_setpoints(j + 1, sp)
+    path = run.write_learned(j, step.d_hat_ne_m, step.p_ne_m2, sp)
     return LearnOutcome(
         trial=j,
         next_trial=j + 1,

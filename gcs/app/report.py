@@ -95,7 +95,7 @@ def trial_overview(run: RunDir) -> list[TrialEntry]:
             s = statuses[j]
             out.append(TrialEntry(j, "complete" if s.complete else "incomplete", s.reason))
         elif j in csv_only:
-            out.append(TrialEntry(j, "incomplete", "no trial-JJJ.json (interrupted write)"))
+            out.append(TrialEntry(j, "incomplete", f"trial-{j:03d}.csv without its .json"))
         else:
             out.append(TrialEntry(j, "missing", f"no trial-{j:03d}.json"))
     return out

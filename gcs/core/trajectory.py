@@ -16,7 +16,12 @@ import numpy as np
 
 from gcs.errors import TrajectoryError
 
+#: Longest trial gcs flies, in samples: twice the N = 6000 whose learning update is benchmarked
+#: (0.6 s, 170 MB; docs/update.md); time and memory grow about linearly beyond.
+MAX_SAMPLES = 12_000
+
 __all__ = [
+    "MAX_SAMPLES",
     "EightShape",
     "Reference",
     "Box",
@@ -57,6 +62,11 @@ class EightShape:
     loops: int = 2
     ramp_s: float = 2.0
     hover_s: float = 1.0
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the trial: hovers, ramps and loops [s]."""
+        return 2.0 * self.hover_s + self.ramp_s + self.loops * self.period_s
 
     def __post_init__(self) -> None:
         for name in ("amplitude_north_m", "amplitude_east_m", "period_s"):
@@ -176,9 +186,13 @@ def sample_eight(shape: EightShape, t_ilc_s: float) -> Reference:
     """
     if not t_ilc_s > 0:
         raise TrajectoryError(f"t_ilc_s must be > 0, got {t_ilc_s}")
-    duration = 2.0 * shape.hover_s + shape.ramp_s + shape.loops * shape.period_s
+    duration = shape.duration_s
     # ceil, not round: the last sample must not fall before the end of the motion
     n = int(np.ceil(duration / t_ilc_s - 1e-9))
+    if n < 2:
+        raise TrajectoryError(
+            f"a trial of {duration:g} s has fewer than 2 samples of {t_ilc_s:g} s"
+        )
     t = np.arange(n + 1) * t_ilc_s
     s, sd, sdd = _phase(t, shape)
     a, b = shape.amplitude_north_m, shape.amplitude_east_m

@@ -15,7 +15,7 @@ from typing import Any
 
 from gcs.core.estimators import KilcSettings, SmootherSettings
 from gcs.core.model import DiscreteModel, from_state_space, from_transfer_function
-from gcs.core.trajectory import Box, EightShape
+from gcs.core.trajectory import MAX_SAMPLES, Box, EightShape
 from gcs.core.update import UpdateWeights
 from gcs.errors import GcsError, ProfileError, TrajectoryError
 from gcs.io.yamlfile import read_yaml
@@ -215,9 +215,10 @@ class Profile:
 def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
     try:
         if f.has("num") or f.has("den"):
-            model = from_transfer_function(
-                f.numbers("num"), f.numbers("den"), f.number("delay_s", 0.0), t_ilc_s
-            )
+            delay_s = f.number("delay_s", 0.0)
+            if delay_s / t_ilc_s > MAX_SAMPLES:  # before the delay line is built
+                raise f.fail("delay_s", f"is longer than the longest trial ({MAX_SAMPLES} samples)")
+            model = from_transfer_function(f.numbers("num"), f.numbers("den"), delay_s, t_ilc_s)
         else:
             dt = f.number("dt_s", positive=True)
             if abs(dt - t_ilc_s) > 1e-9:
@@ -228,7 +229,7 @@ def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
                 f.matrix("C"),
                 f.matrix("D") if f.has("D") else 0.0,
                 dt,
-                f.integer("delay_samples", 0),
+                _delay_samples(f),
             )
     except GcsError as exc:
         if isinstance(exc, ProfileError):
@@ -240,6 +241,13 @@ def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
     if not model.is_stable():
         raise ProfileError(f"{f.where}: field '{f.path}': the model is not asymptotically stable")
     return model
+
+
+def _delay_samples(f: _Fields) -> int:
+    delay = f.integer("delay_samples", 0)
+    if not 0 <= delay <= MAX_SAMPLES:
+        raise f.fail("delay_samples", f"must be in [0, {MAX_SAMPLES}], got {delay}")
+    return delay
 
 
 def _interval(f: _Fields, key: str) -> tuple[float, float]:

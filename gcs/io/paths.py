@@ -98,6 +98,8 @@ def resolve_named(value: str | Path, kind: str, option: str) -> Path:
         Neither an existing file nor a packaged name; or a directory.
     """
     text = str(value)
+    if not text.strip():
+        raise PathError(f"{option}: empty; give a {kind} name or a path")
     path = Path(text)
     if path.is_dir():
         raise PathError(f"{option} {text}: is a directory, not a {kind} file")

@@ -506,6 +506,7 @@ class RunDir:
         self._check_grid(path, table, self.n_samples + 1)
         if not np.all(np.isfinite(table)):
             raise RunLogError(f"{path}: contains NaN or inf")
+        _check_plausible(path, table[:, 2:5], REFERENCE_COLUMNS[2:5])
         pos = table[:, 2:5]
         vel = np.gradient(pos, self.t_ilc_s, axis=0)
         return Reference(table[:, 1], pos, vel, np.gradient(vel, self.t_ilc_s, axis=0))
@@ -528,14 +529,17 @@ class RunDir:
         -------
         Path
         """
+        path = self._file("setpoints", j, "csv")
+        write_once(path, self._setpoints_text(j, sp_ned_m))
+        return path
+
+    def _setpoints_text(self, j: int, sp_ned_m: np.ndarray) -> str:
         sp = np.asarray(sp_ned_m, dtype=float)
         n = self.n_samples
         if sp.shape != (n, 3) or not np.all(np.isfinite(sp)):
             raise RunLogError(f"setpoints for trial {j} must be finite with shape ({n}, 3)")
         table = np.column_stack([np.arange(n), np.arange(n) * self.t_ilc_s, sp])
-        path = self._file("setpoints", j, "csv")
-        write_once(path, _csv_text(SETPOINT_COLUMNS, table))
-        return path
+        return _csv_text(SETPOINT_COLUMNS, table)
 
     def read_setpoints(self, j: int) -> np.ndarray:
         """Trial j's setpoints, shape (N, 3), local NED [m].
@@ -554,6 +558,7 @@ class RunDir:
             raise RunLogError(f"{path}: no setpoints for trial {j} (run 'gcs learn' first)")
         table = _read_csv(path, SETPOINT_COLUMNS)
         self._check_grid(path, table, self.n_samples)
+        _check_plausible(path, table[:, 2:5], SETPOINT_COLUMNS[2:5])
         return table[:, 2:5]
 
     # ----------------------------------------------------------------- trials
@@ -681,6 +686,7 @@ class RunDir:
         if bad.size:
             row, col = bad[0]
             raise RunLogError(f"{path}: column '{TRIAL_COLUMNS[col]}' is NaN or inf at k = {row}")
+        _check_plausible(path, table[:, 2:14], TRIAL_COLUMNS[2:14])
         record = TrialRecord.from_table(table)
         self._check_flown_setpoints(path, j, record)
         return record
@@ -781,10 +787,46 @@ class RunDir:
         p_ne_m2 : ndarray, shape (N, 2)
             Its error variance [m^2] (K-ILC: the filter's scalar, repeated).
         """
-        n = self.n_samples
-        k = np.arange(1, n + 1)
+        write_once(self._file("estimate", j, "csv"), self._estimate_text(d_hat_ne_m, p_ne_m2))
+
+    def _estimate_text(self, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray) -> str:
+        k = np.arange(1, self.n_samples + 1)
         table = np.column_stack([k, k * self.t_ilc_s, d_hat_ne_m, p_ne_m2])
-        write_once(self._file("estimate", j, "csv"), _csv_text(ESTIMATE_COLUMNS, table))
+        return _csv_text(ESTIMATE_COLUMNS, table)
+
+    def write_learned(
+        self, j: int, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray, sp_ned_m: np.ndarray
+    ) -> Path:
+        """Record what was learned from trial j: its estimate, then trial j+1's setpoints.
+
+        Both files are checked first: if either exists with other content nothing is
+        written (refused), so that a refusal never leaves one of the two behind. The setpoints
+        come last: they are what says the next trial can be flown.
+
+        Parameters
+        ----------
+        j : int
+            Trial learned from.
+        d_hat_ne_m, p_ne_m2 : ndarray, shape (N, 2)
+            As :meth:`write_estimate`.
+        sp_ned_m : ndarray, shape (N, 3)
+            Setpoints of trial j+1, as :meth:`write_setpoints`.
+
+        Returns
+        -------
+        Path
+            The setpoints file.
+        """
+        for path, text in (
+            (self._file("estimate", j, "csv"), self._estimate_text(d_hat_ne_m, p_ne_m2)),
+            (self._file("setpoints", j + 1, "csv"), self._setpoints_text(j + 1, sp_ned_m)),
+        ):
+            if path.exists() and path.read_bytes() != text.encode("utf-8"):
+                raise RunLogError(
+                    f"{path}: exists with different content; recorded data are never rewritten"
+                )
+        self.write_estimate(j, d_hat_ne_m, p_ne_m2)
+        return self.write_setpoints(j + 1, sp_ned_m)
 
     def read_estimate(self, j: int) -> tuple[np.ndarray, np.ndarray]:
         """The estimate learned from trial j: ``(d_hat (N, 2) [m], p (N, 2) [m^2])``.
@@ -804,7 +846,25 @@ class RunDir:
         table = _read_csv(path, ESTIMATE_COLUMNS)
         if table.shape[0] != self.n_samples or not np.all(np.isfinite(table)):
             raise RunLogError(f"{path}: expected {self.n_samples} finite rows")
+        _check_plausible(path, table[:, 2:6], ESTIMATE_COLUMNS[2:6])
         return table[:, 2:4], table[:, 4:6]
+
+
+#: Largest magnitude a recorded position, velocity or variance may have [m, m/s, m^2]: a value
+#: beyond it is no measurement (a damaged file), and would overflow the learning's numerics.
+_PLAUSIBLE = 1e6
+
+
+def _check_plausible(path: Path, values: np.ndarray, columns: tuple[str, ...]) -> None:
+    """Refuse values beyond :data:`_PLAUSIBLE` (NaN is left to the caller), naming the column."""
+    with np.errstate(invalid="ignore"):
+        bad = np.argwhere(np.abs(values) > _PLAUSIBLE)
+    if bad.size:
+        row, col = bad[0]
+        raise RunLogError(
+            f"{path}: column '{columns[col]}' is {values[row, col]:.3g} at row {row + 1}, "
+            f"beyond ±{_PLAUSIBLE:g}: not a measurement"
+        )
 
 
 def _check_manifest(mpath: Path, manifest: Any) -> None:

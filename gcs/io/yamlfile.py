@@ -38,4 +38,5 @@ def read_yaml(path: Path, error: type[GcsError]) -> Any:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = f" at line {mark.line + 1}" if mark is not None else ""
-        raise error(f"{path}: malformed YAML{line}: {getattr(exc, 'problem', exc)}") from exc
+        reason = str(getattr(exc, "problem", None) or exc).splitlines()[0]
+        raise error(f"{path}: malformed YAML{line}: {reason}") from exc
