@@ -396,6 +396,7 @@ def report(
     interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
     from gcs.app.report import (
+        aborted_attempts,
         choose_iterations,
         metrics_json,
         metrics_table,
@@ -425,7 +426,7 @@ def report(
         typer.echo(json.dumps(metrics_json(rows, rates, entries), indent=2))
     else:
         console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})", rates))
-        for line in trial_notes(entries) + session_lines(run):
+        for line in trial_notes(entries, aborted_attempts(run)) + session_lines(run):
             console.print(escape(line), highlight=False)
     if plot is not None:
         for path in write_plots(run, plot, chosen):

@@ -174,3 +174,21 @@ def test_iterations_must_be_complete_trials(tmp_path: Path) -> None:
     assert not (tmp_path / "p").exists()
     with pytest.raises(RunLogError, match="trial 4"):
         write_html(run, tmp_path / "r.html", [4])
+
+
+def test_a_trial_flown_again_says_so(tmp_path: Path) -> None:
+    from synthetic import fly_synthetic
+
+    from gcs.io.runlog import TrialStatus
+
+    run = make_run(tmp_path, trials=2)
+    from gcs.app.learn import learn_run
+
+    learn_run(run)
+    record = fly_synthetic(run, 2)  # complete: make it an interrupted attempt, then fly again
+    (run.path / "trial-002.json").unlink()
+    run.write_trial(2, record, TrialStatus(2, False, reason="link lost"))
+    fly_synthetic(run, 2, seed=5)
+    result = invoke("report", run.path)
+    assert result.exit_code == 0, result.output
+    assert "trial 2: 1 earlier incomplete attempt kept in aborted/" in result.output

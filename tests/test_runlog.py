@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
 from pathlib import Path
 
@@ -542,3 +543,15 @@ def test_a_refused_learning_record_leaves_neither_file_behind(tmp_path):
     (run.path / "setpoints-001.csv").unlink()
     assert run.write_learned(0, np.zeros((n, 2)), np.ones((n, 2)), sp).name == "setpoints-001.csv"
     run.write_learned(0, np.zeros((n, 2)), np.ones((n, 2)), sp)  # again: the same bytes
+
+
+def test_files_and_runs_get_the_modes_open_and_mkdir_give(tmp_path):
+    import stat
+
+    mask = os.umask(0o022)
+    os.umask(mask)
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run), complete(0))
+    assert stat.S_IMODE(run.path.stat().st_mode) == 0o777 & ~mask  # not mkdtemp's 0700
+    for p in run.path.iterdir():
+        assert stat.S_IMODE(p.stat().st_mode) == 0o666 & ~mask, p.name  # not mkstemp's 0600

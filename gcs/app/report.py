@@ -30,6 +30,7 @@ __all__ = [
     "TrialEntry",
     "trial_overview",
     "trial_notes",
+    "aborted_attempts",
     "run_metrics",
     "trial_clock_rates",
     "session_lines",
@@ -101,25 +102,50 @@ def trial_overview(run: RunDir) -> list[TrialEntry]:
     return out
 
 
-def trial_notes(entries: list[TrialEntry]) -> list[str]:
-    """One line per trial that is not in the table (missing or incomplete).
+def trial_notes(entries: list[TrialEntry], aborted: dict[int, int] | None = None) -> list[str]:
+    """One line per trial that is not in the table (missing or incomplete), and per trial
+    flown again after an incomplete attempt.
 
     Parameters
     ----------
     entries : list of TrialEntry
         From :func:`trial_overview`.
+    aborted : dict of int to int, optional
+        Incomplete attempts kept in ``aborted/``, by trial (:func:`aborted_attempts`).
 
     Returns
     -------
     list of str
     """
-    return [
-        f"trial {e.trial}: {e.status}"
-        + (f" ({e.reason})" if e.reason else "")
-        + ", not in the table"
-        for e in entries
-        if e.status != "complete"
-    ]
+    out = []
+    for e in entries:
+        if e.status != "complete":
+            reason = f" ({e.reason})" if e.reason else ""
+            out.append(f"trial {e.trial}: {e.status}{reason}, not in the table")
+    for j, n in sorted((aborted or {}).items()):
+        attempts = "attempt" if n == 1 else "attempts"
+        out.append(f"trial {j}: {n} earlier incomplete {attempts} kept in aborted/")
+    return out
+
+
+def aborted_attempts(run: RunDir) -> dict[int, int]:
+    """Incomplete attempts of each trial that was flown again, kept in ``aborted/``.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+
+    Returns
+    -------
+    dict of int to int
+        Number of attempts by trial index.
+    """
+    counts: dict[int, int] = {}
+    for p in (run.path / "aborted").glob("trial-[0-9][0-9][0-9]-attempt-*.json"):
+        j = int(p.name.split("-")[1])
+        counts[j] = counts.get(j, 0) + 1
+    return counts
 
 
 def complete_records(run: RunDir) -> dict[int, TrialRecord]:
@@ -388,7 +414,7 @@ def _colors(iterations: list[int]) -> dict[int, Any]:
 
 def _fig_xy(plt: Any, ref: Any, records: dict, iterations: list[int]) -> Any:
     colors = _colors(iterations)
-    fig, ax = plt.subplots(figsize=(6.4, 5.2))
+    fig, ax = plt.subplots(figsize=(5.6, 6.0))
     ax.plot(ref.pos_ned_m[:, 1], ref.pos_ned_m[:, 0], "k--", lw=1.6, label="reference")
     for j in iterations:
         p = records[j].pos_ned_m
@@ -397,7 +423,7 @@ def _fig_xy(plt: Any, ref: Any, records: dict, iterations: list[int]) -> Any:
     ax.set_ylabel("north [m]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    ax.legend(fontsize=8, loc="center left")
     ax.set_title("Horizontal path per iteration (paper Fig. 4)")
     return fig
 
@@ -420,7 +446,7 @@ def _fig_position(plt: Any, ref: Any, records: dict, iterations: list[int]) -> A
             r = records[j]
             ax.plot(r.t_s, r.pos_ned_m[:, c], lw=1.1, color=colors[j], label=f"j = {j}")
         ax.set_ylabel(f"{name} [m]")
-    axs[0].legend(fontsize=8, ncol=len(iterations) + 1, loc="upper right")
+    axs[0].legend(fontsize=8, ncol=len(iterations) + 1, loc="lower left")  # the hover: empty
     return fig
 
 
@@ -450,7 +476,10 @@ def _fig_setpoints(plt: Any, run: RunDir, ref: Any, records: dict, iterations: l
         ax.plot([], [], color="C3", lw=1.2, ls=":", label="arena")
         ax.set_ylabel(f"{name} setpoint [m]")
         ax.set_ylim(limits[c][0] - 0.3, limits[c][1] + 0.3)
-    axs[0].legend(fontsize=7, ncol=3, loc="lower left")
+    # below the figure: the band and the arena leave no empty corner inside
+    handles, labels = axs[0].get_legend_handles_labels()
+    axs[1].legend(handles, labels, fontsize=8, ncol=4, loc="upper center",
+                  bbox_to_anchor=(0.5, -0.2))  # fmt: skip
     return fig
 
 
@@ -464,23 +493,36 @@ def _fig_error(plt: Any, ref: Any, records: dict, iterations: list[int]) -> Any:
                     label=f"j = {j}")  # fmt: skip
         ax.axhline(0.0, color="k", lw=0.8)
         ax.set_ylabel(f"{name} error [m]")
-    axs[0].legend(fontsize=8, ncol=len(iterations), loc="upper right")
+    axs[0].legend(fontsize=8, ncol=len(iterations), loc="lower left")
     return fig
 
 
 def _fig_epos(plt: Any, rows: list[IterationMetrics], algorithm: str) -> Any:
+    from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter
+
     e0 = rows[0].epos_m
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     js = [r.iteration for r in rows]
     ax.semilogy(js, [r.epos_m for r in rows], "o-", color="C0")
     for r in rows:
         ax.annotate(f"{r.epos_pct:.1f} %", (r.iteration, r.epos_m), textcoords="offset points",
-                    xytext=(4, 5), fontsize=8)  # fmt: skip
+                    xytext=(7, 3), ha="left", fontsize=8)  # fmt: skip
     ax.set_xlabel("iteration j")
     ax.set_ylabel("e_pos,j [m]")
     ax.set_xticks(js)
-    ax.grid(True, which="both", alpha=0.3)
+    ax.set_xlim(min(js) - 0.4, max(js) + 0.4)
+    low = min(r.epos_m for r in rows)
+    ax.set_ylim(low / 1.6, e0 * 1.6)
+    # plain numbers on both log axes: 1-2-5 steps read better than powers of ten
+    steps = [m * 10.0**e for e in range(-4, 3) for m in (1, 2, 5)]
+    ax.yaxis.set_major_locator(FixedLocator(steps))
+    ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+    ax.grid(True, which="major", alpha=0.3)
     right = ax.secondary_yaxis("right", functions=(lambda m: 100 * m / e0, lambda p: p * e0 / 100))
+    right.yaxis.set_major_locator(FixedLocator(steps))
+    right.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    right.yaxis.set_minor_formatter(NullFormatter())
     right.set_ylabel("e_pos,j / e_pos,0 [%]")
     ax.set_title(f"Average position error per iteration ({algorithm}; paper Fig. 2)")
     return fig
@@ -500,7 +542,7 @@ def _fig_disturbance(plt: Any, run: RunDir, iterations: list[int]) -> Any | None
         for j, d in estimates.items():
             ax.plot(t, d[:, c], lw=1.0, color=colors[j], label=f"from trial {j}")
         ax.set_ylabel(f"d {name} [m]")
-    axs[0].legend(fontsize=8, ncol=len(estimates), loc="upper right")
+    axs[0].legend(fontsize=8, ncol=len(estimates), loc="lower left")
     return fig
 
 
@@ -644,7 +686,7 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
           for row in _table_cells(rows, rates)),
         "</table>",
     ]  # fmt: skip
-    notes = trial_notes(trial_overview(run)) + session_lines(run)
+    notes = trial_notes(trial_overview(run), aborted_attempts(run)) + session_lines(run)
     if notes:
         parts.append("<ul>" + "".join(f"<li>{e(n)}</li>" for n in notes) + "</ul>")
     parts.append("<h2>Figures</h2>")

@@ -77,6 +77,17 @@ SETPOINT_COLUMNS = ("k", "t_s", "sp_north_m", "sp_east_m", "sp_down_m")
 REFERENCE_COLUMNS = ("k", "t_s", "ref_north_m", "ref_east_m", "ref_down_m")
 ESTIMATE_COLUMNS = ("k", "t_s", "d_north_m", "d_east_m", "p_north_m2", "p_east_m2")
 _PACKAGES = ("numpy", "scipy", "clarabel", "mavsdk", "pymavlink", "typer", "rich")
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)  # the only way to read the umask is to set it
+    os.umask(mask)
+    return mask
+
+
+#: Modes of the files and directories written here: what ``open()`` and ``mkdir()`` give
+#: under the process's umask (``mkstemp`` and ``mkdtemp`` would make them owner-only).
+_FILE_MODE, _DIR_MODE = 0o666 & ~_umask(), 0o777 & ~_umask()
 #: Manifest ``algorithm`` of learning runs; identification runs record ``identify``.
 LEARNING_ALGORITHMS = ("smoother", "kilc")
 #: Run kind by manifest algorithm.
@@ -98,6 +109,7 @@ def atomic_write_text(path: Path, text: str) -> None:
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, _FILE_MODE)  # as open() would make it, not mkstemp's owner-only 0600
         with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
             fh.write(text)
             fh.flush()
@@ -137,6 +149,7 @@ def write_once(path: Path, text: str) -> bool:
         raise RunLogError(f"{path}: is a directory")
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, _FILE_MODE)  # as open() would make it, not mkstemp's owner-only 0600
         with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
             fh.write(text)
             fh.flush()
@@ -368,6 +381,7 @@ class RunDir:
             raise RunLogError(f"{root / run_id}: run directory exists already")
         root.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(dir=root, prefix=f".{base}.", suffix=".tmp"))
+        staging.chmod(_DIR_MODE)
         manifest = {
             "format": 1,
             "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
