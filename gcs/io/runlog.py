@@ -50,8 +50,9 @@ import numpy as np
 
 from gcs import __version__
 from gcs.core.trajectory import Reference, sample_eight
-from gcs.errors import RunLogError
+from gcs.errors import PathError, RunLogError
 from gcs.io.config import Profile, TrajectorySpec, profile_from_dict, trajectory_from_dict
+from gcs.io.paths import check_writable_dir
 
 __all__ = [
     "LEARNING_ALGORITHMS",
@@ -107,6 +108,16 @@ def atomic_write_text(path: Path, text: str) -> None:
         Content.
     """
     path = Path(path)
+    tmp = _temporary_copy(path, text)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _temporary_copy(path: Path, text: str) -> Path:
+    """``text`` in a new hidden file beside ``path``, on disk (fsync), with open()'s mode."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         os.fchmod(fd, _FILE_MODE)  # as open() would make it, not mkstemp's owner-only 0600
@@ -114,10 +125,10 @@ def atomic_write_text(path: Path, text: str) -> None:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    return Path(tmp)
 
 
 def write_once(path: Path, text: str) -> bool:
@@ -147,13 +158,8 @@ def write_once(path: Path, text: str) -> bool:
     path = Path(path)
     if path.is_dir():
         raise RunLogError(f"{path}: is a directory")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = _temporary_copy(path, text)
     try:
-        os.fchmod(fd, _FILE_MODE)  # as open() would make it, not mkstemp's owner-only 0600
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
         try:
             os.link(tmp, path)  # atomic "create if absent"
             return True
@@ -164,7 +170,7 @@ def write_once(path: Path, text: str) -> bool:
                 os.replace(tmp, path)
                 return True
     finally:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
     try:
         same = path.read_bytes() == text.encode("utf-8")
     except OSError as exc:
@@ -478,13 +484,10 @@ class RunDir:
             Read-only directory or filesystem, no permission.
         """
         try:
-            fd, probe = tempfile.mkstemp(dir=self.path, prefix=".gcs-probe-", suffix=".tmp")
-        except OSError as exc:
-            raise RunLogError(
-                f"{self.path}: run directory is not writable ({exc.strerror})"
-            ) from None
-        os.close(fd)
-        os.unlink(probe)
+            check_writable_dir(self.path, str(self.path))
+        except PathError as exc:
+            reason = str(exc).rsplit("(", 1)[-1].rstrip(")")
+            raise RunLogError(f"{self.path}: run directory is not writable ({reason})") from None
 
     @property
     def n_samples(self) -> int:
