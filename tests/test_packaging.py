@@ -7,6 +7,7 @@ repository's top-level folders, and a wheel carries the files they point at.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -42,9 +43,15 @@ def test_fly_finds_the_packaged_profile_and_trajectory_from_another_directory(
 
 
 def test_an_installed_wheel_carries_the_files_and_finds_them_by_name(tmp_path: Path) -> None:
+    source = tmp_path / "source"  # a copy: building in the checkout would leave build/ there
+    source.mkdir()
+    for name in ("pyproject.toml", "README.md", "gcs", "profiles", "trajectories"):
+        copy = shutil.copytree if (ROOT / name).is_dir() else shutil.copy2
+        copy(ROOT / name, source / name, **({"symlinks": True} if copy is shutil.copytree else {}))
+    assert (source / "gcs" / "profiles").is_symlink()
     build = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path / "dist"),
-         str(ROOT)],
+         str(source)],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert build.returncode == 0, build.stderr[-2000:]
