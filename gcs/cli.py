@@ -1,13 +1,19 @@
 """The ``gcs`` command line: thin wiring of profiles, runs, learning, flight and reports.
 
-Every command turns a :class:`gcs.errors.GcsError` (bad input, unreachable vehicle, ...) into
-one line on stderr and exit code 2.
+Every command validates everything it will need before it creates, moves or flies anything
+(each command's room in :mod:`gcs.app` does the checking), and every failure is one line on
+stderr: a :class:`gcs.errors.GcsError` (bad input, unreachable vehicle, ...), an operating
+system error naming its file, and a usage error of the command line all exit with code 2;
+Ctrl-C exits with 130; anything else is a bug, reported in one line with exit code 1
+(``GCS_DEBUG=1`` shows its traceback).
 """
 
 from __future__ import annotations
 
 import functools
 import json
+import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
@@ -15,12 +21,64 @@ from typing import Annotated, Any
 import typer
 from rich.console import Console
 from rich.markup import escape
+from typer._click.exceptions import ClickException
+from typer.core import TyperGroup
+from typer.exceptions import Exit
 
 from gcs import __version__
 from gcs.errors import GcsError
 
+#: Exit codes, as every command's --help states them.
+EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+def _say(message: str) -> None:
+    message = " ".join(line.strip() for line in message.splitlines())  # one line, always
+    Console(stderr=True).print(
+        f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True
+    )
+
+
+class OneLineGroup(TyperGroup):
+    """Typer's group, with usage errors (a bad option value, a missing argument) on one line."""
+
+    def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
+        """Run the command line; a usage error is one line and exit code 2.
+
+        Parameters
+        ----------
+        *args, **kwargs
+            As :meth:`typer.core.TyperGroup.main`.
+        standalone_mode : bool
+            Exit with the command's code (True) or return it.
+
+        Returns
+        -------
+        Any
+        """
+        from typer._click import exceptions as click_exc
+        from typer.exceptions import Abort
+
+        try:
+            rv = super().main(*args, standalone_mode=False, **kwargs)
+        except click_exc.NoArgsIsHelpError:  # the help was printed already
+            rv = EXIT_BAD_INPUT
+        except click_exc.ClickException as exc:
+            ctx = getattr(exc, "ctx", None)
+            where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+            _say(f"{exc.format_message()}{where}")
+            rv = exc.exit_code
+        except Abort:
+            rv = EXIT_INTERRUPTED
+        code = rv if isinstance(rv, int) else EXIT_OK
+        if standalone_mode:
+            sys.exit(code)
+        return code
+
+
 app = typer.Typer(
     name="gcs",
+    cls=OneLineGroup,
     help=(
         "Ground control station that makes a multirotor fly a repeated manoeuvre more "
         "precisely every time, by learning from its previous flights (smoother-based "
@@ -34,9 +92,10 @@ app = typer.Typer(
 console = Console()
 err_console = Console(stderr=True)
 
-DEFAULT_PROFILE = Path("profiles/antx.yaml")
-DEFAULT_TRAJECTORY = Path("trajectories/eight.yaml")
+DEFAULT_PROFILE = "antx"
+DEFAULT_TRAJECTORY = "eight"
 DEFAULT_LOGS = Path("logs")
+NAMED = "A packaged name ({names}; found from any directory) or a path to a YAML file."
 
 Algorithm = Annotated[
     str | None,
@@ -50,21 +109,47 @@ Algorithm = Annotated[
 
 
 def one_line_errors(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Report a GcsError as one line on stderr and exit with code 2; Ctrl-C exits with 130."""
+    """Every failure of a command as one line on stderr, with its exit code.
+
+    A GcsError (bad input, the vehicle) and an operating-system error (it names its file)
+    exit with 2, Ctrl-C with 130, anything else, a bug, with 1 (``GCS_DEBUG=1`` re-raises it
+    with its traceback).
+    """
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return func(*args, **kwargs)
         except GcsError as exc:
-            err_console.print(
-                f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True
-            )
-            raise typer.Exit(2) from None
+            _say(str(exc))
+            raise typer.Exit(EXIT_BAD_INPUT) from None
         except KeyboardInterrupt:  # a flight landed the vehicle and said where its run is
-            raise typer.Exit(130) from None
+            raise typer.Exit(EXIT_INTERRUPTED) from None
+        except (ClickException, Exit):  # usage errors and exits: OneLineGroup reports them
+            raise
+        except OSError as exc:
+            where = exc.filename if exc.filename is not None else "operating system"
+            _say(f"{where}: {exc.strerror or exc}")
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+        except Exception as exc:
+            if os.environ.get("GCS_DEBUG"):
+                raise
+            _say(f"internal error, please report it: {type(exc).__name__}: {exc}")
+            raise typer.Exit(EXIT_INTERNAL) from None
 
     return wrapper
+
+
+def _named(value: str | Path | None, kind: str, option: str) -> Path | None:
+    from gcs.io.paths import resolve_named
+
+    return None if value is None else resolve_named(value, kind, option)
+
+
+def _names(kind: str) -> str:
+    from gcs.io.paths import packaged_names
+
+    return ", ".join(packaged_names(kind)) or "none"
 
 
 def _check_algorithm(algorithm: str | None) -> None:
@@ -105,10 +190,26 @@ def fly(
             help="MAVSDK connection URL of a real vehicle or PX4 SITL, e.g. udpin://0.0.0.0:14540.",
         ),
     ] = None,
-    profile: Annotated[Path, typer.Option(help="Vehicle profile (YAML).")] = DEFAULT_PROFILE,
+    profile: Annotated[
+        str | None,
+        typer.Option(
+            help="Vehicle profile. "
+            + NAMED.format(names=_names("profile"))
+            + f" Default: {DEFAULT_PROFILE}; with --resume, the run's own (a different one "
+            "is refused).",
+            show_default=False,
+        ),
+    ] = None,
     trajectory: Annotated[
-        Path, typer.Option(help="Trajectory to learn (YAML).")
-    ] = DEFAULT_TRAJECTORY,
+        str | None,
+        typer.Option(
+            help="Trajectory to learn. "
+            + NAMED.format(names=_names("trajectory"))
+            + f" Default: {DEFAULT_TRAJECTORY}; with --resume, the run's own (a different "
+            "one is refused).",
+            show_default=False,
+        ),
+    ] = None,
     algorithm: Algorithm = None,
     run_dir: Annotated[
         Path | None, typer.Option("--run", help="Create the new run exactly here.")
@@ -122,8 +223,23 @@ def fly(
         Path | None, typer.Option(help="Mock drone settings (YAML) for --mock.")
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the mock drone's random gusts.")] = 0,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check",
+            help="Validate everything (profile, trajectory, run, paths, URL) and say what "
+            "would be flown; create, connect and fly nothing.",
+        ),
+    ] = False,
 ) -> None:
     """Fly N learning trials: take off, fly, learn, fly again, land.
+
+    Before anything is created or connected, everything is checked: the profile (every
+    section), the trajectory on the grid that is flown (speed and acceleration as finite
+    differences of the samples, the arena), a first learning update (models and setpoint
+    limits admit one), the run directory (--run must be new; --resume: a writable learning
+    run whose files agree and whose next setpoints keep the arena and the learning's limits),
+    the connection URL or the mock's settings. A failure is one line and nothing is written.
 
     Connects through MAVSDK, says what the vehicle navigates on (GPS, vision: PX4's EKF2
     parameters), waits for a healthy local position, arms, takes off to the trajectory's
@@ -145,7 +261,12 @@ def fly(
 
         gcs fly --mock --iter 3
 
-        gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc
+        gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc --check
+
+    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option), or the
+    vehicle was unreachable, refused a command, lost the link or aborted a trial (it was
+    landed first); 130 interrupted (Ctrl-C or SIGTERM; the vehicle was landed first); 1 an
+    internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
     from gcs.app.fly_view import fly_with_display
 
@@ -154,19 +275,22 @@ def fly(
         raise typer.BadParameter("give exactly one of --mock and --connect")
     if resume is not None and run_dir is not None:
         raise typer.BadParameter("give at most one of --run and --resume")
+    if resume is None:
+        profile, trajectory = profile or DEFAULT_PROFILE, trajectory or DEFAULT_TRAJECTORY
     fly_with_display(
         console=console,
         iterations=iterations,
         connect=connect,
-        mock_config=mock_config,
+        mock_config=_named(mock_config, "profile", "--mock-config"),
         seed=seed,
-        profile_path=profile,
-        trajectory_path=trajectory,
+        profile_path=_named(profile, "profile", "--profile"),
+        trajectory_path=_named(trajectory, "trajectory", "--trajectory"),
         algorithm=algorithm,
         run_path=run_dir,
         resume=resume,
         logs=logs,
         use_mock=mock,
+        check_only=check,
     )
 
 
@@ -176,25 +300,34 @@ def learn(
     run_dir: Annotated[Path, typer.Argument(help="Run directory, e.g. logs/latest.")],
     algorithm: Algorithm = None,
     profile: Annotated[
-        Path | None,
-        typer.Option(help="Profile that must match the one recorded in the run's manifest."),
+        str | None,
+        typer.Option(
+            help="Profile (name or path) that must match the one recorded in the run's manifest."
+        ),
     ] = None,
 ) -> None:
     """Learn from the newest complete trial and write the next trial's setpoints.
 
     Estimates the repetitive disturbance D of the newest complete trial (RTS smoother or
     K-ILC), solves the input update of eq. (8) with the run's limits, and writes
-    `setpoints-<j+1>.csv` and `estimate-<j>.csv`. Deterministic and idempotent; a log with NaNs,
-    a wrong length or time grid, or a mismatching profile is refused and nothing is written.
+    `setpoints-<j+1>.csv` and `estimate-<j>.csv`. Deterministic and idempotent: learning again
+    from the same trial writes nothing new, and a file that exists with other content is never
+    replaced (refused). A log with NaNs, a wrong length or time grid, files that disagree with
+    their names, an identification run, a read-only run directory or a mismatching profile is
+    refused and nothing is written. The learned setpoints are checked on their grid against
+    the arena, max_step_m and max_deviation_m before they are written.
 
     Example: gcs learn logs/latest
+
+    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
+    interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
     from gcs.app.learn import learn_run
     from gcs.io.runlog import RunDir
 
     _check_algorithm(algorithm)
     run = RunDir.open(run_dir)
-    outcome = learn_run(run, algorithm, profile)
+    outcome = learn_run(run, algorithm, _named(profile, "profile", "--profile"))
     console.print(
         f"learned from trial {outcome.trial} ({run.algorithm}); "
         f"setpoints for trial {outcome.next_trial}: {outcome.setpoints_path} "
@@ -217,42 +350,89 @@ def report(
     ] = False,
     plot: Annotated[
         Path | None,
-        typer.Option(help="Write PNG figures (xy paths, north(t), e_pos by iteration) here."),
+        typer.Option(
+            help="Write the figures here as PNG (created if missing): xy, position, setpoints, "
+            "error, epos, disturbance."
+        ),
+    ] = None,
+    html: Annotated[
+        Path | None,
+        typer.Option(
+            help="Write one self-contained HTML report here (table and figures embedded): "
+            "a single file to mail."
+        ),
+    ] = None,
+    iterations: Annotated[
+        str | None,
+        typer.Option(
+            help="Trials to draw in the figures, e.g. 0,2,5 (each a complete trial). "
+            "Default: 0, 1, 2 and the last."
+        ),
     ] = None,
 ) -> None:
-    """Show the learning table of a run: one row per complete trial.
+    """Show the learning table of a run: one row per complete trial, then what is missing.
 
-    Columns as the paper's Table IV: e_pos,j (eq. 10), e_pos,j / e_pos,0, the relative change
-    from the previous trial, and the largest horizontal error; then the rate at which the
-    vehicle's clock ran against the wall clock in that trial (1.000 for a real vehicle; a
-    simulator under load runs slower). Below the table, one line per flight session: the
-    vehicle's navigation source, the hover measured before its first trial and the settle
-    tolerance derived from it.
+    Columns as the paper's Table IV: e_pos,j (eq. 10), e_pos,j / e_pos,0 (always relative to
+    trial 0: a run without a complete trial 0, or with e_pos,0 = 0, is refused), the relative
+    change from the previous trial ('-' after a gap), and the largest horizontal error; then
+    the rate at which the vehicle's clock ran against the wall clock in that trial (1.000 for a
+    real vehicle; a simulator under load runs slower). Below the table: every missing or
+    incomplete trial, and one line per flight session (navigation source, the hover measured
+    before its first trial, the settle tolerance derived from it). --json lists every trial,
+    with its status.
 
-    Example: gcs report logs/latest --plot plots/
+    Figures (--plot, --html), for both axes: the horizontal path per iteration (paper Fig. 4),
+    north and east against time (Fig. 5), the setpoints flown against the reference, the
+    max_deviation_m band and the arena, the error against time, e_pos per iteration with a
+    percentage axis (Fig. 2), and the learned disturbance.
+
+    Examples:
+
+        gcs report logs/latest --plot plots/
+
+        gcs report logs/latest --html report.html --iterations 0,2,5
+
+    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
+    interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
     from gcs.app.report import (
+        aborted_attempts,
+        choose_iterations,
         metrics_json,
         metrics_table,
+        parse_iterations,
         run_metrics,
         session_lines,
         trial_clock_rates,
+        trial_notes,
+        trial_overview,
+        write_html,
         write_plots,
     )
+    from gcs.io.paths import check_output_dir, check_output_file
     from gcs.io.runlog import RunDir
 
     run = RunDir.open(run_dir)
+    run.profile()  # a damaged manifest is a damaged run, even where the table needs no profile
     rows = run_metrics(run)
+    entries = trial_overview(run)
     rates = trial_clock_rates(run)
+    chosen = choose_iterations(run, None if iterations is None else parse_iterations(iterations))
+    if plot is not None:
+        check_output_dir(plot, "--plot")
+    if html is not None:
+        check_output_file(html, "--html")
     if as_json:
-        typer.echo(json.dumps(metrics_json(rows, rates), indent=2))
+        typer.echo(json.dumps(metrics_json(rows, rates, entries), indent=2))
     else:
         console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})", rates))
-        for line in session_lines(run):
+        for line in trial_notes(entries, aborted_attempts(run)) + session_lines(run):
             console.print(escape(line), highlight=False)
     if plot is not None:
-        for path in write_plots(run, plot):
+        for path in write_plots(run, plot, chosen):
             err_console.print(f"wrote {path}")
+    if html is not None:
+        err_console.print(f"wrote {write_html(run, html, chosen)}")
 
 
 def run() -> None:  # pragma: no cover - console-script entry point alias
@@ -281,11 +461,11 @@ def identify(
         ),
     ] = None,
     profile: Annotated[
-        Path | None,
+        str | None,
         typer.Option(
-            help="Input profile: its 'identification' section sets the experiments and PBSID, "
-            "and the output is a copy of it with new models. Default: profiles/antx.yaml when "
-            "flying, the run's own profile with --from-log.",
+            help="Input profile (a packaged name or a path): its 'identification' section "
+            "sets the experiments and PBSID, and the output is a copy of it with new models. "
+            f"Default: {DEFAULT_PROFILE} when flying, the run's own profile with --from-log.",
         ),
     ] = None,
     axis: Annotated[
@@ -318,6 +498,14 @@ def identify(
     mock_config: Annotated[
         Path | None, typer.Option(help="Mock drone settings (YAML) for --mock.")
     ] = None,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check",
+            help="Validate everything (profile, excitation, run, paths, URL) and stop: create, "
+            "connect, fly and write nothing.",
+        ),
+    ] = False,
 ) -> None:
     """Identify the closed loop "position setpoint -> position" with PBSID and write a profile.
 
@@ -336,13 +524,21 @@ def identify(
     (y) replaced by the identified discrete state spaces; 'gcs fly --profile' uses it as is.
 
     Too little data, a constant or non-exciting input, NaNs or an incomplete trial are
-    refused with one line and exit code 2; no profile is written then.
+    refused with one line and exit code 2; no profile is written then. The profile, the
+    excitation against the arena, the run and the output paths (--out, --plot) are checked
+    before anything is flown or identified. The run's own identified.yaml is written once:
+    identifying the run again gives the same bytes, or is refused.
 
     Examples:
 
         gcs identify --mock --out profiles/mock-identified.yaml --plot plots/
 
         gcs identify --from-log logs/latest --axis x --out x-only.yaml
+
+    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option), or the
+    vehicle was unreachable, refused a command, lost the link or aborted an experiment (it
+    was landed first); 130 interrupted (Ctrl-C or SIGTERM; the vehicle was landed first, no
+    profile written); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
     from gcs.app.identify_view import identify_with_display
 
@@ -355,7 +551,7 @@ def identify(
     identify_with_display(
         console=console,
         err_console=err_console,
-        profile_path=profile,
+        profile_path=_named(profile, "profile", "--profile"),
         axis=axis,
         out=out,
         from_log=from_log,
@@ -363,10 +559,11 @@ def identify(
         seed=seed,
         connect=connect,
         use_mock=mock,
-        mock_config=mock_config,
+        mock_config=_named(mock_config, "profile", "--mock-config"),
         logs=logs,
         run_path=run_dir,
-        default_profile=DEFAULT_PROFILE,
+        default_profile=_named(DEFAULT_PROFILE, "profile", "--profile"),
+        check_only=check,
     )
 
 
@@ -378,7 +575,14 @@ def montecarlo(
     ] = "0.05,0.1,0.2,0.4",
     plants: Annotated[int, typer.Option(min=2, help="Plants per level.")] = 100,
     repeats: Annotated[int, typer.Option(min=1, help="Noise realisations per plant.")] = 10,
-    iterations: Annotated[int, typer.Option(min=2, help="Learning iterations.")] = 30,
+    iterations: Annotated[
+        int,
+        typer.Option(
+            min=30,
+            help="Learning iterations; at least 30: the steady state is the mean of trials "
+            "20 to 30 (the paper's footnote 4).",
+        ),
+    ] = 30,
     samples: Annotated[int, typer.Option(min=10, help="Samples per trial (t_ilc 0.01 s).")] = 200,
     seed: Annotated[int, typer.Option(help="Seed of plants and noise.")] = 20240601,
     keep_diverged: Annotated[
@@ -399,6 +603,9 @@ def montecarlo(
     --keep-diverged, left out of the statistics.
 
     Example: gcs montecarlo --levels 0.05,0.1 --json montecarlo.json
+
+    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
+    interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
     import os
     import time
@@ -409,6 +616,7 @@ def montecarlo(
 
     from gcs.app.study_view import study_json, study_tables
     from gcs.core.montecarlo import StudySettings, run_study
+    from gcs.io.paths import check_output_file
     from gcs.io.runlog import atomic_write_text
 
     try:
@@ -417,13 +625,17 @@ def montecarlo(
         raise typer.BadParameter(
             f"not a list of numbers: {levels!r}", param_hint="--levels"
         ) from None
+    if not level_values:
+        raise typer.BadParameter("give at least one level, e.g. 0.05", param_hint="--levels")
     try:
         settings = StudySettings(
             levels=level_values, plants=plants, repeats=repeats, iterations=iterations,
             n_samples=samples, seed=seed, diverged_rule="include" if keep_diverged else "exclude",
         )  # fmt: skip
     except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from exc
+        raise _study_error(str(exc)) from None
+    if json_path is not None:
+        check_output_file(json_path, "--json")
     start = time.perf_counter()
     with Progress(console=err_console, transient=True) as progress:
         task = progress.add_task("simulating", total=1)
@@ -437,10 +649,47 @@ def montecarlo(
         atomic_write_text(json_path, json.dumps(study_json(rows, settings), indent=2) + "\n")
 
 
+#: StudySettings fields and the options that set them.
+_STUDY_OPTIONS = {
+    "levels": "--levels", "plants": "--plants", "repeats": "--repeats",
+    "iterations": "--iterations", "n_samples": "--samples", "seed": "--seed",
+}  # fmt: skip
+
+
+def _study_error(message: str) -> typer.BadParameter:
+    """A StudySettings refusal, with the option's name instead of the field's."""
+    for field, option in _STUDY_OPTIONS.items():
+        if message.startswith(f"StudySettings.{field} "):
+            text = message.removeprefix(f"StudySettings.{field} ")
+            return typer.BadParameter(text, param_hint=option)
+    return typer.BadParameter(message.removeprefix("StudySettings."))
+
+
+MOCK_EXIT_CODES = (
+    "Exit codes: 0 stopped (SIGTERM or Ctrl-C); 2 bad input, named on one line; 1 an "
+    "internal error (a bug; GCS_DEBUG=1 shows the traceback)."
+)
+
+
 def _register_mock() -> None:
     from gcs.mock.cli import mock_command
 
-    app.command("mock")(one_line_errors(mock_command))
+    @functools.wraps(mock_command)
+    def mock(**kwargs: Any) -> None:
+        # checked before the mock binds or runs: its settings, and where its stats will go
+        from gcs.io.paths import check_output_file
+        from gcs.mock.config import load_mock_config
+
+        if kwargs.get("config") is not None:
+            kwargs["config"] = _named(kwargs["config"], "profile", "--config")
+            load_mock_config(kwargs["config"])
+        if kwargs.get("stats_out") is not None:
+            check_output_file(kwargs["stats_out"], "--stats-out")
+        mock_command(**kwargs)
+
+    head, _, tail = (mock_command.__doc__ or "").partition("\f")
+    text = f"{head.rstrip()}\n\n    {MOCK_EXIT_CODES}\n    \f{tail}"
+    app.command("mock", help=text)(one_line_errors(mock))
 
 
 _register_mock()

@@ -40,3 +40,8 @@ class TrialAborted(GcsError, RuntimeError):
 
 class UpdateInfeasible(GcsError, ValueError):
     """The setpoint limits admit no next input (box, step or deviation bound); names the limit."""
+
+
+class PathError(GcsError, ValueError):
+    """A file or directory named on the command line cannot be used as asked (missing, a
+    directory where a file is expected or the other way round, not writable); names it."""

@@ -17,7 +17,7 @@ runner = CliRunner()
 
 
 def invoke(*args: str):
-    return runner.invoke(app, [str(a) for a in args])
+    return runner.invoke(app, [str(a) for a in args], env={"COLUMNS": "200"})
 
 
 def files(path: Path) -> dict[str, bytes]:
@@ -45,8 +45,10 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     rows = json.loads(result.output)
     assert [r["iteration"] for r in rows] == [0, 1]
     assert set(rows[0]) == {
-        "iteration", "epos_m", "epos_pct", "delta_pct", "max_err_m", "vehicle_time_rate"
+        "iteration", "status", "reason", "epos_m", "epos_pct", "delta_pct", "max_err_m",
+        "vehicle_time_rate",
     }  # fmt: skip
+    assert rows[0]["status"] == "complete" and rows[0]["reason"] is None
     assert rows[0]["vehicle_time_rate"] is None  # simulated trials: no vehicle clock
     assert rows[0]["epos_pct"] == pytest.approx(100.0)
     assert rows[0]["delta_pct"] is None
@@ -60,8 +62,8 @@ def test_report_table_and_plots(tmp_path: Path) -> None:
     result = invoke("report", run.path, "--plot", tmp_path / "plots")
     assert result.exit_code == 0, result.output
     assert "e_pos [m]" in result.output
-    for name in ("xy.png", "north_t.png", "epos.png"):
-        data = (tmp_path / "plots" / name).read_bytes()
+    for name in ("xy", "position", "setpoints", "error", "epos", "disturbance"):
+        data = (tmp_path / "plots" / f"{name}.png").read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
 
 
@@ -175,3 +177,114 @@ def test_identify_interrupted_exits_130_and_writes_no_profile(
     assert "interrupted; no profile written" in result.output
     assert (run / "manifest.json").exists()  # the run is kept for the experiments flown
     assert not (run / "identified.yaml").exists()
+
+
+# ------------------------------------------------------------------------ run integrity
+
+
+def test_learn_refuses_an_identification_run_and_keeps_its_setpoints(tmp_path: Path) -> None:
+    """The issue's case: `gcs learn` on an interrupted identification run (logs/latest after
+    `gcs identify`) overwrote the validation experiment's setpoints."""
+    from badinputs import Templates
+
+    ident = Templates(tmp_path / "t").get("ident")
+    (ident / "trial-001.json").unlink()  # interrupted before the validation experiment
+    (ident / "trial-001.csv").unlink()
+    before = files(ident)
+    result = invoke("learn", ident)
+    assert result.exit_code == 2
+    assert "not a learning run" in result.output
+    assert files(ident) == before
+
+
+def test_learning_twice_writes_the_same_bytes_and_refuses_different_ones(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=1)
+    assert invoke("learn", run.path).exit_code == 0
+    first = files(run.path)
+    second = invoke("learn", run.path)
+    assert second.exit_code == 0 and files(run.path) == first
+    path = run.path / "setpoints-001.csv"
+    lines = path.read_text().splitlines(keepends=True)
+    cells = lines[6].split(",")
+    lines[6] = ",".join([*cells[:2], "0.25", *cells[3:]])  # k = 5, north: edited by hand
+    edited = "".join(lines)
+    path.write_text(edited)
+    result = invoke("learn", run.path)
+    assert result.exit_code == 2 and "never rewritten" in result.output
+    assert path.read_text() == edited
+
+
+def test_learned_setpoints_are_checked_on_their_grid_before_they_are_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import gcs.app.learn as learn
+
+    run = make_run(tmp_path, trials=1)
+    real = learn.learning_step
+
+    def jumpy(*args, **kwargs):  # a solver that broke its step constraint
+        step = real(*args, **kwargs)
+        step.setpoints_ne_m[30, 1] += 0.8
+        return step
+
+    monkeypatch.setattr(learn, "learning_step", jumpy)
+    before = files(run.path)
+    result = invoke("learn", run.path)
+    assert result.exit_code == 2
+    assert "setpoint k = 30 steps" in result.output and "max_step_m = 0.5" in result.output
+    assert files(run.path) == before
+
+
+def test_resume_accepts_the_runs_own_files_and_refuses_others(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=1)
+    assert invoke("learn", run.path).exit_code == 0
+    profile = tmp_path / "same.yaml"
+    profile.write_text((Path(__file__).parents[1] / "profiles" / "antx.yaml").read_text())
+    result = invoke(
+        "fly", "--connect", "udpout://127.0.0.1:9", "--resume", run.path, "--profile", profile,
+        "--check",
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "checked: profile 'antx', trajectory 'tiny'" in result.output
+    assert "trials 1..3" in result.output
+    result = invoke("fly", "--mock", "--resume", run.path, "--trajectory", "eight-short")
+    assert result.exit_code == 2
+    assert "eight-short.yaml: differs from the trajectory" in result.output
+    assert "(field 'amplitude_east_m')" in result.output
+
+
+def test_every_help_states_the_exit_codes() -> None:
+    for command in ("fly", "learn", "report", "identify", "montecarlo", "mock"):
+        text = " ".join(invoke(command, "--help").output.split())
+        assert "Exit codes: 0 " in text, command
+        assert "2 bad input" in text and "1 an internal error" in text, command
+        if command != "mock":
+            assert "130 interrupted" in text, command
+
+
+def test_montecarlo_iterations_help_and_validation_agree() -> None:
+    text = " ".join(invoke("montecarlo", "--help").output.split())
+    assert "x>=30" in text and "at least 30" in text
+    result = invoke("montecarlo", "--iterations", "29")
+    assert result.exit_code == 2 and "'--iterations'" in result.output
+    assert "StudySettings" not in result.output
+    result = invoke("montecarlo", "--levels", "nan")
+    assert result.exit_code == 2 and "--levels" in result.output
+    assert "StudySettings" not in result.output
+
+
+def test_an_internal_error_is_one_line_with_exit_code_1(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    run = make_run(tmp_path, trials=1)
+
+    def broken(*args, **kwargs):
+        raise KeyError("a bug")
+
+    monkeypatch.setattr("gcs.app.learn.learning_step", broken)
+    result = invoke("learn", run.path)
+    assert result.exit_code == 1
+    assert result.output.strip() == ("error: internal error, please report it: KeyError: 'a bug'")
+    monkeypatch.setenv("GCS_DEBUG", "1")
+    result = invoke("learn", run.path)
+    assert isinstance(result.exception, KeyError)  # with its traceback

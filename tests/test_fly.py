@@ -79,7 +79,12 @@ def test_setpoints_outside_the_arena_are_refused(tmp_path: Path) -> None:
     run = make_run(tmp_path, trials=0)
     sp = run.read_setpoints(0)
     sp[7, 0] = 10.0  # beyond the 3 m arena
-    run.write_setpoints(0, sp)
+    path = run.path / "setpoints-000.csv"  # edited by hand: write_setpoints never rewrites
+    lines = path.read_text().splitlines(keepends=True)
+    cells = lines[8].split(",")
+    lines[8] = ",".join([*cells[:2], "10.0", *cells[3:]])
+    path.write_text("".join(lines))
+
     with pytest.raises(TrajectoryError, match="k = 7 .* outside the arena"):
         RunSource(run).setpoints_for(0)
 

@@ -57,6 +57,7 @@ def make_run(
     seed: int = 0,
     mutate=None,
     statuses=(True, True),
+    constant_x: bool = False,
 ) -> RunDir:
     """An identification run whose two trials were 'flown' by TRUTH with output noise."""
     data = antx_data()
@@ -66,7 +67,10 @@ def make_run(
     settings = IdentifySettings(duration_s=duration_s)  # unchecked: short runs are wanted
     exps = plan_experiments(replace(settings, duration_s=60.0), DT, axis, profile.arena)
     n = settings.n_samples(DT)
-    exps = replace(exps, setpoints_ned_m=tuple(sp[:n] for sp in exps.setpoints_ned_m))
+    exps = replace(exps, setpoints_ned_m=tuple(sp[:n].copy() for sp in exps.setpoints_ned_m))
+    if constant_x:  # flown as recorded: the setpoints files say so too
+        for sp in exps.setpoints_ned_m:
+            sp[:, 0] = sp[0, 0]
     run = create_identification_run(tmp, profile, settings, exps, run_id="ident")
     rng = np.random.default_rng(seed)
     center = exps.center_ned_m
@@ -197,14 +201,9 @@ def _nan(j: int, rec: TrialRecord) -> TrialRecord:
     return rec
 
 
-def _constant(j: int, rec: TrialRecord) -> TrialRecord:
-    rec.sp_ned_m[:, 0] = rec.sp_ned_m[0, 0]
-    return rec
-
-
 REFUSALS = [
     pytest.param({"mutate": _nan}, "NaN or inf at k = 100", id="nan"),
-    pytest.param({"mutate": _constant}, "input u is constant", id="constant-input"),
+    pytest.param({"constant_x": True}, "input u is constant", id="constant-input"),
     pytest.param({"statuses": (True, False)}, "trial 1 is incomplete", id="incomplete"),
     pytest.param({"duration_s": 8.0}, "too little data", id="too-little-data"),
 ]

@@ -244,7 +244,7 @@ def test_refuses_profile_mismatch(tmp_path):
     changed = tmp_path / "changed.yaml"
     changed.write_text(yaml.safe_dump(other))
     before = snapshot(run.path)
-    with pytest.raises(RunLogError, match="'learning'") as info:
+    with pytest.raises(RunLogError, match="'learning.weights.wdu'") as info:
         learn_run(run, profile_path=changed)
     assert str(changed) in str(info.value)
     assert snapshot(run.path) == before

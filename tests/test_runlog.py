@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -356,3 +358,200 @@ def test_sessions_take_the_next_number_update_their_own_and_never_overwrite(tmp_
 def test_json_safe() -> None:
     value = {"a": (1.0, float("inf")), "b": np.float64("nan"), "c": np.int64(3), "d": "x"}
     assert json_safe(value) == {"a": [1.0, None], "b": None, "c": 3, "d": "x"}
+
+
+# ------------------------------------------------------------------------------ integrity
+
+
+def test_write_once_writes_new_files_keeps_identical_ones_and_refuses_others(tmp_path):
+    from gcs.io.runlog import write_once
+
+    target = tmp_path / "setpoints-001.csv"
+    assert write_once(target, "a\n") is True
+    stamp = target.stat().st_mtime_ns
+    assert write_once(target, "a\n") is False  # the same bytes: nothing written
+    assert target.stat().st_mtime_ns == stamp
+    with pytest.raises(RunLogError, match="exists with different content") as info:
+        write_once(target, "b\n")
+    assert str(target) in str(info.value)
+    assert target.read_text() == "a\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["setpoints-001.csv"]
+
+
+def test_setpoints_and_estimates_are_never_rewritten_with_other_values(tmp_path):
+    run = new_run(tmp_path)
+    sp = run.read_setpoints(0)
+    run.write_setpoints(0, sp)  # as recorded: accepted, nothing changes
+    with pytest.raises(RunLogError, match="setpoints-000.csv: exists with different"):
+        run.write_setpoints(0, sp + 0.01)
+    np.testing.assert_allclose(run.read_setpoints(0), sp)
+    n = run.n_samples
+    run.write_estimate(0, np.zeros((n, 2)), np.ones((n, 2)))
+    with pytest.raises(RunLogError, match="estimate-000.csv: exists with different"):
+        run.write_estimate(0, np.ones((n, 2)), np.ones((n, 2)))
+
+
+def test_creation_is_staged_and_leaves_nothing_when_interrupted(tmp_path, monkeypatch):
+    import gcs.io.runlog as runlog
+
+    (tmp_path / "old").mkdir()
+    (tmp_path / "latest").symlink_to("old")
+    real = runlog.atomic_write_text
+
+    def failing(path, text):
+        if Path(path).name == "reference.csv":
+            raise KeyboardInterrupt  # Ctrl-C between two files of a new run
+        real(path, text)
+
+    monkeypatch.setattr(runlog, "atomic_write_text", failing)
+    with pytest.raises(KeyboardInterrupt):
+        new_run(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["latest", "old"]  # no half-made run
+    assert (tmp_path / "latest").readlink() == Path("old")  # and latest did not move
+    monkeypatch.setattr(runlog, "atomic_write_text", real)
+    run = new_run(tmp_path)
+    assert sorted(p.name for p in run.path.iterdir()) == [
+        "manifest.json", "reference.csv", "setpoints-000.csv"
+    ]  # fmt: skip
+    assert (tmp_path / "latest").readlink() == Path("run")
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def _manifest_edit(run: RunDir, key: str, value) -> None:
+    path = run.path / "manifest.json"
+    data = json.loads(path.read_text())
+    node = data
+    *parents, last = key.split(".")
+    for k in parents:
+        node = node[k]
+    node[last] = value
+    path.write_text(json.dumps(data))
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("n_samples", "140", "field 'n_samples' must be an integer >= 2, got '140'"),
+        ("n_samples", 1.5, "field 'n_samples'"),
+        ("n_samples", True, "field 'n_samples'"),
+        ("t_ilc_s", -0.05, "field 't_ilc_s' must be a positive number"),
+        ("t_ilc_s", None, "field 't_ilc_s'"),
+        ("algorithm", "ilc", "field 'algorithm' must be one of smoother, kilc, identify"),
+        ("algorithm", ["smoother"], "field 'algorithm'"),
+        ("profile", "antx", "field 'profile' must be an object"),
+        ("trajectory", [], "field 'trajectory' must be an object"),
+        ("trajectory.type", "excitation", "identification runs, and only they"),
+        ("algorithm", "identify", "identification runs, and only they"),
+    ],
+)
+def test_manifest_fields_of_the_wrong_type_are_refused_naming_them(tmp_path, key, value, message):
+    run = new_run(tmp_path)
+    _manifest_edit(run, key, value)
+    with pytest.raises(RunLogError, match=re.escape(message)) as info:
+        RunDir.open(run.path)
+    assert str(run.path / "manifest.json") in str(info.value)
+
+
+def test_run_kind_is_checked_by_writers(tmp_path):
+    run = new_run(tmp_path)
+    assert run.kind == "learning"
+    run.require_kind("learning", "gcs learn")
+    with pytest.raises(RunLogError, match="a learning run .*not an identification run, which "
+                       "'gcs identify --from-log' needs"):  # fmt: skip
+        run.require_kind("identification", "gcs identify --from-log")
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("trial", 1, "field 'trial' must be 0, as the file's name says"),
+        ("trial", "0", "field 'trial' must be 0"),
+        ("status", "done", "field 'status' must be 'complete' or 'incomplete'"),
+        ("epos_m", "0.1", "field 'epos_m' must be a number or null"),
+        ("reason", 3, "field 'reason'"),
+        ("extra", [1], "field 'extra'"),
+    ],
+)
+def test_trial_sidecars_must_agree_with_their_names_and_types(tmp_path, key, value, message):
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run), complete(0))
+    path = run.path / "trial-000.json"
+    data = json.loads(path.read_text())
+    data[key] = value
+    path.write_text(json.dumps(data))
+    with pytest.raises(RunLogError, match=re.escape(message)) as info:
+        run.statuses()
+    assert str(path) in str(info.value)
+
+
+def test_a_trial_whose_setpoints_are_not_its_files_is_refused(tmp_path):
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run), complete(0))
+    other = run.read_setpoints(0) + np.array([0.3, 0.0, 0.0])
+    run.write_setpoints(1, other)
+    rec = record_for(run, seed=4)
+    run.write_trial(1, TrialRecord(**{**rec.__dict__, "sp_ned_m": np.vstack([other, other[-1]])}),
+                    complete(1))  # fmt: skip
+    run.read_trial(1)  # as flown: agrees
+    a, b = run.path / "trial-000.csv", run.path / "trial-001.csv"
+    a.rename(run.path / "x")
+    b.rename(a)
+    (run.path / "x").rename(b)
+    with pytest.raises(RunLogError, match="setpoints differ from setpoints-001.csv") as info:
+        run.read_trial(1)
+    assert "trial-001.csv" in str(info.value)
+    (run.path / "trial-001.csv").unlink()
+    with pytest.raises(RunLogError, match="missing, but trial-001.json says"):
+        run.read_trial(1)
+
+
+def test_a_csv_without_its_sidecar_is_archived_before_the_trial_is_flown_again(tmp_path):
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run, seed=1), complete(0))
+    orphan = (run.path / "trial-000.csv").read_bytes()
+    (run.path / "trial-000.json").unlink()  # interrupted between the CSV and its sidecar
+    assert run.next_trial() == 0
+    run.write_trial(0, record_for(run, seed=2), complete(0))
+    assert (run.path / "aborted" / "trial-000-attempt-1.csv").read_bytes() == orphan
+    assert not (run.path / "aborted" / "trial-000-attempt-1.json").exists()
+
+
+def test_a_session_record_must_name_itself(tmp_path):
+    run = new_run(tmp_path)
+    (run.path / "session-001.json").write_text('{"session": 2}')
+    with pytest.raises(RunLogError, match="session-001.json: field 'session' must be 1"):
+        run.sessions()
+
+
+def test_unwritable_run_directory_is_refused(tmp_path):
+    from test_paths import read_only
+
+    run = new_run(tmp_path)
+    run.check_writable()
+    with read_only(run.path), pytest.raises(RunLogError, match="run directory is not writable"):
+        run.check_writable()
+
+
+def test_a_refused_learning_record_leaves_neither_file_behind(tmp_path):
+    run = new_run(tmp_path)
+    n = run.n_samples
+    sp = run.read_setpoints(0)
+    (run.path / "setpoints-001.csv").write_text("")  # damaged: other content than learned
+    with pytest.raises(RunLogError, match="setpoints-001.csv: exists with different content"):
+        run.write_learned(0, np.zeros((n, 2)), np.ones((n, 2)), sp)
+    assert not (run.path / "estimate-000.csv").exists()  # not written before the refusal
+    (run.path / "setpoints-001.csv").unlink()
+    assert run.write_learned(0, np.zeros((n, 2)), np.ones((n, 2)), sp).name == "setpoints-001.csv"
+    run.write_learned(0, np.zeros((n, 2)), np.ones((n, 2)), sp)  # again: the same bytes
+
+
+def test_files_and_runs_get_the_modes_open_and_mkdir_give(tmp_path):
+    import stat
+
+    mask = os.umask(0o022)
+    os.umask(mask)
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run), complete(0))
+    assert stat.S_IMODE(run.path.stat().st_mode) == 0o777 & ~mask  # not mkdtemp's 0700
+    for p in run.path.iterdir():
+        assert stat.S_IMODE(p.stat().st_mode) == 0o666 & ~mask, p.name  # not mkstemp's 0600

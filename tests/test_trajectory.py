@@ -212,3 +212,82 @@ def test_random_eights_phase_is_monotone_and_makes_whole_loops(shape):
     # rate is the derivative of the phase (trapezoid integration of sd)
     integral = np.concatenate([[0.0], np.cumsum(0.5 * (sd[1:] + sd[:-1]) * np.diff(t))])
     np.testing.assert_allclose(s, integral, atol=1e-3 * (1 + s[-1]))
+
+
+# ------------------------------------------------------------------- limits on the flown grid
+
+
+def test_a_phase_rate_that_jumps_in_one_sample_is_refused_on_the_grid():
+    """ramp_s: 0 passes the analytic check but asks for 2.13 m/s within one 0.05 s sample."""
+    from dataclasses import replace
+
+    shape = replace(eight(), ramp_s=0.0)
+    ref = sample_eight(shape, 0.05)
+    analytic = horizontal_norm(ref.acc_ned_m_s2).max()
+    assert analytic < 5.0  # what the analytic derivatives alone would have let through
+    # at rest, then at full phase rate: the speed a w (north) and b w (east) at s = 0
+    w = 2 * np.pi / shape.period_s
+    jump = np.hypot(shape.amplitude_north_m * w, shape.amplitude_east_m * w)
+    with pytest.raises(TrajectoryError, match="acceleration on the flown grid") as info:
+        check_reference(ref, 3.0, 5.0, WIDE)
+    value = float(re.search(r"grid ([0-9.]+) m/s\^2", str(info.value)).group(1))
+    # the first difference of the position, differenced once more, over dt^2
+    assert value == pytest.approx(jump / 0.05, rel=0.05)
+    assert _message_time(str(info.value)) == pytest.approx(shape.hover_s, abs=0.051)
+
+
+def test_grid_differences_of_the_default_eight_stay_within_its_limits():
+    ref = sample_eight(eight(), 0.05)
+    p = ref.pos_ned_m[:, :2]
+    speed = horizontal_norm(np.diff(p, axis=0) / 0.05)
+    accel = horizontal_norm(np.diff(p, 2, axis=0) / 0.05**2)
+    assert 2.0 < speed.max() < 2.2 and 3.8 < accel.max() < 4.2  # the paper's 2.1 m/s, 4 m/s^2
+    # a smooth reference: the grid's differences and the derivatives agree to a few percent
+    assert speed.max() == pytest.approx(horizontal_norm(ref.vel_ned_m_s).max(), rel=0.01)
+    assert accel.max() == pytest.approx(horizontal_norm(ref.acc_ned_m_s2).max(), rel=0.02)
+    check_reference(ref, 2.2, 4.2, WIDE)
+
+
+def _line_reference(n: int = 40, dt: float = 0.05, speed: float = 1.0) -> Reference:
+    t = np.arange(n + 1) * dt
+    pos = np.zeros((n + 1, 3))
+    pos[:, 0] = speed * t
+    pos[:, 1] = -0.5 * speed * t
+    pos[:, 2] = -1.5
+    zero = np.zeros_like(pos)
+    return Reference(t, pos, zero, zero)
+
+
+def test_check_setpoints_accepts_the_aligned_reference_and_names_each_limit():
+    from gcs.core.trajectory import check_setpoints
+
+    ref = _line_reference()
+    r = (3, 2)  # relative degrees, north and east
+    yd = ref.pos_ned_m
+    aligned = np.column_stack(
+        [np.concatenate([yd[r[a] :, a], np.full(r[a] - 1, yd[-1, a])]) for a in (0, 1)]
+        + [yd[:-1, 2]]
+    )
+    # u(k) = yd(k + r): deviation 0, steps of the reference's own (0.05 and 0.025 m); the
+    # first step from the hover point yd(0) is r samples of motion at once
+    check_setpoints(aligned, ref, WIDE, 0.15, 0.0, r)
+    with pytest.raises(TrajectoryError, match=r"k = 0 steps 0.150 m on north"):
+        check_setpoints(aligned, ref, WIDE, 0.149, None, r)
+    late = yd[:-1].copy()  # u(k) = yd(k): 3 samples behind on north, 2 on east
+    with pytest.raises(TrajectoryError, match=r"k = 0 is 0.150 m from the reference on north"):
+        check_setpoints(late, ref, WIDE, None, 0.1, r)
+    bumped = aligned.copy()
+    bumped[17, 1] += 0.4
+    with pytest.raises(TrajectoryError, match=r"k = 17 steps 0.375 m on east"):
+        check_setpoints(bumped, ref, WIDE, 0.2, None, r)
+    with pytest.raises(TrajectoryError, match=r"k = 17 is 0.400 m from the reference on east"):
+        check_setpoints(bumped, ref, WIDE, None, 0.3, r)
+    far = aligned.copy()
+    far[17, 0] += 2.0  # north 3.0 m: the only point beyond 2.5 m
+    with pytest.raises(TrajectoryError, match=r"k = 17 \[3.0, .* outside the arena"):
+        check_setpoints(far, ref, Box((-3.0, 2.5), (-3.0, 3.0), (-3.0, 0.0)), None, None, r)
+    bumped[5, 0] = np.nan
+    with pytest.raises(TrajectoryError, match="k = 5 is NaN"):
+        check_setpoints(bumped, ref, WIDE)
+    with pytest.raises(TrajectoryError, match="shape"):
+        check_setpoints(aligned[:-1], ref, WIDE)

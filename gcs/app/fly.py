@@ -7,6 +7,7 @@ answers from the run directory and learns with :func:`gcs.app.learn.learn_run`, 
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -14,17 +15,29 @@ from typing import Any
 
 import numpy as np
 
-from gcs.app.learn import learn_run, trial_errors
+from gcs.app.learn import check_learnable, check_learned, differing_field, learn_run, trial_errors
 from gcs.core.metrics import IterationMetrics, iteration_table
-from gcs.core.trajectory import check_reference, points_outside
-from gcs.errors import ProfileError, RunLogError, TrajectoryError
+from gcs.core.trajectory import (
+    MAX_SAMPLES,
+    Reference,
+    check_reference,
+    points_outside,
+    sample_eight,
+)
+from gcs.errors import PathError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
-from gcs.io.config import Profile, TrajectorySpec
+from gcs.io.config import Profile, TrajectorySpec, load_profile, load_trajectory
+from gcs.io.paths import check_new_dir, check_output_dir
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
 
 __all__ = [
+    "FlyPlan",
+    "plan_fly",
+    "start_run",
+    "check_url",
+    "check_mock_config",
     "RunSource",
     "SessionRecorder",
     "flyable_setpoints",
@@ -37,32 +50,262 @@ __all__ = [
 ]
 
 
-def flight_settings(profile: Profile) -> FlightSettings:
+def flight_settings(profile: Profile, where: str | None = None) -> FlightSettings:
     """The profile's ``flight`` section as :class:`FlightSettings` (unknown keys refused).
 
     Parameters
     ----------
     profile : Profile
         The profile.
+    where : str, optional
+        The profile's file for messages (default: ``profile '<name>'``).
 
     Returns
     -------
     FlightSettings
     """
+    where = where or f"profile '{profile.name}'"
     known = {f.name for f in fields(FlightSettings)}
     for key, value in profile.flight.items():
         if key not in known:
-            raise ProfileError(f"profile '{profile.name}': field 'flight.{key}' is not known")
+            raise ProfileError(f"{where}: field 'flight.{key}' is not known")
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ProfileError(f"profile '{profile.name}': field 'flight.{key}' must be a number")
-    settings = FlightSettings(**{k: float(v) for k, v in profile.flight.items()})
+            raise ProfileError(f"{where}: field 'flight.{key}' must be a number, got {value!r}")
     try:
+        settings = FlightSettings(**{k: float(v) for k, v in profile.flight.items()})
         settings.sends_per_sample(profile.t_ilc_s)
-    except ValueError as exc:
-        raise ProfileError(
-            f"profile '{profile.name}': field 'flight.stream_rate_hz': {exc}"
-        ) from exc
+    except ValueError as exc:  # FlightSettings' own messages start with the field's name
+        text = str(exc)
+        field = text.split(":", 1)[0] if text.startswith("flight.") else "flight.stream_rate_hz"
+        detail = text.split(":", 1)[1].strip() if text.startswith("flight.") else text
+        raise ProfileError(f"{where}: field '{field}': {detail}") from None
     return settings
+
+
+#: MAVSDK connection URLs (MAVSDK 2: udpin/udpout/tcpin/tcpout/serial/serial_flowcontrol;
+#: udp:// and tcp:// are its older spellings of udpin and tcpout).
+_URL = re.compile(
+    r"^(?:(?:udpin|udpout|udp|tcpin|tcpout|tcp)://[^/:\s]*:(?P<port>\d{1,5})"
+    r"|(?:serial|serial_flowcontrol)://\S+?(?::\d+)?)$"
+)
+
+
+def check_url(url: str) -> str:
+    """Refuse a MAVSDK connection URL that MAVSDK would not open.
+
+    Parameters
+    ----------
+    url : str
+        E.g. ``udpin://0.0.0.0:14540``, ``udpout://127.0.0.1:14540``,
+        ``serial:///dev/ttyUSB0:57600``.
+
+    Returns
+    -------
+    str
+        ``url``.
+
+    Raises
+    ------
+    PathError
+        Unknown scheme, no port, or a port outside 1..65535.
+    """
+    match = _URL.match(url)
+    port = match.group("port") if match else None
+    if match is None or (port is not None and not 1 <= int(port) <= 65535):
+        raise PathError(
+            f"--connect {url}: not a MAVSDK connection URL (udpin://HOST:PORT, "
+            "udpout://HOST:PORT, tcpout://HOST:PORT, serial:///dev/DEVICE:BAUD)"
+        )
+    return url
+
+
+def check_mock_config(path: Path | None) -> None:
+    """Load the mock drone's settings once, so that a bad file is refused before flying.
+
+    Parameters
+    ----------
+    path : Path or None
+        ``--mock-config``; None for the defaults.
+    """
+    if path is not None:
+        from gcs.mock.config import load_mock_config
+
+        load_mock_config(path)
+
+
+@dataclass(frozen=True)
+class FlyPlan:
+    """Everything ``gcs fly`` needs, validated before anything is created, moved or flown.
+
+    Parameters
+    ----------
+    profile : Profile
+        The profile (a new run's, or the resumed run's).
+    trajectory : TrajectorySpec
+        The trajectory.
+    algorithm : str
+        ``"smoother"`` or ``"kilc"``.
+    settings : FlightSettings
+        The profile's flight settings.
+    reference : Reference
+        The reference on the grid, checked against the vehicle and the arena.
+    first_trial : int
+        The trial to fly first.
+    run : RunDir or None
+        The run to resume; None for a new one.
+    run_path : Path or None
+        Exact path of the new run.
+    logs : Path
+        Parent of new runs.
+    """
+
+    profile: Profile
+    trajectory: TrajectorySpec
+    algorithm: str
+    settings: FlightSettings
+    reference: Reference
+    first_trial: int
+    run: RunDir | None
+    run_path: Path | None
+    logs: Path
+
+
+def plan_fly(
+    profile_path: Path | None,
+    trajectory_path: Path | None,
+    algorithm: str | None,
+    run_path: Path | None = None,
+    resume: Path | None = None,
+    logs: Path = Path("logs"),
+) -> FlyPlan:
+    """Validate everything a flight needs; nothing is created, moved or flown here.
+
+    A new run: the profile (every section, flight settings included), the trajectory on the
+    flown grid against the vehicle's limits and the arena, a dry first learning update (models
+    and setpoint limits admit one), the run's path. A resumed run: the run directory (a
+    learning run, writable, its manifest, reference, trial files and the next trial's
+    setpoints on their grid limits), and ``profile_path`` / ``trajectory_path``, if given,
+    must be the run's own.
+
+    Parameters
+    ----------
+    profile_path, trajectory_path : Path or None
+        Files of a new run (None: with ``resume``, the run's own; else required).
+    algorithm : str or None
+        Learning algorithm (default: the profile's, or the resumed run's).
+    run_path : Path or None
+        Exact path of a new run.
+    resume : Path or None
+        Run to continue.
+    logs : Path
+        Parent of new runs.
+
+    Returns
+    -------
+    FlyPlan
+    """
+    if resume is not None:
+        return _plan_resume(resume, profile_path, trajectory_path, algorithm, logs)
+    if profile_path is None or trajectory_path is None:
+        raise ProfileError("a new run needs a profile and a trajectory")
+    profile, where = load_profile(profile_path), str(profile_path)
+    trajectory = load_trajectory(trajectory_path)
+    algorithm = algorithm or profile.learning.algorithm
+    settings = flight_settings(profile, where)
+    ref = _reference(profile, trajectory, str(trajectory_path))
+    check_learnable(profile, ref, algorithm, where)
+    if run_path is not None:
+        check_new_dir(run_path, "--run")
+    else:
+        check_output_dir(logs, "--logs")
+    return FlyPlan(profile, trajectory, algorithm, settings, ref, 0, None, run_path, logs)
+
+
+def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Reference:
+    if trajectory.shape is None:
+        raise TrajectoryError(f"{where}: not an eight (an identification excitation)")
+    duration = trajectory.shape.duration_s
+    if not duration / profile.t_ilc_s <= MAX_SAMPLES:  # before the arrays are made
+        raise TrajectoryError(
+            f"{where}: a trial of {duration:g} s has more than {MAX_SAMPLES} samples of "
+            f"{profile.t_ilc_s:g} s"
+        )
+    try:
+        with np.errstate(over="raise", invalid="raise"):
+            ref = sample_eight(trajectory.shape, profile.t_ilc_s)
+        check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)
+    except TrajectoryError as exc:
+        raise TrajectoryError(f"{where}: {exc}") from None
+    except FloatingPointError as exc:
+        raise TrajectoryError(f"{where}: its numbers overflow when sampled ({exc})") from None
+    return ref
+
+
+def _plan_resume(
+    resume: Path,
+    profile_path: Path | None,
+    trajectory_path: Path | None,
+    algorithm: str | None,
+    logs: Path,
+) -> FlyPlan:
+    run = RunDir.open(resume)
+    run.require_kind("learning", "gcs fly --resume")
+    if algorithm is not None and algorithm != run.algorithm:
+        raise RunLogError(f"{resume}: the run learns with '{run.algorithm}', not '{algorithm}'")
+    for given, loader, key in (
+        (profile_path, load_profile, "profile"),
+        (trajectory_path, load_trajectory, "trajectory"),
+    ):
+        if given is not None:
+            field = differing_field(loader(given).source, run.manifest[key])
+            if field is not None:
+                raise RunLogError(
+                    f"--{key} {given}: differs from the {key} {resume} was flown with (field "
+                    f"'{field}'); a resumed run keeps its own {key}: leave out --{key}, or "
+                    "start a new run"
+                )
+    where = f"{run.path}/manifest.json:profile"
+    profile, trajectory = run.profile(), run.trajectory()
+    settings = flight_settings(profile, where)
+    ref = run.reference()
+    try:
+        check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)
+    except TrajectoryError as exc:
+        raise RunLogError(f"{run.path}/reference.csv: {exc}") from None
+    first = run.next_trial()
+    if first > 0:
+        run.read_trial(first - 1)  # the trial the next setpoints were learned from
+        if not (run.path / f"setpoints-{first:03d}.csv").exists():
+            raise RunLogError(
+                f"{run.path}: no setpoints for trial {first}; run 'gcs learn {run.path}' first"
+            )
+    flyable_setpoints(run, first)
+    run.check_writable()
+    return FlyPlan(profile, trajectory, run.algorithm, settings, ref, first, run, None, logs)
+
+
+def start_run(plan: FlyPlan) -> RunDir:
+    """The run to fly: the resumed one, or a new run directory created from the plan.
+
+    Parameters
+    ----------
+    plan : FlyPlan
+        From :func:`plan_fly`.
+
+    Returns
+    -------
+    RunDir
+    """
+    if plan.run is not None:
+        return plan.run
+    if plan.run_path is not None:
+        return RunDir.create(
+            plan.run_path.parent, plan.profile, plan.trajectory, plan.algorithm,
+            run_id=plan.run_path.name, reference=plan.reference,
+        )  # fmt: skip
+    return RunDir.create(
+        plan.logs, plan.profile, plan.trajectory, plan.algorithm, reference=plan.reference
+    )
 
 
 def prepare_run(
@@ -91,13 +334,12 @@ def prepare_run(
     -------
     RunDir
     """
-    from gcs.core.trajectory import sample_eight
-
-    ref = sample_eight(trajectory.shape, profile.t_ilc_s)
-    check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)
+    ref = _reference(profile, trajectory, trajectory.name)
     if run_path is not None:
-        return RunDir.create(run_path.parent, profile, trajectory, algorithm, run_id=run_path.name)
-    return RunDir.create(logs, profile, trajectory, algorithm)
+        root, run_id = run_path.parent, run_path.name
+    else:
+        root, run_id = logs, None
+    return RunDir.create(root, profile, trajectory, algorithm, run_id=run_id, reference=ref)
 
 
 def to_record(
@@ -195,7 +437,12 @@ def session_record(session: FlightSession) -> dict[str, Any]:
 
 
 def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
-    """Trial j's setpoints from the run directory, refused if any leaves the profile's arena.
+    """Trial j's setpoints from the run directory, refused if any breaks a limit, on its grid.
+
+    Every sequence must lie inside the profile's arena. A learned sequence of a learning run
+    (j >= 1) must also keep the learning's limits (step per sample, deviation from the
+    reference; :func:`gcs.app.learn.check_learned`): the file on disk is what is flown, and
+    it is checked as such, whoever wrote it.
 
     Parameters
     ----------
@@ -210,7 +457,8 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
         Absolute local NED [m].
     """
     sp = run.read_setpoints(j)
-    arena = run.profile().arena
+    profile = run.profile()
+    arena = profile.arena
     outside = points_outside(sp, arena)
     if outside.size:
         k = outside[0]
@@ -218,6 +466,11 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
             f"setpoints-{j:03d}.csv: setpoint k = {k} {np.round(sp[k], 3).tolist()} is "
             f"outside the arena {arena}; not flown"
         )
+    if run.kind == "learning" and j > 0:
+        try:
+            check_learned(sp, profile, run.reference())
+        except TrajectoryError as exc:
+            raise TrajectoryError(f"{run.path}/setpoints-{j:03d}.csv: {exc}; not flown") from None
     return sp
 
 

@@ -10,12 +10,11 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from gcs.app.fly import flight_settings, fly_run, prepare_run
+from gcs.app.fly import check_mock_config, check_url, fly_run, plan_fly, start_run
 from gcs.app.report import metrics_table
 from gcs.core.metrics import IterationMetrics
 from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
-from gcs.io.config import load_profile, load_trajectory
 from gcs.io.runlog import RunDir
 
 __all__ = ["fly_with_display", "live_progress", "vehicle_url"]
@@ -53,26 +52,6 @@ def vehicle_url(
     with MockProcess(config_path=mock_config, seed=seed) as mock:
         console.print(f"[dim]mock drone at {mock.url}[/]")
         yield mock.url
-
-
-def _open_run(
-    resume: Path | None,
-    run_path: Path | None,
-    logs: Path,
-    profile_path: Path,
-    trajectory_path: Path,
-    algorithm: str | None,
-) -> RunDir:
-    if resume is not None:
-        run = RunDir.open(resume)
-        if algorithm is not None and algorithm != run.algorithm:
-            from gcs.errors import RunLogError
-
-            raise RunLogError(f"{resume}: the run learns with '{run.algorithm}', not '{algorithm}'")
-        return run
-    profile = load_profile(profile_path)
-    trajectory = load_trajectory(trajectory_path)
-    return prepare_run(logs, profile, trajectory, algorithm or profile.learning.algorithm, run_path)
 
 
 def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]:
@@ -140,15 +119,19 @@ def fly_with_display(
     connect: str | None,
     mock_config: Path | None,
     seed: int,
-    profile_path: Path,
-    trajectory_path: Path,
+    profile_path: Path | None,
+    trajectory_path: Path | None,
     algorithm: str | None,
     run_path: Path | None,
     resume: Path | None,
     logs: Path,
     use_mock: bool,
-) -> RunDir:
-    """Set up (or resume) a run and fly it with a live display.
+    check_only: bool = False,
+) -> RunDir | None:
+    """Validate everything, then set up (or resume) a run and fly it with a live display.
+
+    Nothing is created, moved or flown before every input has been checked
+    (:func:`gcs.app.fly.plan_fly`, the connection URL, the mock's settings).
 
     Parameters
     ----------
@@ -162,10 +145,10 @@ def fly_with_display(
         Mock settings for ``use_mock``.
     seed : int
         Mock seed.
-    profile_path : Path
-        Profile of a new run.
-    trajectory_path : Path
-        Trajectory of a new run.
+    profile_path : Path or None
+        Profile of a new run; with ``resume``, must be the run's if given.
+    trajectory_path : Path or None
+        Trajectory of a new run; with ``resume``, must be the run's if given.
     algorithm : str or None
         Learning algorithm (default: the profile's, or the resumed run's).
     run_path : Path or None
@@ -176,14 +159,33 @@ def fly_with_display(
         Parent of new runs.
     use_mock : bool
         Fly the mock drone.
+    check_only : bool
+        Validate and say what would be flown, then stop: nothing is created or connected.
 
     Returns
     -------
-    RunDir
+    RunDir or None
+        The run flown (None with ``check_only``).
     """
-    run = _open_run(resume, run_path, logs, profile_path, trajectory_path, algorithm)
-    settings = flight_settings(run.profile())
+    plan = plan_fly(profile_path, trajectory_path, algorithm, run_path, resume, logs)
+    if use_mock:
+        check_mock_config(mock_config)
+    else:
+        assert connect is not None
+        check_url(connect)
+    if check_only:
+        where = plan.run.path if plan.run is not None else (plan.run_path or plan.logs)
+        console.print(
+            f"checked: profile '{plan.profile.name}', trajectory '{plan.trajectory.name}' "
+            f"({plan.reference.n_samples} samples of {plan.profile.t_ilc_s:g} s), "
+            f"{plan.algorithm}, trials {plan.first_trial}..{plan.first_trial + iterations - 1} "
+            f"in {where}; nothing flown"
+        )
+        return None
+    run = start_run(plan)
+    settings = plan.settings
     console.print(f"run [bold]{run.path}[/] ({run.algorithm}), next trial {run.next_trial()}")
+
     progress, on_event = live_progress(console)
 
     def on_row(rows: list[IterationMetrics]) -> None:

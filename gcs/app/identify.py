@@ -28,7 +28,6 @@ import copy
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +46,7 @@ from gcs.core.pbsid import (
     to_continuous_tf,
     vaf,
 )
-from gcs.core.trajectory import Reference, points_outside
+from gcs.core.trajectory import MAX_SAMPLES, Reference, points_outside
 from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import run_campaign
 from gcs.flight.settings import FlightSettings
@@ -206,6 +205,10 @@ def identification_settings(
         if f_max >= nyquist:
             raise f.fail("f_max_hz", f"must be below Nyquist {nyquist:g} Hz, got {f_max:g}")
     duration = f.number("duration_s", d.duration_s, positive=True)
+    if duration / profile.t_ilc_s > MAX_SAMPLES:
+        raise f.fail(
+            "duration_s", f"gives more than {MAX_SAMPLES} samples of {profile.t_ilc_s:g} s"
+        )
     past = f.integer("past", d.past)
     if past < 1:
         raise f.fail("past", f"must be >= 1, got {past}")
@@ -714,12 +717,18 @@ def model_to_dict(model: DiscreteModel) -> dict:
 
 
 def identified_profile_text(
-    profile: Profile, results: Sequence[AxisResult], origin: str, where: str = "<out>"
+    profile: Profile,
+    results: Sequence[AxisResult],
+    origin: str,
+    where: str = "<out>",
+    recorded_utc: str | None = None,
 ) -> str:
     """The input profile's YAML with the identified models in ``model`` / ``model_y``.
 
     An axis that was not identified keeps the input profile's model. The text is checked by
-    loading it (:func:`gcs.io.config.profile_from_dict`) before it is returned.
+    loading it (:func:`gcs.io.config.profile_from_dict`) before it is returned. It depends on
+    the data and the settings only (no clock): identifying the same run again gives the same
+    bytes, so that the run's own ``identified.yaml`` is written once and never replaced.
 
     Parameters
     ----------
@@ -731,6 +740,8 @@ def identified_profile_text(
         Where the data came from (run directory), for the header and ``description``.
     where : str
         Name used in error messages if the result does not load.
+    recorded_utc : str or None
+        When the experiments were flown (the run's ``created_utc``), for the header.
 
     Returns
     -------
@@ -755,9 +766,9 @@ def identified_profile_text(
     )
     ordered = {k: data[k] for k in ("name", "description", "t_ilc_s", "model", "model_y")}
     ordered.update({k: v for k, v in data.items() if k not in ordered})
-    stamp = datetime.now(UTC).isoformat(timespec="seconds")
+    flown = f" (experiments flown {recorded_utc})" if recorded_utc else ""
     header = (
-        f"# Written by 'gcs identify' on {stamp} from {origin}.\n"
+        f"# Written by 'gcs identify' from {origin}{flown}.\n"
         f"# model / model_y: identified discrete state spaces at t_ilc_s = {profile.t_ilc_s:g} s\n"
         "# (x(k+1) = A x(k) + B u(k - delay_samples), y = C x; u setpoint, y position, both\n"
         "# relative to the hover point [m]). Everything else is the input profile's.\n"

@@ -18,11 +18,14 @@ from gcs.app.identify import (
     identified_profile_text,
     identify_run,
     plan_experiments,
+    run_axes,
     write_identification_plots,
     write_identified_profile,
 )
+from gcs.errors import PathError, RunLogError
 from gcs.io.config import Profile, load_profile
-from gcs.io.runlog import RunDir
+from gcs.io.paths import check_new_dir, check_output_dir, check_output_file
+from gcs.io.runlog import RunDir, write_once
 
 __all__ = ["results_table", "model_lines", "identify_with_display"]
 
@@ -124,8 +127,13 @@ def identify_with_display(
     logs: Path,
     run_path: Path | None,
     default_profile: Path,
-) -> Path:
+    check_only: bool = False,
+) -> Path | None:
     """Fly the two experiments (or read them), identify, print, write profile and plots.
+
+    Everything is validated first (profile, identification and flight settings, the
+    excitation against the arena, the run, the output paths, the connection URL or the mock's
+    settings); only then is a run created, a vehicle connected or PBSID run.
 
     Parameters
     ----------
@@ -157,31 +165,61 @@ def identify_with_display(
         Exact path of the new run.
     default_profile : Path
         Profile used when flying without ``profile_path``.
+    check_only : bool
+        Validate and say what would be done, then stop: nothing is created, flown or written.
 
     Returns
     -------
-    Path
-        The profile written.
+    Path or None
+        The profile written (None with ``check_only``).
     """
+    if plot is not None:
+        check_output_dir(plot, "--plot")
     if from_log is not None:
         run = RunDir.open(from_log)
+        run.require_kind("identification", "gcs identify --from-log")
         if profile_path is None:
             profile: Profile = run.profile()
             where = f"{run.path}/manifest.json:profile"
         else:
             profile, where = load_profile(profile_path), str(profile_path)
         settings = identification_settings(profile, where)
+        run_axes(run, axis)
+        for j, what in ((0, "fitting"), (1, "validation")):
+            if not (run.path / f"trial-{j:03d}.json").exists():
+                raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
+            run.read_trial(j)
+        _check_target(out, run.path)
+        if check_only:
+            console.print(f"checked: {run.path}, profile '{profile.name}'; nothing identified")
+            return None
     else:
-        from gcs.app.fly import flight_settings
+        from gcs.app.fly import check_mock_config, check_url, flight_settings
         from gcs.app.fly_view import live_progress, vehicle_url
 
         path = profile_path or default_profile
         profile, where = load_profile(path), str(path)
         settings = identification_settings(profile, where, seed)
-        flight = flight_settings(profile)
+        flight = flight_settings(profile, where)
         experiments = plan_experiments(
             settings, profile.t_ilc_s, axis or "both", profile.arena, where
         )
+        if run_path is not None:
+            check_new_dir(run_path, "--run")
+        else:
+            check_output_dir(logs, "--logs")
+        _check_target(out, None)
+        if use_mock:
+            check_mock_config(mock_config)
+        else:
+            check_url(str(connect))
+        if check_only:
+            console.print(
+                f"checked: profile '{profile.name}', {settings.excitation} on "
+                f"{', '.join(experiments.axes)}, two experiments of "
+                f"{settings.n_samples(profile.t_ilc_s)} samples; nothing flown"
+            )
+            return None
         run_root, run_id = (logs, None) if run_path is None else (run_path.parent, run_path.name)
         run = create_identification_run(run_root, profile, settings, experiments, run_id)
         n = settings.n_samples(profile.t_ilc_s)
@@ -203,10 +241,36 @@ def identify_with_display(
     for line in model_lines(results):
         console.print(line, highlight=False)
     target = Path(out) if out is not None else run.path / OUT_NAME
-    text = identified_profile_text(profile, results, str(run.path), str(target))
-    write_identified_profile(target, text)
-    console.print(f"wrote profile {target}")
+    text = identified_profile_text(
+        profile, results, str(run.path), str(target), run.manifest.get("created_utc")
+    )
+    if _in_run(target, run.path):  # the run's own record: written once, never replaced
+        if write_once(target, text):
+            console.print(f"wrote profile {target}")
+        else:
+            console.print(f"profile {target} holds this result already")
+    else:
+        write_identified_profile(target, text)
+        console.print(f"wrote profile {target}")
     if plot is not None:
         for p in write_identification_plots(results, profile, plot):
             err_console.print(f"wrote {p}")
     return target
+
+
+def _in_run(target: Path, run_path: Path) -> bool:
+    return target.absolute().parent.resolve() == run_path.absolute().resolve()
+
+
+def _check_target(out: Path | None, run_path: Path | None) -> None:
+    """``--out`` (or the default in the run directory) can be written."""
+    if out is None:
+        if run_path is not None:  # identifying an existing run again: it must take the file
+            RunDir.open(run_path).check_writable()
+        return
+    if run_path is not None and _in_run(out, run_path):
+        if out.name != OUT_NAME:
+            raise PathError(f"--out {out}: inside the run directory only {OUT_NAME} is written")
+        RunDir.open(run_path).check_writable()
+        return
+    check_output_file(out, "--out")

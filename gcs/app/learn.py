@@ -9,18 +9,28 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from gcs.core.estimators import KilcState
 from gcs.core.learning import LearningInputs, learning_step
 from gcs.core.metrics import epos, max_error
-from gcs.core.trajectory import points_outside
-from gcs.errors import RunLogError
+from gcs.core.model import relative_degree
+from gcs.core.trajectory import Reference, check_setpoints
+from gcs.errors import GcsError, ProfileError, RunLogError, TrajectoryError
 from gcs.io.config import Profile, load_profile
 from gcs.io.runlog import RunDir, TrialRecord
 
-__all__ = ["LearnOutcome", "learning_inputs", "learn_run", "trial_errors"]
+__all__ = [
+    "LearnOutcome",
+    "learning_inputs",
+    "learn_run",
+    "trial_errors",
+    "check_learned",
+    "check_learnable",
+    "differing_field",
+]
 
 
 @dataclass(frozen=True)
@@ -91,21 +101,110 @@ def trial_errors(record: TrialRecord) -> tuple[float, float]:
     return epos(ref, pos), max_error(ref, pos)
 
 
+def differing_field(given: Any, recorded: Any, prefix: str = "") -> str | None:
+    """The first field (dotted path, sorted) where two parsed YAML documents differ, or None.
+
+    Parameters
+    ----------
+    given, recorded : Any
+        Parsed documents (dicts, lists, scalars).
+    prefix : str
+        Path of the documents themselves (for recursion).
+
+    Returns
+    -------
+    str or None
+        ``"<top>"`` when the documents themselves differ in type.
+    """
+    if given == recorded:
+        return None
+    if isinstance(given, dict) and isinstance(recorded, dict):
+        for key in sorted(set(given) | set(recorded), key=str):
+            if given.get(key, ...) != recorded.get(key, ...):
+                name = f"{prefix}.{key}" if prefix else str(key)
+                return differing_field(given.get(key), recorded.get(key), name) or name
+    return prefix or "<top>"
+
+
 def _check_profile(run: RunDir, profile_path: Path | None) -> Profile:
     profile = run.profile()
     if profile_path is not None:
         given = load_profile(profile_path)
-        if given.source != run.manifest["profile"]:
-            keys = sorted(
-                k
-                for k in set(given.source) | set(run.manifest["profile"])
-                if given.source.get(k) != run.manifest["profile"].get(k)
-            )
+        key = differing_field(given.source, run.manifest["profile"])
+        if key is not None:
             raise RunLogError(
                 f"{profile_path}: does not match the profile in {run.path}/manifest.json "
-                f"(field '{keys[0]}' differs)"
+                f"(field '{key}' differs)"
             )
     return profile
+
+
+def check_learned(sp_ned_m: np.ndarray, profile: Profile, ref: Reference) -> None:
+    """Refuse setpoints that break a limit of the profile's learning, on the grid flown.
+
+    Arena, step per sample and deviation from the reference (aligned by each model's
+    relative degree), as :func:`gcs.core.trajectory.check_setpoints`.
+
+    Parameters
+    ----------
+    sp_ned_m : ndarray, shape (N, 3)
+        Learned setpoints, local NED [m].
+    profile : Profile
+        The run's profile (arena, limits, models).
+    ref : Reference
+        The run's reference.
+
+    Raises
+    ------
+    TrajectoryError
+        Naming the limit, sample and axis.
+    """
+    ln = profile.learning
+    check_setpoints(
+        sp_ned_m, ref, profile.arena, ln.max_step_m, ln.max_deviation_m,
+        (relative_degree(profile.model_x), relative_degree(profile.model_y)),
+    )  # fmt: skip
+
+
+def check_learnable(profile: Profile, ref: Reference, algorithm: str, where: str) -> None:
+    """Refuse a profile and reference whose first learning update cannot be computed.
+
+    Runs the learning step on a trial that tracked the reference exactly, before anything is
+    flown: the models must fit the trial's length, and the setpoint limits (arena, step,
+    deviation) must admit a sequence; both depend on the reference, not on the data, so a
+    refusal here is one that would otherwise come after the first trial, in the air.
+
+    Parameters
+    ----------
+    profile : Profile
+        The profile.
+    ref : Reference
+        The reference to be flown.
+    algorithm : str
+        ``"smoother"`` or ``"kilc"``.
+    where : str
+        Name of the profile (file) for messages.
+
+    Raises
+    ------
+    ProfileError, ModelError, UpdateInfeasible
+        Naming the profile.
+    """
+    try:
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            step = learning_step(
+                learning_inputs(profile, algorithm),
+                ref.pos_ned_m[:, :2], ref.pos_ned_m[:-1, :2], ref.pos_ned_m[:, :2],
+            )  # fmt: skip
+        sp = np.column_stack([step.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
+        check_learned(sp, profile, ref)
+    except GcsError as exc:
+        raise type(exc)(f"{where}: learning cannot start on this trajectory: {exc}") from None
+    except (ValueError, ArithmeticError, RuntimeError) as exc:  # a solver that fails numerically
+        raise ProfileError(
+            f"{where}: learning cannot start on this trajectory: {exc} (check learning.weights "
+            "and the models)"
+        ) from None
 
 
 def _kilc_prior(run: RunDir, j: int) -> tuple[KilcState, KilcState] | None:
@@ -134,12 +233,14 @@ def learn_run(
     -------
     LearnOutcome
     """
+    run.require_kind("learning", "gcs learn")
     if algorithm is not None and algorithm != run.algorithm:
         raise RunLogError(
             f"{run.path}: the run learns with '{run.algorithm}', not '{algorithm}' "
             "(start a new run to compare algorithms)"
         )
     profile = _check_profile(run, profile_path)
+    run.check_writable()
     j = run.newest_complete()
     if j is None:
         raise RunLogError(f"{run.path}: no complete trial to learn from")
@@ -148,19 +249,28 @@ def learn_run(
     if np.max(np.abs(record.ref_ned_m - ref.pos_ned_m)) > 1e-6:
         raise RunLogError(f"{run.path}/trial-{j:03d}.csv: reference columns differ from the run's")
     kilc_prior = _kilc_prior(run, j) if run.algorithm == "kilc" else None
-    step = learning_step(
-        learning_inputs(profile, run.algorithm),
-        ref.pos_ned_m[:, :2],
-        record.sp_ned_m[:-1, :2],
-        record.pos_ned_m[:, :2],
-        kilc_prior,
-    )
+    try:
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            step = learning_step(
+                learning_inputs(profile, run.algorithm),
+                ref.pos_ned_m[:, :2],
+                record.sp_ned_m[:-1, :2],
+                record.pos_ned_m[:, :2],
+                kilc_prior,
+            )
+    except (ArithmeticError, RuntimeError) as exc:  # GcsErrors pass: they name their cause
+        if isinstance(exc, GcsError):
+            raise
+        raise RunLogError(
+            f"{run.path}/trial-{j:03d}.csv: the learning update failed on this trial ({exc}); "
+            "nothing written"
+        ) from None
     sp = np.column_stack([step.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
-    outside = points_outside(sp, profile.arena, tol_m=1e-6)
-    if outside.size:  # the QP keeps the box; this guards against a solver that did not
-        raise RunLogError(f"learned setpoint k = {outside[0]} leaves the arena; nothing written")
-    run.write_estimate(j, step.d_hat_ne_m, step.p_ne_m2)
-    path = run.write_setpoints(j + 1, sp)
+    try:  # the QP keeps these limits; this guards against a solver that did not
+        check_learned(sp, profile, ref)
+    except TrajectoryError as exc:
+        raise RunLogError(f"{run.path}: learned from trial {j}: {exc}; nothing written") from None
+    path = run.write_learned(j, step.d_hat_ne_m, step.p_ne_m2, sp)
     return LearnOutcome(
         trial=j,
         next_trial=j + 1,

@@ -16,7 +16,20 @@ import numpy as np
 
 from gcs.errors import TrajectoryError
 
-__all__ = ["EightShape", "Reference", "Box", "sample_eight", "check_reference"]
+#: Longest trial gcs flies, in samples: twice the N = 6000 whose learning update is benchmarked
+#: (0.6 s, 170 MB; docs/update.md); time and memory grow about linearly beyond.
+MAX_SAMPLES = 12_000
+
+__all__ = [
+    "MAX_SAMPLES",
+    "EightShape",
+    "Reference",
+    "Box",
+    "sample_eight",
+    "check_reference",
+    "check_setpoints",
+    "points_outside",
+]
 
 
 @dataclass(frozen=True)
@@ -49,6 +62,11 @@ class EightShape:
     loops: int = 2
     ramp_s: float = 2.0
     hover_s: float = 1.0
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the trial: hovers, ramps and loops [s]."""
+        return 2.0 * self.hover_s + self.ramp_s + self.loops * self.period_s
 
     def __post_init__(self) -> None:
         for name in ("amplitude_north_m", "amplitude_east_m", "period_s"):
@@ -168,9 +186,13 @@ def sample_eight(shape: EightShape, t_ilc_s: float) -> Reference:
     """
     if not t_ilc_s > 0:
         raise TrajectoryError(f"t_ilc_s must be > 0, got {t_ilc_s}")
-    duration = 2.0 * shape.hover_s + shape.ramp_s + shape.loops * shape.period_s
+    duration = shape.duration_s
     # ceil, not round: the last sample must not fall before the end of the motion
     n = int(np.ceil(duration / t_ilc_s - 1e-9))
+    if n < 2:
+        raise TrajectoryError(
+            f"a trial of {duration:g} s has fewer than 2 samples of {t_ilc_s:g} s"
+        )
     t = np.arange(n + 1) * t_ilc_s
     s, sd, sdd = _phase(t, shape)
     a, b = shape.amplitude_north_m, shape.amplitude_east_m
@@ -192,6 +214,12 @@ def check_reference(
 ) -> None:
     """Refuse a reference beyond the vehicle's limits or outside the arena.
 
+    Speed and acceleration are checked twice: as designed (the analytic derivatives of the
+    reference) and as flown, on the grid: the first and second finite differences of the
+    sampled positions, ``(p(k+1) - p(k)) / dt`` and ``(p(k+1) - 2 p(k) + p(k-1)) / dt^2``. The
+    vehicle receives samples, not the curve: a phase rate that jumps within one sample
+    (``ramp_s: 0``) has bounded analytic derivatives but asks for the jump in one sample.
+
     Parameters
     ----------
     ref : Reference
@@ -208,18 +236,28 @@ def check_reference(
     TrajectoryError
         Naming the limit, the value and the time at which it is first exceeded.
     """
-    speed = np.hypot(ref.vel_ned_m_s[:, 0], ref.vel_ned_m_s[:, 1])
-    accel = np.hypot(ref.acc_ned_m_s2[:, 0], ref.acc_ned_m_s2[:, 1])
-    for values, limit, what, unit in (
-        (speed, max_speed_m_s, "speed", "m/s"),
-        (accel, max_accel_m_s2, "acceleration", "m/s^2"),
-    ):
+    dt = ref.t_ilc_s
+    p = np.asarray(ref.pos_ned_m, dtype=float)[:, :2]
+    checks = [
+        (np.hypot(*ref.vel_ned_m_s[:, :2].T), ref.t_s, max_speed_m_s, "speed", "m/s"),
+        (np.hypot(*ref.acc_ned_m_s2[:, :2].T), ref.t_s, max_accel_m_s2, "acceleration", "m/s^2"),
+    ]
+    if p.shape[0] >= 3:
+        grid_speed = np.hypot(*(np.diff(p, axis=0) / dt).T)
+        grid_accel = np.hypot(*(np.diff(p, 2, axis=0) / dt**2).T)
+        checks += [
+            (grid_speed, ref.t_s[:-1], max_speed_m_s, "speed on the flown grid", "m/s"),
+            (grid_accel, ref.t_s[1:-1], max_accel_m_s2, "acceleration on the flown grid", "m/s^2"),
+        ]
+    for values, times, limit, what, unit in checks:
+        if not np.all(np.isfinite(values)):
+            raise TrajectoryError(f"{what} is not finite (NaN or inf in the reference)")
         over = np.flatnonzero(values > limit + 1e-9)
         if over.size:
             k = over[0]
             raise TrajectoryError(
                 f"{what} {values.max():.2f} {unit} exceeds the vehicle limit {limit:g} {unit} "
-                f"(first at t = {ref.t_s[k]:.2f} s)"
+                f"(first at t = {times[k]:.2f} s)"
             )
     outside = points_outside(ref.pos_ned_m, arena)
     if outside.size:
@@ -229,6 +267,83 @@ def check_reference(
             f"trajectory leaves the arena at t = {ref.t_s[k]:.2f} s: NED "
             f"({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m is outside {arena}"
         )
+
+
+def check_setpoints(
+    sp_ned_m: np.ndarray,
+    ref: Reference,
+    arena: Box,
+    max_step_m: float | None = None,
+    max_deviation_m: float | None = None,
+    relative_degrees: tuple[int, int] = (1, 1),
+    tol_m: float = 1e-6,
+) -> None:
+    """Refuse a learned setpoint sequence that breaks a limit the learning keeps, on its grid.
+
+    The input update keeps these limits as constraints of its QP; this checks the numbers that
+    will be flown, independently of the solver: finite values, inside the arena, the step
+    ``|u(k) - u(k-1)|`` per horizontal axis with ``u(-1)`` the reference's start (the hover
+    point before the trial), and the deviation ``|u(k) - yd(k + r)|`` from the reference
+    aligned by each axis's relative degree ``r`` (the tail held at the last reference sample).
+
+    Parameters
+    ----------
+    sp_ned_m : ndarray, shape (N, 3)
+        Setpoints ``u(0) .. u(N-1)``, local NED [m].
+    ref : Reference
+        The run's reference, N + 1 samples.
+    arena : Box
+        Flight volume [m].
+    max_step_m : float or None
+        Bound on the step per sample and axis [m]; None: not checked.
+    max_deviation_m : float or None
+        Bound on the deviation from the aligned reference per axis [m]; None: not checked.
+    relative_degrees : tuple of int
+        Relative degree of the north and east models (``>= 1``).
+    tol_m : float
+        Tolerance of every bound [m] (the solver's constraints hold to about 1e-9 m).
+
+    Raises
+    ------
+    TrajectoryError
+        Naming the limit, the sample, the axis and the value.
+    """
+    sp = np.asarray(sp_ned_m, dtype=float)
+    n = ref.n_samples
+    if sp.shape != (n, 3):
+        raise TrajectoryError(f"setpoints have shape {sp.shape}, the reference needs ({n}, 3)")
+    bad = np.argwhere(~np.isfinite(sp))
+    if bad.size:
+        raise TrajectoryError(f"setpoint k = {bad[0][0]} is NaN or inf")
+    outside = points_outside(sp, arena, tol_m)
+    if outside.size:
+        k = int(outside[0])
+        raise TrajectoryError(
+            f"setpoint k = {k} {np.round(sp[k], 3).tolist()} is outside the arena {arena}"
+        )
+    yd = ref.pos_ned_m
+    for axis, name in ((0, "north"), (1, "east")):
+        u = sp[:, axis]
+        if max_step_m is not None:
+            step = np.abs(np.diff(np.concatenate([[yd[0, axis]], u])))
+            over = np.flatnonzero(step > max_step_m + tol_m)
+            if over.size:
+                k = int(over[0])
+                raise TrajectoryError(
+                    f"setpoint k = {k} steps {step[k]:.3f} m on {name} "
+                    f"(limit max_step_m = {max_step_m:g} m)"
+                )
+        if max_deviation_m is not None:
+            r = int(relative_degrees[axis])
+            aligned = np.concatenate([yd[r:, axis], np.full(r - 1, yd[-1, axis])])
+            dev = np.abs(u - aligned)
+            over = np.flatnonzero(dev > max_deviation_m + tol_m)
+            if over.size:
+                k = int(over[0])
+                raise TrajectoryError(
+                    f"setpoint k = {k} is {dev[k]:.3f} m from the reference on {name} "
+                    f"(limit max_deviation_m = {max_deviation_m:g} m)"
+                )
 
 
 def points_outside(pos_ned_m: np.ndarray, arena: Box, tol_m: float = 1e-9) -> np.ndarray:

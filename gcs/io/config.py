@@ -8,13 +8,14 @@ safety limit must not silently fall back to a default.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from gcs.core.estimators import KilcSettings, SmootherSettings
 from gcs.core.model import DiscreteModel, from_state_space, from_transfer_function
-from gcs.core.trajectory import Box, EightShape
+from gcs.core.trajectory import MAX_SAMPLES, Box, EightShape
 from gcs.core.update import UpdateWeights
 from gcs.errors import GcsError, ProfileError, TrajectoryError
 from gcs.io.yamlfile import read_yaml
@@ -31,6 +32,8 @@ __all__ = [
 ]
 
 ALGORITHMS = ("smoother", "kilc")
+#: A trajectory's name becomes part of a run directory's name.
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
 
 class _Fields:
@@ -111,6 +114,22 @@ class _Fields:
                     raise self.fail(key, f"must contain only finite numbers, got {v!r}")
             out.append([float(v) for v in row])
         return out
+
+    def mapping(self, key: str) -> dict:
+        """An optional section passed on as a dict (checked by its user), refused if not one."""
+        value = self.raw(key, None)
+        if value is None:
+            return {}
+        if not isinstance(value, dict):
+            raise self.fail(key, f"must be a mapping, got {value!r}")
+        return dict(value)
+
+    def text(self, key: str) -> str | None:
+        """An optional free text (``description``)."""
+        value = self.raw(key, None)
+        if value is not None and not isinstance(value, str):
+            raise self.fail(key, f"must be a string, got {value!r}")
+        return value
 
     def sub(self, key: str, default: Any = ...) -> _Fields:
         value = self.raw(key, default)
@@ -196,9 +215,10 @@ class Profile:
 def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
     try:
         if f.has("num") or f.has("den"):
-            model = from_transfer_function(
-                f.numbers("num"), f.numbers("den"), f.number("delay_s", 0.0), t_ilc_s
-            )
+            delay_s = f.number("delay_s", 0.0)
+            if delay_s / t_ilc_s > MAX_SAMPLES:  # before the delay line is built
+                raise f.fail("delay_s", f"is longer than the longest trial ({MAX_SAMPLES} samples)")
+            model = from_transfer_function(f.numbers("num"), f.numbers("den"), delay_s, t_ilc_s)
         else:
             dt = f.number("dt_s", positive=True)
             if abs(dt - t_ilc_s) > 1e-9:
@@ -209,7 +229,7 @@ def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
                 f.matrix("C"),
                 f.matrix("D") if f.has("D") else 0.0,
                 dt,
-                f.integer("delay_samples", 0),
+                _delay_samples(f),
             )
     except GcsError as exc:
         if isinstance(exc, ProfileError):
@@ -221,6 +241,13 @@ def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
     if not model.is_stable():
         raise ProfileError(f"{f.where}: field '{f.path}': the model is not asymptotically stable")
     return model
+
+
+def _delay_samples(f: _Fields) -> int:
+    delay = f.integer("delay_samples", 0)
+    if not 0 <= delay <= MAX_SAMPLES:
+        raise f.fail("delay_samples", f"must be in [0, {MAX_SAMPLES}], got {delay}")
+    return delay
 
 
 def _interval(f: _Fields, key: str) -> tuple[float, float]:
@@ -295,11 +322,11 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
         max_speed_m_s=vehicle.number("max_speed_m_s", positive=True),
         max_accel_m_s2=vehicle.number("max_accel_m_s2", positive=True),
         arena=box,
-        flight=dict(f.raw("flight", {}) or {}),
-        identification=dict(f.raw("identification", {}) or {}),
+        flight=f.mapping("flight"),
+        identification=f.mapping("identification"),
         source=data,
     )
-    f.raw("description", None)
+    f.text("description")
     vehicle.done()
     arena.done()
     f.done()
@@ -365,7 +392,13 @@ def trajectory_from_dict(data: Any, where: str = "<trajectory>") -> TrajectorySp
             raise
         raise TrajectoryError(f"{where}: {exc}") from exc
     name = f.string("name")
-    f.raw("description", None)
+    if not _NAME.match(name):
+        raise f.fail(
+            "name",
+            f"must be 1 to 64 letters, digits, '.', '_' or '-' (it names run directories), "
+            f"got {name!r}",
+        )
+    f.text("description")
     f.done()
     return TrajectorySpec(name=name, shape=shape, source=data)
 

@@ -16,8 +16,18 @@ Layout of ``logs/<run-id>/`` (documented for users in the README)::
 
 Every file is written atomically (temporary file in the same directory, then ``os.replace``),
 and a trial counts as complete only once its ``.json`` says so; it is written after the CSV. A
-new session record takes the next free number by a hard link that fails if the name exists, so
-that no session ever overwrites another's.
+new run is assembled in a hidden staging directory and renamed into place whole, so that an
+interrupted creation leaves no half-made run. Recorded data are never rewritten: setpoints and
+estimates are written once (writing the same bytes again is a no-op, different bytes are
+refused), a complete trial is never replaced, and an incomplete one is moved to ``aborted/``
+before it is flown again. A new session record takes the next free number by a hard link that
+fails if the name exists, so that no session ever overwrites another's; a session updates only
+its own record.
+
+Files must agree with their names: a trial's ``.json`` names its own index, its CSV carries the
+setpoints of ``setpoints-JJJ.csv``, and the manifest's fields have their types. A run is a
+learning run (algorithm ``smoother`` or ``kilc``) or an identification run (``identify``);
+commands that write into a run check its kind first.
 """
 
 from __future__ import annotations
@@ -28,6 +38,7 @@ import json
 import math
 import os
 import platform
+import shutil
 import tempfile
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -39,14 +50,18 @@ import numpy as np
 
 from gcs import __version__
 from gcs.core.trajectory import Reference, sample_eight
-from gcs.errors import RunLogError
+from gcs.errors import PathError, RunLogError
 from gcs.io.config import Profile, TrajectorySpec, profile_from_dict, trajectory_from_dict
+from gcs.io.paths import check_writable_dir
 
 __all__ = [
+    "LEARNING_ALGORITHMS",
+    "RUN_KINDS",
     "TrialRecord",
     "TrialStatus",
     "RunDir",
     "atomic_write_text",
+    "write_once",
     "json_safe",
     "TRIAL_COLUMNS",
 ]
@@ -65,6 +80,23 @@ ESTIMATE_COLUMNS = ("k", "t_s", "d_north_m", "d_east_m", "p_north_m2", "p_east_m
 _PACKAGES = ("numpy", "scipy", "clarabel", "mavsdk", "pymavlink", "typer", "rich")
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)  # the only way to read the umask is to set it
+    os.umask(mask)
+    return mask
+
+
+#: Modes of the files and directories written here: what ``open()`` and ``mkdir()`` give
+#: under the process's umask (``mkstemp`` and ``mkdtemp`` would make them owner-only).
+_FILE_MODE, _DIR_MODE = 0o666 & ~_umask(), 0o777 & ~_umask()
+#: Manifest ``algorithm`` of learning runs; identification runs record ``identify``.
+LEARNING_ALGORITHMS = ("smoother", "kilc")
+#: Run kind by manifest algorithm.
+RUN_KINDS = {"smoother": "learning", "kilc": "learning", "identify": "identification"}
+#: Tolerance of a trial's setpoint columns against its setpoints file [m].
+_SP_TOL_M = 1e-6
+
+
 def atomic_write_text(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` atomically (temporary file + rename).
 
@@ -76,16 +108,78 @@ def atomic_write_text(path: Path, text: str) -> None:
         Content.
     """
     path = Path(path)
+    tmp = _temporary_copy(path, text)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _temporary_copy(path: Path, text: str) -> Path:
+    """``text`` in a new hidden file beside ``path``, on disk (fsync), with open()'s mode."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", newline="") as fh:
+        os.fchmod(fd, _FILE_MODE)  # as open() would make it, not mkstemp's owner-only 0600
+        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    return Path(tmp)
+
+
+def write_once(path: Path, text: str) -> bool:
+    """Write ``text`` to a new file ``path`` atomically; never replace different content.
+
+    The file appears whole (temporary file, then a hard link that fails if the name exists)
+    or not at all. If ``path`` holds exactly ``text`` already nothing is written (learning
+    twice from the same trial is a no-op); different content is refused.
+
+    Parameters
+    ----------
+    path : Path
+        Destination.
+    text : str
+        Content.
+
+    Returns
+    -------
+    bool
+        True if the file was written, False if it held ``text`` already.
+
+    Raises
+    ------
+    RunLogError
+        ``path`` exists with other content.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise RunLogError(f"{path}: is a directory")
+    tmp = _temporary_copy(path, text)
+    try:
+        try:
+            os.link(tmp, path)  # atomic "create if absent"
+            return True
+        except FileExistsError:
+            pass
+        except OSError:  # a filesystem without hard links: check, then rename
+            if not path.exists():
+                os.replace(tmp, path)
+                return True
+    finally:
+        tmp.unlink(missing_ok=True)
+    try:
+        same = path.read_bytes() == text.encode("utf-8")
+    except OSError as exc:
+        raise RunLogError(f"{path}: cannot read ({exc.strerror})") from exc
+    if not same:
+        raise RunLogError(
+            f"{path}: exists with different content; recorded data are never rewritten"
+        )
+    return False
 
 
 def json_safe(value: Any) -> Any:
@@ -277,21 +371,9 @@ class RunDir:
         -------
         RunDir
         """
+        if algorithm not in RUN_KINDS:
+            raise RunLogError(f"algorithm must be one of {', '.join(RUN_KINDS)}, got {algorithm!r}")
         root = Path(root)
-        root.mkdir(parents=True, exist_ok=True)
-        stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
-        base = run_id or f"{stamp}-{trajectory.name}-{algorithm}"
-        path = root / base
-        suffix = 1
-        while True:
-            try:
-                path.mkdir()
-                break
-            except FileExistsError:
-                if run_id:
-                    raise RunLogError(f"{path}: run directory exists already") from None
-                suffix += 1
-                path = root / f"{base}-{suffix}"
         ref = (
             reference if reference is not None else sample_eight(trajectory.shape, profile.t_ilc_s)
         )
@@ -299,6 +381,13 @@ class RunDir:
             raise RunLogError(
                 f"reference sampled at {ref.t_ilc_s:g} s, profile {profile.t_ilc_s:g} s"
             )
+        stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
+        base = run_id or f"{stamp}-{trajectory.name}-{algorithm}"
+        if run_id and ((root / run_id).exists() or (root / run_id).is_symlink()):
+            raise RunLogError(f"{root / run_id}: run directory exists already")
+        root.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(dir=root, prefix=f".{base}.", suffix=".tmp"))
+        staging.chmod(_DIR_MODE)
         manifest = {
             "format": 1,
             "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -311,13 +400,18 @@ class RunDir:
             "profile": profile.source,
             "trajectory": trajectory.source,
         }
-        run = cls(path, manifest)
-        atomic_write_text(path / "manifest.json", json.dumps(manifest, indent=2) + "\n")
-        table = np.column_stack([np.arange(ref.n_samples + 1), ref.t_s, ref.pos_ned_m])
-        atomic_write_text(path / "reference.csv", _csv_text(REFERENCE_COLUMNS, table))
-        run.write_setpoints(0, ref.pos_ned_m[:-1])
+        try:
+            staged = cls(staging, manifest)
+            atomic_write_text(staging / "manifest.json", json.dumps(manifest, indent=2) + "\n")
+            table = np.column_stack([np.arange(ref.n_samples + 1), ref.t_s, ref.pos_ned_m])
+            atomic_write_text(staging / "reference.csv", _csv_text(REFERENCE_COLUMNS, table))
+            staged.write_setpoints(0, ref.pos_ned_m[:-1])
+            path = _rename_into_place(staging, root, base, fixed=run_id is not None)
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
         _update_latest(root, path)
-        return run
+        return cls(path, manifest)
 
     @classmethod
     def open(cls, path: Path) -> RunDir:
@@ -342,9 +436,9 @@ class RunDir:
             raise RunLogError(f"{mpath}: cannot read ({exc.strerror})") from exc
         except json.JSONDecodeError as exc:
             raise RunLogError(f"{mpath}: malformed JSON ({exc.msg}, line {exc.lineno})") from exc
-        for key in ("algorithm", "t_ilc_s", "n_samples", "profile", "trajectory"):
-            if key not in manifest:
-                raise RunLogError(f"{mpath}: field '{key}' is missing")
+        except UnicodeDecodeError as exc:
+            raise RunLogError(f"{mpath}: not UTF-8 text ({exc.reason})") from exc
+        _check_manifest(mpath, manifest)
         return cls(path, manifest)
 
     # ----------------------------------------------------------------- accessors
@@ -352,6 +446,48 @@ class RunDir:
     def algorithm(self) -> str:
         """The run's learning algorithm."""
         return str(self.manifest["algorithm"])
+
+    @property
+    def kind(self) -> str:
+        """``"learning"`` (algorithm smoother or kilc) or ``"identification"`` (identify)."""
+        return RUN_KINDS[self.algorithm]
+
+    def require_kind(self, kind: str, command: str) -> None:
+        """Refuse a command that writes into a run of the other kind.
+
+        Parameters
+        ----------
+        kind : str
+            ``"learning"`` or ``"identification"``.
+        command : str
+            The command, for the message (``gcs learn``).
+
+        Raises
+        ------
+        RunLogError
+            The run is of the other kind.
+        """
+        if self.kind != kind:
+            article = "an" if self.kind[0] in "aeiou" else "a"
+            raise RunLogError(
+                f"{self.path}: {article} {self.kind} run (manifest algorithm "
+                f"'{self.algorithm}'), not {'an' if kind[0] in 'aeiou' else 'a'} {kind} run, "
+                f"which '{command}' needs"
+            )
+
+    def check_writable(self) -> None:
+        """Refuse a run directory that cannot be written into (a probe file, removed at once).
+
+        Raises
+        ------
+        RunLogError
+            Read-only directory or filesystem, no permission.
+        """
+        try:
+            check_writable_dir(self.path, str(self.path))
+        except PathError as exc:
+            reason = str(exc).rsplit("(", 1)[-1].rstrip(")")
+            raise RunLogError(f"{self.path}: run directory is not writable ({reason})") from None
 
     @property
     def n_samples(self) -> int:
@@ -387,6 +523,7 @@ class RunDir:
         self._check_grid(path, table, self.n_samples + 1)
         if not np.all(np.isfinite(table)):
             raise RunLogError(f"{path}: contains NaN or inf")
+        _check_plausible(path, table[:, 2:5], REFERENCE_COLUMNS[2:5])
         pos = table[:, 2:5]
         vel = np.gradient(pos, self.t_ilc_s, axis=0)
         return Reference(table[:, 1], pos, vel, np.gradient(vel, self.t_ilc_s, axis=0))
@@ -409,14 +546,17 @@ class RunDir:
         -------
         Path
         """
+        path = self._file("setpoints", j, "csv")
+        write_once(path, self._setpoints_text(j, sp_ned_m))
+        return path
+
+    def _setpoints_text(self, j: int, sp_ned_m: np.ndarray) -> str:
         sp = np.asarray(sp_ned_m, dtype=float)
         n = self.n_samples
         if sp.shape != (n, 3) or not np.all(np.isfinite(sp)):
             raise RunLogError(f"setpoints for trial {j} must be finite with shape ({n}, 3)")
         table = np.column_stack([np.arange(n), np.arange(n) * self.t_ilc_s, sp])
-        path = self._file("setpoints", j, "csv")
-        atomic_write_text(path, _csv_text(SETPOINT_COLUMNS, table))
-        return path
+        return _csv_text(SETPOINT_COLUMNS, table)
 
     def read_setpoints(self, j: int) -> np.ndarray:
         """Trial j's setpoints, shape (N, 3), local NED [m].
@@ -435,6 +575,7 @@ class RunDir:
             raise RunLogError(f"{path}: no setpoints for trial {j} (run 'gcs learn' first)")
         table = _read_csv(path, SETPOINT_COLUMNS)
         self._check_grid(path, table, self.n_samples)
+        _check_plausible(path, table[:, 2:5], SETPOINT_COLUMNS[2:5])
         return table[:, 2:5]
 
     # ----------------------------------------------------------------- trials
@@ -460,17 +601,11 @@ class RunDir:
         path = self._file("trial", j, "json")
         try:
             data = json.loads(path.read_text())
-            return TrialStatus(
-                trial=int(data["trial"]), complete=data["status"] == "complete",
-                reason=data.get("reason"), epos_m=data.get("epos_m"),
-                max_err_m=data.get("max_err_m"),
-                interpolated_share=float(data.get("interpolated_share", 0.0)),
-                extra=data.get("extra"),
-            )  # fmt: skip
         except OSError as exc:
             raise RunLogError(f"{path}: cannot read ({exc.strerror})") from exc
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError
             raise RunLogError(f"{path}: malformed trial status ({exc})") from exc
+        return _status_from_json(path, j, data)
 
     def complete_trials(self) -> list[int]:
         """Indices of the complete trials, ascending."""
@@ -502,12 +637,14 @@ class RunDir:
             Completion and metrics.
         """
         csv_path, json_path = self._file("trial", j, "csv"), self._file("trial", j, "json")
+        if record.n_samples != self.n_samples:
+            raise RunLogError(f"trial {j} has {record.n_samples} samples, the run {self.n_samples}")
         if json_path.exists():
             if self.read_status(j).complete:
                 raise RunLogError(f"{json_path}: trial {j} is complete; refusing to overwrite it")
             self._archive_attempt(j)
-        if record.n_samples != self.n_samples:
-            raise RunLogError(f"trial {j} has {record.n_samples} samples, the run {self.n_samples}")
+        elif csv_path.exists():  # a CSV whose sidecar was never written (interrupted write)
+            self._archive_attempt(j)
         atomic_write_text(csv_path, _csv_text(TRIAL_COLUMNS, record.table()))
         data = {
             "trial": j,
@@ -525,7 +662,9 @@ class RunDir:
         aborted = self.path / "aborted"
         aborted.mkdir(exist_ok=True)
         attempt = 1
-        while (aborted / f"trial-{j:03d}-attempt-{attempt}.json").exists():
+        while any(
+            (aborted / f"trial-{j:03d}-attempt-{attempt}.{ext}").exists() for ext in ("csv", "json")
+        ):
             attempt += 1
         for ext in ("csv", "json"):
             src = self._file("trial", j, ext)
@@ -555,6 +694,8 @@ class RunDir:
             raise RunLogError(
                 f"{path}: trial {j} is incomplete ({status.reason}); not learned from"
             )
+        if not path.exists():
+            raise RunLogError(f"{path}: missing, but {path.stem}.json says the trial is complete")
         table = _read_csv(path, TRIAL_COLUMNS)
         self._check_grid(path, table, self.n_samples + 1)
         values = table[:, :14]
@@ -562,7 +703,23 @@ class RunDir:
         if bad.size:
             row, col = bad[0]
             raise RunLogError(f"{path}: column '{TRIAL_COLUMNS[col]}' is NaN or inf at k = {row}")
-        return TrialRecord.from_table(table)
+        _check_plausible(path, table[:, 2:14], TRIAL_COLUMNS[2:14])
+        record = TrialRecord.from_table(table)
+        self._check_flown_setpoints(path, j, record)
+        return record
+
+    def _check_flown_setpoints(self, path: Path, j: int, record: TrialRecord) -> None:
+        """The setpoint columns of trial j must be ``setpoints-JJJ.csv``: files agree with names."""
+        sp_path = self._file("setpoints", j, "csv")
+        if not sp_path.exists():
+            raise RunLogError(f"{sp_path}: missing; trial {j} cannot be checked against it")
+        diff = np.abs(record.sp_ned_m[:-1] - self.read_setpoints(j))
+        if diff.max() > _SP_TOL_M:
+            k = int(np.argmax(diff.max(axis=1)))
+            raise RunLogError(
+                f"{path}: its setpoints differ from {sp_path.name} (first at k = {k}); "
+                "the files do not belong together (renamed or swapped?)"
+            )
 
     def _check_grid(self, path: Path, table: np.ndarray, rows: int) -> None:
         if table.shape[0] != rows:
@@ -625,9 +782,13 @@ class RunDir:
         out = []
         for path in sorted(self.path.glob("session-[0-9][0-9][0-9].json")):
             try:
-                out.append(json.loads(path.read_text()))
-            except (OSError, json.JSONDecodeError) as exc:
+                data = json.loads(path.read_text())
+            except (OSError, ValueError) as exc:
                 raise RunLogError(f"{path}: unreadable session record ({exc})") from exc
+            number = int(path.stem.split("-")[1])
+            if not isinstance(data, dict) or data.get("session") != number:
+                raise RunLogError(f"{path}: field 'session' must be {number}, as its name says")
+            out.append(data)
         return out
 
     # ----------------------------------------------------------------- estimates
@@ -643,10 +804,46 @@ class RunDir:
         p_ne_m2 : ndarray, shape (N, 2)
             Its error variance [m^2] (K-ILC: the filter's scalar, repeated).
         """
-        n = self.n_samples
-        k = np.arange(1, n + 1)
+        write_once(self._file("estimate", j, "csv"), self._estimate_text(d_hat_ne_m, p_ne_m2))
+
+    def _estimate_text(self, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray) -> str:
+        k = np.arange(1, self.n_samples + 1)
         table = np.column_stack([k, k * self.t_ilc_s, d_hat_ne_m, p_ne_m2])
-        atomic_write_text(self._file("estimate", j, "csv"), _csv_text(ESTIMATE_COLUMNS, table))
+        return _csv_text(ESTIMATE_COLUMNS, table)
+
+    def write_learned(
+        self, j: int, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray, sp_ned_m: np.ndarray
+    ) -> Path:
+        """Record what was learned from trial j: its estimate, then trial j+1's setpoints.
+
+        Both files are checked first: if either exists with other content nothing is
+        written (refused), so that a refusal never leaves one of the two behind. The setpoints
+        come last: they are what says the next trial can be flown.
+
+        Parameters
+        ----------
+        j : int
+            Trial learned from.
+        d_hat_ne_m, p_ne_m2 : ndarray, shape (N, 2)
+            As :meth:`write_estimate`.
+        sp_ned_m : ndarray, shape (N, 3)
+            Setpoints of trial j+1, as :meth:`write_setpoints`.
+
+        Returns
+        -------
+        Path
+            The setpoints file.
+        """
+        for path, text in (
+            (self._file("estimate", j, "csv"), self._estimate_text(d_hat_ne_m, p_ne_m2)),
+            (self._file("setpoints", j + 1, "csv"), self._setpoints_text(j + 1, sp_ned_m)),
+        ):
+            if path.exists() and path.read_bytes() != text.encode("utf-8"):
+                raise RunLogError(
+                    f"{path}: exists with different content; recorded data are never rewritten"
+                )
+        self.write_estimate(j, d_hat_ne_m, p_ne_m2)
+        return self.write_setpoints(j + 1, sp_ned_m)
 
     def read_estimate(self, j: int) -> tuple[np.ndarray, np.ndarray]:
         """The estimate learned from trial j: ``(d_hat (N, 2) [m], p (N, 2) [m^2])``.
@@ -666,7 +863,104 @@ class RunDir:
         table = _read_csv(path, ESTIMATE_COLUMNS)
         if table.shape[0] != self.n_samples or not np.all(np.isfinite(table)):
             raise RunLogError(f"{path}: expected {self.n_samples} finite rows")
+        _check_plausible(path, table[:, 2:6], ESTIMATE_COLUMNS[2:6])
         return table[:, 2:4], table[:, 4:6]
+
+
+#: Largest magnitude a recorded position, velocity or variance may have [m, m/s, m^2]: a value
+#: beyond it is no measurement (a damaged file), and would overflow the learning's numerics.
+_PLAUSIBLE = 1e6
+
+
+def _check_plausible(path: Path, values: np.ndarray, columns: tuple[str, ...]) -> None:
+    """Refuse values beyond :data:`_PLAUSIBLE` (NaN is left to the caller), naming the column."""
+    with np.errstate(invalid="ignore"):
+        bad = np.argwhere(np.abs(values) > _PLAUSIBLE)
+    if bad.size:
+        row, col = bad[0]
+        raise RunLogError(
+            f"{path}: column '{columns[col]}' is {values[row, col]:.3g} at row {row + 1}, "
+            f"beyond ±{_PLAUSIBLE:g}: not a measurement"
+        )
+
+
+def _check_manifest(mpath: Path, manifest: Any) -> None:
+    """Refuse a manifest whose fields are missing or of the wrong type, naming the field."""
+    if not isinstance(manifest, dict):
+        raise RunLogError(f"{mpath}: must be a JSON object")
+
+    def fail(key: str, what: str) -> RunLogError:
+        return RunLogError(f"{mpath}: field '{key}' {what}, got {manifest.get(key)!r}")
+
+    for key in ("algorithm", "t_ilc_s", "n_samples", "profile", "trajectory"):
+        if key not in manifest:
+            raise RunLogError(f"{mpath}: field '{key}' is missing")
+    if not isinstance(manifest["algorithm"], str) or manifest["algorithm"] not in RUN_KINDS:
+        raise fail("algorithm", f"must be one of {', '.join(RUN_KINDS)}")
+    t = manifest["t_ilc_s"]
+    if isinstance(t, bool) or not isinstance(t, int | float) or not (math.isfinite(t) and t > 0):
+        raise fail("t_ilc_s", "must be a positive number")
+    n = manifest["n_samples"]
+    if isinstance(n, bool) or not isinstance(n, int) or n < 2:
+        raise fail("n_samples", "must be an integer >= 2")
+    for key in ("profile", "trajectory"):
+        if not isinstance(manifest[key], dict):
+            raise fail(key, "must be an object")
+    kind = manifest["trajectory"].get("type")
+    if (kind == "excitation") != (manifest["algorithm"] == "identify"):
+        raise RunLogError(
+            f"{mpath}: field 'algorithm' is {manifest['algorithm']!r} but field "
+            f"'trajectory.type' is {kind!r}: identification runs, and only they, record an "
+            "excitation"
+        )
+
+
+def _status_from_json(path: Path, j: int, data: Any) -> TrialStatus:
+    """A trial sidecar's JSON as :class:`TrialStatus`, every field checked against its type."""
+    if not isinstance(data, dict):
+        raise RunLogError(f"{path}: malformed trial status (not a JSON object)")
+
+    def fail(key: str, what: str) -> RunLogError:
+        return RunLogError(f"{path}: field '{key}' {what}, got {data.get(key)!r}")
+
+    for key in ("trial", "status"):
+        if key not in data:
+            raise RunLogError(f"{path}: malformed trial status (field '{key}' is missing)")
+    if isinstance(data["trial"], bool) or data["trial"] != j:
+        raise fail("trial", f"must be {j}, as the file's name says")
+    if data["status"] not in ("complete", "incomplete"):
+        raise fail("status", "must be 'complete' or 'incomplete'")
+    for key in ("epos_m", "max_err_m", "interpolated_share"):
+        value = data.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
+            raise fail(key, "must be a number or null")
+    if data.get("reason") is not None and not isinstance(data["reason"], str):
+        raise fail("reason", "must be a string or null")
+    if data.get("extra") is not None and not isinstance(data["extra"], dict):
+        raise fail("extra", "must be an object or null")
+    return TrialStatus(
+        trial=j, complete=data["status"] == "complete", reason=data.get("reason"),
+        epos_m=data.get("epos_m"), max_err_m=data.get("max_err_m"),
+        interpolated_share=float(data.get("interpolated_share") or 0.0),
+        extra=data.get("extra"),
+    )  # fmt: skip
+
+
+def _rename_into_place(staging: Path, root: Path, base: str, fixed: bool) -> Path:
+    """Rename a staged run to ``root/base`` (or ``base-2``, ... unless ``fixed``)."""
+    suffix = 1
+    while True:
+        path = root / (base if suffix == 1 else f"{base}-{suffix}")
+        if not path.exists() and not path.is_symlink():
+            try:
+                os.rename(staging, path)  # atomic; refuses a non-empty directory in the way
+                return path
+            except OSError:
+                if not path.exists():
+                    raise
+        if fixed:
+            raise RunLogError(f"{path}: run directory exists already")
+        suffix += 1
 
 
 def _version(package: str) -> str | None:

@@ -31,9 +31,12 @@ def read_yaml(path: Path, error: type[GcsError]) -> Any:
         text = Path(path).read_text()
     except OSError as exc:
         raise error(f"{path}: cannot read ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not UTF-8 text (byte {exc.start})") from exc
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = f" at line {mark.line + 1}" if mark is not None else ""
-        raise error(f"{path}: malformed YAML{line}: {getattr(exc, 'problem', exc)}") from exc
+        reason = str(getattr(exc, "problem", None) or exc).splitlines()[0]
+        raise error(f"{path}: malformed YAML{line}: {reason}") from exc

@@ -1,0 +1,1117 @@
+"""The bad-input catalogue: every command, walked with bad paths, files and values.
+
+Each case builds its input in a fresh workspace (a copy of the packaged profile and trajectory,
+a synthetic learning run with two complete trials, a synthetic identification run), runs one
+command in-process from the workspace, and records what happened: the exit code, the output,
+and whether anything in the workspace was created, changed or moved. Used by
+``tests/test_bad_inputs.py`` (every case must exit 2 with one line and change nothing) and by
+``tools/bad_inputs.py`` (which writes ``docs/bad-inputs.md`` from the same catalogue).
+
+Flights and identifications use ``--connect`` to a closed loopback port: a case whose
+validation wrongly passed would try to connect, create its run and print more than one line,
+and fail.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from synthetic import ROOT, fly_synthetic, make_run
+from typer.testing import CliRunner
+
+from gcs.cli import app
+from gcs.core.model import from_transfer_function, simulate
+from gcs.io.config import profile_from_dict
+from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+
+UNREACHABLE = "udpout://127.0.0.1:9"  # the discard port: nothing answers there
+DELETE = object()
+
+
+# --------------------------------------------------------------------------- the workspace
+
+
+def _set(data: Any, dotted: str, value: Any) -> Any:
+    data = copy.deepcopy(data)
+    *parents, last = dotted.split(".")
+    node = data
+    for key in parents:
+        node = node[key]
+    if value is DELETE:
+        del node[last]
+    else:
+        node[last] = value
+    return data
+
+
+def _identification_run(root: Path) -> Path:
+    """A synthetic identification run (two 30 s PRBS experiments of a known loop)."""
+    from gcs.app.identify import (
+        create_identification_run,
+        identification_settings,
+        plan_experiments,
+    )
+
+    data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
+    data["identification"]["duration_s"] = 30.0
+    profile = profile_from_dict(data, "antx")
+    settings = identification_settings(profile)
+    exps = plan_experiments(settings, profile.t_ilc_s, "both", profile.arena)
+    run = create_identification_run(root, profile, settings, exps, run_id="ident")
+    truth = from_transfer_function([2.56], [1.0, 1.76, 2.56], 0.25, profile.t_ilc_s)
+    rng = np.random.default_rng(0)
+    for j, sp in enumerate(exps.setpoints_ned_m):
+        n, c = sp.shape[0], exps.center_ned_m
+        rows = np.vstack([sp, sp[-1]])
+        pos = np.tile(c, (n + 1, 1))
+        for a in (0, 1):
+            pos[1:, a] += simulate(truth, sp[:, a] - c[a]) + rng.normal(0, 0.003, n)
+        record = TrialRecord(
+            t_s=np.arange(n + 1) * profile.t_ilc_s,
+            ref_ned_m=rows,
+            sp_ned_m=rows,
+            pos_ned_m=pos,
+            vel_ned_m_s=np.gradient(pos, profile.t_ilc_s, axis=0),
+            sp_sent_s=np.append(np.arange(n) * profile.t_ilc_s, np.nan),
+            interpolated=np.zeros(n + 1, dtype=bool),
+        )
+        run.write_trial(j, record, TrialStatus(j, True))
+    return run.path
+
+
+def _learning_run(root: Path) -> Path:
+    """A synthetic learning run: trials 0 and 1 complete, setpoints of trial 2 learned."""
+    from gcs.app.learn import learn_run
+
+    run = make_run(root, trials=2)
+    learn_run(run)
+    return run.path
+
+
+class Templates:
+    """Runs built once and copied into every workspace that needs one."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self._built: dict[str, Path] = {}
+
+    def get(self, name: str) -> Path:
+        if name not in self._built:
+            where = self.root / name
+            where.mkdir(parents=True)
+            build = {"learning": _learning_run, "ident": _identification_run}[name]
+            self._built[name] = build(where)
+        return self._built[name]
+
+
+@dataclass
+class Workspace:
+    """One case's directory; everything a case builds or names lives in it."""
+
+    path: Path
+    templates: Templates
+    cleanups: list[Callable[[], None]] = field(default_factory=list)
+
+    def file(self, name: str, text: str | bytes) -> Path:
+        p = self.path / name
+        p.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(text, bytes):
+            p.write_bytes(text)
+        else:
+            p.write_text(text)
+        return p
+
+    def profile(self, dotted: str | None = None, value: Any = None, **more: Any) -> Path:
+        data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
+        if dotted is not None:
+            data = _set(data, dotted, value)
+        for key, v in more.items():
+            data = _set(data, key.replace("__", "."), v)
+        return self.file("profile.yaml", yaml.safe_dump(data))
+
+    def trajectory(self, dotted: str | None = None, value: Any = None) -> Path:
+        data = yaml.safe_load((ROOT / "trajectories" / "eight.yaml").read_text())
+        if dotted is not None:
+            data = _set(data, dotted, value)
+        return self.file("trajectory.yaml", yaml.safe_dump(data))
+
+    def run(self, kind: str = "learning") -> Path:
+        source = self.templates.get(kind)
+        target = self.path / source.name
+        shutil.copytree(source, target, symlinks=True)
+        return target
+
+    def read_only(self, path: Path) -> Path:
+        """Make ``path`` unwritable (also for root: the immutable attribute)."""
+        if os.geteuid() == 0:
+            subprocess.run(["chattr", "+i", str(path)], check=True, capture_output=True)
+            self.cleanups.append(lambda: subprocess.run(["chattr", "-i", str(path)], check=True))
+        else:
+            mode = path.stat().st_mode
+            path.chmod(0o555)
+            self.cleanups.append(lambda: path.chmod(mode))
+        return path
+
+
+def _edit_json(path: Path, key: str, value: Any) -> None:
+    data = json.loads(path.read_text())
+    data = _set(data, key, value)
+    path.write_text(json.dumps(data))
+
+
+def _edit_csv(path: Path, row: int, column: str, value: str) -> None:
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    cells = lines[row + 1].split(",")
+    cells[header.index(column)] = value
+    lines[row + 1] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _truncate(path: Path, keep: float = 0.5) -> None:
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * keep)])
+
+
+def _swap(a: Path, b: Path) -> None:
+    tmp = a.with_name(".swap")
+    a.rename(tmp)
+    b.rename(a)
+    tmp.rename(b)
+
+
+# ------------------------------------------------------------------------------ the cases
+
+
+@dataclass(frozen=True)
+class Case:
+    """One bad input: its class, the command, what is wrong, how to build it, the message."""
+
+    klass: str
+    command: str
+    what: str
+    build: Callable[[Workspace], list[str]]
+    expect: str
+
+
+def _fly(ws: Workspace, *args: str, profile: Path | None = None, traj: Path | None = None):
+    argv = ["fly", "--connect", UNREACHABLE, "--iter", "1"]
+    if profile is not None:
+        argv += ["--profile", str(profile)]
+    if traj is not None:
+        argv += ["--trajectory", str(traj)]
+    return [*argv, *args]
+
+
+def _profile_cases() -> Iterator[Case]:
+    k = "profile file"
+    yield Case(
+        k, "fly", "missing file", lambda ws: _fly(ws, profile=ws.path / "no.yaml"), "no such file"
+    )
+    yield Case(
+        k,
+        "fly",
+        "unknown packaged name",
+        lambda ws: _fly(ws, "--profile", "antz"),
+        "no packaged profile",
+    )
+    yield Case(k, "fly", "a directory", lambda ws: _fly(ws, profile=ws.path), "is a directory")
+    yield Case(
+        k,
+        "fly",
+        "malformed YAML",
+        lambda ws: _fly(ws, profile=ws.file("p.yaml", "name: antx\nmodel: [1, 2\n")),
+        "malformed YAML",
+    )
+    yield Case(
+        k,
+        "fly",
+        "empty file",
+        lambda ws: _fly(ws, profile=ws.file("p.yaml", "")),
+        "must be a mapping",
+    )
+    yield Case(
+        k,
+        "fly",
+        "not UTF-8",
+        lambda ws: _fly(ws, profile=ws.file("p.yaml", b"name: \xff\xfe\n")),
+        "not UTF-8",
+    )
+    yield Case(
+        k,
+        "fly",
+        "a list at the top",
+        lambda ws: _fly(ws, profile=ws.file("p.yaml", "- 1\n- 2\n")),
+        "must be a mapping",
+    )
+    yield Case(
+        k,
+        "fly",
+        "truncated in the middle",
+        lambda ws: _fly(
+            ws, profile=ws.file("p.yaml", (ROOT / "profiles" / "antx.yaml").read_text()[:700])
+        ),
+        "field",
+    )
+    k = "profile field: missing"
+    for dotted in ("t_ilc_s", "name", "model", "vehicle", "arena.down_m", "model.den"):
+        yield Case(
+            k, "fly", dotted, lambda ws, d=dotted: _fly(ws, profile=ws.profile(d, DELETE)), dotted
+        )
+    k = "profile field: wrong type"
+    for dotted, value in (
+        ("t_ilc_s", "fast"),
+        ("vehicle.max_speed_m_s", [3]),
+        ("name", 5),
+        ("learning.weights.wdu", "0.01"),
+        ("arena.north_m", "wide"),
+        ("flight.stream_rate_hz", "60"),
+        ("description", 7),
+        ("learning.limits.max_step_m", True),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"{dotted}: {value!r}",
+            lambda ws, d=dotted, v=value: _fly(ws, profile=ws.profile(d, v)),
+            dotted,
+        )
+    k = "profile field: section not a mapping"
+    for dotted, value in (
+        ("flight", 5),
+        ("identification", [1, 2]),
+        ("learning", 3),
+        ("vehicle", "fast"),
+        ("arena", 1),
+        ("model", 7),
+        ("learning.weights", [1]),
+        ("model_y", "x"),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"{dotted}: {value!r}",
+            lambda ws, d=dotted, v=value: _fly(ws, profile=ws.profile(d, v)),
+            dotted,
+        )
+    k = "profile field: NaN, infinite or out of range"
+    for dotted, value, expect in (
+        ("t_ilc_s", float("nan"), "t_ilc_s"),
+        ("t_ilc_s", 0.0, "t_ilc_s"),
+        ("vehicle.max_accel_m_s2", float("inf"), "vehicle.max_accel_m_s2"),
+        ("vehicle.max_speed_m_s", -1.0, "vehicle.max_speed_m_s"),
+        ("model.delay_s", -0.1, "model"),
+        ("learning.weights.we", 0.0, "learning.weights.we"),
+        ("arena.north_m", [3.0, -3.0], "arena.north_m"),
+        ("arena.east_m", [0.0, 0.0], "arena.east_m"),
+        ("learning.smoother.r", float("nan"), "learning.smoother.r"),
+        ("learning.algorithm", "smooth", "learning.algorithm"),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"{dotted}: {value!r}",
+            lambda ws, d=dotted, v=value: _fly(ws, profile=ws.profile(d, v)),
+            expect,
+        )
+    k = "profile field: unknown (a typo)"
+    for dotted in ("arean", "learning.smoother.qq", "vehicle.max_sped_m_s", "flight.stream_rate"):
+        yield Case(
+            k,
+            "fly",
+            dotted,
+            lambda ws, d=dotted: _fly(ws, profile=ws.profile(d, 1.0)),
+            dotted.split(".")[-1],
+        )
+    k = "profile: flight settings"
+    for dotted, value, expect in (
+        ("flight.stream_rate_hz", 50, "integer multiple"),
+        ("flight.stream_rate_hz", 1, "stream_rate_hz"),
+        ("flight.connect_timeout_s", -1, "connect_timeout_s"),
+        ("flight.yaw_deg", float("nan"), "yaw_deg"),
+        ("flight.min_battery_pct", 120, "min_battery_pct"),
+        ("flight.hover_measure_s", 0.5, "hover_measure_s"),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"{dotted}: {value!r}",
+            lambda ws, d=dotted, v=value: _fly(ws, profile=ws.profile(d, v)),
+            expect,
+        )
+    k = "profile: model"
+    yield Case(
+        k,
+        "fly",
+        "unstable model",
+        lambda ws: _fly(ws, profile=ws.profile("model.den", [1.0, -0.5, 2.0])),
+        "not asymptotically stable",
+    )
+    yield Case(
+        k,
+        "fly",
+        "state space at another dt_s",
+        lambda ws: _fly(
+            ws,
+            profile=ws.profile("model", {"A": [[0.9]], "B": [[0.1]], "C": [[1.0]], "dt_s": 0.02}),
+        ),
+        "dt_s",
+    )
+    k = "profile: limits that admit no learning"
+    yield Case(
+        k,
+        "fly",
+        "max_step_m 0.01 m and max_deviation_m 0.05 m",
+        lambda ws: _fly(
+            ws, profile=ws.profile("learning.limits", {"max_step_m": 0.01, "max_deviation_m": 0.05})
+        ),
+        "learning cannot start",
+    )
+    yield Case(
+        k,
+        "fly",
+        "arena smaller than the eight",
+        lambda ws: _fly(ws, profile=ws.profile("arena.north_m", [-1.0, 1.0])),
+        "arena",
+    )
+
+
+def _trajectory_cases() -> Iterator[Case]:
+    k = "trajectory file"
+    yield Case(
+        k, "fly", "missing file", lambda ws: _fly(ws, traj=ws.path / "no.yaml"), "no such file"
+    )
+    yield Case(
+        k,
+        "fly",
+        "unknown packaged name",
+        lambda ws: _fly(ws, "--trajectory", "eigth"),
+        "no packaged trajectory",
+    )
+    yield Case(
+        k,
+        "fly",
+        "malformed YAML",
+        lambda ws: _fly(ws, traj=ws.file("t.yaml", "name: [\n")),
+        "malformed YAML",
+    )
+    yield Case(
+        k, "fly", "empty file", lambda ws: _fly(ws, traj=ws.file("t.yaml", "")), "must be a mapping"
+    )
+    k = "trajectory field"
+    for dotted, value, expect in (
+        ("name", "a/b", "name"),
+        ("name", "", "name"),
+        ("name", 8, "name"),
+        ("name", "../up", "name"),
+        ("type", "circle", "type"),
+        ("amplitude_north_m", "big", "amplitude_north_m"),
+        ("amplitude_east_m", -1.0, "amplitude_east_m"),
+        ("period_s", float("nan"), "period_s"),
+        ("loops", 0, "loops"),
+        ("loops", 1.5, "loops"),
+        ("ramp_s", 20.0, "ramp_s"),
+        ("center_ned_m", [0, 0], "center_ned_m"),
+        ("hover_s", -1.0, "hover_s"),
+        ("speed", 3.0, "speed"),
+        ("period_s", DELETE, "period_s"),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"{dotted}: {value if value is not DELETE else 'missing'!r}",
+            lambda ws, d=dotted, v=value: _fly(ws, traj=ws.trajectory(d, v)),
+            expect,
+        )
+    k = "trajectory beyond the vehicle or the arena"
+    for dotted, value, expect in (
+        ("ramp_s", 0.0, "acceleration on the flown grid"),
+        ("period_s", 2.0, "exceeds the vehicle limit"),
+        ("center_ned_m", [2.5, 0.0, -1.5], "leaves the arena"),
+        ("center_ned_m", [0.0, 0.0, 1.0], "leaves the arena"),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"{dotted}: {value!r}",
+            lambda ws, d=dotted, v=value: _fly(ws, traj=ws.trajectory(d, v)),
+            expect,
+        )
+
+
+def _learning_run_damage() -> list[tuple[str, Callable[[Path], None], str]]:
+    """(what, damage to a learning run, expected message): trials 0, 1 complete."""
+    return [
+        ("manifest.json missing", lambda r: (r / "manifest.json").unlink(), "manifest.json"),
+        ("manifest.json truncated", lambda r: _truncate(r / "manifest.json"), "malformed JSON"),
+        ("manifest.json a list", lambda r: (r / "manifest.json").write_text("[1]"), "JSON object"),
+        (
+            "manifest n_samples a string",
+            lambda r: _edit_json(r / "manifest.json", "n_samples", "x"),
+            "n_samples",
+        ),
+        (
+            "manifest t_ilc_s negative",
+            lambda r: _edit_json(r / "manifest.json", "t_ilc_s", -0.05),
+            "t_ilc_s",
+        ),
+        (
+            "manifest algorithm unknown",
+            lambda r: _edit_json(r / "manifest.json", "algorithm", "ilc"),
+            "algorithm",
+        ),
+        (
+            "manifest profile a list",
+            lambda r: _edit_json(r / "manifest.json", "profile", [1]),
+            "profile",
+        ),
+        (
+            "manifest profile field wrong type",
+            lambda r: _edit_json(r / "manifest.json", "profile.t_ilc_s", "x"),
+            "t_ilc_s",
+        ),
+        (
+            "trial-001.json names trial 0",
+            lambda r: _edit_json(r / "trial-001.json", "trial", 0),
+            "as the file's name says",
+        ),
+        (
+            "trial-001.json status unknown",
+            lambda r: _edit_json(r / "trial-001.json", "status", "done"),
+            "status",
+        ),
+        (
+            "trial-001.json not JSON",
+            lambda r: (r / "trial-001.json").write_text("{"),
+            "malformed trial status",
+        ),
+        (
+            "trial-001.json epos_m a string",
+            lambda r: _edit_json(r / "trial-001.json", "epos_m", "x"),
+            "epos_m",
+        ),
+        ("trial-001.csv truncated", lambda r: _truncate(r / "trial-001.csv"), "trial-001.csv"),
+        (
+            "trial-001.csv NaN position",
+            lambda r: _edit_csv(r / "trial-001.csv", 9, "pos_east_m", "nan"),
+            "NaN",
+        ),
+        (
+            "trial-001.csv not a number",
+            lambda r: _edit_csv(r / "trial-001.csv", 9, "pos_east_m", "abc"),
+            "trial-001.csv",
+        ),
+        (
+            "trial-001.csv wrong time grid",
+            lambda r: _edit_csv(r / "trial-001.csv", 3, "t_s", "0.2"),
+            "t_ilc_s",
+        ),
+        ("trial-001.csv missing", lambda r: (r / "trial-001.csv").unlink(), "trial-001.csv"),
+        (
+            "trial CSVs swapped",
+            lambda r: _swap(r / "trial-000.csv", r / "trial-001.csv"),
+            "do not belong together",
+        ),
+        (
+            "setpoints-001.csv missing",
+            lambda r: (r / "setpoints-001.csv").unlink(),
+            "setpoints-001.csv",
+        ),
+        ("reference.csv truncated", lambda r: _truncate(r / "reference.csv"), "reference.csv"),
+    ]
+
+
+def _run_cases() -> Iterator[Case]:
+    k = "run directory: learn"
+    yield Case(
+        k,
+        "learn",
+        "not a directory",
+        lambda ws: ["learn", str(ws.path / "nope")],
+        "not a run directory",
+    )
+    for what, damage, expect in _learning_run_damage():
+
+        def build(ws: Workspace, d=damage) -> list[str]:
+            run = ws.run()
+            d(run)
+            return ["learn", str(run)]
+
+        yield Case(k, "learn", what, build, expect)
+    yield Case(
+        "run directory: kind and algorithm",
+        "learn",
+        "an identification run",
+        lambda ws: ["learn", str(ws.run("ident"))],
+        "not a learning run",
+    )
+
+    def learned_differently(ws: Workspace) -> list[str]:
+        run = ws.run()
+        _edit_csv(run / "setpoints-002.csv", 5, "sp_north_m", "0.123")
+        return ["learn", str(run)]
+
+    yield Case(
+        "run directory: rewriting recorded data",
+        "learn",
+        "setpoints-002.csv exists with other content",
+        learned_differently,
+        "never rewritten",
+    )
+
+    def read_only(ws: Workspace) -> list[str]:
+        run = ws.run()
+        (run / "setpoints-002.csv").unlink()
+        (run / "estimate-001.csv").unlink()
+        ws.read_only(run)
+        return ["learn", str(run)]
+
+    yield Case(
+        "run directory: read-only", "learn", "read-only run directory", read_only, "not writable"
+    )
+    k = "run directory: report"
+    for what, damage, expect in _learning_run_damage()[:12]:
+
+        def build(ws: Workspace, d=damage) -> list[str]:
+            run = ws.run()
+            d(run)
+            return ["report", str(run)]
+
+        yield Case(k, "report", what, build, expect)
+
+    def no_trial_0(ws: Workspace) -> list[str]:
+        run = ws.run()
+        (run / "trial-000.json").unlink()
+        return ["report", str(run)]
+
+    def incomplete_trial_0(ws: Workspace) -> list[str]:
+        run = ws.run()
+        _edit_json(run / "trial-000.json", "status", "incomplete")
+        return ["report", str(run)]
+
+    def epos0_zero(ws: Workspace) -> list[str]:
+        run = ws.run()
+        lines = (run / "trial-000.csv").read_text().splitlines()
+        header = lines[0].split(",")
+        out = [lines[0]]
+        for line in lines[1:]:
+            cells = line.split(",")
+            for axis in ("north", "east", "down"):
+                cells[header.index(f"pos_{axis}_m")] = cells[header.index(f"ref_{axis}_m")]
+            out.append(",".join(cells))
+        (run / "trial-000.csv").write_text("\n".join(out) + "\n")
+        return ["report", str(run)]
+
+    k = "run directory: percentages without trial 0"
+    yield Case(k, "report", "trial-000.json missing", no_trial_0, "trial 0 is missing")
+    yield Case(k, "report", "trial 0 incomplete", incomplete_trial_0, "trial 0 is incomplete")
+    yield Case(k, "report", "e_pos,0 = 0", epos0_zero, "e_pos,0 = 0")
+
+
+def _resume_cases() -> Iterator[Case]:
+    k = "run directory: fly --resume"
+
+    def resume(ws: Workspace, damage: Callable[[Path], None] | None = None, *extra: str):
+        run = ws.run()
+        if damage is not None:
+            damage(run)
+        return ["fly", "--connect", UNREACHABLE, "--resume", str(run), *extra]
+
+    yield Case(
+        k,
+        "fly",
+        "an identification run",
+        lambda ws: ["fly", "--connect", UNREACHABLE, "--resume", str(ws.run("ident"))],
+        "not a learning run",
+    )
+    yield Case(
+        k,
+        "fly",
+        "next setpoints missing",
+        lambda ws: resume(ws, lambda r: (r / "setpoints-002.csv").unlink()),
+        "gcs learn",
+    )
+    yield Case(
+        k,
+        "fly",
+        "next setpoints outside the arena",
+        lambda ws: resume(
+            ws, lambda r: _edit_csv(r / "setpoints-002.csv", 40, "sp_north_m", "9.0")
+        ),
+        "outside the arena",
+    )
+    yield Case(
+        k,
+        "fly",
+        "next setpoints jump beyond max_step_m",
+        lambda ws: resume(ws, lambda r: _edit_csv(r / "setpoints-002.csv", 40, "sp_east_m", "1.9")),
+        "max_step_m",
+    )
+    yield Case(
+        k,
+        "fly",
+        "a different --profile",
+        lambda ws: resume(ws, None, "--profile", str(ws.profile("vehicle.max_speed_m_s", 2.9))),
+        "vehicle.max_speed_m_s",
+    )
+    yield Case(
+        k,
+        "fly",
+        "a different --trajectory",
+        lambda ws: resume(ws, None, "--trajectory", "eight"),
+        "differs",
+    )
+    yield Case(
+        k,
+        "fly",
+        "another --algorithm",
+        lambda ws: resume(ws, None, "--algorithm", "kilc"),
+        "learns with 'smoother'",
+    )
+    yield Case(
+        k,
+        "fly",
+        "--resume and --run",
+        lambda ws: resume(ws, None, "--run", str(ws.path / "new")),
+        "at most one",
+    )
+
+    def read_only(ws: Workspace) -> list[str]:
+        run = ws.run()
+        ws.read_only(run)
+        return ["fly", "--connect", UNREACHABLE, "--resume", str(run)]
+
+    yield Case(
+        "run directory: read-only", "fly", "read-only run to resume", read_only, "not writable"
+    )
+    for what, damage, expect in _learning_run_damage()[:9]:
+        yield Case(k, "fly", what, lambda ws, d=damage: resume(ws, d), expect)
+
+
+def _identify_cases() -> Iterator[Case]:
+    k = "run directory: identify --from-log"
+
+    def from_log(ws: Workspace, damage=None, *extra: str) -> list[str]:
+        run = ws.run("ident")
+        if damage is not None:
+            damage(run)
+        return ["identify", "--from-log", str(run), *extra]
+
+    yield Case(
+        k,
+        "identify",
+        "a learning run",
+        lambda ws: ["identify", "--from-log", str(ws.run())],
+        "not an identification run",
+    )
+    yield Case(
+        k,
+        "identify",
+        "trial-001.json missing",
+        lambda ws: from_log(ws, lambda r: (r / "trial-001.json").unlink()),
+        "missing",
+    )
+    yield Case(
+        k,
+        "identify",
+        "trial-000.csv NaN",
+        lambda ws: from_log(ws, lambda r: _edit_csv(r / "trial-000.csv", 30, "pos_north_m", "nan")),
+        "NaN",
+    )
+    yield Case(
+        k,
+        "identify",
+        "trial CSVs swapped",
+        lambda ws: from_log(ws, lambda r: _swap(r / "trial-000.csv", r / "trial-001.csv")),
+        "do not belong together",
+    )
+    yield Case(
+        k,
+        "identify",
+        "manifest trajectory not an excitation",
+        lambda ws: from_log(
+            ws, lambda r: _edit_json(r / "manifest.json", "trajectory.type", "eight")
+        ),
+        "trajectory.type",
+    )
+    yield Case(
+        k, "identify", "axis not excited", lambda ws: from_log(ws, None, "--axis", "z"), "--axis"
+    )
+    yield Case(
+        k,
+        "identify",
+        "identification settings wrong type",
+        lambda ws: from_log(
+            ws, None, "--profile", str(ws.profile("identification.past", "twenty"))
+        ),
+        "identification.past",
+    )
+    k = "output path: identify"
+    yield Case(
+        k,
+        "identify",
+        "--out is a directory",
+        lambda ws: from_log(ws, None, "--out", str(ws.path)),
+        "is a directory",
+    )
+    yield Case(
+        k,
+        "identify",
+        "--out under a file",
+        lambda ws: from_log(ws, None, "--out", str(ws.file("f.txt", "x") / "p.yaml")),
+        "is a file",
+    )
+    yield Case(
+        k,
+        "identify",
+        "--plot is a file",
+        lambda ws: from_log(ws, None, "--plot", str(ws.file("f.png", "x"))),
+        "is a file",
+    )
+    yield Case(
+        k,
+        "identify",
+        "--out is a recorded file of another run",
+        lambda ws: from_log(ws, None, "--out", str(ws.run() / "manifest.json")),
+        "run directory",
+    )
+    k = "flight options: identify"
+    idf = ["identify", "--connect", UNREACHABLE]
+    yield Case(
+        k, "identify", "--run exists", lambda ws: [*idf, "--run", str(ws.run())], "exists already"
+    )
+    yield Case(
+        k,
+        "identify",
+        "--logs is a file",
+        lambda ws: [*idf, "--logs", str(ws.file("logs", "x"))],
+        "is a file",
+    )
+    yield Case(
+        k,
+        "identify",
+        "excitation leaves the arena",
+        lambda ws: [*idf, "--profile", str(ws.profile("identification.amplitude_m", 5.0))],
+        "arena",
+    )
+    yield Case(
+        k,
+        "identify",
+        "experiments too short",
+        lambda ws: [*idf, "--profile", str(ws.profile("identification.duration_s", 2.0))],
+        "too short",
+    )
+    yield Case(
+        k,
+        "identify",
+        "flight section not a mapping",
+        lambda ws: [*idf, "--profile", str(ws.profile("flight", 3))],
+        "flight",
+    )
+    yield Case(
+        k,
+        "identify",
+        "bad connection URL",
+        lambda ws: ["identify", "--connect", "http://x"],
+        "connection URL",
+    )
+    yield Case(
+        k,
+        "identify",
+        "--mock and --from-log",
+        lambda ws: ["identify", "--mock", "--from-log", str(ws.path)],
+        "exactly one",
+    )
+    yield Case(
+        k,
+        "identify",
+        "--mock-config malformed",
+        lambda ws: ["identify", "--mock", "--mock-config", str(ws.file("m.yaml", "physics: [\n"))],
+        "malformed YAML",
+    )
+
+
+def _output_cases() -> Iterator[Case]:
+    k = "output path: report"
+
+    def report(ws: Workspace, *extra: str) -> list[str]:
+        return ["report", str(ws.run()), *extra]
+
+    yield Case(
+        k,
+        "report",
+        "--plot is a file",
+        lambda ws: report(ws, "--plot", str(ws.file("f", "x"))),
+        "is a file",
+    )
+    yield Case(
+        k,
+        "report",
+        "--plot under a file",
+        lambda ws: report(ws, "--plot", str(ws.file("f", "x") / "d")),
+        "is a file",
+    )
+    yield Case(
+        k,
+        "report",
+        "--html is a directory",
+        lambda ws: report(ws, "--html", str(ws.path)),
+        "is a directory",
+    )
+    yield Case(
+        k,
+        "report",
+        "--html under a file",
+        lambda ws: report(ws, "--html", str(ws.file("f", "x") / "r.html")),
+        "is a file",
+    )
+    yield Case(
+        k,
+        "report",
+        "--html onto the run's manifest",
+        lambda ws: ["report", str(r := ws.run()), "--html", str(r / "manifest.json")],
+        "run directory",
+    )
+    k = "options: report"
+    yield Case(
+        k,
+        "report",
+        "--iterations not numbers",
+        lambda ws: report(ws, "--iterations", "a,b"),
+        "--iterations",
+    )
+    yield Case(
+        k,
+        "report",
+        "--iterations of a trial not flown",
+        lambda ws: report(ws, "--iterations", "0,7"),
+        "trial 7",
+    )
+    yield Case(
+        k,
+        "report",
+        "--iterations negative",
+        lambda ws: report(ws, "--iterations", "-1"),
+        "--iterations",
+    )
+    k = "output path: montecarlo"
+    mc = ["montecarlo", "--plants", "2", "--repeats", "1", "--levels", "0.05"]
+    yield Case(
+        k,
+        "montecarlo",
+        "--json is a directory",
+        lambda ws: [*mc, "--json", str(ws.path)],
+        "is a directory",
+    )
+    yield Case(
+        k,
+        "montecarlo",
+        "--json under a file",
+        lambda ws: [*mc, "--json", str(ws.file("f", "x") / "mc.json")],
+        "is a file",
+    )
+    k = "options: montecarlo"
+    for args, expect in (
+        (["--iterations", "5"], "--iterations"),
+        (["--levels", "abc"], "--levels"),
+        (["--levels", ","], "--levels"),
+        (["--levels", "nan"], "--levels"),
+        (["--levels", "-0.1"], "--levels"),
+        (["--plants", "1"], "--plants"),
+        (["--samples", "5"], "--samples"),
+        (["--repeats", "0"], "--repeats"),
+    ):
+        yield Case(k, "montecarlo", " ".join(args), lambda ws, a=args: ["montecarlo", *a], expect)
+    k = "output path: fly"
+    yield Case(
+        k, "fly", "--run exists", lambda ws: _fly(ws, "--run", str(ws.run())), "exists already"
+    )
+    yield Case(
+        k,
+        "fly",
+        "--run under a file",
+        lambda ws: _fly(ws, "--run", str(ws.file("f", "x") / "run")),
+        "is a file",
+    )
+    yield Case(
+        k,
+        "fly",
+        "--logs is a file",
+        lambda ws: _fly(ws, "--logs", str(ws.file("f", "x"))),
+        "is a file",
+    )
+
+    def read_only_logs(ws: Workspace) -> list[str]:
+        (ws.path / "ro").mkdir()
+        return _fly(ws, "--logs", str(ws.read_only(ws.path / "ro")))
+
+    yield Case(
+        "run directory: read-only", "fly", "--logs read-only", read_only_logs, "not writable"
+    )
+    k = "options: fly"
+    for args, expect in (
+        (["--connect", UNREACHABLE, "--iter", "0"], "--iter"),
+        (["--connect", UNREACHABLE, "--algorithm", "ilc"], "--algorithm"),
+        (["--mock", "--connect", UNREACHABLE], "exactly one"),
+        (["--connect", "http://x:1"], "connection URL"),
+        (["--connect", "udpin://0.0.0.0:99999"], "connection URL"),
+        (["--connect", "udpin://0.0.0.0"], "connection URL"),
+    ):
+        yield Case(k, "fly", " ".join(args), lambda ws, a=args: ["fly", *a], expect)
+
+    yield Case(k, "fly", "neither --mock nor --connect", lambda ws: ["fly"], "exactly one")
+    yield Case(
+        k,
+        "fly",
+        "--mock-config malformed",
+        lambda ws: ["fly", "--mock", "--mock-config", str(ws.file("m.yaml", "physics: [\n"))],
+        "malformed YAML",
+    )
+    yield Case(
+        k,
+        "fly",
+        "--mock-config unknown field",
+        lambda ws: ["fly", "--mock", "--mock-config", str(ws.file("m.yaml", "physic: {}\n"))],
+        "physic",
+    )
+    k = "options and paths: mock"
+    for args, expect in (
+        (["--port", "70000"], "--port"),
+        (["--loss", "2"], "--loss"),
+        (["--dropout", "abc"], "--dropout"),
+        (["--clock-rate", "0"], "--clock-rate"),
+    ):
+        yield Case(k, "mock", " ".join(args), lambda ws, a=args: ["mock", *a], expect)
+    yield Case(
+        k, "mock", "--config missing", lambda ws: ["mock", "--config", "nope.yaml"], "nope.yaml"
+    )
+    yield Case(
+        k,
+        "mock",
+        "--config malformed",
+        lambda ws: ["mock", "--config", str(ws.file("m.yaml", "physics: [\n"))],
+        "malformed YAML",
+    )
+    yield Case(
+        k,
+        "mock",
+        "--stats-out is a directory",
+        lambda ws: ["mock", "--stats-out", str(ws.path)],
+        "is a directory",
+    )
+    k = "options: learn"
+    yield Case(
+        k,
+        "learn",
+        "another --algorithm",
+        lambda ws: ["learn", str(ws.run()), "--algorithm", "kilc"],
+        "learns with",
+    )
+    yield Case(
+        k,
+        "learn",
+        "a different --profile",
+        lambda ws: [
+            "learn",
+            str(ws.run()),
+            "--profile",
+            str(ws.profile("learning.weights.wdu", 0.02)),
+        ],
+        "learning.weights.wdu",
+    )
+    yield Case(k, "learn", "no run directory given", lambda ws: ["learn"], "run_dir")
+
+
+def catalogue() -> list[Case]:
+    """Every case, in a stable order."""
+    return [
+        *_profile_cases(),
+        *_trajectory_cases(),
+        *_run_cases(),
+        *_resume_cases(),
+        *_identify_cases(),
+        *_output_cases(),
+    ]
+
+
+# ----------------------------------------------------------------------------- running one
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a case did."""
+
+    exit_code: int
+    output: str
+    changed: list[str]
+
+    @property
+    def lines(self) -> list[str]:
+        return [line for line in self.output.splitlines() if line.strip()]
+
+
+def snapshot(root: Path) -> dict[str, Any]:
+    """Every path under ``root``: file bytes, link targets, directories."""
+    out: dict[str, Any] = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for name in dirnames + filenames:
+            p = Path(dirpath) / name
+            key = str(p.relative_to(root))
+            if p.is_symlink():
+                out[key] = ("link", os.readlink(p))
+            elif p.is_dir():
+                out[key] = ("dir",)
+            else:
+                out[key] = ("file", p.read_bytes())
+    return out
+
+
+@contextmanager
+def _cwd(path: Path) -> Iterator[None]:
+    old = os.getcwd()
+    os.chdir(path)
+    try:
+        yield
+    finally:
+        os.chdir(old)
+
+
+def run_case(case: Case, root: Path, templates: Templates) -> Outcome:
+    """Build ``case`` in a fresh workspace under ``root``, run it, compare the workspace."""
+    ws_path = Path(tempfile.mkdtemp(dir=root, prefix="case-"))
+    ws = Workspace(ws_path, templates)
+    try:
+        argv = case.build(ws)
+        before = snapshot(ws_path)
+        with _cwd(ws_path):
+            result = CliRunner().invoke(app, argv, env={"COLUMNS": "400"})
+        after = snapshot(ws_path)
+    finally:
+        for undo in reversed(ws.cleanups):
+            undo()
+    changed = sorted(k for k in set(before) | set(after) if before.get(k) != after.get(k))
+    output = result.output
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        output += f"\n[exception] {type(result.exception).__name__}: {result.exception}"
+    shutil.rmtree(ws_path, ignore_errors=True)
+    return Outcome(result.exit_code, output, changed)
+
+
+def learning_template(root: Path) -> RunDir:
+    """A learning run as the catalogue uses it (for other tests)."""
+    return RunDir.open(_learning_run(root))
+
+
+__all__ = ["Case", "Outcome", "Templates", "catalogue", "run_case", "snapshot", "fly_synthetic"]

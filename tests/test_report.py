@@ -1,0 +1,194 @@
+"""gcs report: trials that are missing or incomplete, percentages of trial 0, figures, HTML."""
+
+from __future__ import annotations
+
+import base64
+import json
+from html.parser import HTMLParser
+from pathlib import Path
+
+import pytest
+from synthetic import make_run
+from typer.testing import CliRunner
+
+from gcs.app.learn import trial_errors
+from gcs.app.report import report_figures, run_metrics, write_html
+from gcs.cli import app
+from gcs.errors import RunLogError
+
+runner = CliRunner()
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def invoke(*args: object):
+    return runner.invoke(app, [str(a) for a in args], env={"COLUMNS": "200"})
+
+
+def test_missing_and_incomplete_trials_are_listed_not_dropped(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=4)
+    (run.path / "trial-001.json").unlink()
+    (run.path / "trial-001.csv").unlink()
+    (run.path / "trial-002.json").rename(run.path / "x")  # a CSV whose sidecar never came
+    status = json.loads((run.path / "trial-003.json").read_text())
+    status.update(status="incomplete", reason="link lost")
+    (run.path / "trial-003.json").write_text(json.dumps(status))
+    result = invoke("report", run.path)
+    assert result.exit_code == 0, result.output
+    assert "trial 1: missing (no trial-001.json), not in the table" in result.output
+    assert "trial 3: incomplete (link lost), not in the table" in result.output
+    assert "trial 2: incomplete (trial-002.csv without its .json)" in result.output
+    rows = json.loads(invoke("report", run.path, "--json").output)
+    assert [(r["iteration"], r["status"]) for r in rows] == [
+        (0, "complete"), (1, "missing"), (2, "incomplete"), (3, "incomplete")
+    ]  # fmt: skip
+    (run.path / "x").rename(run.path / "trial-002.json")
+    rows = json.loads(invoke("report", run.path, "--json").output)
+    assert rows[3]["reason"] == "link lost" and rows[3]["epos_m"] is None
+    # trial 2 compared with trial 0, never with a neighbour it does not have
+    e0 = trial_errors(run.read_trial(0))[0]
+    e2 = trial_errors(run.read_trial(2))[0]
+    assert rows[2]["epos_pct"] == pytest.approx(100 * e2 / e0)
+    assert rows[2]["delta_pct"] is None
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (lambda p: (p / "trial-000.json").unlink(), "trial 0 is missing"),
+        (
+            lambda p: (p / "trial-000.json").write_text(
+                json.loads((p / "trial-000.json").read_text()) and
+                json.dumps({**json.loads((p / "trial-000.json").read_text()),
+                            "status": "incomplete"})
+            ),
+            "trial 0 is incomplete",
+        ),
+    ],
+)  # fmt: skip
+def test_without_a_complete_trial_0_there_are_no_percentages(tmp_path: Path, damage, message):
+    run = make_run(tmp_path, trials=3)
+    damage(run.path)
+    result = invoke("report", run.path)
+    assert result.exit_code == 2
+    assert message in result.output and len(result.output.strip().splitlines()) == 1
+    with pytest.raises(RunLogError, match=message):
+        run_metrics(run)
+
+
+def test_a_zero_e_pos_0_is_refused(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=2)
+    path = run.path / "trial-000.csv"
+    lines = path.read_text().splitlines()
+    head = lines[0].split(",")
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        for axis in ("north", "east"):
+            cells[head.index(f"pos_{axis}_m")] = cells[head.index(f"ref_{axis}_m")]
+        out.append(",".join(cells))
+    path.write_text("\n".join(out) + "\n")
+    result = invoke("report", run.path, "--json")
+    assert result.exit_code == 2 and "e_pos,0 = 0" in result.output
+
+
+def _labels(fig) -> set[str]:
+    return {label for ax in fig.axes for label in ax.get_legend_handles_labels()[1]}
+
+
+def test_figures_draw_the_chosen_iterations_for_both_axes(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    run = make_run(tmp_path, trials=4)
+    figures = report_figures(run, [0, 3])
+    assert set(figures) == {"xy", "position", "setpoints", "error", "epos", "disturbance"}
+    for name in ("position", "error"):
+        assert {"j = 0", "j = 3"} <= _labels(figures[name])
+        assert "j = 1" not in _labels(figures[name])
+        assert [ax.get_ylabel().split()[0] for ax in figures[name].axes] == ["north", "east"]
+    setpoints = figures["setpoints"]
+    assert {"u, j = 0", "u, j = 3", "arena", "reference"} <= _labels(setpoints)
+    assert any(label.startswith("max_deviation_m ±2.5 m") for label in _labels(setpoints))
+    arena = run.profile().arena.bounds()
+    for ax, axis in zip(setpoints.axes, (0, 1), strict=True):
+        dotted = [line for line in ax.get_lines() if line.get_linestyle() == ":"]
+        levels = {line.get_ydata()[0] for line in dotted if len(line.get_ydata())}
+        assert set(arena[axis]) <= levels  # the arena's edges are drawn
+    # estimates exist for trials 0..2 only (learned from them)
+    assert _labels(figures["disturbance"]) == {"from trial 0"}
+    epos = figures["epos"]
+    assert epos.axes[0].get_yscale() == "log"
+    right = epos.axes[0].child_axes  # the percentage axis
+    assert len(right) == 1 and right[0].get_ylabel() == "e_pos,j / e_pos,0 [%]"
+    plt.close("all")
+
+
+class _Collect(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.srcs: list[str] = []
+        self.refs: list[str] = []
+        self.cells: list[str] = []
+        self._cell = False
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        if tag == "img":
+            self.srcs.append(attrs.get("src", ""))
+        for key in ("href", "src"):
+            if key in attrs and tag != "img":
+                self.refs.append(attrs[key])
+        self._cell = tag == "td"
+
+    def handle_data(self, data):
+        if self._cell:
+            self.cells.append(data)
+            self._cell = False
+
+
+def test_html_report_is_one_self_contained_file(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=3)
+    target = tmp_path / "out" / "report.html"
+    result = invoke("report", run.path, "--html", target, "--iterations", "0,2")
+    assert result.exit_code == 0, result.output
+    text = target.read_text()
+    parser = _Collect()
+    parser.feed(text)
+    assert parser.refs == []  # no stylesheet, script or link to fetch
+    assert len(parser.srcs) == 6
+    for src in parser.srcs:
+        assert src.startswith("data:image/png;base64,")
+        assert base64.b64decode(src.split(",", 1)[1])[:8] == PNG
+    rows = run_metrics(run)
+    for r in rows:
+        assert f"{r.epos_m:.4f}" in parser.cells and f"{r.epos_pct:.2f}" in parser.cells
+    assert "0, 2" in parser.cells  # the iterations drawn
+    assert "http" not in text.replace("http-equiv", "")
+    assert list(target.parent.iterdir()) == [target]  # one file, nothing beside it
+
+
+def test_iterations_must_be_complete_trials(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=2)
+    for value, message in (("0,5", "trial 5 is not a complete trial"), ("x", "--iterations")):
+        result = invoke("report", run.path, "--plot", tmp_path / "p", "--iterations", value)
+        assert result.exit_code == 2 and message in result.output
+    assert not (tmp_path / "p").exists()
+    with pytest.raises(RunLogError, match="trial 4"):
+        write_html(run, tmp_path / "r.html", [4])
+
+
+def test_a_trial_flown_again_says_so(tmp_path: Path) -> None:
+    from synthetic import fly_synthetic
+
+    from gcs.io.runlog import TrialStatus
+
+    run = make_run(tmp_path, trials=2)
+    from gcs.app.learn import learn_run
+
+    learn_run(run)
+    record = fly_synthetic(run, 2)  # complete: make it an interrupted attempt, then fly again
+    (run.path / "trial-002.json").unlink()
+    run.write_trial(2, record, TrialStatus(2, False, reason="link lost"))
+    fly_synthetic(run, 2, seed=5)
+    result = invoke("report", run.path)
+    assert result.exit_code == 0, result.output
+    assert "trial 2: 1 earlier incomplete attempt kept in aborted/" in result.output
