@@ -40,3 +40,7 @@ class TrialAborted(GcsError, RuntimeError):
 
 class UpdateInfeasible(GcsError, ValueError):
     """The setpoint limits admit no next input (box, step or deviation bound); names the limit."""
+
+
+class MocapError(GcsError, RuntimeError):
+    """The motion-capture server is unreachable, the reader failed, or the stream is unusable."""
