@@ -79,22 +79,29 @@ def test_pose_round_trip_rate_and_timestamps_at_240_hz() -> None:
     try:
         with MocapClient(parse_mocap_url(server.url)) as client:
             first = client.wait_until(lambda s: s.tracked, WAIT_S)
-            last = client.wait_until(lambda s: s.seq >= first.seq + 240, WAIT_S)
+            client.wait_until(lambda s: s.seq >= first.seq + 240, WAIT_S)
             got = client.drain()
     finally:
         server.stop()
-    window = (got.seq >= first.seq) & (got.seq <= last.seq)
-    # rate: the frames sent while we listened arrived, one sample each, in order
-    sent = [f for f in server.sent if first.t_receipt_s <= f.t_send_s + 0.002 <= last.t_receipt_s]
-    assert window.sum() >= 0.9 * len(sent) and window.sum() <= len(sent) + 2
     assert np.all(np.diff(got.seq) == 1)
     assert np.all(np.diff(got.t_receipt_s) > 0)
-    assert np.median(np.diff(got.t_receipt_s[window])) == pytest.approx(1 / 240, rel=0.2)
-    # poses: the client's samples, mapped to NED, are the circle within the noise
+    # each sample is a distinct frame the server sent, in order, exactly as sent
     by_pos = {f.pos_m: f for f in server.sent}
+    frames = [by_pos[tuple(float(v) for v in p)] for p in got.pos_m[got.tracked]]
+    numbers = np.array([f.frame_number for f in frames])
+    assert np.all(np.diff(numbers) > 0)
+    # rate: the frames arrive in real time on the server's 240 Hz clock; under load the library
+    # keeps only the newest frame when it falls behind (fraction measured in benchmarks/)
+    frame_span_s = (numbers[-1] - numbers[0]) / 240.0
+    receipt_span_s = got.t_receipt_s[got.tracked][-1] - got.t_receipt_s[got.tracked][0]
+    assert receipt_span_s == pytest.approx(frame_span_s, abs=0.05)
+    assert len(numbers) >= 0.6 * (numbers[-1] - numbers[0] + 1)
+    assert np.median(np.diff(got.t_receipt_s)) == pytest.approx(1 / 240, rel=0.25)
+    # poses: the client's samples, mapped to NED, are the circle within the noise
     errors, turns = [], []
-    for pos, quat in zip(got.pos_m[got.tracked], got.quat_wxyz[got.tracked], strict=True):
-        frame = by_pos[tuple(float(v) for v in pos)]  # exactly what the server sent
+    for frame, pos, quat in zip(
+        frames, got.pos_m[got.tracked], got.quat_wxyz[got.tracked], strict=True
+    ):
         truth_pos, truth_q = circle(frame.t_s)
         errors.append(np.linalg.norm(ROOM.position_to_ned(pos) - truth_pos))
         turns.append(math.degrees(float(quat_angle_rad(ROOM.attitude_to_ned(quat), truth_q))))
@@ -239,6 +246,36 @@ def test_no_server_times_out_without_freezing_this_process() -> None:
     assert 1.0 <= time.monotonic() - t0 < 4.0
     gaps = np.diff([t0, *ticks])
     assert len(ticks) > 50 and gaps.max() < 0.5  # this process kept running meanwhile
+
+
+def test_refused_connection_fails_at_once_with_the_library_s_reason() -> None:
+    import socket
+
+    with socket.socket() as closed:  # a TCP port nobody listens on (QTM's protocol is TCP)
+        closed.bind(("127.0.0.1", 0))
+        port = closed.getsockname()[1]
+    source = MocapSource("qualisys", "127.0.0.1", port, "drone", "0.0.0.0")
+    t0 = time.monotonic()
+    with pytest.raises(MocapError, match="qualisys connect failed: Error connecting QTM"):
+        MocapClient(source, connect_timeout_s=10.0).start()
+    assert time.monotonic() - t0 < 5.0  # the reason, not the timeout
+
+
+def test_a_failing_callback_ends_the_stream_with_its_reason() -> None:
+    server = serve(rate_hz=100.0)
+
+    def broken(sample: MocapSample) -> None:
+        raise ZeroDivisionError("boom")
+
+    source = parse_mocap_url(server.url)
+    try:
+        client = MocapClient(source, on_sample=broken).start()
+        with pytest.raises(MocapError, match="ZeroDivisionError"):
+            client.wait_until(lambda s: False, WAIT_S)
+        client.stop()
+    finally:
+        server.stop()
+    assert client.cpu_seconds()["reader"] >= 0  # the reader was ended, its CPU kept
 
 
 def test_unknown_rigid_body_is_never_tracked_and_the_names_say_why() -> None:

@@ -14,6 +14,7 @@ Samples are in the mocap system's axes; map them with
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -182,7 +183,11 @@ class MocapClient:
         )
         self._thread.start()
         where = f"{self.source.system} server {self.source.host}:{self.source.port}"
-        if not self._connected.wait(self.connect_timeout_s):
+        with self._cond:
+            self._cond.wait_for(
+                lambda: self._connected.is_set() or self._ended.is_set(), self.connect_timeout_s
+            )
+        if not self._connected.is_set():
             problem = self._problem or f"no answer from {where} within {self.connect_timeout_s} s"
             self.stop()
             raise MocapError(problem)
@@ -226,6 +231,8 @@ class MocapClient:
                 if len(payload) < length:
                     break
                 self._record(kind, payload)
+        except Exception as exc:  # a failing on_sample ends the stream, with the reason
+            self._problem = f"mocap client failed: {exc!r}"
         finally:
             stream.close()
             self._end()
@@ -245,13 +252,18 @@ class MocapClient:
             if self.on_sample is not None:
                 self.on_sample(sample)
         elif kind == b"C":
-            self._connected.set()
+            with self._cond:
+                self._connected.set()
+                self._cond.notify_all()
         elif kind == b"N":
             self._names = tuple(json.loads(payload))
         elif kind == b"E":
             self._problem = payload.decode(errors="replace")
 
     def _end(self) -> None:
+        if self._proc is not None and self._proc.poll() is None:
+            self._cpu_at_stop = self.cpu_seconds()
+            self._proc.terminate()  # we stopped reading (a failure here): end the reader too
         if self._problem is None:
             code = self._proc.wait() if self._proc is not None else None
             if code is not None and code < 0:
@@ -309,7 +321,10 @@ class MocapClient:
         """
         start = (time.monotonic() if now_s is None else now_s) - duration_s
         with self._cond:
-            picked = [s for s in self._history if s.t_receipt_s >= start]
+            newest_first = itertools.takewhile(
+                lambda s: s.t_receipt_s >= start, reversed(self._history)
+            )
+            picked = list(newest_first)[::-1]
         return series_of(picked)
 
     def drain(self) -> MocapSeries:
@@ -349,7 +364,7 @@ class MocapClient:
             while True:
                 new = self._count - seen
                 if new:
-                    recent = list(self._history)[-min(new, len(self._history)) :]
+                    recent = list(itertools.islice(reversed(self._history), new))[::-1]
                     seen = self._count
                     for sample in recent:
                         if predicate(sample):
