@@ -45,3 +45,7 @@ class UpdateInfeasible(GcsError, ValueError):
 class PathError(GcsError, ValueError):
     """A file or directory named on the command line cannot be used as asked (missing, a
     directory where a file is expected or the other way round, not writable); names it."""
+
+
+class MocapError(GcsError, RuntimeError):
+    """The motion-capture server is unreachable, the reader failed, or the stream is unusable."""

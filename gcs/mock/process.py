@@ -158,6 +158,12 @@ class MockProcess:
     def _failure(self) -> str:
         assert self._proc is not None
         code = self._proc.poll()
+        if code is None and self._ready.is_set():
+            # stdout reached EOF: the process is exiting, but may not have been reaped yet
+            try:
+                code = self._proc.wait(self.stop_timeout_s)
+            except subprocess.TimeoutExpired:
+                code = None
         tail = ""
         if self._stderr is not None:
             self._stderr.seek(0)

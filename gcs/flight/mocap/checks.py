@@ -1,0 +1,130 @@
+"""Pre-flight agreement of the motion capture and the vehicle (pure).
+
+Two checks catch a wrong frame mapping before the manoeuvre does:
+
+- :func:`pose_agreement_problem`: the vehicle's position estimate and the mocap position,
+  mapped to NED, agree within a tolerance (catches a wrong origin, a wrong up axis, a wrong
+  scale, or a vehicle whose estimate is not fed by this mocap);
+- :func:`move_direction_problem`: a small commanded move went the commanded way in both the
+  vehicle's estimate and the mocap. It catches what the first check cannot when the vehicle
+  sits at the origin: a mirrored axis (left-handed mapping, east and west swapped), swapped
+  axes or a yaw offset off by 90 or 180 degrees. A mirror along one axis is invisible to a
+  move along the other, so fly one move per horizontal axis (north, then east).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["pose_agreement_problem", "move_direction_problem"]
+
+
+def _vec(value: np.ndarray, name: str) -> np.ndarray:
+    v = np.asarray(value, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be 3 finite numbers (north, east, down), got {value!r}")
+    return v
+
+
+def pose_agreement_problem(
+    est_pos_ned_m: np.ndarray, mocap_pos_ned_m: np.ndarray, tolerance_m: float = 0.1
+) -> str | None:
+    """Whether estimate and mocap disagree on where the vehicle is.
+
+    Parameters
+    ----------
+    est_pos_ned_m : numpy.ndarray
+        Vehicle's position estimate, shape (3,) [m, NED].
+    mocap_pos_ned_m : numpy.ndarray
+        Mocap position mapped to NED, shape (3,) [m].
+    tolerance_m : float
+        Largest accepted distance [m].
+
+    Returns
+    -------
+    str or None
+        Reason naming the distance and the largest axis, or None.
+    """
+    diff = _vec(mocap_pos_ned_m, "mocap_pos_ned_m") - _vec(est_pos_ned_m, "est_pos_ned_m")
+    dist = float(np.linalg.norm(diff))
+    if dist <= tolerance_m:
+        return None
+    axis = ("north", "east", "down")[int(np.argmax(np.abs(diff)))]
+    return (
+        f"mocap and vehicle estimate {dist:.2f} m apart (mostly {axis}; tolerance "
+        f"{tolerance_m:.2f} m): check the mocap origin, up axis and that the vehicle uses it"
+    )
+
+
+def _went_wrong(
+    cmd: np.ndarray, delta: np.ndarray, who: str, min_fraction: float, max_angle_deg: float
+) -> str | None:
+    size = float(np.linalg.norm(cmd))
+    along = float(delta @ cmd) / size
+    if along < min_fraction * size:
+        if along < 0:
+            return f"{who} moved {-along:.2f} m the opposite way"
+        return f"{who} moved only {along:.2f} m of {size:.2f} m commanded"
+    moved = float(np.linalg.norm(delta))
+    angle = math.degrees(math.acos(min(1.0, along / moved)))
+    if angle > max_angle_deg:
+        return f"{who} moved {angle:.0f} deg off the commanded direction"
+    return None
+
+
+def move_direction_problem(
+    cmd_ned_m: np.ndarray,
+    est_delta_ned_m: np.ndarray,
+    mocap_delta_ned_m: np.ndarray,
+    min_fraction: float = 0.5,
+    max_angle_deg: float = 45.0,
+) -> str | None:
+    """Whether a commanded move went the commanded way in the estimate and in the mocap.
+
+    Parameters
+    ----------
+    cmd_ned_m : numpy.ndarray
+        Commanded displacement, shape (3,) [m, NED], e.g. 0.3 m north.
+    est_delta_ned_m : numpy.ndarray
+        Displacement seen by the vehicle's estimate, shape (3,) [m, NED].
+    mocap_delta_ned_m : numpy.ndarray
+        Displacement seen by the mocap after frame mapping, shape (3,) [m, NED].
+    min_fraction : float
+        Each must have covered at least this fraction of the command along it.
+    max_angle_deg : float
+        Largest accepted angle between a displacement and the command [deg].
+
+    Returns
+    -------
+    str or None
+        Reason (which side went wrong, and the likely cause), or None.
+    """
+    cmd = _vec(cmd_ned_m, "cmd_ned_m")
+    if float(np.linalg.norm(cmd)) <= 0:
+        raise ValueError("cmd_ned_m must be a non-zero move")
+    est = _went_wrong(
+        cmd, _vec(est_delta_ned_m, "est_delta_ned_m"), "vehicle estimate", min_fraction,
+        max_angle_deg,
+    )  # fmt: skip
+    mocap = _went_wrong(
+        cmd, _vec(mocap_delta_ned_m, "mocap_delta_ned_m"), "mocap", min_fraction, max_angle_deg
+    )
+    if mocap is not None and est is None:
+        return (
+            f"commanded move {_fmt(cmd)}: {mocap}, the vehicle estimate did not: "
+            "the mocap frame mapping is wrong (mirrored or swapped axis, or yaw offset)"
+        )
+    if est is not None and mocap is None:
+        return (
+            f"commanded move {_fmt(cmd)}: {est}, the mocap did not: the vehicle's "
+            "estimate is wrong (vision fed with another frame, or not fused)"
+        )
+    if est is not None:
+        return f"commanded move {_fmt(cmd)}: {est}; {mocap}: the vehicle did not follow"
+    return None
+
+
+def _fmt(v: np.ndarray) -> str:
+    return "(" + ", ".join(f"{x:+.2f}" for x in v) + ") m NED"

@@ -1,0 +1,193 @@
+"""``python -m gcs.mock.mocap``: the mock OptiTrack Motive as a program."""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+from typing import Annotated
+
+import typer
+
+from gcs.flight.mocap.frames import SYSTEM_FRAMES, mapping_for
+from gcs.mock.mocap.natnet import VERSIONS
+from gcs.mock.mocap.scripted import Circle, Hover, in_room
+from gcs.mock.mocap.server import FaultWindow, NatNetServer
+
+__all__ = ["mocap_command", "parse_window", "parse_version"]
+
+
+def parse_window(kind: str, text: str) -> FaultWindow:
+    """Parse ``START:DURATION`` (or ``START:DURATION:DX:DY:DZ`` for a jump).
+
+    Parameters
+    ----------
+    kind : str
+        Fault kind (see :data:`gcs.mock.mocap.server.FAULT_KINDS`).
+    text : str
+        Option value [s, s, m, m, m].
+
+    Returns
+    -------
+    FaultWindow
+    """
+    count = 5 if kind == "jump" else 2
+    try:
+        values = [float(v) for v in text.split(":")]
+    except ValueError:
+        values = []
+    if len(values) != count:
+        fmt = "START:DURATION:DX:DY:DZ" if kind == "jump" else "START:DURATION"
+        raise typer.BadParameter(f"--{kind} must be {fmt}, got {text!r}")
+    try:
+        return FaultWindow(kind, values[0], values[1], tuple(values[2:]) or (0.0, 0.0, 0.0))
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from exc
+
+
+def parse_version(text: str) -> tuple[int, int]:
+    """Parse a NatNet version ``MAJOR.MINOR``.
+
+    Parameters
+    ----------
+    text : str
+        Option value.
+
+    Returns
+    -------
+    tuple of int
+    """
+    try:
+        major, minor = (int(v) for v in text.split("."))
+    except ValueError:
+        major, minor = -1, -1
+    if (major, minor) not in VERSIONS:
+        known = ", ".join(f"{a}.{b}" for a, b in VERSIONS)
+        raise typer.BadParameter(f"--natnet must be one of {known}, got {text!r}")
+    return major, minor
+
+
+def _faults(options: dict[str, list[str]]) -> tuple[FaultWindow, ...]:
+    return tuple(parse_window(kind, text) for kind, texts in options.items() for text in texts)
+
+
+def mocap_command(
+    body: Annotated[str, typer.Option("--body", help="Rigid body name.")] = "drone",
+    rate_hz: Annotated[
+        float, typer.Option("--rate", min=50.0, max=360.0, help="Frame rate, Hz.")
+    ] = 120.0,
+    natnet: Annotated[
+        str, typer.Option("--natnet", help="NatNet version: 3.0 3.1 4.0 4.1.")
+    ] = "4.1",
+    noise_mm: Annotated[
+        float, typer.Option("--noise-mm", min=0.0, help="Marker noise, mm (1 sigma per axis).")
+    ] = 0.2,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the marker noise.")] = 0,
+    port: Annotated[
+        int, typer.Option("--port", min=0, max=65535, help="Command port on 127.0.0.1; 0 = free.")
+    ] = 0,
+    room: Annotated[
+        str, typer.Option("--room", help=f"Axes of the mocap: {', '.join(SYSTEM_FRAMES)}.")
+    ] = "optitrack",
+    yaw_offset_deg: Annotated[
+        float, typer.Option("--yaw-offset-deg", help="Heading of the room's north axis, deg.")
+    ] = 0.0,
+    circle: Annotated[
+        str | None,
+        typer.Option("--circle", help="Fly RADIUS:PERIOD (m, s) around (0, 0, -1) NED."),
+    ] = None,
+    occlusion: Annotated[
+        list[str] | None, typer.Option("--occlusion", help="START:DURATION, s (repeatable).")
+    ] = None,
+    dropout: Annotated[
+        list[str] | None, typer.Option("--dropout", help="No frames START:DURATION, s.")
+    ] = None,
+    freeze: Annotated[
+        list[str] | None, typer.Option("--freeze", help="Same frame repeated START:DURATION, s.")
+    ] = None,
+    jump: Annotated[
+        list[str] | None,
+        typer.Option("--jump", help="START:DURATION:DX:DY:DZ, s and m (mocap axes)."),
+    ] = None,
+) -> None:
+    """Run a mock OptiTrack Motive streaming one rigid body over NatNet.
+
+    It binds two UDP sockets on 127.0.0.1 (command port ``--port``, data port any free one),
+    sends frames to the multicast group 239.255.42.99 through the loopback interface only,
+    and prints exactly one line on stdout, ``READY optitrack://127.0.0.1:<port>/<body>?
+    interface=127.0.0.1``: the URL of gcs's mocap client. The vehicle hovers at 1 m above
+    the origin (or flies ``--circle``) in NED; the room's axes (``--room``, Motive's Y-up
+    by default, and ``--yaw-offset-deg``) say how the mocap sees it. Fault times count from
+    the start of the program. SIGTERM or Ctrl-C stops it and prints its counters (JSON) on
+    stderr.
+
+    Examples:
+
+        python -m gcs.mock.mocap --rate 240 --circle 1:6
+
+        python -m gcs.mock.mocap --occlusion 5:0.5 --jump 8:0.05:0.3:0:0
+    \f
+    Parameters
+    ----------
+    body : str
+        Rigid body name.
+    rate_hz : float
+        Frame rate [Hz].
+    natnet : str
+        NatNet version.
+    noise_mm : float
+        Marker noise [mm].
+    seed : int
+        Seed of the noise.
+    port : int
+        Command port (0 = any free port).
+    room : str
+        Named convention of the room's axes.
+    yaw_offset_deg : float
+        Heading of the room's north axis [deg].
+    circle : str or None
+        ``RADIUS:PERIOD`` of a circle, or None to hover.
+    occlusion, dropout, freeze, jump : list of str or None
+        Fault windows.
+    """
+    version = parse_version(natnet)
+    faults = _faults(
+        {
+            "occlusion": occlusion or [],
+            "dropout": dropout or [],
+            "freeze": freeze or [],
+            "jump": jump or [],
+        }
+    )
+    if circle is None:
+        truth = Hover()
+    else:
+        try:
+            radius, period = (float(v) for v in circle.split(":"))
+        except ValueError:
+            raise typer.BadParameter(f"--circle must be RADIUS:PERIOD, got {circle!r}") from None
+        truth = Circle(radius_m=radius, period_s=period)
+    server = NatNetServer(
+        in_room(truth, mapping_for(room, yaw_offset_deg=yaw_offset_deg)),
+        body_name=body,
+        rate_hz=rate_hz,
+        version=version,
+        noise_m=noise_mm / 1000.0,
+        faults=faults,
+        seed=seed,
+        command_port=port,
+    )
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: server.stop())
+    print(f"READY {server.url}", flush=True)
+    print(
+        f"mock Motive (NatNet {natnet}) on 127.0.0.1:{server.command_port}, frames to "
+        f"{server.multicast_group}:{server.data_port} on loopback; Ctrl-C to stop",
+        file=sys.stderr,
+        flush=True,
+    )
+    try:
+        server.serve()
+    finally:
+        server.close()
+        print(json.dumps(server.stats()), file=sys.stderr, flush=True)

@@ -1,0 +1,478 @@
+"""A mock OptiTrack Motive: one rigid body streamed over NatNet, in real time.
+
+Sockets, as Motive opens them: a **command** socket (Motive's 1510) answers ``NAT_CONNECT``
+with ``NAT_SERVERINFO`` and ``NAT_REQUEST_MODELDEF`` with ``NAT_MODELDEF``, ignores
+``NAT_KEEPALIVE`` and answers any other request with ``NAT_UNRECOGNIZED_REQUEST``; a **data**
+socket (Motive's 1511) sends every ``NAT_FRAMEOFDATA`` to the multicast group (Motive's
+239.255.42.99), so the source port of frames is the data port. Both sockets are bound to
+127.0.0.1 on ports the system picks (port 0), and frames leave through the loopback interface
+with a multicast TTL of 0: they never leave the machine. Parallel servers are kept apart by
+their data ports, which the system hands out once: a client learns the data port and the group
+from ``NAT_SERVERINFO`` and listens on that port only (Linux delivers a group's datagrams to
+the sockets bound to their destination port). The data socket is bound with ``SO_REUSEADDR``
+so that a client on the same machine can bind the same port, as beside a real Motive.
+
+Each frame, at ``rate_hz`` on a grid of the monotonic clock, the true pose comes from
+``pose_fn(t_s)`` in the system's own axes (Motive: Y up); the rigid body's markers are placed
+with it, each gets Gaussian noise of ``noise_m`` per axis, and the pose is solved back from the
+noisy markers (least squares, as Motive's rigid-body solver does), which also gives the mean
+marker error of the frame. Faults (:class:`FaultWindow`) act on top: an occlusion clears the
+tracking-valid flag, a dropout sends nothing, a freeze repeats the last datagram byte for
+byte, a jump offsets the solved position.
+
+Time stamps: the frame's ``timestamp`` counts frames over the rate since the first frame (as
+Motive's does); the high-resolution stamps are this machine's monotonic clock in ticks of
+:data:`CLOCK_HZ` (mid-exposure and data-received = the frame's instant on the grid, transmit =
+the moment of sending), so a client on this machine can measure its latency against them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import select
+import socket
+import struct
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gcs.flight.mocap.frames import matrix_to_quat, quat_to_matrix
+from gcs.mock.mocap import natnet
+
+__all__ = [
+    "CLOCK_HZ",
+    "DEFAULT_MARKERS_M",
+    "FAULT_KINDS",
+    "FaultWindow",
+    "NatNetServer",
+    "SentFrame",
+    "solve_rigid_body",
+]
+
+#: Ticks per second of the high-resolution stamps (Windows' QueryPerformanceCounter rate).
+CLOCK_HZ = 10_000_000
+#: Markers of the default rigid body in its own frame [m]: five, asymmetric, about 10 cm.
+DEFAULT_MARKERS_M = np.array(
+    [
+        [0.080, 0.010, 0.000],
+        [-0.060, 0.020, 0.050],
+        [-0.050, 0.005, -0.070],
+        [0.000, 0.030, 0.090],
+        [0.030, -0.010, -0.040],
+    ]
+)
+FAULT_KINDS = ("occlusion", "dropout", "freeze", "jump")
+PoseFn = Callable[[float], tuple[np.ndarray, np.ndarray] | None]
+
+
+@dataclass(frozen=True)
+class FaultWindow:
+    """A fault over a window of server time.
+
+    Parameters
+    ----------
+    kind : str
+        ``"occlusion"`` (body not tracked), ``"dropout"`` (no frames), ``"freeze"`` (the last
+        datagram repeated) or ``"jump"`` (position offset by ``offset_m``).
+    start_s : float
+        Start [s of server time, see :meth:`NatNetServer.now_s`].
+    duration_s : float
+        Length [s].
+    offset_m : tuple of float
+        Offset of a jump, system axes [m].
+    """
+
+    kind: str
+    start_s: float
+    duration_s: float
+    offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if self.kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind must be one of {FAULT_KINDS}, got {self.kind!r}")
+        if not (self.duration_s > 0 and math.isfinite(self.start_s + self.duration_s)):
+            raise ValueError(f"{self.kind}: duration must be positive and times finite")
+
+    def active(self, t_s: float) -> bool:
+        """Whether the window covers server time ``t_s``.
+
+        Parameters
+        ----------
+        t_s : float
+            Server time [s].
+
+        Returns
+        -------
+        bool
+        """
+        return self.start_s <= t_s < self.start_s + self.duration_s
+
+
+@dataclass(frozen=True)
+class SentFrame:
+    """What the server sent in one frame (for tests and latency measurements).
+
+    Parameters
+    ----------
+    frame_number : int
+        NatNet frame number.
+    t_s : float
+        Server time of the frame (the instant the pose was taken) [s].
+    t_send_s : float
+        ``time.monotonic()`` just before the datagram left.
+    tracked : bool
+        Tracking-valid flag sent.
+    pos_m : tuple of float
+        Position sent (float32 values), system frame [m].
+    quat_wxyz : tuple of float
+        Orientation sent (float32 values).
+    true_pos_m : tuple of float
+        Position given by the pose function, system frame [m].
+    """
+
+    frame_number: int
+    t_s: float
+    t_send_s: float
+    tracked: bool
+    pos_m: tuple[float, float, float]
+    quat_wxyz: tuple[float, float, float, float]
+    true_pos_m: tuple[float, float, float]
+
+
+def solve_rigid_body(
+    markers_body_m: np.ndarray, markers_world_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Least-squares pose of a rigid body from its markers (Kabsch).
+
+    Parameters
+    ----------
+    markers_body_m : numpy.ndarray
+        Marker positions in the body frame, shape (M, 3) [m].
+    markers_world_m : numpy.ndarray
+        The same markers measured in the world frame, shape (M, 3) [m].
+
+    Returns
+    -------
+    pos_m : numpy.ndarray
+        Body origin in the world, shape (3,) [m].
+    quat_wxyz : numpy.ndarray
+        Body-to-world orientation, shape (4,).
+    error_m : float
+        Mean distance between the measured markers and the fitted ones [m].
+    """
+    b = np.asarray(markers_body_m, dtype=float)
+    w = np.asarray(markers_world_m, dtype=float)
+    cb, cw = b.mean(axis=0), w.mean(axis=0)
+    u, _, vt = np.linalg.svd((b - cb).T @ (w - cw))
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    rot = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    pos = cw - rot @ cb
+    error = float(np.mean(np.linalg.norm(w - (b @ rot.T + pos), axis=1)))
+    return pos, matrix_to_quat(rot), error
+
+
+@dataclass
+class _Stats:
+    frames: int = 0
+    sent: int = 0
+    connects: int = 0
+    modeldef_requests: int = 0
+    clients: set[tuple[str, int]] = field(default_factory=set)
+
+
+class NatNetServer:
+    """Serve one rigid body over NatNet like OptiTrack Motive (multicast on loopback).
+
+    Parameters
+    ----------
+    pose_fn : callable
+        ``pose_fn(t_s) -> (pos_m, quat_wxyz)`` in the system's own axes, or None when the
+        body is out of view; ``t_s`` is server time (:meth:`now_s`).
+    body_name : str
+        Rigid body name in the model definitions.
+    body_id : int
+        Its streaming id.
+    rate_hz : float
+        Frame rate [Hz], 1 to 1000 (Motive: 30-360 and more).
+    version : tuple of int
+        NatNet bitstream version announced and written (see :data:`natnet.VERSIONS`).
+    noise_m : float
+        Standard deviation of the noise of each marker coordinate [m].
+    faults : tuple of FaultWindow
+        Faults from the start; more can be added with :meth:`add_fault`.
+    seed : int
+        Seed of the marker noise.
+    host : str
+        Address both sockets bind to (loopback).
+    command_port : int
+        Command port, 0 for any free one.
+    multicast_group : str
+        Group the frames go to.
+    markers_m : numpy.ndarray
+        Rigid body markers in its own frame, shape (M, 3) [m].
+    history : int
+        How many :class:`SentFrame` records :attr:`sent` keeps.
+
+    Attributes
+    ----------
+    command_port : int
+        Bound command port.
+    data_port : int
+        Bound data port (where clients listen).
+    sent : collections.deque of SentFrame
+        The most recent frames sent.
+    """
+
+    def __init__(
+        self,
+        pose_fn: PoseFn,
+        body_name: str = "drone",
+        body_id: int = 1,
+        rate_hz: float = 120.0,
+        version: tuple[int, int] = (4, 1),
+        noise_m: float = 2e-4,
+        faults: tuple[FaultWindow, ...] = (),
+        seed: int = 0,
+        host: str = "127.0.0.1",
+        command_port: int = 0,
+        multicast_group: str = "239.255.42.99",
+        markers_m: np.ndarray = DEFAULT_MARKERS_M,
+        history: int = 20_000,
+    ) -> None:
+        if not 1.0 <= rate_hz <= 1000.0:
+            raise ValueError(f"rate_hz must be within 1..1000, got {rate_hz}")
+        if noise_m < 0 or not math.isfinite(noise_m):
+            raise ValueError(f"noise_m must be finite and >= 0, got {noise_m}")
+        self.pose_fn = pose_fn
+        self.model = natnet.RigidBodyModel(body_name, body_id, markers_m)
+        self.rate_hz = float(rate_hz)
+        self.version = tuple(version)
+        natnet.server_info(self.version, (0, 0, 0, 0), CLOCK_HZ, 0, None)  # validates version
+        self.noise_m = float(noise_m)
+        self.multicast_group = multicast_group
+        self.host = host
+        self.sent: deque[SentFrame] = deque(maxlen=history)
+        self._faults: list[FaultWindow] = list(faults)
+        self._rng = np.random.default_rng(seed)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._stats = _Stats()
+        self._last_datagram: bytes | None = None
+        self._t0 = time.monotonic()
+        self._cmd = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._data = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._cmd.bind((host, command_port))
+            self._data.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self._data.bind((host, 0))
+            self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(host))
+            self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+            self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+        except OSError:
+            self.close()
+            raise
+        self.command_port = self._cmd.getsockname()[1]
+        self.data_port = self._data.getsockname()[1]
+        self._wake_r, self._wake_w = socket.socketpair()
+
+    @property
+    def url(self) -> str:
+        """``optitrack://HOST:COMMAND_PORT/BODY?interface=HOST``, for gcs's mocap client."""
+        return (
+            f"optitrack://{self.host}:{self.command_port}/{self.model.name}?interface={self.host}"
+        )
+
+    def now_s(self) -> float:
+        """Server time [s]: monotonic seconds since the server was created.
+
+        Returns
+        -------
+        float
+        """
+        return time.monotonic() - self._t0
+
+    def add_fault(self, fault: FaultWindow) -> None:
+        """Add a fault window (thread-safe; times are server time).
+
+        Parameters
+        ----------
+        fault : FaultWindow
+            The fault.
+        """
+        with self._lock:
+            self._faults.append(fault)
+
+    def stats(self) -> dict[str, int]:
+        """Counters: frames due, datagrams sent, connects, model-definition requests, clients.
+
+        Returns
+        -------
+        dict
+        """
+        s = self._stats
+        return {
+            "frames": s.frames,
+            "sent": s.sent,
+            "connects": s.connects,
+            "modeldef_requests": s.modeldef_requests,
+            "clients": len(s.clients),
+        }
+
+    def start(self) -> NatNetServer:
+        """Serve in a background thread; returns self.
+
+        Returns
+        -------
+        NatNetServer
+        """
+        self._thread = threading.Thread(target=self.serve, name="natnet-server", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop serving (from any thread or a signal handler) and close the sockets."""
+        self._stop.set()
+        with contextlib.suppress(OSError):
+            self._wake_w.send(b"x")
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+        self.close()
+
+    def close(self) -> None:
+        """Close the sockets."""
+        for sock in (self._cmd, self._data, getattr(self, "_wake_r", None)):
+            if sock is not None:
+                sock.close()
+        if hasattr(self, "_wake_w"):
+            self._wake_w.close()
+
+    def __enter__(self) -> NatNetServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def serve(self) -> None:
+        """Serve until :meth:`stop`: frames on the rate grid, commands as they arrive."""
+        period = 1.0 / self.rate_hz
+        k = 0
+        while not self._stop.is_set():
+            due = self._t0 + k * period
+            try:
+                ready, _, _ = select.select(
+                    [self._cmd, self._wake_r], [], [], max(0.0, due - time.monotonic())
+                )
+            except (OSError, ValueError):
+                return  # closed under us
+            if self._cmd in ready:
+                self._answer_command()
+            now = time.monotonic()
+            if now >= due and not self._stop.is_set():
+                self._frame(k, due)
+                # after a stall of more than a period, skip the frames already missed
+                k = max(k + 1, math.floor((now - self._t0) / period))
+
+    def _answer_command(self) -> None:
+        try:
+            datagram, addr = self._cmd.recvfrom(65535)
+        except OSError:
+            return
+        msg = natnet.message_id(datagram)
+        if msg == natnet.NAT_CONNECT:
+            self._stats.connects += 1
+            self._stats.clients.add(addr)
+            reply = natnet.server_info(
+                self.version, (3, 1, 0, 0), CLOCK_HZ, self.data_port, self.multicast_group
+            )
+        elif msg == natnet.NAT_REQUEST_MODELDEF:
+            self._stats.modeldef_requests += 1
+            reply = natnet.model_definitions(self.version, [self.model])
+        elif msg == natnet.NAT_ECHOREQUEST and len(datagram) >= 12:
+            # clock synchronisation of the SDK: its stamp back, with ours
+            reply = natnet.packet(
+                natnet.NAT_ECHORESPONSE,
+                datagram[4:12] + struct.pack("<Q", int(time.monotonic() * CLOCK_HZ)),
+            )
+        elif msg == natnet.NAT_KEEPALIVE or msg is None:
+            return
+        else:
+            reply = natnet.packet(natnet.NAT_UNRECOGNIZED_REQUEST, b"")
+        with contextlib.suppress(OSError):
+            self._cmd.sendto(reply, addr)
+
+    def _active(self, t_s: float) -> dict[str, FaultWindow]:
+        with self._lock:
+            return {f.kind: f for f in self._faults if f.active(t_s)}
+
+    def _measure(
+        self, t_s: float, jump: FaultWindow | None
+    ) -> tuple[natnet.RigidBodyState, tuple[float, float, float]]:
+        """The body as the cameras see it at ``t_s`` (noisy markers, solved pose); true position."""
+        pose = self.pose_fn(t_s)
+        body = self.model.markers_m
+        if pose is None:
+            lost = natnet.RigidBodyState(False, np.zeros(3), np.array([1.0, 0, 0, 0]), 0.0, body)
+            return lost, (math.nan, math.nan, math.nan)
+        pos, quat = np.asarray(pose[0], float), np.asarray(pose[1], float)
+        markers = body @ quat_to_matrix(quat).T + pos
+        if self.noise_m > 0:
+            markers = markers + self._rng.normal(0.0, self.noise_m, markers.shape)
+        solved_pos, solved_q, error = solve_rigid_body(body, markers)
+        if jump is not None:
+            offset = np.asarray(jump.offset_m, dtype=float)
+            solved_pos, markers = solved_pos + offset, markers + offset
+        state = natnet.RigidBodyState(True, solved_pos, solved_q, error, markers)
+        return state, (float(pos[0]), float(pos[1]), float(pos[2]))
+
+    def _frame(self, k: int, t_grid: float) -> None:
+        t_s = t_grid - self._t0
+        self._stats.frames += 1
+        faults = self._active(t_s)
+        if "dropout" in faults:
+            return
+        if "freeze" in faults and self._last_datagram is not None:
+            self._send(self._last_datagram, None)
+            return
+        state, true_pos = self._measure(t_s, faults.get("jump"))
+        if "occlusion" in faults:
+            state = natnet.RigidBodyState(
+                False, np.zeros(3), np.array([1.0, 0, 0, 0]), 0.0, state.markers_m
+            )
+        grid_ticks = int(t_grid * CLOCK_HZ)
+        stamps = natnet.FrameStamps(
+            timestamp_s=k / self.rate_hz,
+            mid_exposure_ticks=grid_ticks,
+            data_received_ticks=grid_ticks,
+            transmit_ticks=int(time.monotonic() * CLOCK_HZ),
+        )
+        datagram = natnet.frame_of_data(self.version, k, [self.model], [state], stamps)
+        self._last_datagram = datagram
+        self._send(
+            datagram,
+            SentFrame(
+                frame_number=k,
+                t_s=t_s,
+                t_send_s=math.nan,
+                tracked=state.tracked,
+                pos_m=tuple(float(v) for v in np.float32(state.pos_m)),
+                quat_wxyz=tuple(float(v) for v in np.float32(state.quat_wxyz)),
+                true_pos_m=true_pos,
+            ),
+        )
+
+    def _send(self, datagram: bytes, record: SentFrame | None) -> None:
+        t_send = time.monotonic()
+        try:
+            self._data.sendto(datagram, (self.multicast_group, self.data_port))
+        except OSError:
+            return
+        self._stats.sent += 1
+        if record is not None:
+            self.sent.append(dataclasses.replace(record, t_send_s=t_send))

@@ -1,0 +1,318 @@
+"""The mocap client (``motioncapture`` library in its reader process) against the mock Motive
+over real NatNet on loopback: poses through the frame mapping, rate, time stamps, faults found
+by the health checks, a mirrored mapping caught, and the failure modes of the library."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from gcs.errors import MocapError
+from gcs.flight.mocap.checks import move_direction_problem
+from gcs.flight.mocap.client import MocapClient, MocapSample
+from gcs.flight.mocap.frames import FrameMapping, mapping_for, quat_angle_rad
+from gcs.flight.mocap.health import (
+    HealthLimits,
+    frozen_problem,
+    jump_problem,
+    occlusion_problem,
+    stale_problem,
+    stream_problem,
+)
+from gcs.flight.mocap.source import MocapSource, parse_mocap_url
+from gcs.io.mocap_samples import MocapSeries
+from gcs.mock.mocap.process import MocapServerProcess
+from gcs.mock.mocap.scripted import Circle, Hover, in_room
+from gcs.mock.mocap.server import FaultWindow, NatNetServer
+
+ROOM = mapping_for("optitrack", yaw_offset_deg=30.0, origin_m=(0.5, 0.0, -0.25))
+LIMITS = HealthLimits()
+WAIT_S = 5.0  # longest wait for an event that should come within a fraction of a second
+
+
+def serve(pose_ned=None, room: FrameMapping = ROOM, **kwargs) -> NatNetServer:
+    return NatNetServer(in_room(pose_ned or Hover(), room), **kwargs).start()
+
+
+def connect(server: NatNetServer, body: str | None = None) -> MocapClient:
+    source = parse_mocap_url(server.url)
+    if body is not None:
+        source = MocapSource(source.system, source.host, source.port, body, source.interface_ip)
+    return MocapClient(source)
+
+
+@pytest.fixture
+def hover() -> Iterator[tuple[NatNetServer, MocapClient]]:
+    server = serve(rate_hz=200.0)
+    client = connect(server).start()
+    yield server, client
+    client.stop()
+    server.stop()
+
+
+def _until(client: MocapClient, seq: int) -> MocapSeries:
+    """The client's recent samples up to and including ``seq``."""
+    series = client.recent(4.0)
+    keep = series.seq <= seq
+    return MocapSeries(
+        series.seq[keep],
+        series.t_receipt_s[keep],
+        series.t_mocap_s[keep],
+        series.tracked[keep],
+        series.pos_m[keep],
+        series.quat_wxyz[keep],
+    )
+
+
+def test_pose_round_trip_rate_and_timestamps_at_240_hz() -> None:
+    circle = Circle(radius_m=1.0, period_s=4.0)
+    server = serve(circle, rate_hz=240.0, noise_m=3e-4)
+    try:
+        with MocapClient(parse_mocap_url(server.url)) as client:
+            first = client.wait_until(lambda s: s.tracked, WAIT_S)
+            client.wait_until(lambda s: s.seq >= first.seq + 240, WAIT_S)
+            got = client.drain()
+    finally:
+        server.stop()
+    assert np.all(np.diff(got.seq) == 1)
+    assert np.all(np.diff(got.t_receipt_s) > 0)
+    # each sample is a distinct frame the server sent, in order, exactly as sent
+    by_pos = {f.pos_m: f for f in server.sent}
+    frames = [by_pos[tuple(float(v) for v in p)] for p in got.pos_m[got.tracked]]
+    numbers = np.array([f.frame_number for f in frames])
+    assert np.all(np.diff(numbers) > 0)
+    # rate: the frames arrive in real time on the server's 240 Hz clock; under load the library
+    # keeps only the newest frame when it falls behind (fraction measured in benchmarks/)
+    frame_span_s = (numbers[-1] - numbers[0]) / 240.0
+    receipt_span_s = got.t_receipt_s[got.tracked][-1] - got.t_receipt_s[got.tracked][0]
+    assert receipt_span_s == pytest.approx(frame_span_s, abs=0.05)
+    assert len(numbers) >= 0.6 * (numbers[-1] - numbers[0] + 1)
+    assert np.median(np.diff(got.t_receipt_s)) == pytest.approx(1 / 240, rel=0.25)
+    # poses: the client's samples, mapped to NED, are the circle within the noise
+    errors, turns = [], []
+    for frame, pos, quat in zip(
+        frames, got.pos_m[got.tracked], got.quat_wxyz[got.tracked], strict=True
+    ):
+        truth_pos, truth_q = circle(frame.t_s)
+        errors.append(np.linalg.norm(ROOM.position_to_ned(pos) - truth_pos))
+        turns.append(math.degrees(float(quat_angle_rad(ROOM.attitude_to_ned(quat), truth_q))))
+    assert len(errors) >= 200
+    assert max(errors) < 2e-3  # 0.3 mm marker noise over five markers: ~0.2 mm per axis
+    assert max(turns) < 1.0
+
+
+@pytest.mark.parametrize("version", [(3, 0), (3, 1), (4, 0), (4, 1)])
+def test_every_natnet_version_is_read_by_the_library(version: tuple[int, int]) -> None:
+    server = serve(Hover((0.2, -0.4, -1.5)), version=version, rate_hz=100.0)
+    try:
+        with connect(server) as client:
+            sample = client.wait_until(lambda s: s.tracked, WAIT_S)
+            assert client.names_seen == ("drone",)
+    finally:
+        server.stop()
+    np.testing.assert_allclose(ROOM.position_to_ned(np.array(sample.pos_m)), [0.2, -0.4, -1.5],
+                               atol=2e-3)  # fmt: skip
+    assert server.stats()["connects"] == 1 and server.stats()["modeldef_requests"] == 1
+
+
+def test_occlusion_is_reported_by_the_health_check(hover) -> None:
+    server, client = hover
+    start = client.wait_until(lambda s: s.tracked, WAIT_S)
+    assert stream_problem(client.recent(0.5), start.t_receipt_s) is None
+    server.add_fault(FaultWindow("occlusion", server.now_s() + 0.05, 0.35))
+    lost = client.wait_until(lambda s: not s.tracked, WAIT_S)
+    back = client.wait_until(lambda s: s.tracked, WAIT_S)
+    window = _until(client, back.seq - 1)
+    assert lost.seq in window.seq and not window.tracked[-1]
+    reason = occlusion_problem(window, float(window.t_receipt_s[-1]), LIMITS)
+    assert reason is not None and reason.startswith("rigid body lost (not tracked for 0.3")
+
+
+def test_dropout_is_reported_as_stale(hover) -> None:
+    server, client = hover
+    client.wait_until(lambda s: s.tracked, WAIT_S)
+    server.add_fault(FaultWindow("dropout", server.now_s() + 0.05, 0.4))
+    previous = [client.latest()]
+
+    def after_gap(s: MocapSample) -> bool:
+        gap = s.t_receipt_s - previous[0].t_receipt_s
+        previous[0] = s
+        return gap > 0.3
+
+    resumed = client.wait_until(after_gap, WAIT_S)
+    before = _until(client, resumed.seq - 1)
+    reason = stale_problem(before, resumed.t_receipt_s - 1e-3, LIMITS)
+    assert reason is not None and reason.startswith("mocap stream stale (0.")
+
+
+def test_frozen_stream_is_reported(hover) -> None:
+    server, client = hover
+    client.wait_until(lambda s: s.tracked, WAIT_S)
+    server.add_fault(FaultWindow("freeze", server.now_s() + 0.05, 0.3))
+    run = [0, client.latest()]
+
+    def thawed(s: MocapSample) -> bool:
+        same = (s.pos_m, s.quat_wxyz) == (run[1].pos_m, run[1].quat_wxyz)
+        done = run[0] >= 10 and not same
+        run[0] = run[0] + 1 if same else 0
+        run[1] = s
+        return done
+
+    thaw = client.wait_until(thawed, WAIT_S)
+    reason = frozen_problem(_until(client, thaw.seq - 1), LIMITS)
+    assert reason is not None and "identical frames over 0." in reason
+    assert frozen_problem(_until(client, thaw.seq - 60), LIMITS) is None  # before the freeze
+
+
+def test_jump_is_reported(hover) -> None:
+    server, client = hover
+    first = client.wait_until(lambda s: s.tracked, WAIT_S)
+    server.add_fault(FaultWindow("jump", server.now_s() + 0.05, 0.05, (0.3, 0.0, 0.0)))
+    jumped = client.wait_until(
+        lambda s: s.tracked and abs(s.pos_m[0] - first.pos_m[0]) > 0.2, WAIT_S
+    )
+    assert jump_problem(_until(client, jumped.seq - 1), LIMITS) is None
+    reason = jump_problem(_until(client, jumped.seq), LIMITS)
+    assert reason is not None and reason.startswith("mocap position jumped 0.3")
+
+
+def test_server_that_stops_leaves_the_reader_blocked_and_the_stream_stale(hover) -> None:
+    server, client = hover
+    client.wait_until(lambda s: s.tracked, WAIT_S)
+    server.stop()
+    stopped = time.monotonic()
+    with pytest.raises(MocapError, match="no matching mocap sample"):
+        client.wait_until(lambda s: s.t_receipt_s > stopped + 0.01, 0.4)
+    assert client.problem() is None  # the library just waits: only the age tells
+    reason = stream_problem(client.recent(2.0), time.monotonic())
+    assert reason is not None and reason.startswith("mocap stream stale")
+
+
+def test_mirrored_mapping_sends_an_east_move_west() -> None:
+    def east(t_s: float):
+        return np.array([0.0, 0.5 * t_s, -1.0]), np.array([1.0, 0.0, 0.0, 0.0])
+
+    server = serve(east, room=mapping_for("optitrack"), rate_hz=100.0)
+    mirrored = FrameMapping(up_axis="+y", north_axis="+x", right_handed=False)
+    try:
+        with connect(server) as client:
+            a = client.wait_until(lambda s: s.tracked, WAIT_S)
+            b = client.wait_until(lambda s: s.tracked and s.t_receipt_s > a.t_receipt_s + 0.5,
+                                  WAIT_S)  # fmt: skip
+    finally:
+        server.stop()
+    pa, pb = np.array(a.pos_m), np.array(b.pos_m)
+    truth = mapping_for("optitrack").position_to_ned(np.vstack([pa, pb]))
+    moved = truth[1] - truth[0]
+    assert moved[1] > 0.2  # the vehicle really went east
+    wrong = mirrored.position_to_ned(pb) - mirrored.position_to_ned(pa)
+    reason = move_direction_problem(moved, moved, wrong)
+    assert reason is not None and "frame mapping is wrong" in reason
+    assert move_direction_problem(moved, moved, moved) is None
+
+
+def test_no_server_times_out_without_freezing_this_process() -> None:
+    import socket
+
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))  # a port that receives and never answers
+    ticks: list[float] = []
+    stop = threading.Event()
+
+    def tick() -> None:
+        while not stop.wait(0.01):
+            ticks.append(time.monotonic())
+
+    ticker = threading.Thread(target=tick)
+    ticker.start()
+    source = MocapSource("optitrack", "127.0.0.1", silent.getsockname()[1], "drone", "127.0.0.1")
+    t0 = time.monotonic()
+    try:
+        with pytest.raises(MocapError, match=r"no answer from optitrack server 127\.0\.0\.1"):
+            MocapClient(source, connect_timeout_s=1.0).start()
+    finally:
+        stop.set()
+        ticker.join()
+        silent.close()
+    assert 1.0 <= time.monotonic() - t0 < 4.0
+    gaps = np.diff([t0, *ticks])
+    assert len(ticks) > 50 and gaps.max() < 0.5  # this process kept running meanwhile
+
+
+def test_refused_connection_fails_at_once_with_the_library_s_reason() -> None:
+    import socket
+
+    with socket.socket() as closed:  # a TCP port nobody listens on (QTM's protocol is TCP)
+        closed.bind(("127.0.0.1", 0))
+        port = closed.getsockname()[1]
+    source = MocapSource("qualisys", "127.0.0.1", port, "drone", "0.0.0.0")
+    t0 = time.monotonic()
+    with pytest.raises(MocapError, match="qualisys connect failed: Error connecting QTM"):
+        MocapClient(source, connect_timeout_s=10.0).start()
+    assert time.monotonic() - t0 < 5.0  # the reason, not the timeout
+
+
+def test_a_failing_callback_ends_the_stream_with_its_reason() -> None:
+    server = serve(rate_hz=100.0)
+
+    def broken(sample: MocapSample) -> None:
+        raise ZeroDivisionError("boom")
+
+    source = parse_mocap_url(server.url)
+    try:
+        client = MocapClient(source, on_sample=broken).start()
+        with pytest.raises(MocapError, match="ZeroDivisionError"):
+            client.wait_until(lambda s: False, WAIT_S)
+        client.stop()
+    finally:
+        server.stop()
+    assert client.cpu_seconds()["reader"] >= 0  # the reader was ended, its CPU kept
+
+
+def test_unknown_rigid_body_is_never_tracked_and_the_names_say_why() -> None:
+    server = serve(rate_hz=100.0)
+    try:
+        with connect(server, body="Drone") as client:
+            first = client.wait_until(lambda s: True, WAIT_S)
+            last = client.wait_until(lambda s: s.t_receipt_s > first.t_receipt_s + 0.3, WAIT_S)
+            series = client.recent(2.0)
+            assert client.names_seen == ("drone",)
+    finally:
+        server.stop()
+    assert not series.tracked.any()
+    reason = occlusion_problem(series, last.t_receipt_s, LIMITS)
+    assert reason is not None and "not tracked in any frame" in reason
+
+
+def test_reader_crash_ends_the_stream_with_a_reason(hover) -> None:
+    _, client = hover
+    client.wait_until(lambda s: s.tracked, WAIT_S)
+    os.kill(client.reader_pid, signal.SIGSEGV)
+    with pytest.raises(MocapError, match="ended by signal 11"):
+        client.wait_until(lambda s: False, WAIT_S)
+    assert client.problem() == "mocap reader ended by signal 11"
+
+
+def test_server_program_and_its_ready_url() -> None:
+    with MocapServerProcess(["--rate", "100", "--natnet", "3.1", "--circle", "1:4"]) as mock:
+        client = MocapClient(parse_mocap_url(mock.url)).start()
+        try:
+            sample = client.wait_until(lambda s: s.tracked, WAIT_S)
+        finally:
+            client.stop()
+    ned = mapping_for("optitrack").position_to_ned(np.array(sample.pos_m))
+    assert math.hypot(ned[0], ned[1]) == pytest.approx(1.0, abs=2e-3)
+    assert ned[2] == pytest.approx(-1.0, abs=2e-3)
+    assert '"connects": 1' in mock.stderr_text
+
+
+def test_server_program_refuses_bad_options() -> None:
+    with pytest.raises(MocapError, match="--natnet must be one of"):
+        MocapServerProcess(["--natnet", "2.9"]).__enter__()

@@ -1,0 +1,118 @@
+"""NatNet packets of the mock Motive, checked byte by byte against the documented layouts."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from gcs.flight.mocap.frames import matrix_to_quat, quat_angle_rad, quat_to_matrix
+from gcs.mock.mocap import natnet
+from gcs.mock.mocap.server import DEFAULT_MARKERS_M, solve_rigid_body
+
+MODEL = natnet.RigidBodyModel("drone", 7, DEFAULT_MARKERS_M)
+STAMPS = natnet.FrameStamps(12.25, 1_000, 2_000, 3_000)
+POS = np.array([1.0, 2.0, 3.0])
+QUAT = np.array([0.5, 0.5, 0.5, 0.5])
+
+
+def frame(version, tracked=True) -> bytes:
+    markers = DEFAULT_MARKERS_M @ quat_to_matrix(QUAT).T + POS
+    state = natnet.RigidBodyState(tracked, POS, QUAT, 0.0005, markers)
+    return natnet.frame_of_data(version, 42, [MODEL], [state], STAMPS)
+
+
+def test_server_info_is_the_packed_sender_server() -> None:
+    data = natnet.server_info((4, 1), (3, 1, 0, 0), 10_000_000, 51234, "239.255.42.99")
+    assert len(data) == 4 + 256 + 4 + 4 + 8 + 2 + 1 + 4
+    assert struct.unpack_from("<HH", data) == (natnet.NAT_SERVERINFO, len(data) - 4)
+    assert data[4:11] == b"Motive\0"
+    assert tuple(data[260:264]) == (3, 1, 0, 0)
+    assert tuple(data[264:268]) == (4, 1, 0, 0)
+    assert struct.unpack_from("<QH?", data, 268) == (10_000_000, 51234, True)
+    assert tuple(data[279:283]) == (239, 255, 42, 99)
+    unicast = natnet.server_info((3, 0), (2, 3, 0, 0), 1, 1511, None)
+    assert unicast[278] == 0 and unicast[279:] == bytes(4)
+
+
+def test_rigid_body_description_per_version() -> None:
+    d40 = natnet.model_definitions((4, 0), [MODEL])
+    d41 = natnet.model_definitions((4, 1), [MODEL])
+    d31 = natnet.model_definitions((3, 1), [MODEL])
+    assert struct.unpack_from("<HHii", d40) == (natnet.NAT_MODELDEF, len(d40) - 4, 1, 1)
+    body40 = d40[12:]
+    # name, id, parent, offset, marker count, offsets, active labels, names (4.x)
+    assert body40.startswith(b"drone\0")
+    assert struct.unpack_from("<ii3fi", body40, 6) == (7, -1, 0.0, 0.0, 0.0, 5)
+    offsets = np.frombuffer(body40, "<f4", 15, 6 + 24)
+    np.testing.assert_array_equal(offsets, DEFAULT_MARKERS_M.astype(np.float32).ravel())
+    assert body40.endswith(b"Marker1\0Marker2\0Marker3\0Marker4\0Marker5\0")
+    # 3.x: no marker names; 4.1: a byte count after the dataset type
+    assert len(d31) == len(d40) - len(b"Marker1\0") * 5
+    assert struct.unpack_from("<iii", d41, 4) == (1, 1, len(body40))
+    assert d41[16:] == body40
+
+
+def test_frame_layout_3_0_3_1_4_0_identical_4_1_adds_sizes_assets_and_precision_time() -> None:
+    f30, f31, f40, f41 = (frame(v) for v in [(3, 0), (3, 1), (4, 0), (4, 1)])
+    assert f30 == f31 == f40
+    # seven counted lists get a byte count, plus the asset list (count, bytes) and the
+    # precision timestamp (seconds, fraction)
+    assert len(f41) == len(f40) + 7 * 4 + 8 + 8
+    for f in (f40, f41):
+        assert struct.unpack_from("<HHi", f) == (natnet.NAT_FRAMEOFDATA, len(f) - 4, 42)
+        assert struct.unpack_from("<hi", f, len(f) - 6) == (0, 0)  # params, end-of-data tag
+    tail40 = len(f40) - 6 - 24 - 8
+    assert struct.unpack_from("<dQQQ", f40, tail40) == (12.25, 1_000, 2_000, 3_000)
+    tail41 = len(f41) - 6 - 8 - 24 - 8
+    assert struct.unpack_from("<dQQQII", f41, tail41) == (12.25, 1_000, 2_000, 3_000, 12, 2**30)
+
+
+def _rigid_body_block(f: bytes) -> tuple:
+    # 3.x/4.0: frame number; 1 marker set ("drone", 5 markers); 0 legacy markers; 1 body
+    offset = 4 + 4 + 4 + len(b"drone\0") + 4 + 5 * 12 + 4
+    assert struct.unpack_from("<i", f, offset) == (1,)
+    return struct.unpack_from("<i3f4ffh", f, offset + 4)
+
+
+def test_rigid_body_in_the_frame_and_tracking_flag() -> None:
+    rid, x, y, z, qx, qy, qz, qw, err, params = _rigid_body_block(frame((3, 1)))
+    assert rid == 7 and (x, y, z) == (1.0, 2.0, 3.0)
+    assert (qw, qx, qy, qz) == (0.5, 0.5, 0.5, 0.5)
+    assert err == pytest.approx(0.0005) and params & 1 == 1
+    lost = frame((3, 1), tracked=False)
+    # untracked: no marker set for it (count 0), no legacy markers, one body, flag cleared
+    assert struct.unpack_from("<iiii", lost, 4) == (42, 0, 0, 1)
+    params_lost = struct.unpack_from("<i3f4ffh", lost, 4 + 16)[-1]
+    assert params_lost & 1 == 0
+
+
+def test_unknown_version_refused() -> None:
+    with pytest.raises(ValueError, match="not implemented"):
+        natnet.server_info((2, 9), (1, 0, 0, 0), 1, 1, None)
+    with pytest.raises(ValueError, match="shape"):
+        natnet.RigidBodyModel("x", 1, np.zeros((2, 3)))
+
+
+def test_message_id_and_packet() -> None:
+    assert natnet.message_id(natnet.packet(natnet.NAT_KEEPALIVE, b"")) == natnet.NAT_KEEPALIVE
+    assert natnet.message_id(b"\x00") is None
+    with pytest.raises(ValueError, match="uint16"):
+        natnet.packet(natnet.NAT_MODELDEF, bytes(70_000))
+
+
+def test_solver_recovers_the_pose_exactly_without_noise_and_within_noise_with_it() -> None:
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    pos = np.array([0.3, 1.2, -2.0])
+    world = DEFAULT_MARKERS_M @ quat_to_matrix(q).T + pos
+    p, qq, err = solve_rigid_body(DEFAULT_MARKERS_M, world)
+    np.testing.assert_allclose(p, pos, atol=1e-12)
+    assert float(quat_angle_rad(qq, q)) < 1e-7 and err < 1e-12
+    noisy = world + rng.normal(0, 1e-3, world.shape)
+    p, qq, err = solve_rigid_body(DEFAULT_MARKERS_M, noisy)
+    assert np.linalg.norm(p - pos) < 3e-3 and 2e-4 < err < 3e-3
+    assert np.degrees(float(quat_angle_rad(qq, q))) < 3.0
+    assert matrix_to_quat(quat_to_matrix(qq))[0] >= 0
