@@ -40,21 +40,9 @@ def test_fly_mock_gps_settles_on_the_measured_hover_and_learns(tmp_path: Path) -
     run_path, stats_path = tmp_path / "run", tmp_path / "stats.json"
     mock_gps = ROOT / "profiles" / "mock-gps.yaml"
     with MockProcess(mock_gps, seed=1, stats_path=stats_path) as mock:
-        code, out = finish(
-            gcs(
-                "fly",
-                "--connect",
-                mock.url,
-                "--iter",
-                2,
-                "--trajectory",
-                ROOT / "trajectories" / "eight-short.yaml",
-                "--run",
-                run_path,
-                "--profile",
-                gps_ci_profile(tmp_path),
-            )  # fmt: skip
-        )
+        short = ROOT / "trajectories" / "eight-short.yaml"
+        options = ["--iter", 2, "--trajectory", short, "--profile", gps_ci_profile(tmp_path)]
+        code, out = finish(gcs("fly", "--connect", mock.url, "--run", run_path, *options))
     assert code == 0, out
     assert "landed and disarmed" in out
     assert "navigation: GPS (EKF2_GPS_CTRL 7 (position, altitude, velocity)" in out, out

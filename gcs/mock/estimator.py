@@ -23,8 +23,9 @@ source (GPS), per axis ``i``, on the physics grid::
 
 The velocity error is what makes a GPS-navigated PX4 vehicle hover off its setpoint in the
 reported position: its velocity loop drives the *estimated* velocity to ``Kp (r - pos_est)``,
-so a velocity error ``v_err`` holds the reported position ``v_err / Kp`` off the setpoint
-(the shared PX4 SITL hovers: 0.61 m off while reporting 0.58 m/s, with ``MPC_XY_P`` 0.95).
+so a velocity error ``v_err`` holds the reported position about ``v_err / Kp`` off the setpoint
+(a shared PX4 SITL hover starts 0.70 m off while reporting 0.58 m/s towards the point;
+0.58 / ``MPC_XY_P`` 0.95 = 0.61 m).
 The same error is what the reported data show as the difference between the reported
 velocity and the derivative of the reported position: ``d(pos_est)/dt - vel_est`` equals
 ``-(p_err - g) / T``, which follows ``-v_err`` low-passed by ``T``. The truth is available for
@@ -37,7 +38,7 @@ from __future__ import annotations
 
 import math
 import random
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from gcs.mock.config import EstimatorConfig
@@ -85,10 +86,10 @@ class ErrorProcess(Protocol):
 class _OrnsteinUhlenbeck:
     """Exact discretisation of a stationary Ornstein-Uhlenbeck process, started stationary."""
 
-    def __init__(self, sigma: float, tau_s: float, gauss: object) -> None:
+    def __init__(self, sigma: float, tau_s: float, gauss: Callable[[float, float], float]) -> None:
         self.sigma, self.tau_s = sigma, tau_s
         self._gauss = gauss
-        self.x = sigma * gauss(0.0, 1.0) if sigma > 0 else 0.0  # type: ignore[operator]
+        self.x = sigma * gauss(0.0, 1.0) if sigma > 0 else 0.0
         self._dt = math.nan
         self._a = self._b = 0.0
 
@@ -99,7 +100,7 @@ class _OrnsteinUhlenbeck:
             self._dt = dt_s
             self._a = math.exp(-dt_s / self.tau_s)
             self._b = self.sigma * math.sqrt(1.0 - self._a * self._a)
-        self.x = self._a * self.x + self._b * self._gauss(0.0, 1.0)  # type: ignore[operator]
+        self.x = self._a * self.x + self._b * self._gauss(0.0, 1.0)
         return self.x
 
 
