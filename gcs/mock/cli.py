@@ -196,6 +196,8 @@ def mock_command(
     50 Hz; SET_MESSAGE_INTERVAL is honoured). The simulated vehicle follows a PX4-like
     cascaded controller whose x and y closed loops resemble eq. (11) of the paper, with a
     repeatable position-dependent disturbance, random gusts and millimetre mocap noise.
+    ``--config profiles/mock-gps.yaml`` is instead a vehicle like PX4 SITL on GPS + EKF2:
+    it flies on an estimate that wanders by decimetres (the truth goes to ``--stats-out``).
 
     Faults: ``--loss`` and ``--latency-ms`` apply from the start and to both directions. The
     times of ``--dropout``, ``--link-loss-at`` and ``--gust`` count in seconds from the
@@ -210,13 +212,16 @@ def mock_command(
 
     SIGTERM or Ctrl-C stops it; with ``--stats-out`` it then writes, atomically, a JSON file
     with the arrival time (monotonic clock and vehicle time) and value of every position
-    setpoint, the mode changes and packet counters.
+    setpoint, the mode changes and packet counters, and with an estimator the true position
+    and the estimator's error every 0.1 s.
 
     Examples:
 
         gcs mock --seed 3
 
         gcs mock --config profiles/mock.yaml --gust 5:2:0:3 --stats-out /tmp/mock.json
+
+        gcs mock --config profiles/mock-gps.yaml --seed 1 --stats-out /tmp/mock-gps.json
 
         gcs mock --clock-rate 0.8
     \f

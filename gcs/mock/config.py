@@ -29,6 +29,7 @@ __all__ = [
     "ControllerConfig",
     "DisturbanceConfig",
     "NoiseConfig",
+    "EstimatorConfig",
     "RatesConfig",
     "Px4Config",
     "MockConfig",
@@ -168,7 +169,7 @@ class DisturbanceConfig:
 
 @dataclass(frozen=True)
 class NoiseConfig:
-    """Measurement noise on the reported state (the controller sees the true state).
+    """Fast measurement noise added to the reported state only (the controller does not see it).
 
     Parameters
     ----------
@@ -183,6 +184,55 @@ class NoiseConfig:
     pos_sigma_m: float = 0.002
     vel_sigma_m_s: float = 0.01
     att_sigma_rad: float = 0.002
+
+
+Ned = tuple[float, float, float]
+"""Three values for the north, east and down axes."""
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Navigation error: the controller acts on, and the mock reports, an estimate.
+
+    Off by default (the indoor mock flies on its true state, a motion-capture vehicle). On, the
+    estimate is the truth plus the error of an inertial solution aided by a wandering absolute
+    position source, as PX4's EKF2 with GPS (``gcs.mock.estimator.AidedInertialError``), per
+    axis::
+
+        v_err  Ornstein-Uhlenbeck (vel_sigma, vel_tau)            inertial velocity error
+        g      Ornstein-Uhlenbeck (aid_sigma, aid_tau_s)          aiding (GPS) position error
+        dp_err/dt = v_err - (p_err - g) / aid_time_constant_s
+        p_err <- g at Poisson times of rate reset_rate_1_s      (estimator reset)
+
+    Seeded by ``--seed`` through its own random stream. ``profiles/mock-gps.yaml`` calibrates it
+    on the shared PX4 SITL data (``benchmarks/mock_gps_calibration.py``, ``docs/mock.md``).
+
+    Parameters
+    ----------
+    enabled : bool
+        Fly on the estimate (True) or on the true state (False, the default).
+    vel_sigma_ned_m_s : tuple of float
+        Standard deviation of the velocity error, north, east, down [m/s].
+    vel_tau_ned_s : tuple of float
+        Correlation time of the velocity error, north, east, down [s].
+    aid_sigma_ned_m : tuple of float
+        Standard deviation of the aiding position error, north, east, down [m].
+    aid_tau_s : float
+        Correlation time of the aiding position error [s].
+    aid_time_constant_s : float
+        Time constant with which the aiding pulls the position estimate back [s].
+    reset_rate_1_s : float
+        Mean number of resets per second (0 = none): the position error jumps onto the aiding
+        error.
+    """
+
+    enabled: bool = False
+    vel_sigma_ned_m_s: Ned = (0.0, 0.0, 0.0)
+    vel_tau_ned_s: Ned = (10.0, 10.0, 10.0)
+    aid_sigma_ned_m: Ned = (0.0, 0.0, 0.0)
+    aid_tau_s: float = 60.0
+    aid_time_constant_s: float = 0.5
+    reset_rate_1_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -307,6 +357,8 @@ class MockConfig:
         Repeatable field and gusts.
     noise : NoiseConfig
         Measurement noise.
+    estimator : EstimatorConfig
+        Navigation error (off: the vehicle flies on its true state).
     rates : RatesConfig
         Default telemetry rates.
     px4 : Px4Config
@@ -317,6 +369,7 @@ class MockConfig:
     controller: ControllerConfig = field(default_factory=ControllerConfig)
     disturbance: DisturbanceConfig = field(default_factory=DisturbanceConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
     rates: RatesConfig = field(default_factory=RatesConfig)
     px4: Px4Config = field(default_factory=Px4Config)
 
@@ -449,6 +502,10 @@ def _check_value(value: Any, annotation: Any, where: str) -> Any:
         if not math.isfinite(value):
             raise ProfileError(f"{where} must be finite, got {value!r}")
         return float(value)
+    if annotation == Ned:
+        if not (isinstance(value, list | tuple) and len(value) == 3):
+            raise ProfileError(f"{where} must be three numbers [north, east, down], got {value!r}")
+        return tuple(_check_value(v, float, where) for v in value)
     if annotation is str:
         if not isinstance(value, str):
             raise ProfileError(f"{where} must be a string, got {value!r}")
@@ -508,7 +565,7 @@ def mock_config_from_dict(data: Any, where: str = "<dict>") -> MockConfig:
 
 def _validate(cfg: MockConfig, where: str) -> None:
     """Range and cross-field checks that a plain type check cannot make."""
-    for section in ("physics", "controller", "disturbance", "noise", "rates"):
+    for section in ("physics", "controller", "disturbance", "noise", "estimator", "rates"):
         sub = getattr(cfg, section)
         for f in dataclasses.fields(sub):
             value = getattr(sub, f.name)
@@ -522,6 +579,20 @@ def _validate(cfg: MockConfig, where: str) -> None:
         ("controller.tilt_max_deg", 0 < cfg.controller.tilt_max_deg < 80, "must be in (0, 80)"),
         ("controller.yaw_lag_s", cfg.controller.yaw_lag_s > 0, "must be > 0"),
         ("disturbance.gust_tau_s", cfg.disturbance.gust_tau_s > 0, "must be > 0"),
+        ("estimator.vel_sigma_ned_m_s", min(cfg.estimator.vel_sigma_ned_m_s) >= 0, "must be >= 0"),
+        ("estimator.vel_tau_ned_s", min(cfg.estimator.vel_tau_ned_s) > 0, "must be > 0"),
+        ("estimator.aid_sigma_ned_m", min(cfg.estimator.aid_sigma_ned_m) >= 0, "must be >= 0"),
+        ("estimator.aid_tau_s", cfg.estimator.aid_tau_s > 0, "must be > 0"),
+        (
+            "estimator.aid_time_constant_s",
+            cfg.estimator.aid_time_constant_s >= 2 * cfg.physics.dt_s,
+            "must be >= 2 physics.dt_s (the pull is integrated on the physics grid)",
+        ),
+        (
+            "estimator.reset_rate_1_s",
+            cfg.estimator.reset_rate_1_s * cfg.physics.dt_s <= 1.0,
+            "must be <= 1 / physics.dt_s",
+        ),
         (
             "disturbance.field_wavelength_max_m",
             cfg.disturbance.field_wavelength_max_m >= cfg.disturbance.field_wavelength_min_m > 0,

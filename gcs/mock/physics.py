@@ -12,8 +12,11 @@ Model, in the local NED frame, integrated with semi-implicit Euler on a fixed gr
 with the wind ``w`` of an injected gust, a smooth position-dependent disturbance field ``d(p)``
 (sums of sines, fixed by ``field_seed``: the same path meets the same disturbance in every
 trial) and Ornstein-Uhlenbeck gusts ``g(t)`` (seeded per run). The ground is the plane
-``down = 0``. The controller sees the true state; :meth:`QuadPhysics.measure` adds
-motion-capture noise to what is reported.
+``down = 0``. The controller acts on the navigation state ``(nav_pos, nav_vel)``: the true
+state itself by default (a motion-capture vehicle), or the estimate of a
+:class:`gcs.mock.estimator.Estimator` when the profile enables one (a GPS-navigated vehicle,
+which then wanders with its estimate). :meth:`QuadPhysics.measure` reports the navigation
+state plus fast measurement noise.
 
 The state is kept in plain floats (not NumPy) because the mock steps it at 250 Hz in real
 time; :func:`step_response` and :func:`fit_step_response` give the small-signal closed loop
@@ -29,6 +32,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from gcs.mock.config import DisturbanceConfig, MockConfig
+from gcs.mock.estimator import Estimator, make_estimator
 
 if TYPE_CHECKING:  # NumPy and SciPy are imported lazily: the real-time mock does not need them
     import numpy as np
@@ -122,9 +126,20 @@ class QuadPhysics:
     cfg : MockConfig
         Physics, controller, disturbance and noise settings.
     seed : int
-        Seed of the gusts and of the measurement noise (not of the disturbance field).
+        Seed of the gusts, the measurement noise and the estimator (not of the disturbance
+        field); each has its own random stream.
     pos_ned_m : tuple of float
         Initial position [m]; on the ground unless ``down < 0``.
+
+    Attributes
+    ----------
+    pos, vel : list of float
+        True position [m] and velocity [m/s], NED.
+    nav_pos, nav_vel : list of float
+        Navigation state the controller and the commander act on: the very ``pos`` and
+        ``vel`` lists without an estimator, the estimate with one.
+    estimator : Estimator or None
+        The navigation error (None: the vehicle flies on its true state).
     """
 
     def __init__(
@@ -149,6 +164,11 @@ class QuadPhysics:
         self._field = DisturbanceField(cfg.disturbance)
         self._rng = random.Random(seed)
         self._noise_rng = random.Random(seed + 0x5EED)
+        self.estimator: Estimator | None = make_estimator(cfg.estimator, seed)
+        self.nav_pos, self.nav_vel = self.pos, self.vel
+        if self.estimator is not None:
+            self.nav_pos, self.nav_vel = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+            self.estimator.apply(self.pos, self.vel, self.nav_pos, self.nav_vel)
         self.gust = [0.0, 0.0, 0.0]
         self._kp = (c.pos_p_x_1_s, c.pos_p_y_1_s, c.pos_p_z_1_s)
         self._kv = (c.vel_p_x_1_s, c.vel_p_y_1_s, c.vel_p_z_1_s)
@@ -219,12 +239,13 @@ class QuadPhysics:
             self.target = queue.popleft()[1]
         tgt = self.target
         pos, vel, acc = self.pos, self.vel, self.acc
+        nav_pos, nav_vel = self.nav_pos, self.nav_vel  # pos, vel themselves without estimator
         grounded = self.on_ground
 
         if self.armed:
             # position -> velocity setpoint
             kp = self._kp
-            vsp = [kp[i] * (tgt.pos_ned_m[i] - pos[i]) for i in range(3)]
+            vsp = [kp[i] * (tgt.pos_ned_m[i] - nav_pos[i]) for i in range(3)]
             if tgt.vz_m_s is not None:
                 vsp[2] = tgt.vz_m_s
             vxy = math.hypot(vsp[0], vsp[1])
@@ -239,7 +260,7 @@ class QuadPhysics:
             # velocity -> acceleration setpoint (PID, derivative on the measured acceleration)
             asp = [0.0, 0.0, 0.0]
             for i in range(3):
-                err = vsp[i] - vel[i]
+                err = vsp[i] - nav_vel[i]
                 if not grounded:
                     lim = c.vel_int_max_m_s2 / self._ki[i] if self._ki[i] > 0 else 0.0
                     self.vel_int[i] = min(max(self.vel_int[i] + err * dt, -lim), lim)
@@ -293,6 +314,10 @@ class QuadPhysics:
             if acc[2] >= 0.0:  # not lifting off: no horizontal push either
                 acc[0] = acc[1] = 0.0
 
+        if self.estimator is not None:
+            self.estimator.step(dt)
+            self.estimator.apply(pos, vel, self.nav_pos, self.nav_vel)
+
     # -- outputs --------------------------------------------------------------------------
     def attitude(self) -> tuple[float, float, float, float, float, float]:
         """Attitude implied by the thrust direction and yaw.
@@ -314,17 +339,18 @@ class QuadPhysics:
         return (roll, pitch, self.yaw_rad, dby / lift, -dbx / lift, self.yaw_rate_rad_s)
 
     def measure(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-        """Reported position and velocity: the true state plus measurement noise.
+        """Reported position and velocity: the navigation state plus measurement noise.
 
         Returns
         -------
         pos_ned_m, vel_ned_m_s : tuple of float
-            Noisy position [m] and velocity [m/s], NED.
+            Noisy position [m] and velocity [m/s], NED (the true state's without an
+            estimator, the estimate's with one).
         """
         n = self.cfg.noise
         gauss = self._noise_rng.gauss
-        pos = tuple(x + gauss(0.0, n.pos_sigma_m) for x in self.pos)
-        vel = tuple(v + gauss(0.0, n.vel_sigma_m_s) for v in self.vel)
+        pos = tuple(x + gauss(0.0, n.pos_sigma_m) for x in self.nav_pos)
+        vel = tuple(v + gauss(0.0, n.vel_sigma_m_s) for v in self.nav_vel)
         return pos, vel  # type: ignore[return-value]
 
 
@@ -421,8 +447,9 @@ def step_response(
     """Small-signal step response of one horizontal axis, from the physics alone.
 
     The vehicle hovers at 2 m in equilibrium; at t = 0 the position setpoint of ``axis`` steps
-    by ``amplitude_m``. The repeatable field, the gusts and the noise are switched off; the
-    nonlinearities (limits, drag) stay but are not reached at small amplitude.
+    by ``amplitude_m``. The repeatable field, the gusts, the estimator error and the noise are
+    switched off; the nonlinearities (limits, drag) stay but are not reached at small
+    amplitude.
 
     Parameters
     ----------
@@ -447,7 +474,9 @@ def step_response(
     import numpy as np
 
     quiet = replace(
-        cfg, disturbance=replace(cfg.disturbance, field_amplitude_m_s2=0.0, gust_sigma_m_s2=0.0)
+        cfg,
+        disturbance=replace(cfg.disturbance, field_amplitude_m_s2=0.0, gust_sigma_m_s2=0.0),
+        estimator=replace(cfg.estimator, enabled=False),
     )
     sim = QuadPhysics(quiet, seed=0, pos_ned_m=(0.0, 0.0, -2.0))
     target = [0.0, 0.0, -2.0]

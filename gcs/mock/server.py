@@ -37,7 +37,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from gcs.mock.config import Faults, MockConfig
 from gcs.mock.vehicle import MODE_FROM_CUSTOM, MavResult, Vehicle, encode_param
 
-__all__ = ["MockServer", "STREAMS", "write_json_atomic"]
+__all__ = ["MockServer", "STREAMS", "TRUTH_PERIOD_S", "write_json_atomic"]
 
 # stream name -> MAVLink message id (rates in RatesConfig are named <stream>_hz)
 STREAMS = {
@@ -67,6 +67,12 @@ _SENSORS_ENABLED = 50413615
 _SENSORS_HEALTH = 52480063
 _PREARM_CHECK = 0x10000000
 _EARTH_RADIUS_M = 6_371_000.0
+TRUTH_PERIOD_S = 0.1
+"""Period of the truth-and-error record in the statistics (vehicle time) [s]."""
+_TRUTH_KEYS = (
+    "t_vehicle_s", "north_m", "east_m", "down_m", "err_north_m", "err_east_m", "err_down_m",
+    "err_vn_m_s", "err_ve_m_s", "err_vd_m_s",
+)  # fmt: skip
 _FORCE_MAGIC = 21196
 
 
@@ -161,6 +167,11 @@ class MockServer:
         self.sp_values: list[tuple[float, float, float, float, int, int]] = []
         self.counts = {"rx": 0, "tx": 0, "rx_dropped": 0, "tx_dropped": 0, "steps": 0}
         self.max_lag_s = 0.0
+        # the truth behind the estimate, every TRUTH_PERIOD_S of vehicle time (estimator on)
+        self._truth: dict[str, list[float]] | None = None
+        if self.vehicle.physics.estimator is not None:
+            self._truth = {key: [] for key in _TRUTH_KEYS}
+        self._truth_next_t = 0.0
 
     # -- public ---------------------------------------------------------------------------
     @property
@@ -245,11 +256,29 @@ class MockServer:
                 for m in v.mode_log
             ],
             "packets": {k: self.counts[k] for k in ("rx", "tx", "rx_dropped", "tx_dropped")},
+            "estimator": self._truth_stats(),
             "physics_steps": self.counts["steps"],
             "max_physics_lag_s": self.max_lag_s,
             "cpu_s": time.process_time(),
             "wall_s": time.monotonic() - self.t0,
         }
+
+    def _truth_stats(self) -> dict[str, Any] | None:
+        """The estimator's truth record (None without an estimator)."""
+        est = self.vehicle.physics.estimator
+        if self._truth is None or est is None:
+            return None
+        return {"period_s": TRUTH_PERIOD_S, "resets": est.resets, **self._truth}
+
+    def _record_truth(self) -> None:
+        ph = self.vehicle.physics
+        est = ph.estimator
+        if self._truth is None or est is None or ph.t_s < self._truth_next_t - 1e-9:
+            return
+        self._truth_next_t = ph.t_s + TRUTH_PERIOD_S
+        row = (ph.t_s, *ph.pos, *est.pos_err_m, *est.vel_err_m_s)
+        for key, value in zip(_TRUTH_KEYS, row, strict=True):
+            self._truth[key].append(value)
 
     # -- time -----------------------------------------------------------------------------
     def _t(self, now: float | None = None) -> float:
@@ -269,6 +298,7 @@ class MockServer:
         v.physics.wind_ne_m_s = self.faults.wind_ned_m_s(self._t_offboard())
         before = v.physics.t_s
         v.update(self._t(now))
+        self._record_truth()
         steps = int(round((v.physics.t_s - before) / v.physics.dt_s))
         self.counts["steps"] += steps
         if steps > 1:

@@ -26,7 +26,8 @@ Behaviour copied from PX4 v1.16 (commander sources and the SIH capture in
   after one was heard takes ``NAV_DLL_ACT``: 0 nothing (PX4's default), 1 Hold (left for
   OFFBOARD again when setpoints return, like the offboard-loss fallback), 3 Land (stays
   landing). Other values, which PARAM_SET may store, are not modelled and land.
-- Home is set at arming to the current position.
+- Home is set at arming to the current position as the estimator has it; hold, take-off and
+  land targets are estimated positions too (PX4 flies on its estimate).
 """
 
 from __future__ import annotations
@@ -414,7 +415,8 @@ class Vehicle:
             self.armed = True
             self.t_armed_s = self.t_s
             self.took_off = False
-            self.home_ned_m = (self.physics.pos[0], self.physics.pos[1], self.physics.pos[2])
+            nav = self.physics.nav_pos  # PX4 sets home where its estimator says it is
+            self.home_ned_m = (nav[0], nav[1], nav[2])
             self.physics.set_armed(True)
             self._apply_mode_target()
             self.events.append((6, "Armed by external command"))
@@ -527,8 +529,8 @@ class Vehicle:
             self.mode is Mode.TAKEOFF
             and self.armed
             and not self.landed
-            and abs(ph.pos[2] - ph.target.pos_ned_m[2]) < 0.1
-            and abs(ph.vel[2]) < 0.3
+            and abs(ph.nav_pos[2] - ph.target.pos_ned_m[2]) < 0.1
+            and abs(ph.nav_vel[2]) < 0.3
         ):
             self.user_mode = Mode.HOLD
             self._mode_after_disarm = Mode.HOLD
@@ -594,7 +596,7 @@ class Vehicle:
         if not self.armed:
             return
         ph, t = self.physics, self.t_s
-        here = (ph.pos[0], ph.pos[1], ph.pos[2])
+        here = (ph.nav_pos[0], ph.nav_pos[1], ph.nav_pos[2])  # hold where it believes it is
         mode = self.mode
         if mode is Mode.OFFBOARD and self.first_offboard_t_s is None:
             self.first_offboard_t_s = t
