@@ -41,7 +41,6 @@ def test_every_field_parses(tmp_path: Path) -> None:
     section = {
         "noise": "data",
         "drift_offset": False,
-        "drift_window_s": 1.5,
         "refresh": True,
         "refresh_min_snr": 2.0,
         "refresh_block_s": 0.5,
@@ -66,7 +65,7 @@ def test_every_field_parses(tmp_path: Path) -> None:
         ({"robustness_cutoff_rad_s": "automatic"}, "learning.adaptive.robustness_cutoff_rad_s"),
         ({"robustness_order": 1.5}, "learning.adaptive.robustness_order"),
         ({"safeguard_step": 0.0}, "learning.adaptive.safeguard_step"),
-        ({"drift_window_s": float("nan")}, "learning.adaptive.drift_window_s"),
+        ({"safeguard_k_sigma": float("nan")}, "learning.adaptive.safeguard_k_sigma"),
         ({"refesh": True}, "learning.adaptive.refesh"),
         ("data", "learning.adaptive"),
     ],

@@ -10,7 +10,7 @@ import pytest
 from gcs.core import montecarlo as mc
 from gcs.core.learning import AdaptiveSettings
 from gcs.core.model import simulate
-from gcs.core.noise_model import estimate_disturbance
+from gcs.core.noise_model import drift_scale, estimate_disturbance
 from gcs.core.refresh import refresh_model
 from gcs.core.robustness import robustness_weight
 from gcs.core.update import UpdateWeights, next_input
@@ -21,11 +21,11 @@ SMALL = mc.StudySettings(
 OPTIONS = AdaptiveSettings(noise="data", refresh=True)
 
 
-def _estimate(model, uh: np.ndarray, yh: np.ndarray, adaptive: AdaptiveSettings, window: int):
+def _estimate(model, uh: np.ndarray, yh: np.ndarray, adaptive: AdaptiveSettings):
     t, n = uh.shape
     change = simulate(model, np.diff(uh, axis=0).T).T.reshape(t - 1, n)
     z = yh - simulate(model, uh.T).T
-    return estimate_disturbance(z, change, True, adaptive.drift_offset, window)
+    return estimate_disturbance(z, drift_scale(change), True, adaptive.drift_offset)
 
 
 def reference_norms(settings: mc.StudySettings, level: float, adaptive: AdaptiveSettings):
@@ -38,7 +38,6 @@ def reference_norms(settings: mc.StudySettings, level: float, adaptive: Adaptive
     noise = [rng.standard_normal((p * r, n)) for _ in range(settings.iterations + 1)]
     weights = UpdateWeights(settings.we, settings.wdu, settings.wu)
     refresh = replace(adaptive.refresh_settings(), delay_search=0)
-    window = int(round(adaptive.drift_window_s / dt))
     norms = np.zeros((p, r, settings.iterations + 1))
     for i in range(p):
         plant = mc._msd_model(float(plants.wn_rad_s[i]), float(plants.zeta[i]), dt)
@@ -54,7 +53,7 @@ def reference_norms(settings: mc.StudySettings, level: float, adaptive: Adaptive
                 if j == settings.iterations:
                     break
                 uh, yh = np.array(us), np.array(ys)
-                est = _estimate(model, uh, yh, adaptive, window)
+                est = _estimate(model, uh, yh, adaptive)
                 if adaptive.refresh and j >= 1:
                     res = refresh_model(
                         model, np.diff(uh, axis=0), np.diff(yh, axis=0),
@@ -62,7 +61,7 @@ def reference_norms(settings: mc.StudySettings, level: float, adaptive: Adaptive
                     )  # fmt: skip
                     if res.accepted:
                         model = res.model
-                        est = _estimate(model, uh, yh, adaptive, window)
+                        est = _estimate(model, uh, yh, adaptive)
                 robust = None
                 if adaptive.robustness_cutoff_rad_s is not None:
                     robust = robustness_weight(

@@ -239,9 +239,6 @@ class AdaptiveSettings:
         ``"data"`` only: the drift between trials whose input changed has a part ``q0`` that
         does not scale with the predicted output change (nonlinear, path-dependent effects);
         False lets it scale with the change alone (``q0 = 0``).
-    drift_window_s : float
-        ``"data"`` only: the drift of sample k follows the model's predicted output change
-        averaged over ``+- drift_window_s`` around k [s] (0: the change at k alone).
     refresh : bool
         Correct the model between trials from trials of different setpoints
         (:mod:`gcs.core.refresh`), accepted only when it explains held-out data better.
@@ -271,7 +268,6 @@ class AdaptiveSettings:
 
     noise: str = "table1"
     drift_offset: bool = True
-    drift_window_s: float = 0.5
     refresh: bool = False
     refresh_min_snr: float = 1.0
     refresh_block_s: float = 1.0
@@ -296,8 +292,6 @@ class AdaptiveSettings:
             raise ValueError(
                 f"robustness_order must be an integer >= 1, got {self.robustness_order}"
             )
-        if not (np.isfinite(self.drift_window_s) and self.drift_window_s >= 0):
-            raise ValueError(f"drift_window_s must be finite and >= 0, got {self.drift_window_s}")
         if not (np.isfinite(self.floor_z) and self.floor_z > 0):
             raise ValueError(f"floor_z must be > 0, got {self.floor_z}")
         self.refresh_settings()  # validates the refresh fields
@@ -339,11 +333,9 @@ class NoiseRecord:
     q_time_m2, r_white_m2 : float
         Time-domain random walk and white noise variances [m^2] (``"data"``).
     r_eff_m2 : float
-        White-noise variance left in the iteration estimate, given to the smoother (mean
-        over samples) [m^2].
+        White-noise variance left in the iteration estimate, given to the smoother [m^2].
     weights : tuple of float
-        Weight of each trial in the estimate, mean over samples (``"table1"`` smoother: the
-        newest trial only).
+        Weight of each trial in the estimate (``"table1"`` smoother: the newest trial only).
     """
 
     method: str
@@ -546,15 +538,14 @@ def _data_estimate(
     """Data-driven estimate of one axis from residuals of every trial (u, y: (T, N))."""
     z = y - simulate(model, u.T).T
     change = simulate(model, np.diff(u, axis=0).T).T.reshape(u.shape[0] - 1, u.shape[1])
-    window = int(round(adaptive.drift_window_s / model.dt_s))
     est = estimate_disturbance(
-        z, change, inputs.algorithm == "smoother", adaptive.drift_offset, window
+        z, drift_scale(change), inputs.algorithm == "smoother", adaptive.drift_offset
     )
     it, tn = est.iteration, est.time
     rec = NoiseRecord(
         "data", float(it.q0_m2), float(it.kappa), float(it.r_m2), bool(it.identified),
-        float(tn.q_m2), float(tn.r_m2), float(np.mean(est.r_eff_m2)),
-        tuple(float(w) for w in est.weights.mean(axis=-1)),
+        float(tn.q_m2), float(tn.r_m2), float(est.r_eff_m2),
+        tuple(float(w) for w in est.weights),
     )  # fmt: skip
     return est.d_hat_m, est.p_m2, rec
 

@@ -35,7 +35,7 @@ import scipy.linalg
 from gcs.core.estimators import KilcSettings, SmootherSettings, kilc_gains, smoother_operator
 from gcs.core.learning import AdaptiveSettings
 from gcs.core.model import DiscreteModel, from_transfer_function, lifted_matrix
-from gcs.core.noise_model import DisturbanceEstimate, estimate_disturbance
+from gcs.core.noise_model import DisturbanceEstimate, drift_scale, estimate_disturbance
 from gcs.core.refresh import refresh_decision, simulate_tf, transfer_function
 from gcs.core.robustness import difference_matrix
 
@@ -698,7 +698,7 @@ def _adaptive_simulate(
         u_hist[:, j], y_hist[:, j] = u, y
         if j == settings.iterations:
             break
-        est = _estimate(f_run, u_hist[:, : j + 1], y_hist[:, : j + 1], algorithm, adaptive, dt)
+        est = _estimate(f_run, u_hist[:, : j + 1], y_hist[:, : j + 1], algorithm, adaptive)
         if adaptive.refresh and j >= 1:
             out = refresh_decision(
                 b, a, 0, dt, np.diff(u_hist[:, : j + 1], axis=1),
@@ -715,9 +715,7 @@ def _adaptive_simulate(
                 h_inv[changed] = _update_inverses(
                     f_run[changed], settings, lam[changed], adaptive.robustness_order
                 )
-                est = _estimate(
-                    f_run, u_hist[:, : j + 1], y_hist[:, : j + 1], algorithm, adaptive, dt
-                )
+                est = _estimate(f_run, u_hist[:, : j + 1], y_hist[:, : j + 1], algorithm, adaptive)
         rhs = settings.we * _conv_transpose(f_run, yd - est.d_hat_m) + settings.wdu * u
         if np.any(lam > 0):
             rhs = rhs + lam[:, None] * (d_mat.T @ (d_mat @ u0))[None, :]
@@ -738,15 +736,13 @@ def _estimate(
     y_hist: np.ndarray,
     algorithm: str,
     adaptive: AdaptiveSettings,
-    dt_s: float,
 ) -> DisturbanceEstimate:
     """The disturbance estimate of every run from its whole history (M, T, N)."""
     z = y_hist - _conv(f_run, u_hist)
     if adaptive.noise == "table1":
         raise ValueError("the adaptive study needs noise = 'data' (table1 is the paper's study)")
-    change = _conv(f_run, np.diff(u_hist, axis=1))
-    window = int(round(adaptive.drift_window_s / dt_s))
-    return estimate_disturbance(z, change, algorithm == "smoother", adaptive.drift_offset, window)
+    m = drift_scale(_conv(f_run, np.diff(u_hist, axis=1)))
+    return estimate_disturbance(z, m, algorithm == "smoother", adaptive.drift_offset)
 
 
 def adaptive_error_norms(

@@ -49,7 +49,6 @@ __all__ = [
     "drift_scale",
     "DisturbanceEstimate",
     "estimate_disturbance",
-    "local_drift_scale",
 ]
 
 #: log10 of the ratio q_time / r_white searched by :func:`fit_time_noise`.
@@ -111,10 +110,10 @@ class IterationEstimate:
     ----------
     d_hat_m : ndarray, shape (..., N)
         Estimate of the disturbance of the newest trial [m].
-    p_m2 : ndarray, shape (..., N)
+    p_m2 : ndarray, shape (...)
         Its error variance per sample [m^2].
-    weights : ndarray, shape (..., T, N)
-        ``d_hat(k) = sum_j weights[j, k] z_j(k)``; they sum to 1 over j.
+    weights : ndarray, shape (..., T)
+        ``d_hat = sum_j weights[j] z_j``; they sum to 1.
     """
 
     d_hat_m: np.ndarray
@@ -427,15 +426,12 @@ def _initial_theta(s: np.ndarray, m: np.ndarray, r_min: np.ndarray) -> np.ndarra
     return np.stack([q0 + tiny, kappa + 1e-3, np.maximum(r, r_min + tiny)], axis=-1)
 
 
-def iteration_filter(
-    z: np.ndarray, m: np.ndarray, noise: IterationNoise, m_local: np.ndarray | None = None
-) -> IterationEstimate:
-    """Kalman filter along the iteration axis with ``q_j = q0 + kappa m_j`` and ``r``.
+def iteration_filter(z: np.ndarray, m: np.ndarray, noise: IterationNoise) -> IterationEstimate:
+    """Kalman filter along the iteration axis with ``q_j = q0 [m_j > 0] + kappa m_j`` and ``r``.
 
     The first trial initialises the estimate (diffuse prior): ``d_hat = z_0``, variance ``r``.
-    With ``m_local`` the drift of sample k is ``q0 + kappa m_local[j, k]``: the disturbance
-    moves where the input moved (the estimate follows the newest trial there and averages
-    elsewhere); ``m_j`` is the mean of ``m_local[j]``, so ``kappa`` means the same.
+    All covariances are scalars times the identity, so the gains are the same for every
+    sample: the estimate is a weighted mean of the trials' residuals.
 
     Parameters
     ----------
@@ -445,64 +441,29 @@ def iteration_filter(
         Drift scales [m^2]; ``q0`` applies to trials with ``m_j > 0``.
     noise : IterationNoise
         The variances (arrays of shape ``z.shape[:-2]``).
-    m_local : ndarray, shape (..., T-1, N), optional
-        Drift scales per sample (:func:`local_drift_scale`) [m^2].
 
     Returns
     -------
     IterationEstimate
-        ``p_m2`` and ``weights`` per sample: shapes (..., N) and (..., T, N).
     """
     z = _check_history(z)
     n_trials = z.shape[-2]
-    r = np.asarray(noise.r_m2, dtype=float)[..., None]
+    r = np.asarray(noise.r_m2, dtype=float)
     if np.any(r <= 0):
         raise ValueError("iteration_filter needs r > 0")
-    q0 = np.asarray(noise.q0_m2, dtype=float)[..., None]
-    kappa = np.asarray(noise.kappa, dtype=float)[..., None]
     d = z[..., 0, :].copy()
-    p = np.broadcast_to(r, d.shape).copy()
-    weights = np.zeros(z.shape)
-    weights[..., 0, :] = 1.0
+    p = np.array(r, dtype=float, copy=True)
+    weights = np.zeros(z.shape[:-1])
+    weights[..., 0] = 1.0
     for j in range(1, n_trials):
-        moved = (m[..., j - 1] > 0)[..., None]
-        local = m[..., j - 1, None] if m_local is None else m_local[..., j - 1, :]
-        p_prior = p + np.where(moved, q0, 0.0) + kappa * local
+        mj = m[..., j - 1]
+        p_prior = p + np.where(mj > 0, noise.q0_m2, 0.0) + noise.kappa * mj
         g = p_prior / (p_prior + r)
-        d = d + g * (z[..., j, :] - d)
+        d = d + g[..., None] * (z[..., j, :] - d)
         p = (1.0 - g) * p_prior
-        weights[..., :j, :] *= (1.0 - g)[..., None, :]
-        weights[..., j, :] = g
+        weights[..., :j] *= (1.0 - g)[..., None]
+        weights[..., j] = g
     return IterationEstimate(d_hat_m=d, p_m2=p, weights=weights)
-
-
-def local_drift_scale(predicted_change_m: np.ndarray, window: int) -> np.ndarray:
-    """Per-sample drift scale: ``(F dU)^2`` averaged over a centred window, same mean.
-
-    Parameters
-    ----------
-    predicted_change_m : ndarray, shape (..., T-1, N)
-        ``F (U_j - U_(j-1))`` [m].
-    window : int
-        Half-width of the moving average [samples] (0: none); the model error of a change
-        spreads over the model's response, not only where the predicted change is large.
-
-    Returns
-    -------
-    ndarray, shape (..., T-1, N)
-        [m^2], rescaled so that its mean over samples equals :func:`drift_scale`'s.
-    """
-    x = np.asarray(predicted_change_m, dtype=float) ** 2
-    if window <= 0 or x.shape[-1] == 0:
-        return x
-    n = x.shape[-1]
-    c = np.cumsum(np.concatenate([np.zeros(x.shape[:-1] + (1,)), x], axis=-1), axis=-1)
-    k = np.arange(n)
-    lo, hi = np.clip(k - window, 0, n), np.clip(k + window + 1, 0, n)
-    avg = (c[..., hi] - c[..., lo]) / (hi - lo)
-    mean_x = x.mean(axis=-1, keepdims=True)
-    mean_avg = avg.mean(axis=-1, keepdims=True)
-    return avg * np.divide(mean_x, mean_avg, out=np.zeros_like(mean_x), where=mean_avg > 0)
 
 
 @dataclass(frozen=True)
@@ -519,9 +480,9 @@ class DisturbanceEstimate:
         Time-domain noise model (shape ``(...)``).
     iteration : IterationNoise
         Iteration-domain noise model (shape ``(...)``).
-    weights : ndarray, shape (..., T, N)
-        Weight of each trial in the iteration estimate, per sample.
-    r_eff_m2 : ndarray, shape (..., N)
+    weights : ndarray, shape (..., T)
+        Weight of each trial in the iteration estimate.
+    r_eff_m2 : ndarray, shape (...)
         White-noise variance left in the iteration estimate, given to the smoother [m^2].
     """
 
@@ -534,11 +495,7 @@ class DisturbanceEstimate:
 
 
 def estimate_disturbance(
-    z: np.ndarray,
-    predicted_change_m: np.ndarray,
-    smooth_in_time: bool,
-    drift_offset: bool = True,
-    window: int = 0,
+    z: np.ndarray, m: np.ndarray, smooth_in_time: bool, drift_offset: bool = True
 ) -> DisturbanceEstimate:
     """The data-driven estimate: noise models by maximum likelihood, then the filters.
 
@@ -546,32 +503,28 @@ def estimate_disturbance(
     ----------
     z : ndarray, shape (..., T, N)
         Residual histories ``z_j = Y_j - F U_j`` [m].
-    predicted_change_m : ndarray, shape (..., T-1, N)
-        The model's predicted output changes ``F (U_j - U_(j-1))`` [m].
+    m : ndarray, shape (..., T-1)
+        Drift scales (:func:`drift_scale`) [m^2].
     smooth_in_time : bool
         Follow the iteration filter with the RTS smoother in time (the smoother's path);
         False: the iteration filter alone (K-ILC's path).
     drift_offset : bool
         Estimate ``q0`` (see :func:`fit_iteration_noise`).
-    window : int
-        Half-width of the local drift scale [samples] (:func:`local_drift_scale`).
 
     Returns
     -------
     DisturbanceEstimate
     """
     z = _check_history(z)
-    m = drift_scale(predicted_change_m) if z.shape[-2] > 1 else np.zeros(z.shape[:-2] + (0,))
-    m_local = local_drift_scale(predicted_change_m, window) if z.shape[-2] > 1 else None
     time_noise = fit_time_noise(z)
     noise = fit_iteration_noise(z, m, time_noise.r_m2, drift_offset)
-    est = iteration_filter(z, m, noise, m_local)
-    r_eff = time_noise.r_m2[..., None] * np.sum(est.weights**2, axis=-2)
+    est = iteration_filter(z, m, noise)
+    r_eff = time_noise.r_m2 * np.sum(est.weights**2, axis=-1)
     if smooth_in_time:
         # a white-noise variance of zero makes the smoother the identity; keep it positive
-        scale = np.var(est.d_hat_m, axis=-1)[..., None]
-        r_eff = np.maximum(r_eff, 1e-12 * scale + 1e-30)
+        r_eff = np.maximum(r_eff, 1e-12 * np.var(est.d_hat_m, axis=-1) + 1e-30)
         d_hat, p = rts_smooth(est.d_hat_m, time_noise.q_m2, r_eff)
     else:
-        d_hat, p = est.d_hat_m, est.p_m2
+        d_hat = est.d_hat_m
+        p = np.broadcast_to(np.asarray(est.p_m2)[..., None], d_hat.shape).copy()
     return DisturbanceEstimate(d_hat, p, time_noise, noise, est.weights, r_eff)

@@ -285,7 +285,6 @@ def _adaptive(f: _Fields) -> AdaptiveSettings:
         settings = AdaptiveSettings(
             noise=f.string("noise", d.noise, NOISE_MODELS),
             drift_offset=flag["drift_offset"],
-            drift_window_s=f.number("drift_window_s", d.drift_window_s),
             refresh=flag["refresh"],
             refresh_min_snr=f.number("refresh_min_snr", d.refresh_min_snr),
             refresh_block_s=f.number("refresh_block_s", d.refresh_block_s, positive=True),
