@@ -508,6 +508,19 @@ def summarise(
     )
 
 
+def _counter(total: int, progress: Callable[[int, int], None] | None) -> Callable[[], None]:
+    """A step callback that reports ``progress(done, total)`` after every call."""
+    done = 0
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    return step
+
+
 def run_study(
     settings: StudySettings, progress: Callable[[int, int], None] | None = None
 ) -> list[StudyRow]:
@@ -525,15 +538,7 @@ def run_study(
     -------
     list of StudyRow
     """
-    total = len(settings.levels) * len(settings.algorithms) * settings.iterations
-    done = 0
-
-    def step() -> None:
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, total)
-
+    step = _counter(len(settings.levels) * len(settings.algorithms) * settings.iterations, progress)
     rows = []
     for level in settings.levels:
         plants = sample_plants(settings, level)
@@ -806,15 +811,7 @@ def compare_study(
     """
     import time
 
-    total = len(settings.levels) * settings.iterations
-    done = 0
-
-    def step() -> None:
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, total)
-
+    step = _counter(len(settings.levels) * settings.iterations, progress)
     rows, comparison = [], []
     for level in settings.levels:
         plants = sample_plants(settings, level)

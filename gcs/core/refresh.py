@@ -27,12 +27,17 @@ is the one-axis entry point the learning step uses.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 import scipy.fft
 
 from gcs.core.model import DiscreteModel
+
+T = TypeVar("T")
 
 __all__ = [
     "RefreshSettings",
@@ -300,6 +305,19 @@ def _jacobian(
     return y_hat, np.stack(cols, axis=-1)
 
 
+def _quiet(func: Callable[..., T]) -> Callable[..., T]:
+    """Run ``func`` with overflow ignored: an unstable candidate simulates to inf and its loss
+    refuses it, which is the intended outcome, not a numerical accident."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> T:
+        with np.errstate(over="ignore", invalid="ignore"):
+            return func(*args, **kwargs)
+
+    return wrapper
+
+
+@_quiet
 def fit_output_error(
     b0: np.ndarray,
     a0: np.ndarray,
@@ -333,19 +351,6 @@ def fit_output_error(
     loss : ndarray, shape (M,)
         Sum of squared errors on the masked samples [m^2].
     """
-    with np.errstate(over="ignore", invalid="ignore"):  # diverging steps give inf: refused
-        return _fit_output_error(b0, a0, delay, du, dy, mask, max_iter)
-
-
-def _fit_output_error(
-    b0: np.ndarray,
-    a0: np.ndarray,
-    delay: int,
-    du: np.ndarray,
-    dy: np.ndarray,
-    mask: np.ndarray,
-    max_iter: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     b, a = np.array(b0, dtype=float), np.array(a0, dtype=float)
     du, dy = np.asarray(du, float), np.asarray(dy, float)
     w = np.asarray(mask, float)
@@ -460,6 +465,7 @@ class _Batch:
     snr: np.ndarray
 
 
+@_quiet
 def refresh_decision(
     b: np.ndarray,
     a: np.ndarray,
@@ -495,21 +501,6 @@ def refresh_decision(
     _Batch
         Fields of shape (M,) (models (M, n)).
     """
-    with np.errstate(over="ignore", invalid="ignore"):  # unstable candidates give inf: rejected
-        return _refresh_decision(b, a, delay, dt_s, du, dy, noise_var_m2, settings, band_gain2)
-
-
-def _refresh_decision(
-    b: np.ndarray,
-    a: np.ndarray,
-    delay: int,
-    dt_s: float,
-    du: np.ndarray,
-    dy: np.ndarray,
-    noise_var_m2: np.ndarray,
-    settings: RefreshSettings,
-    band_gain2: float,
-) -> _Batch:
     b, a = np.atleast_2d(np.asarray(b, float)), np.atleast_2d(np.asarray(a, float))
     du, dy = np.asarray(du, float), np.asarray(dy, float)
     m_rows, n_pairs, n = du.shape
