@@ -431,6 +431,10 @@ def montecarlo(
             levels=level_values, plants=plants, repeats=repeats, iterations=iterations,
             n_samples=samples, seed=seed, diverged_rule="include" if keep_diverged else "exclude",
         )  # fmt: skip
+        if adaptive:
+            from gcs.core.montecarlo import check_adaptive_size
+
+            check_adaptive_size(settings)
     except ValueError as exc:
         raise typer.BadParameter(str(exc)) from exc
     start = time.perf_counter()

@@ -35,3 +35,9 @@ def test_montecarlo_default_output_has_no_adaptive_rows(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "adaptive" not in result.output
     assert isinstance(json.loads(out.read_text()), list)
+
+
+def test_montecarlo_adaptive_refuses_a_study_too_large_for_memory() -> None:
+    args = ["montecarlo", "--samples", "2000", "--adaptive"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2 and "GB" in result.output

@@ -53,6 +53,7 @@ __all__ = [
     "ComparisonRow",
     "adaptive_error_norms",
     "compare_study",
+    "check_adaptive_size",
 ]
 
 ALGORITHMS = ("smoother", "kilc")
@@ -557,6 +558,10 @@ def run_study(
 # =============================================================================================
 
 
+#: Memory the adaptive study may spend on per-run update operators [bytes].
+_OPERATOR_BYTES_MAX = 2e9
+
+
 @dataclass(frozen=True)
 class ComparisonRow:
     """The paper's method against the new options at one uncertainty level (same plants, noise).
@@ -783,6 +788,29 @@ def _diverged(settings: StudySettings, norms: np.ndarray) -> np.ndarray:
     return ~(steady <= per_plant[:, 0])
 
 
+def check_adaptive_size(settings: StudySettings) -> None:
+    """Refuse an adaptive study whose per-run update operators would not fit in memory.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study.
+
+    Raises
+    ------
+    ValueError
+        ``plants x repeats`` operators of ``N x N`` doubles exceed 2 GB.
+    """
+    memory = 8.0 * settings.plants * settings.repeats * settings.n_samples**2
+    if memory > _OPERATOR_BYTES_MAX:
+        raise ValueError(
+            f"the adaptive study keeps one {settings.n_samples} x {settings.n_samples} update "
+            f"operator per run: {memory / 1e9:.1f} GB for {settings.plants} x "
+            f"{settings.repeats} runs (limit {_OPERATOR_BYTES_MAX / 1e9:.0f} GB); use fewer "
+            "samples, plants or repeats"
+        )
+
+
 def compare_study(
     settings: StudySettings,
     adaptive: AdaptiveSettings,
@@ -808,9 +836,15 @@ def compare_study(
         Tables II/III rows of the new options (algorithm ``"<algorithm>+adaptive"``).
     comparison : list of ComparisonRow
         One per level.
+
+    Raises
+    ------
+    ValueError
+        The per-run update operators would take more than 2 GB.
     """
     import time
 
+    check_adaptive_size(settings)
     step = _counter(len(settings.levels) * settings.iterations, progress)
     rows, comparison = [], []
     for level in settings.levels:
