@@ -44,7 +44,7 @@ from gcs.core.noise_model import (
     fit_time_noise,
 )
 from gcs.core.refresh import RefreshResult, RefreshSettings, refresh_model
-from gcs.core.robustness import repeat_cutoff, robustness_weight
+from gcs.core.robustness import RobustnessWeight, repeat_cutoff, robustness_weight
 from gcs.core.safeguard import SafeguardDecision, SafeguardSettings, safeguard
 from gcs.core.trajectory import Box
 from gcs.core.update import SetpointLimits, UpdateResult, UpdateWeights, next_input
@@ -510,7 +510,7 @@ def _floor_of(sp: np.ndarray, pos: np.ndarray, given: Floor | None) -> Floor | N
 
 
 def _table1_estimate(
-    inputs: LearningInputs, z: np.ndarray, axis: int
+    inputs: LearningInputs, z: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, NoiseRecord, KilcState | None]:
     n_trials, n = z.shape
     nan = float("nan")
@@ -602,10 +602,9 @@ def plan_next_trial(
     LearningPlan
     """
     ref, sp, pos, start = _history(ref_ne_m, setpoints_ne_m, pos_ne_m)
-    n_trials, n = sp.shape[0], sp.shape[1]
+    n_trials = sp.shape[0]
     u_all = sp - start
     y_all = pos[:, 1:] - start
-    yd = ref[1:] - start
     epos_all = np.array([epos(ref[1:], pos[j, 1:]) for j in range(n_trials)])
     current = tuple(models) if models is not None else tuple(inputs.models)
     the_floor = _floor_of(sp, pos, floor)
@@ -616,71 +615,103 @@ def plan_next_trial(
         decision = safeguard(epos_all, sp, scatter, inputs.arena, adaptive.safeguard_settings())
     anchor = n_trials - 1 if decision is None else decision.anchor_trial
     step = 1.0 if decision is None else decision.step
-    u_next = np.empty((n, 2))
-    d_hat = np.empty((n, 2))
-    p = np.empty((n, 2))
-    new_models: list[DiscreteModel] = []
-    states: list[KilcState] = []
-    axes: list[AxisRecord] = []
-    for axis in range(2):
-        model = current[axis]
-        u, y = u_all[:, :, axis], y_all[:, :, axis]
-        refresh = None
-        if adaptive.refresh and n_trials > 1:
-            r_m2 = _noise_variance(inputs, model, u, y, the_floor, axis)
-            refresh = _refresh_axis(model, u, y, r_m2, adaptive, inputs.weights)
-            model = refresh.model
-        if adaptive.noise == "table1":
-            # one trial at a time: the same arithmetic as learning_step, bit for bit
-            z = np.array([y[j] - simulate(model, u[j]) for j in range(n_trials)])
-            d_hat[:, axis], p[:, axis], noise_rec, state = _table1_estimate(inputs, z, axis)
-            if state is not None:
-                states.append(state)
-        else:
-            d_hat[:, axis], p[:, axis], noise_rec = _data_estimate(inputs, adaptive, model, u, y)
-        robust, source = None, ""
-        cutoff = adaptive.robustness_cutoff_rad_s
-        if cutoff == "auto":
-            cutoff, source = _auto_cutoff(sp, pos, ref, axis, model.dt_s), "auto"
-        elif cutoff is not None:
-            source = "profile"
-        if cutoff is not None:
-            robust = robustness_weight(
-                model, float(cutoff), adaptive.robustness_order, u[0], inputs.weights.we
-            )
-        limits = axis_limits(inputs.arena, start, axis, inputs.max_step_m, inputs.max_deviation_m)
-        result = next_input(model, yd[:, axis], d_hat[:, axis], u[anchor], inputs.weights,
-                            limits, robust)  # fmt: skip
-        if step < 1.0:
-            u_next[:, axis] = u[anchor] + step * (result.u_m - u[anchor])
-        else:
-            u_next[:, axis] = result.u_m
-        new_models.append(model)
-        robust_rec = None
-        if robust is not None:
-            robust_rec = {"cutoff_rad_s": robust.cutoff_rad_s, "lam": robust.lam,
-                          "order": robust.order, "source": source}  # fmt: skip
-        axes.append(AxisRecord(("north", "east")[axis], noise_rec, refresh, robust_rec, result))
+    axes = [
+        _plan_axis(inputs, adaptive, current[a], a, ref, sp, pos, the_floor, anchor, step)
+        for a in range(2)
+    ]
+    states = [ax.kilc_state for ax in axes if ax.kilc_state is not None]
     record = LearningRecord(
         trials=n_trials,
         epos_m=tuple(float(e) for e in epos_all),
         floor=the_floor,
         verdicts=verdicts,
         safeguard=decision,
-        axes=(axes[0], axes[1]),
+        axes=(axes[0].record, axes[1].record),
     )
     return LearningPlan(
-        setpoints_ne_m=u_next + start,
-        d_hat_ne_m=d_hat,
-        p_ne_m2=p,
-        models=(new_models[0], new_models[1]),
+        setpoints_ne_m=np.column_stack([ax.u_next for ax in axes]) + start,
+        d_hat_ne_m=np.column_stack([ax.d_hat for ax in axes]),
+        p_ne_m2=np.column_stack([ax.p for ax in axes]),
+        models=(axes[0].model, axes[1].model),
         kilc_states=(states[0], states[1]) if states else None,
         record=record,
     )
 
 
-def _noise_variance(
+@dataclass(frozen=True)
+class _AxisPlan:
+    """What :func:`_plan_axis` returns for one axis (learning coordinates)."""
+
+    u_next: np.ndarray
+    d_hat: np.ndarray
+    p: np.ndarray
+    model: DiscreteModel
+    kilc_state: KilcState | None
+    record: AxisRecord
+
+
+def _plan_axis(
     inputs: LearningInputs,
+    adaptive: AdaptiveSettings,
+    model: DiscreteModel,
+    axis: int,
+    ref: np.ndarray,
+    sp: np.ndarray,
+    pos: np.ndarray,
+    the_floor: Floor | None,
+    anchor: int,
+    step: float,
+) -> _AxisPlan:
+    """Refresh, estimate and update one axis from the whole history."""
+    start = ref[0]
+    u, y = sp[:, :, axis] - start[axis], pos[:, 1:, axis] - start[axis]
+    yd = ref[1:, axis] - start[axis]
+    refresh = None
+    if adaptive.refresh and u.shape[0] > 1:
+        r_m2 = _noise_variance(model, u, y, the_floor, axis)
+        refresh = _refresh_axis(model, u, y, r_m2, adaptive, inputs.weights)
+        model = refresh.model
+    state = None
+    if adaptive.noise == "table1":
+        # one trial at a time: the same arithmetic as learning_step, bit for bit
+        z = np.array([y[j] - simulate(model, u[j]) for j in range(u.shape[0])])
+        d_hat, p, noise_rec, state = _table1_estimate(inputs, z)
+    else:
+        d_hat, p, noise_rec = _data_estimate(inputs, adaptive, model, u, y)
+    robust, robust_rec = _robustness(inputs, adaptive, model, axis, ref, sp, pos, u[0])
+    limits = axis_limits(inputs.arena, start, axis, inputs.max_step_m, inputs.max_deviation_m)
+    result = next_input(model, yd, d_hat, u[anchor], inputs.weights, limits, robust)
+    # after a safeguard revert: a convex combination of two feasible inputs stays feasible
+    u_next = result.u_m if step >= 1.0 else u[anchor] + step * (result.u_m - u[anchor])
+    record = AxisRecord(("north", "east")[axis], noise_rec, refresh, robust_rec, result)
+    return _AxisPlan(u_next, d_hat, p, model, state, record)
+
+
+def _robustness(
+    inputs: LearningInputs,
+    adaptive: AdaptiveSettings,
+    model: DiscreteModel,
+    axis: int,
+    ref: np.ndarray,
+    sp: np.ndarray,
+    pos: np.ndarray,
+    anchor_m: np.ndarray,
+) -> tuple[RobustnessWeight | None, dict | None]:
+    """The robustness weight of one axis (None when off) and its record."""
+    cutoff, source = adaptive.robustness_cutoff_rad_s, "profile"
+    if cutoff == "auto":
+        cutoff, source = _auto_cutoff(sp, pos, ref, axis, model.dt_s), "auto"
+    if cutoff is None:
+        return None, None
+    weight = robustness_weight(
+        model, float(cutoff), adaptive.robustness_order, anchor_m, inputs.weights.we
+    )
+    rec = {"cutoff_rad_s": weight.cutoff_rad_s, "lam": weight.lam, "order": weight.order,
+           "source": source}  # fmt: skip
+    return weight, rec
+
+
+def _noise_variance(
     model: DiscreteModel,
     u: np.ndarray,
     y: np.ndarray,
