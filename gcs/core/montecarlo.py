@@ -26,14 +26,18 @@ gives the evidence for each default.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.fft
 import scipy.linalg
 
 from gcs.core.estimators import KilcSettings, SmootherSettings, kilc_gains, smoother_operator
+from gcs.core.learning import AdaptiveSettings
 from gcs.core.model import DiscreteModel, from_transfer_function, lifted_matrix
+from gcs.core.noise_model import DisturbanceEstimate, drift_scale, estimate_disturbance
+from gcs.core.refresh import refresh_decision, simulate_tf, transfer_function
+from gcs.core.robustness import difference_matrix
 
 __all__ = [
     "ALGORITHMS",
@@ -46,6 +50,10 @@ __all__ = [
     "error_norms",
     "run_study",
     "summarise",
+    "ComparisonRow",
+    "adaptive_error_norms",
+    "compare_study",
+    "check_adaptive_size",
 ]
 
 ALGORITHMS = ("smoother", "kilc")
@@ -501,6 +509,19 @@ def summarise(
     )
 
 
+def _counter(total: int, progress: Callable[[int, int], None] | None) -> Callable[[], None]:
+    """A step callback that reports ``progress(done, total)`` after every call."""
+    done = 0
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    return step
+
+
 def run_study(
     settings: StudySettings, progress: Callable[[int, int], None] | None = None
 ) -> list[StudyRow]:
@@ -518,15 +539,7 @@ def run_study(
     -------
     list of StudyRow
     """
-    total = len(settings.levels) * len(settings.algorithms) * settings.iterations
-    done = 0
-
-    def step() -> None:
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, total)
-
+    step = _counter(len(settings.levels) * len(settings.algorithms) * settings.iterations, progress)
     rows = []
     for level in settings.levels:
         plants = sample_plants(settings, level)
@@ -534,3 +547,334 @@ def run_study(
             norms = _simulate(settings, plants, level, algorithm, step)
             rows.append(summarise(settings, norms, level, algorithm, plants.excluded))
     return rows
+
+
+# =============================================================================================
+# The study with the options beyond the paper (issue P5): data-driven noise model, model refresh,
+# robustness weight. Each run (plant x repeat) now has its own model and its own estimator
+# gains, so the fixed-operator trick above no longer applies; the runs still advance together
+# as the rows of (runs, ...) arrays, and the only per-run matrices are the update operators,
+# recomputed for the runs whose model a refresh changed.
+# =============================================================================================
+
+
+#: Memory the adaptive study may spend on per-run update operators [bytes].
+_OPERATOR_BYTES_MAX = 2e9
+
+
+@dataclass(frozen=True)
+class ComparisonRow:
+    """The paper's method against the new options at one uncertainty level (same plants, noise).
+
+    Parameters
+    ----------
+    uncertainty : float
+        Uncertainty level.
+    algorithm : str
+        Estimator of both (``"smoother"`` or ``"kilc"``).
+    paper_mean_2_5 : float
+        Mean error 2-norm over trials j = 2..5, plants and repeats, the paper's method [m].
+    new_mean_2_5 : float
+        The same with the new options [m].
+    change_pct : float
+        ``100 (new / paper - 1)``: negative is better.
+    paper_diverged, new_diverged : int
+        Plants whose learning diverged (steady-state norm above trial 0's).
+    plants : int
+        Plants at this level.
+    paper_kept_2_5, new_kept_2_5 : float
+        Mean error 2-norm over trials j = 2..5 over the plants that diverged under neither
+        method [m].
+    paper_steady, new_steady : float
+        Mean steady-state norm (trials ``steady_from..steady_to``) over the plants that did not
+        diverge under either method [m].
+    refreshed_pct : float
+        Share of runs whose model a refresh changed at least once [%].
+    seconds : float
+        Wall time of the new options' simulation at this level [s].
+    """
+
+    uncertainty: float
+    algorithm: str
+    paper_mean_2_5: float
+    new_mean_2_5: float
+    change_pct: float
+    paper_diverged: int
+    new_diverged: int
+    plants: int
+    paper_kept_2_5: float
+    new_kept_2_5: float
+    paper_steady: float
+    new_steady: float
+    refreshed_pct: float
+    seconds: float
+
+
+def _runs_markov(b: np.ndarray, a: np.ndarray, n: int) -> np.ndarray:
+    """Markov parameters f_1..f_N of every run's model (delay 0), shape (M, N)."""
+    impulse = np.zeros((b.shape[0], 1, n))
+    impulse[:, 0, 0] = 1.0
+    return simulate_tf(b, a, 0, impulse)[:, 0, :]
+
+
+def _conv(f: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Causal convolution along the last axis: f (M, N) with x (M, ..., N)."""
+    n = x.shape[-1]
+    nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)
+    ff = f.reshape(f.shape[:1] + (1,) * (x.ndim - 2) + f.shape[1:])
+    return np.fft.irfft(np.fft.rfft(ff, nfft) * np.fft.rfft(x, nfft), nfft)[..., :n]
+
+
+def _update_inverses(
+    f: np.ndarray, settings: StudySettings, robust_lam: np.ndarray, order: int
+) -> np.ndarray:
+    """``H^-1`` per run, ``H = we F'F + (wdu + wu) I + lam D'D``: shape (M, N, N)."""
+    m, n = f.shape
+    idx = np.subtract.outer(np.arange(n), np.arange(n))
+    out = np.empty((m, n, n))
+    dtd = None
+    if np.any(robust_lam > 0):
+        d = difference_matrix(n, order).toarray()
+        dtd = d.T @ d
+    for start in range(0, m, 128):  # chunks bound the temporary (C, N, N) arrays
+        sl = slice(start, min(start + 128, m))
+        big = np.where(idx >= 0, f[sl][:, np.clip(idx, 0, None)], 0.0)  # lifted F per run
+        h = settings.we * np.einsum("mki,mkj->mij", big, big)
+        h += (settings.wdu + settings.wu) * np.eye(n)
+        if dtd is not None:
+            h += robust_lam[sl, None, None] * dtd
+        out[sl] = np.linalg.inv(h)
+    return out
+
+
+def _robust_lam(
+    b: np.ndarray, a: np.ndarray, settings: StudySettings, adaptive: AdaptiveSettings
+) -> np.ndarray:
+    """Robustness weight per run (0 when off): ``we |F(w_c)|^2 / (2 sin(w_c T / 2))^(2p)``."""
+    cutoff = adaptive.robustness_cutoff_rad_s
+    if cutoff is None:
+        return np.zeros(b.shape[0])
+    if cutoff == "auto":
+        raise ValueError("the study flies no repeat: give the robustness cutoff in rad/s")
+    dt = settings.t_ilc_s
+    zinv = np.exp(-1j * cutoff * dt)
+    powers = zinv ** np.arange(1, b.shape[-1] + 1)
+    gain2 = np.abs((b @ powers) / (1.0 + a @ powers)) ** 2
+    return (
+        settings.we * gain2 / (2.0 * np.sin(0.5 * cutoff * dt)) ** (2 * adaptive.robustness_order)
+    )
+
+
+def _adaptive_simulate(
+    settings: StudySettings,
+    plants: PlantSample,
+    level: float,
+    algorithm: str,
+    adaptive: AdaptiveSettings,
+    step: Callable[[], None] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Error norms (P, R, J+1) and whether each run's model was refreshed (P, R)."""
+    n, dt = settings.n_samples, settings.t_ilc_s
+    p, r = plants.wn_rad_s.size, settings.repeats
+    runs, n_trials = p * r, settings.iterations + 1
+    norms = np.zeros((p, r, n_trials))
+    refreshed = np.zeros(runs, dtype=bool)
+    if p == 0:
+        return norms, refreshed.reshape(p, r)
+    yd, d, u0 = _signals(settings)
+    b0, a0 = transfer_function(_msd_model(settings.wn_rad_s, settings.zeta, dt))
+    b = np.tile(b0, (runs, 1))
+    a = np.tile(a0, (runs, 1))
+    f_run = _runs_markov(b[:1], a[:1], n).repeat(runs, axis=0)
+    lam = _robust_lam(b, a, settings, adaptive)
+    h_inv = _update_inverses(f_run[:1], settings, lam[:1], adaptive.robustness_order)
+    h_inv = np.broadcast_to(h_inv, (runs, n, n))  # shared until a refresh changes a run
+    d_mat = difference_matrix(n, adaptive.robustness_order)
+    f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
+    nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)
+    f_true_fft = np.fft.rfft(f_true, nfft, axis=-1)[:, None, :]
+    noise_rng = _rng(settings, level, 1)  # the paper's study's noise, draw for draw
+    refresh_settings = replace(adaptive.refresh_settings(), delay_search=0)
+    u_hist = np.zeros((runs, n_trials, n))
+    y_hist = np.zeros((runs, n_trials, n))
+    u = np.broadcast_to(u0, (runs, n)).copy()
+    measured = settings.error_signal == "measured"
+    for j in range(n_trials):
+        u_fft = np.fft.rfft(u.reshape(p, r, n), nfft, axis=-1)
+        y_true = np.fft.irfft(f_true_fft * u_fft, nfft, axis=-1)[..., :n].reshape(runs, n) + d
+        y = y_true + settings.noise_std * noise_rng.standard_normal((runs, n))
+        e = yd - (y if measured else y_true)
+        norms[:, :, j] = np.sqrt(np.einsum("ij,ij->i", e, e)).reshape(p, r)
+        u_hist[:, j], y_hist[:, j] = u, y
+        if j == settings.iterations:
+            break
+        est = _estimate(f_run, u_hist[:, : j + 1], y_hist[:, : j + 1], algorithm, adaptive)
+        if adaptive.refresh and j >= 1:
+            out = refresh_decision(
+                b, a, 0, dt, np.diff(u_hist[:, : j + 1], axis=1),
+                np.diff(y_hist[:, : j + 1], axis=1), est.iteration.r_m2, refresh_settings,
+                settings.wdu / settings.we,
+            )  # fmt: skip
+            changed = np.flatnonzero(out.accepted)
+            if changed.size:
+                refreshed[changed] = True
+                b, a = out.b, out.a
+                f_run[changed] = _runs_markov(b[changed], a[changed], n)
+                lam[changed] = _robust_lam(b[changed], a[changed], settings, adaptive)
+                h_inv = np.array(h_inv)  # own copy per run from the first refresh on
+                h_inv[changed] = _update_inverses(
+                    f_run[changed], settings, lam[changed], adaptive.robustness_order
+                )
+                est = _estimate(f_run, u_hist[:, : j + 1], y_hist[:, : j + 1], algorithm, adaptive)
+        rhs = settings.we * _conv_transpose(f_run, yd - est.d_hat_m) + settings.wdu * u
+        if np.any(lam > 0):
+            rhs = rhs + lam[:, None] * (d_mat.T @ (d_mat @ u0))[None, :]
+        u = np.einsum("mij,mj->mi", h_inv, rhs)
+        if step is not None:
+            step()
+    return norms, refreshed.reshape(p, r)
+
+
+def _conv_transpose(f: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``F' x`` for each run's lower-triangular Toeplitz ``F``: a correlation, x (M, N)."""
+    return _conv(f, x[:, ::-1])[:, ::-1]
+
+
+def _estimate(
+    f_run: np.ndarray,
+    u_hist: np.ndarray,
+    y_hist: np.ndarray,
+    algorithm: str,
+    adaptive: AdaptiveSettings,
+) -> DisturbanceEstimate:
+    """The disturbance estimate of every run from its whole history (M, T, N)."""
+    z = y_hist - _conv(f_run, u_hist)
+    if adaptive.noise == "table1":
+        raise ValueError("the adaptive study needs noise = 'data' (table1 is the paper's study)")
+    m = drift_scale(_conv(f_run, np.diff(u_hist, axis=1)))
+    return estimate_disturbance(z, m, algorithm == "smoother", adaptive.drift_offset)
+
+
+def adaptive_error_norms(
+    settings: StudySettings, level: float, algorithm: str, adaptive: AdaptiveSettings
+) -> tuple[np.ndarray, np.ndarray]:
+    """Error 2-norms of every trial with the new options, on the paper's plants and noise.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study (the plants and noise of ``level`` are :func:`error_norms`'s).
+    level : float
+        Uncertainty level.
+    algorithm : str
+        ``"smoother"`` (iteration filter and RTS smoother) or ``"kilc"`` (iteration filter).
+    adaptive : AdaptiveSettings
+        The options; ``noise`` must be ``"data"``. The safeguard is not simulated (it acts
+        on measured e_pos against a floor from a repeat flight, which the study does not fly).
+
+    Returns
+    -------
+    norms : ndarray, shape (P, repeats, iterations + 1)
+        ``[plant, repeat, j]`` [m].
+    refreshed : ndarray of bool, shape (P, repeats)
+        Runs whose model a refresh changed at least once.
+    """
+    return _adaptive_simulate(settings, sample_plants(settings, level), level, algorithm, adaptive)
+
+
+def _diverged(settings: StudySettings, norms: np.ndarray) -> np.ndarray:
+    per_plant = norms.mean(axis=1)
+    steady = per_plant[:, settings.steady_from : settings.steady_to + 1].mean(axis=1)
+    return ~(steady <= per_plant[:, 0])
+
+
+def check_adaptive_size(settings: StudySettings) -> None:
+    """Refuse an adaptive study whose per-run update operators would not fit in memory.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study.
+
+    Raises
+    ------
+    ValueError
+        ``plants x repeats`` operators of ``N x N`` doubles exceed 2 GB.
+    """
+    memory = 8.0 * settings.plants * settings.repeats * settings.n_samples**2
+    if memory > _OPERATOR_BYTES_MAX:
+        raise ValueError(
+            f"the adaptive study keeps one {settings.n_samples} x {settings.n_samples} update "
+            f"operator per run: {memory / 1e9:.1f} GB for {settings.plants} x "
+            f"{settings.repeats} runs (limit {_OPERATOR_BYTES_MAX / 1e9:.0f} GB); use fewer "
+            "samples, plants or repeats"
+        )
+
+
+def compare_study(
+    settings: StudySettings,
+    adaptive: AdaptiveSettings,
+    algorithm: str = "smoother",
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[list[StudyRow], list[ComparisonRow]]:
+    """The paper's method and the new options on the same plants and noise, every level.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study.
+    adaptive : AdaptiveSettings
+        The new options (``noise = "data"``).
+    algorithm : str
+        Estimator of both.
+    progress : callable, optional
+        ``progress(done, total)`` after every learning iteration of the new options.
+
+    Returns
+    -------
+    rows : list of StudyRow
+        Tables II/III rows of the new options (algorithm ``"<algorithm>+adaptive"``).
+    comparison : list of ComparisonRow
+        One per level.
+
+    Raises
+    ------
+    ValueError
+        The per-run update operators would take more than 2 GB.
+    """
+    import time
+
+    check_adaptive_size(settings)
+    step = _counter(len(settings.levels) * settings.iterations, progress)
+    rows, comparison = [], []
+    for level in settings.levels:
+        plants = sample_plants(settings, level)
+        paper = _simulate(settings, plants, level, algorithm)
+        start = time.perf_counter()
+        new, refreshed = _adaptive_simulate(settings, plants, level, algorithm, adaptive, step)
+        seconds = time.perf_counter() - start
+        rows.append(summarise(settings, new, level, f"{algorithm}+adaptive", plants.excluded))
+        div_p, div_n = _diverged(settings, paper), _diverged(settings, new)
+        keep = ~(div_p | div_n)
+        window = slice(2, min(5, settings.iterations) + 1)
+        pm, nm = float(paper[:, :, window].mean()), float(new[:, :, window].mean())
+        steady = slice(settings.steady_from, settings.steady_to + 1)
+        comparison.append(
+            ComparisonRow(
+                uncertainty=float(level),
+                algorithm=algorithm,
+                paper_mean_2_5=pm,
+                new_mean_2_5=nm,
+                change_pct=100.0 * (nm / pm - 1.0),
+                paper_diverged=int(div_p.sum()),
+                new_diverged=int(div_n.sum()),
+                plants=int(plants.wn_rad_s.size),
+                paper_kept_2_5=float(paper[keep][:, :, window].mean()) if keep.any() else np.nan,
+                new_kept_2_5=float(new[keep][:, :, window].mean()) if keep.any() else np.nan,
+                paper_steady=float(paper[keep][:, :, steady].mean()) if keep.any() else np.nan,
+                new_steady=float(new[keep][:, :, steady].mean()) if keep.any() else np.nan,
+                refreshed_pct=100.0 * float(refreshed.mean()),
+                seconds=seconds,
+            )
+        )
+    return rows, comparison

@@ -46,6 +46,7 @@ from gcs.core.model import (
     markov_parameters,
     relative_degree,
 )
+from gcs.core.robustness import RobustnessWeight, difference_matrix
 from gcs.errors import ProfileError, RunLogError, TrajectoryError, UpdateInfeasible
 
 __all__ = [
@@ -232,6 +233,7 @@ def _build_problem(
     d_hat_m: np.ndarray,
     u_prev_m: np.ndarray,
     weights: UpdateWeights,
+    robust: RobustnessWeight | None = None,
 ) -> _Problem:
     if not isinstance(model, DiscreteModel):
         raise TypeError(f"model must be a DiscreteModel, got {type(model).__name__}")
@@ -266,11 +268,31 @@ def _build_problem(
     ctc = C.T @ C
     PX = sp.kron(sp.diags(mask), sp.csr_matrix(2.0 * weights.we * ctc))
     PU = sp.eye(m) * (2.0 * (weights.wdu + weights.wu))
-    P = sp.block_diag([PU, PX], format="csc")
     qX = (-2.0 * weights.we * (mask * w[d:N]))[:, None] * C[0][None, :]
     qU = -2.0 * weights.wdu * up[:m]
+    if robust is not None and robust.lam > 0:
+        PR, qR = _robust_terms(robust, N, m, y_final)
+        PU, qU = PU + PR, qU + qR
+    P = sp.block_diag([PU, PX], format="csc")
     q = np.concatenate([qU, qX.ravel()])
     return _Problem(N, r, m, y_final, P, q, G, h, reference_for_inputs(yd, r))
+
+
+def _robust_terms(
+    robust: RobustnessWeight, n: int, m: int, y_final: float
+) -> tuple[sp.csc_matrix, np.ndarray]:
+    """Hessian block and linear term of ``lam ||D (u - anchor)||^2`` on the free inputs.
+
+    The pinned tail (``u = y_final``) is a constant of ``D u`` and moves to the offset.
+    """
+    if robust.anchor_m.shape != (n,):
+        raise RunLogError(
+            f"robustness anchor_m must have {n} samples, got shape {robust.anchor_m.shape}"
+        )
+    D = difference_matrix(n, robust.order)
+    Df = D[:, :m]
+    offset = D @ robust.anchor_m - D[:, m:] @ np.full(n - m, y_final)
+    return (2.0 * robust.lam * (Df.T @ Df)).tocsc(), -2.0 * robust.lam * (Df.T @ offset)
 
 
 def _full_input(prob: _Problem, u_free: np.ndarray) -> np.ndarray:
@@ -508,12 +530,17 @@ def _objective(
     up: np.ndarray,
     weights: UpdateWeights,
     r: int,
+    robust: RobustnessWeight | None = None,
 ) -> float:
     f = markov_parameters(model, u.size)
     y = scipy.signal.oaconvolve(f, u)[: u.size] if u.size > 64 else np.convolve(f, u)[: u.size]
     e = (y - yd + dh)[r - 1 :]
     du = u - up
-    return float(weights.we * e @ e + weights.wdu * du @ du + weights.wu * u @ u)
+    value = float(weights.we * e @ e + weights.wdu * du @ du + weights.wu * u @ u)
+    if robust is not None and robust.lam > 0:
+        x = difference_matrix(u.size, robust.order) @ (u - robust.anchor_m)
+        value += robust.lam * float(x @ x)
+    return value
 
 
 def next_input(
@@ -523,6 +550,7 @@ def next_input(
     u_prev_m: np.ndarray,
     weights: UpdateWeights,
     limits: SetpointLimits | None = None,
+    robustness: RobustnessWeight | None = None,
 ) -> UpdateResult:
     """Next trial input: minimiser of eq. (8) under the setpoint limits (one axis).
 
@@ -540,6 +568,9 @@ def next_input(
         Weights of eq. (8).
     limits : SetpointLimits or None
         Setpoint limits of this axis; None for none.
+    robustness : RobustnessWeight or None
+        Zero-phase weight ``lam ||D_p (U - U_anchor)||^2`` added to eq. (8) (the Q-filter of
+        :mod:`gcs.core.robustness`); None (default) for eq. (8) as written.
 
     Returns
     -------
@@ -558,7 +589,7 @@ def next_input(
     RuntimeError
         Clarabel failed numerically (status other than solved or infeasible).
     """
-    prob = _build_problem(model, yd_m, d_hat_m, u_prev_m, weights)
+    prob = _build_problem(model, yd_m, d_hat_m, u_prev_m, weights, robustness)
     yd = np.asarray(yd_m, dtype=float)
     dh = np.asarray(d_hat_m, dtype=float)
     up = np.asarray(u_prev_m, dtype=float)
@@ -570,7 +601,7 @@ def next_input(
         u = _full_input(prob, u_free)
         method = "clarabel"
     active = 0 if limits is None else _violations(u, prob, limits, _ACTIVE_TOL_M)
-    objective = _objective(model, u, yd, dh, up, weights, prob.r)
+    objective = _objective(model, u, yd, dh, up, weights, prob.r, robustness)
     return UpdateResult(u, status, objective, method, active)
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from gcs.core.estimators import KilcSettings, SmootherSettings
+from gcs.core.learning import NOISE_MODELS, AdaptiveSettings
 from gcs.core.model import DiscreteModel, from_state_space, from_transfer_function
 from gcs.core.trajectory import MAX_SAMPLES, Box, EightShape
 from gcs.core.update import UpdateWeights
@@ -159,6 +160,8 @@ class LearningConfig:
         Bound on the change of a setpoint from one sample to the next [m].
     max_deviation_m : float or None
         Bound on the distance of a setpoint from the reference [m].
+    adaptive : AdaptiveSettings
+        Options beyond the paper (``learning.adaptive``); the default is the paper's method.
     """
 
     algorithm: str = "smoother"
@@ -167,6 +170,7 @@ class LearningConfig:
     kilc: KilcSettings = field(default_factory=KilcSettings)
     max_step_m: float | None = None
     max_deviation_m: float | None = None
+    adaptive: AdaptiveSettings = field(default_factory=AdaptiveSettings)
 
 
 @dataclass(frozen=True)
@@ -286,10 +290,46 @@ def _learning(f: _Fields) -> LearningConfig:
         kilc=settings["kilc"],
         max_step_m=limits.optional_number("max_step_m"),
         max_deviation_m=limits.optional_number("max_deviation_m"),
+        adaptive=_adaptive(f.sub("adaptive", {})),
     )
     limits.done()
     f.done()
     return config
+
+
+def _adaptive(f: _Fields) -> AdaptiveSettings:
+    """``learning.adaptive``: the options beyond the paper (absent: the paper's method)."""
+    d = AdaptiveSettings()
+    flag = {}
+    for key in ("drift_offset", "refresh", "safeguard"):
+        value = f.raw(key, getattr(d, key))
+        if not isinstance(value, bool):
+            raise f.fail(key, f"must be true or false, got {value!r}")
+        flag[key] = value
+    cutoff = f.raw("robustness_cutoff_rad_s", None)
+    order = f.integer("robustness_order", d.robustness_order)
+    try:
+        settings = AdaptiveSettings(
+            noise=f.string("noise", d.noise, NOISE_MODELS),
+            drift_offset=flag["drift_offset"],
+            refresh=flag["refresh"],
+            refresh_min_snr=f.number("refresh_min_snr", d.refresh_min_snr),
+            refresh_block_s=f.number("refresh_block_s", d.refresh_block_s, positive=True),
+            robustness_cutoff_rad_s=cutoff
+            if cutoff is None or cutoff == "auto"
+            else f.number("robustness_cutoff_rad_s", positive=True),
+            robustness_order=order,
+            safeguard=flag["safeguard"],
+            safeguard_k_sigma=f.number("safeguard_k_sigma", d.safeguard_k_sigma),
+            safeguard_step=f.number("safeguard_step", d.safeguard_step, positive=True),
+            floor_z=f.number("floor_z", d.floor_z, positive=True),
+        )
+    except ValueError as exc:
+        if isinstance(exc, GcsError):
+            raise
+        raise ProfileError(f"{f.where}: field '{f.path}': {exc}") from exc
+    f.done()
+    return settings
 
 
 def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:

@@ -1,0 +1,301 @@
+"""Repeatability of the vehicle and the floor of learning (pure numerics).
+
+No ILC removes what does not repeat. Flights of identical setpoints differ only by their
+non-repeatable parts ``v_i`` (gusts, estimator wander, measurement noise):
+``Y_i - Y_l = v_i - v_l``. For independent, identically distributed zero-mean Gaussian
+``v_i`` (any covariance, isotropic or not, correlated in time or not), the scaled deviation
+from the mean of ``K`` flights,
+
+    delta_i = sqrt(K / (K - 1)) (Y_i - mean_l Y_l),
+
+has exactly the distribution of one flight's ``v``; for two flights ``delta = (Y_1 - Y_2) /
+sqrt(2)``. So the floor in the terms of eq. (10), the expected e_pos of a flight whose
+repeatable error is zero, is the mean over samples (and flights) of ``|delta(k)|`` (the
+horizontal distance), and its RMS version ``sqrt(mean |delta|^2)``.
+
+The floor's scatter is the standard deviation of one trial's e_pos at the floor: the
+standard error of a time average of the correlated series ``a(k) = |delta(k)|``, i.e.
+``sd(a) sqrt(tau / N)`` with ``tau`` the integrated autocorrelation time of ``a`` (Geyer's
+initial positive sequence). Why these statistics decide "reached" and "converged" is in
+``docs/learning-floor.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "Floor",
+    "FloorVerdict",
+    "floor_from_flights",
+    "floor_from_difference",
+    "identical_groups",
+    "integrated_autocorrelation",
+    "floor_verdicts",
+]
+
+#: Setpoints closer than this count as identical [m].
+IDENTICAL_TOL_M = 1e-9
+
+
+@dataclass(frozen=True)
+class Floor:
+    """One flight's non-repeatable error, in e_pos terms, with its sampling scatter.
+
+    Parameters
+    ----------
+    epos_m : float
+        Expected e_pos (eq. 10) of a trial with no repeatable error left [m].
+    rms_m : float
+        RMS horizontal non-repeatable error of one flight [m].
+    axis_rms_m : tuple of float
+        RMS per axis (north, east) [m].
+    axis_mean_abs_m : tuple of float
+        Mean absolute non-repeatable error per axis (north, east) [m].
+    scatter_m : float
+        Standard deviation of one trial's e_pos at the floor [m].
+    effective_samples : float
+        ``N / tau``: independent samples a trial is worth for the time average.
+    flights : int
+        Flights the floor is measured from (``K``); 2 for a difference.
+    source : str
+        ``"repeat"`` (identical setpoints) or ``"model-corrected pair"`` (two trials of
+        different setpoints, the model's predicted change removed: an upper bound).
+    """
+
+    epos_m: float
+    rms_m: float
+    axis_rms_m: tuple[float, float]
+    axis_mean_abs_m: tuple[float, float]
+    scatter_m: float
+    effective_samples: float
+    flights: int
+    source: str = "repeat"
+
+    @property
+    def floor_scatter_m(self) -> float:
+        """Standard deviation of the floor estimate itself [m] (``K - 1`` degrees of freedom)."""
+        return self.scatter_m / np.sqrt(max(self.flights - 1, 1))
+
+    def as_dict(self) -> dict:
+        """JSON-ready dictionary of the fields (SI units)."""
+        return {
+            "epos_m": self.epos_m,
+            "rms_m": self.rms_m,
+            "axis_rms_m": list(self.axis_rms_m),
+            "axis_mean_abs_m": list(self.axis_mean_abs_m),
+            "scatter_m": self.scatter_m,
+            "floor_scatter_m": self.floor_scatter_m,
+            "effective_samples": self.effective_samples,
+            "flights": self.flights,
+            "source": self.source,
+        }
+
+
+def _check_ne(name: str, arr: np.ndarray, ndim: int) -> np.ndarray:
+    arr = np.asarray(arr, dtype=float)
+    if arr.ndim != ndim or arr.shape[-1] != 2:
+        want = "(K, N, 2)" if ndim == 3 else "(N, 2)"
+        raise ValueError(f"{name} must have shape {want} (north, east last), got {arr.shape}")
+    if arr.shape[-2] < 4:
+        raise ValueError(f"{name} needs at least 4 samples per flight, got {arr.shape[-2]}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf")
+    return arr
+
+
+def integrated_autocorrelation(x: np.ndarray) -> float:
+    """Integrated autocorrelation time ``tau = 1 + 2 sum_k rho(k)`` of a series.
+
+    The sum runs over Geyer's initial positive sequence: pairs ``rho(2m) + rho(2m+1)`` are
+    added while they stay positive, which bounds the noise of the long lags.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+        The series.
+
+    Returns
+    -------
+    float
+        ``tau`` in samples, between 1 and ``N``.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.ndim != 1:
+        raise ValueError(f"x must be one-dimensional, got shape {x.shape}")
+    n = x.size
+    xc = x - x.mean()
+    var = float(xc @ xc) / n
+    if var == 0.0 or n < 4:
+        return 1.0
+    spec = np.fft.rfft(xc, 2 * n)
+    acov = np.fft.irfft(spec * np.conj(spec), 2 * n)[:n] / n
+    rho = acov / var
+    tau = -1.0  # rho(0) = 1 enters the first pair: tau = -1 + 2 sum of pairs
+    for m in range(n // 2):
+        pair = rho[2 * m] + (rho[2 * m + 1] if 2 * m + 1 < n else 0.0)
+        if pair <= 0:
+            break
+        tau += 2.0 * pair
+    return float(min(max(tau, 1.0), n))
+
+
+def _floor(delta: np.ndarray, flights: int, source: str) -> Floor:
+    """Floor statistics from deviations ``delta`` of shape (K', N, 2) distributed like v."""
+    dist = np.hypot(delta[..., 0], delta[..., 1])  # (K', N)
+    n = dist.shape[-1]
+    taus = [integrated_autocorrelation(a) for a in dist]
+    tau = float(np.mean(taus))
+    # s^2 tau / (N - tau): the demeaned sample variance underestimates the variance by the
+    # variance of the mean itself, sigma^2 tau / N
+    scatter = float(np.mean([np.std(a) for a in dist])) * np.sqrt(tau / max(n - tau, 1.0))
+    return Floor(
+        epos_m=float(dist.mean()),
+        rms_m=float(np.sqrt(np.mean(dist**2))),
+        axis_rms_m=tuple(float(x) for x in np.sqrt(np.mean(delta**2, axis=(0, 1)))),  # type: ignore[arg-type]
+        axis_mean_abs_m=tuple(float(x) for x in np.mean(np.abs(delta), axis=(0, 1))),  # type: ignore[arg-type]
+        scatter_m=float(scatter),
+        effective_samples=float(n / tau),
+        flights=flights,
+        source=source,
+    )
+
+
+def floor_from_flights(pos_ne_m: np.ndarray) -> Floor:
+    """The floor from ``K >= 2`` flights of identical setpoints.
+
+    Parameters
+    ----------
+    pos_ne_m : ndarray, shape (K, N, 2)
+        Measured north/east positions y(1..N) of each flight on the trial grid [m] (absolute
+        or learning coordinates: only differences enter).
+
+    Returns
+    -------
+    Floor
+    """
+    pos = _check_ne("pos_ne_m", pos_ne_m, 3)
+    k = pos.shape[0]
+    if k < 2:
+        raise ValueError(f"the floor needs at least 2 flights, got {k}")
+    delta = np.sqrt(k / (k - 1)) * (pos - pos.mean(axis=0))
+    # two flights give one series (delta_2 = -delta_1): keep one so tau is not counted twice
+    return _floor(delta[:1] if k == 2 else delta, k, "repeat")
+
+
+def floor_from_difference(diff_ne_m: np.ndarray, source: str = "repeat") -> Floor:
+    """The floor from the difference of two flights' non-repeatable parts ``v_1 - v_2``.
+
+    Parameters
+    ----------
+    diff_ne_m : ndarray, shape (N, 2)
+        ``Y_1 - Y_2`` for identical setpoints, or ``Y_1 - Y_2 - F (U_1 - U_2)`` (the model's
+        predicted change removed) for different ones [m].
+    source : str
+        ``"repeat"`` or ``"model-corrected pair"`` (recorded in the result).
+
+    Returns
+    -------
+    Floor
+    """
+    diff = _check_ne("diff_ne_m", diff_ne_m, 2)
+    return _floor(diff[None] / np.sqrt(2.0), 2, source)
+
+
+def identical_groups(setpoints_ne_m: np.ndarray, tol_m: float = IDENTICAL_TOL_M) -> list[list[int]]:
+    """Groups of trials flown with identical setpoints (two or more trials each).
+
+    Parameters
+    ----------
+    setpoints_ne_m : ndarray, shape (T, N, 2)
+        Setpoints of every trial [m].
+    tol_m : float
+        Largest difference that counts as identical [m].
+
+    Returns
+    -------
+    list of list of int
+        Trial indices of each group, in order of their first trial.
+    """
+    sp = np.asarray(setpoints_ne_m, dtype=float)
+    if sp.ndim != 3 or sp.shape[-1] != 2:
+        raise ValueError(f"setpoints_ne_m must have shape (T, N, 2), got {sp.shape}")
+    groups: list[list[int]] = []
+    for i in range(sp.shape[0]):
+        for g in groups:
+            if np.max(np.abs(sp[i] - sp[g[0]])) <= tol_m:
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    return [g for g in groups if len(g) >= 2]
+
+
+@dataclass(frozen=True)
+class FloorVerdict:
+    """How one trial's e_pos compares with the floor.
+
+    Parameters
+    ----------
+    trial : int
+        Trial index j.
+    epos_m : float
+        The trial's e_pos [m].
+    ratio : float
+        ``epos_m / floor.epos_m``.
+    z : float
+        ``(epos_m - floor) / sigma_d``, ``sigma_d`` the scatter of a trial's e_pos minus the
+        floor estimate.
+    at_floor : bool
+        ``z <= z_max``: the trial is indistinguishable from a flight with nothing repeatable
+        left.
+    converged : bool
+        This trial and the previous are at the floor and their mean lies within one
+        single-flight scatter of the floor: further trials cannot show an improvement.
+    """
+
+    trial: int
+    epos_m: float
+    ratio: float
+    z: float
+    at_floor: bool
+    converged: bool
+
+
+def floor_verdicts(
+    epos_m: np.ndarray, floor: Floor, z_max: float = 2.0
+) -> tuple[FloorVerdict, ...]:
+    """Verdicts "at the floor" and "converged" for every trial.
+
+    Parameters
+    ----------
+    epos_m : ndarray, shape (T,)
+        e_pos of trials j = 0..T-1 [m].
+    floor : Floor
+        The measured floor.
+    z_max : float
+        One-sided threshold of the z statistic (2: a trial at the floor is called so with
+        probability 0.977 under a Gaussian e_pos).
+
+    Returns
+    -------
+    tuple of FloorVerdict
+    """
+    e = np.asarray(epos_m, dtype=float)
+    if e.ndim != 1 or not np.all(np.isfinite(e)):
+        raise ValueError(f"epos_m must be a finite 1-D array, got shape {e.shape}")
+    sigma = floor.scatter_m
+    sigma_d = float(np.hypot(sigma, floor.floor_scatter_m))
+    out: list[FloorVerdict] = []
+    for j, ej in enumerate(e):
+        gap = ej - floor.epos_m
+        z = gap / sigma_d if sigma_d > 0 else (0.0 if gap <= 0 else np.inf)
+        at = bool(z <= z_max)
+        conv = (
+            j >= 1 and at and out[-1].at_floor and 0.5 * (e[j] + e[j - 1]) - floor.epos_m <= sigma
+        )
+        ratio = float(ej / floor.epos_m) if floor.epos_m > 0 else float("inf")
+        out.append(FloorVerdict(j, float(ej), ratio, float(z), at, bool(conv)))
+    return tuple(out)

@@ -1,0 +1,634 @@
+"""Model refresh between trials: correct the model from trials flown with different setpoints.
+
+Two trials with different setpoints give ``Y_j - Y_(j-1) = F_true (U_j - U_(j-1)) + v_j -
+v_(j-1)``: the repeatable disturbance cancels and what is left is the vehicle's response to the
+input change (its linearisation around the flown path) plus non-repeatable error. The refresh
+fits an output-error model of the same structure as the model in use to these pairs,
+
+    dy(k) = z^-d B(z) / A(z) du(k),   B = b_1 z^-1 + .. + b_n z^-n,   A = 1 + a_1 z^-1 + ..,
+
+with the input delay ``d`` kept from the model (explicit, not fitted) and the order ``n`` the
+model's, by Levenberg-Marquardt on the simulation error (Ljung, System Identification,
+sec. 10.1), started from the model in use. The candidate is accepted only when it explains
+held-out data better than the model in use: two-fold cross-validation over blocks of time
+(fit on the even blocks, score on the odd ones, and the other way round), the model in use
+scored on the same samples. It must also be stable. Pairs whose predicted output change is
+within the noise (signal-to-noise below ``min_snr``) carry no information and are not used; a
+refresh is attempted only when the newest pair is informative.
+
+How far the model moved is the largest relative change of its frequency response over the
+band where the update inverts the model (``|F|^2 >= W_du / W_e``): ``max |F_new / F_old - 1|``.
+That is the quantity that decides convergence of norm-optimal ILC, ``|1 - F_true / F| < 1``,
+so a move of 0.3 means the old model was about 30 % off where learning acts.
+
+Everything is vectorised over a leading batch axis (Monte Carlo runs); :func:`refresh_model`
+is the one-axis entry point the learning step uses.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+import scipy.fft
+
+from gcs.core.model import DiscreteModel
+
+T = TypeVar("T")
+
+__all__ = [
+    "RefreshSettings",
+    "RefreshResult",
+    "transfer_function",
+    "model_from_transfer_function",
+    "simulate_tf",
+    "fit_output_error",
+    "refresh_decision",
+    "refresh_model",
+    "model_change",
+]
+
+
+@dataclass(frozen=True)
+class RefreshSettings:
+    """How the model is refreshed.
+
+    Parameters
+    ----------
+    min_snr : float
+        A pair is used when ``mean (F dU)^2 >= min_snr * 2 r`` (its predicted output change
+        above the noise of a difference of two flights).
+    block_s : float
+        Length of the cross-validation blocks [s], longer than the correlation time of the
+        non-repeatable error; shortened so that a trial has at least 8 blocks.
+    max_iter : int
+        Levenberg-Marquardt iterations.
+    stability_margin : float
+        Largest pole radius accepted.
+    delay_search : int
+        The input delay is searched within this many samples of the current model's (the
+        candidate with the smallest cross-validated error wins); 0 keeps it.
+    """
+
+    min_snr: float = 1.0
+    block_s: float = 1.0
+    max_iter: int = 40
+    stability_margin: float = 0.999
+    delay_search: int = 2
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.min_snr) and self.min_snr >= 0):
+            raise ValueError(f"min_snr must be finite and >= 0, got {self.min_snr}")
+        if not (np.isfinite(self.block_s) and self.block_s > 0):
+            raise ValueError(f"block_s must be > 0, got {self.block_s}")
+        if self.max_iter < 1:
+            raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
+        if not 0 < self.stability_margin <= 1:
+            raise ValueError(f"stability_margin must lie in (0, 1], got {self.stability_margin}")
+        if int(self.delay_search) != self.delay_search or self.delay_search < 0:
+            raise ValueError(f"delay_search must be an integer >= 0, got {self.delay_search}")
+
+
+@dataclass(frozen=True)
+class RefreshResult:
+    """One refresh decision (one axis).
+
+    Parameters
+    ----------
+    model : DiscreteModel
+        The model to use from now on (the candidate when accepted, else the current one).
+    accepted : bool
+        Whether the candidate replaced the current model.
+    reason : str
+        Why, in words.
+    moved : float
+        ``max |F_candidate / F_current - 1|`` over the learning band (0 when not accepted or no
+        candidate).
+    candidate_moved : float
+        The same for the candidate, accepted or not (NaN when none was fitted).
+    cv_loss_current_m2 : float
+        Mean square held-out error of the current model on the pairs [m^2] (NaN: not scored).
+    cv_loss_candidate_m2 : float
+        Mean square cross-validated error of the candidate [m^2] (NaN: not fitted).
+    pairs : int
+        Informative pairs used.
+    snr : float
+        Signal-to-noise of the newest pair (``mean (F dU)^2 / 2 r``).
+    """
+
+    model: DiscreteModel
+    accepted: bool
+    reason: str
+    moved: float
+    candidate_moved: float
+    cv_loss_current_m2: float
+    cv_loss_candidate_m2: float
+    pairs: int
+    snr: float
+
+    def as_dict(self) -> dict:
+        """JSON-ready dictionary (the model as its discrete state space)."""
+        return {
+            "accepted": self.accepted,
+            "reason": self.reason,
+            "moved": self.moved,
+            "candidate_moved": self.candidate_moved,
+            "cv_loss_current_m2": self.cv_loss_current_m2,
+            "cv_loss_candidate_m2": self.cv_loss_candidate_m2,
+            "pairs": self.pairs,
+            "snr": self.snr,
+            "model": {
+                "A": self.model.A.tolist(),
+                "B": self.model.B.tolist(),
+                "C": self.model.C.tolist(),
+                "D": [[0.0]],
+                "dt_s": self.model.dt_s,
+                "delay_samples": self.model.delay_samples,
+            },
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+# Transfer functions
+# ---------------------------------------------------------------------------------------------
+
+
+def transfer_function(model: DiscreteModel) -> tuple[np.ndarray, np.ndarray]:
+    """``(b, a)`` with ``F(z) = z^-d (b_1 z^-1 + .. + b_n z^-n) / (1 + a_1 z^-1 + .. + a_n z^-n)``.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+        Model of order n (delay ``d = model.delay_samples``).
+
+    Returns
+    -------
+    b : ndarray, shape (n,)
+    a : ndarray, shape (n,)
+        Denominator without its leading 1.
+    """
+    n = model.order
+    a_full = np.real(np.poly(model.A))  # det(zI - A) = z^n + a_1 z^(n-1) + ..
+    # Markov parameters f_1..f_n (no delay) satisfy f_k + sum_i a_i f_(k-i) = b_k
+    f = np.empty(n)
+    x = model.B[:, 0].copy()
+    for k in range(n):
+        f[k] = model.C[0] @ x
+        x = model.A @ x
+    b = np.array([f[k] + sum(a_full[i] * f[k - i] for i in range(1, k + 1)) for k in range(n)])
+    return b, a_full[1:].copy()
+
+
+def model_from_transfer_function(
+    b: np.ndarray, a: np.ndarray, dt_s: float, delay_samples: int
+) -> DiscreteModel:
+    """Observable canonical state space of :func:`transfer_function`'s ``(b, a)``.
+
+    Parameters
+    ----------
+    b : ndarray, shape (n,)
+        Numerator ``b_1 .. b_n``.
+    a : ndarray, shape (n,)
+        Denominator ``a_1 .. a_n`` (leading 1 omitted).
+    dt_s : float
+        Sample time [s].
+    delay_samples : int
+        Input delay [samples].
+
+    Returns
+    -------
+    DiscreteModel
+    """
+    b = np.asarray(b, dtype=float)
+    a = np.asarray(a, dtype=float)
+    if b.ndim != 1 or a.shape != b.shape or b.size == 0:
+        raise ValueError(f"b and a must be 1-D of one length, got {b.shape} and {a.shape}")
+    n = b.size
+    A = np.zeros((n, n))
+    A[:, 0] = -a
+    A[: n - 1, 1:] = np.eye(n - 1)
+    C = np.zeros((1, n))
+    C[0, 0] = 1.0
+    return DiscreteModel(A, b.reshape(n, 1), C, dt_s, delay_samples)
+
+
+def _pole_radius(a: np.ndarray) -> np.ndarray:
+    """Largest pole modulus of ``1 + a_1 z^-1 + .. + a_n z^-n`` per row, shape (M,)."""
+    n = a.shape[-1]
+    comp = np.zeros(a.shape[:-1] + (n, n))
+    comp[..., 0, :] = -a
+    comp[..., 1:, :-1] = np.eye(n - 1)
+    with np.errstate(invalid="ignore"):
+        radius = np.max(np.abs(np.linalg.eigvals(comp)), axis=-1) if n else np.zeros(len(a))
+    return np.where(np.isfinite(radius), radius, np.inf)
+
+
+def _impulse(b: np.ndarray, a: np.ndarray, delay: int, n_out: int) -> np.ndarray:
+    """Impulse responses (M, n_out) of ``z^-delay (b_1 + b_2 z^-1 + ..) / A(z)``.
+
+    The difference equation run on a unit impulse, vectorised over the rows (an unstable row
+    grows, possibly to inf, and is refused by its loss).
+    """
+    m, n = b.shape
+    h = np.zeros((m, n_out + n))  # column n + k holds h(k); the first n columns are h(<0) = 0
+    coef = [a[:, i].copy() for i in range(n)]
+    for k in range(delay, n_out):
+        kk = k - delay  # b_(kk+1) multiplies the delayed impulse
+        acc = b[:, kk].copy() if kk < n else np.zeros(m)
+        for i in range(n):  # n is the model order: a handful of vector operations
+            acc -= coef[i] * h[:, n + k - 1 - i]
+        h[:, n + k] = acc
+    return h[:, n:]
+
+
+def _causal_conv(h: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``y(k) = sum_i h(i) u(k - i)`` along the last axis; h (M, N), u (M, ..., N)."""
+    n = u.shape[-1]
+    nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)
+    hh = h.reshape(h.shape[:1] + (1,) * (u.ndim - 2) + h.shape[1:])
+    spec = scipy.fft.rfft(hh, nfft, axis=-1) * scipy.fft.rfft(u, nfft, axis=-1)
+    return scipy.fft.irfft(spec, nfft, axis=-1)[..., :n]
+
+
+def _iir(b: np.ndarray, a: np.ndarray, u: np.ndarray, delay: int) -> np.ndarray:
+    """``y = z^-delay (b_1 + b_2 z^-1 + ..) / A u`` along the last axis; b, a (M, n)."""
+    return _causal_conv(_impulse(b, a, delay, u.shape[-1]), u)
+
+
+def simulate_tf(b: np.ndarray, a: np.ndarray, delay: int, u: np.ndarray) -> np.ndarray:
+    """Outputs ``y(1..N)`` from rest for inputs ``u(0..N-1)``, one model per batch row.
+
+    Parameters
+    ----------
+    b, a : ndarray, shape (M, n)
+        Numerators and denominators (see :func:`transfer_function`).
+    delay : int
+        Input delay [samples].
+    u : ndarray, shape (M, ..., N)
+        Inputs.
+
+    Returns
+    -------
+    ndarray, shape like ``u``
+    """
+    return _iir(np.asarray(b, float), np.asarray(a, float), np.asarray(u, float), int(delay))
+
+
+def _shift(x: np.ndarray, s: int) -> np.ndarray:
+    if s == 0:
+        return x
+    out = np.zeros_like(x)
+    out[..., s:] = x[..., :-s]
+    return out
+
+
+def _jacobian(
+    b: np.ndarray, a: np.ndarray, delay: int, du: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Simulation and its Jacobian with respect to ``(b, a)``: (M, P, N), (M, P, N, 2n)."""
+    n = b.shape[-1]
+    e1 = np.zeros_like(b)
+    e1[:, 0] = 1.0
+    w = _iir(e1, a, du, 0)  # w = du / A: numerator 1, no delay
+    y_hat = np.zeros_like(du)
+    cols = []
+    for i in range(n):
+        col = _shift(w, delay + i)  # d y / d b_(i+1)
+        cols.append(col)
+        y_hat = y_hat + b[:, i].reshape((-1,) + (1,) * (du.ndim - 1)) * col
+    s = _iir(e1, a, y_hat, 0)
+    for i in range(n):
+        cols.append(-_shift(s, i + 1))  # d y / d a_(i+1)
+    return y_hat, np.stack(cols, axis=-1)
+
+
+def _quiet(func: Callable[..., T]) -> Callable[..., T]:
+    """Run ``func`` with overflow ignored: an unstable candidate simulates to inf and its loss
+    refuses it, which is the intended outcome, not a numerical accident."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> T:
+        with np.errstate(over="ignore", invalid="ignore"):
+            return func(*args, **kwargs)
+
+    return wrapper
+
+
+@_quiet
+def fit_output_error(
+    b0: np.ndarray,
+    a0: np.ndarray,
+    delay: int,
+    du: np.ndarray,
+    dy: np.ndarray,
+    mask: np.ndarray,
+    max_iter: int = 40,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Levenberg-Marquardt fit of ``dy = z^-d B/A du`` on the samples where ``mask`` is set.
+
+    Parameters
+    ----------
+    b0, a0 : ndarray, shape (M, n)
+        Starting models.
+    delay : int
+        Input delay [samples] (not fitted).
+    du : ndarray, shape (M, P, N)
+        Input changes of the pairs [m].
+    dy : ndarray, shape (M, P, N)
+        Output changes of the pairs [m].
+    mask : ndarray of bool, shape (M, P, N)
+        Samples (and pairs) that enter the loss.
+    max_iter : int
+        Iterations.
+
+    Returns
+    -------
+    b, a : ndarray, shape (M, n)
+        Fitted models.
+    loss : ndarray, shape (M,)
+        Sum of squared errors on the masked samples [m^2].
+    """
+    b, a = np.array(b0, dtype=float), np.array(a0, dtype=float)
+    du, dy = np.asarray(du, float), np.asarray(dy, float)
+    w = np.asarray(mask, float)
+    n = b.shape[-1]
+
+    def loss_of(bb: np.ndarray, aa: np.ndarray) -> np.ndarray:
+        res = (simulate_tf(bb, aa, delay, du) - dy) * w
+        out = _sse(res)
+        return np.where(np.isfinite(out), out, np.inf)
+
+    loss = loss_of(b, a)
+    scale = _sse(dy * w)
+    mu = np.full(b.shape[0], 1e-3)
+    active = np.isfinite(loss)
+    for _ in range(max_iter):
+        rows = np.flatnonzero(active)
+        if rows.size == 0:
+            break
+        y_hat, jac = _jacobian(b[rows], a[rows], delay, du[rows])
+        wr = w[rows]
+        res = ((y_hat - dy[rows]) * wr).reshape(rows.size, -1)
+        jw = (jac * wr[..., None]).reshape(rows.size, -1, 2 * n)
+        jtj = np.einsum("mki,mkj->mij", jw, jw)
+        jtr = np.einsum("mki,mk->mi", jw, res)
+        d = np.maximum(np.diagonal(jtj, axis1=-2, axis2=-1), 1e-300)
+        lhs = jtj + mu[rows, None, None] * d[:, None, :] * np.eye(2 * n)
+        step = -np.linalg.solve(lhs, jtr[..., None])[..., 0]
+        bn, an = b[rows] + step[:, :n], a[rows] + step[:, n:]
+        res_new = (simulate_tf(bn, an, delay, du[rows]) - dy[rows]) * wr
+        new = _sse(res_new)
+        new = np.where(np.isfinite(new), new, np.inf)
+        better = new < loss[rows]
+        rel = np.where(better, (loss[rows] - new) / np.maximum(loss[rows], 1e-300), 0.0)
+        b[rows] = np.where(better[:, None], bn, b[rows])
+        a[rows] = np.where(better[:, None], an, a[rows])
+        loss[rows] = np.where(better, new, loss[rows])
+        mu[rows] = np.where(better, mu[rows] / 3.0, mu[rows] * 4.0)
+        tiny = loss[rows] <= 1e-24 * np.maximum(scale[rows], 1e-300)
+        active[rows] = ~((better & (rel < 1e-9)) | (mu[rows] > 1e8) | tiny)
+    return b, a, loss
+
+
+def _sse(res: np.ndarray) -> np.ndarray:
+    """Sum of squares over every axis but the first."""
+    return np.sum(res * res, axis=tuple(range(1, res.ndim)))
+
+
+def _stable(a: np.ndarray, margin: float) -> np.ndarray:
+    return _pole_radius(a) < margin
+
+
+def _freq(b: np.ndarray, a: np.ndarray, delay: int, omega: np.ndarray, dt_s: float) -> np.ndarray:
+    """Frequency responses (M, K) of ``(b, a)`` at ``omega`` [rad/s]."""
+    zinv = np.exp(-1j * omega * dt_s)
+    powers = zinv[None, :] ** np.arange(1, b.shape[-1] + 1)[:, None]  # (n, K)
+    return (b @ powers) / (1.0 + a @ powers) * zinv**delay
+
+
+def model_change(
+    b_old: np.ndarray,
+    a_old: np.ndarray,
+    b_new: np.ndarray,
+    a_new: np.ndarray,
+    delay: int,
+    dt_s: float,
+    band_gain2: float,
+    delay_new: int | None = None,
+) -> np.ndarray:
+    """Peak relative change ``max |F_new / F_old - 1|`` where ``|F_old|^2 >= band_gain2``.
+
+    Parameters
+    ----------
+    b_old, a_old, b_new, a_new : ndarray, shape (M, n)
+        The two models per batch row.
+    delay : int
+        Input delay of the old model [samples].
+    dt_s : float
+        Sample time [s].
+    band_gain2 : float
+        The band where the update inverts the model: ``|F_old|^2 >= W_du / W_e``.
+    delay_new : int, optional
+        Input delay of the new model [samples] (default: the old one's).
+
+    Returns
+    -------
+    ndarray, shape (M,)
+    """
+    delay_new = delay if delay_new is None else delay_new
+    omega = np.linspace(0.0, np.pi / dt_s, 400)
+    f_old = _freq(np.atleast_2d(b_old), np.atleast_2d(a_old), delay, omega, dt_s)
+    f_new = _freq(np.atleast_2d(b_new), np.atleast_2d(a_new), delay_new, omega, dt_s)
+    band = np.abs(f_old) ** 2 >= band_gain2
+    band[:, 0] = True  # DC always counts
+    rel = np.abs(f_new / np.where(f_old == 0, 1.0, f_old) - 1.0)
+    return np.max(np.where(band, rel, 0.0), axis=-1)
+
+
+@dataclass(frozen=True)
+class _Batch:
+    """Arrays of one batched refresh decision."""
+
+    b: np.ndarray
+    a: np.ndarray
+    delay: np.ndarray
+    accepted: np.ndarray
+    reason: np.ndarray
+    moved: np.ndarray
+    candidate_moved: np.ndarray
+    cv_current: np.ndarray
+    cv_candidate: np.ndarray
+    pairs: np.ndarray
+    snr: np.ndarray
+
+
+@_quiet
+def refresh_decision(
+    b: np.ndarray,
+    a: np.ndarray,
+    delay: int,
+    dt_s: float,
+    du: np.ndarray,
+    dy: np.ndarray,
+    noise_var_m2: np.ndarray,
+    settings: RefreshSettings,
+    band_gain2: float,
+) -> _Batch:
+    """Batched refresh: fit, cross-validate and accept or keep, per batch row.
+
+    Parameters
+    ----------
+    b, a : ndarray, shape (M, n)
+        Current models.
+    delay : int
+        Input delay [samples].
+    dt_s : float
+        Sample time [s].
+    du, dy : ndarray, shape (M, P, N)
+        Input and output changes of consecutive trials, oldest pair first [m].
+    noise_var_m2 : ndarray, shape (M,)
+        Per-sample variance of one flight's non-repeatable error ``r`` [m^2].
+    settings : RefreshSettings
+        Thresholds and iterations.
+    band_gain2 : float
+        Learning band for :func:`model_change` (``W_du / W_e``).
+
+    Returns
+    -------
+    _Batch
+        Fields of shape (M,) (models (M, n)).
+    """
+    b, a = np.atleast_2d(np.asarray(b, float)), np.atleast_2d(np.asarray(a, float))
+    du, dy = np.asarray(du, float), np.asarray(dy, float)
+    m_rows, n_pairs, n = du.shape
+    r = np.broadcast_to(np.asarray(noise_var_m2, float), (m_rows,))
+    pred = simulate_tf(b, a, delay, du)
+    snr_all = np.mean(pred * pred, axis=-1) / np.maximum(2.0 * r[:, None], 1e-300)
+    use = snr_all >= settings.min_snr  # (M, P)
+    newest = use[:, -1] if n_pairs else np.zeros(m_rows, bool)
+    out_b, out_a = b.copy(), a.copy()
+    nan = np.full(m_rows, np.nan)
+    reason = np.where(newest, "", "skipped: the newest input change is within the noise")
+    reason = reason.astype(object)
+    result = _Batch(
+        out_b, out_a, np.full(m_rows, delay), np.zeros(m_rows, bool), reason, np.zeros(m_rows),
+        nan.copy(), nan.copy(), nan.copy(), use.sum(axis=-1),
+        snr_all[:, -1] if n_pairs else nan.copy(),
+    )  # fmt: skip
+    rows = np.flatnonzero(newest)
+    if rows.size == 0:
+        return result
+    # at least 8 blocks, so that each fold sees every part of the trial
+    block = max(1, min(int(round(settings.block_s / dt_s)), n // 8))
+    fold = (np.arange(n) // block) % 2  # (N,)
+    valid = use[rows][:, :, None]
+    dur, dyr, br, ar = du[rows], dy[rows], b[rows], a[rows]
+    masks = [valid & (fold == f)[None, None, :] for f in (0, 1)]
+    res0 = (simulate_tf(br, ar, delay, dur) - dyr) * valid
+    cv_cur = _sse(res0)
+    count = np.maximum(valid.sum(axis=(1, 2)) * n, 1)
+    best_cv = np.full(rows.size, np.inf)
+    best_d = np.full(rows.size, delay)
+    bc, ac = br.copy(), ar.copy()
+    for d in range(max(0, delay - settings.delay_search), delay + settings.delay_search + 1):
+        cv = np.zeros(rows.size)
+        for f in (0, 1):
+            bf, af, _ = fit_output_error(br, ar, d, dur, dyr, masks[f], settings.max_iter)
+            held = _sse((simulate_tf(bf, af, d, dur) - dyr) * masks[1 - f])
+            ok = _stable(af, settings.stability_margin) & np.isfinite(held)
+            cv += np.where(ok, held, np.inf)
+        better = cv < best_cv
+        if not np.any(better):
+            continue
+        bd, ad, _ = fit_output_error(
+            br, ar, d, dur, dyr, np.broadcast_to(valid, dur.shape), settings.max_iter
+        )
+        best_cv = np.where(better, cv, best_cv)
+        best_d = np.where(better, d, best_d)
+        bc = np.where(better[:, None], bd, bc)
+        ac = np.where(better[:, None], ad, ac)
+    stable = _stable(ac, settings.stability_margin)
+    moved_c = np.array(
+        [
+            model_change(br[i], ar[i], bc[i], ac[i], delay, dt_s, band_gain2, int(best_d[i]))[0]
+            for i in range(rows.size)
+        ]
+    )
+    accept = stable & (best_cv < cv_cur)
+    result.cv_current[rows] = cv_cur / count
+    result.cv_candidate[rows] = best_cv / count
+    result.candidate_moved[rows] = moved_c
+    result.moved[rows] = np.where(accept, moved_c, 0.0)
+    result.accepted[rows] = accept
+    result.b[rows] = np.where(accept[:, None], bc, br)
+    result.a[rows] = np.where(accept[:, None], ac, ar)
+    result.delay[rows] = np.where(accept, best_d, delay)
+    why = np.where(
+        accept,
+        "accepted: explains held-out data better",
+        np.where(stable, "rejected: does not explain held-out data better", "rejected: unstable"),
+    )
+    result.reason[rows] = why
+    return result
+
+
+def refresh_model(
+    current: DiscreteModel,
+    du_m: np.ndarray,
+    dy_m: np.ndarray,
+    noise_var_m2: float,
+    settings: RefreshSettings,
+    band_gain2: float,
+) -> RefreshResult:
+    """Refresh one axis's model from consecutive trials (the learning step's entry point).
+
+    Parameters
+    ----------
+    current : DiscreteModel
+        Model in use.
+    du_m : ndarray, shape (P, N)
+        ``U_j - U_(j-1)`` of the pairs, oldest first [m] (U-indexed).
+    dy_m : ndarray, shape (P, N)
+        ``Y_j - Y_(j-1)`` of the same pairs [m] (Y-indexed, y(1..N)).
+    noise_var_m2 : float
+        Per-sample variance of one flight's non-repeatable error [m^2].
+    settings : RefreshSettings
+        Thresholds and iterations.
+    band_gain2 : float
+        ``W_du / W_e``: the learning band of :func:`model_change`.
+
+    Returns
+    -------
+    RefreshResult
+    """
+    du = np.asarray(du_m, dtype=float)
+    dy = np.asarray(dy_m, dtype=float)
+    if du.ndim != 2 or du.shape != dy.shape:
+        raise ValueError(f"du_m and dy_m must share one shape (P, N), got {du.shape}, {dy.shape}")
+    if not (np.all(np.isfinite(du)) and np.all(np.isfinite(dy))):
+        raise ValueError("du_m or dy_m contains NaN or inf")
+    b, a = transfer_function(current)
+    if du.shape[0] == 0:
+        return RefreshResult(current, False, "no pair of trials with different setpoints", 0.0,
+                             float("nan"), float("nan"), float("nan"), 0, float("nan"))  # fmt: skip
+    out = refresh_decision(
+        b[None], a[None], current.delay_samples, current.dt_s, du[None], dy[None],
+        np.array([noise_var_m2]), settings, band_gain2,
+    )  # fmt: skip
+    model = current
+    if out.accepted[0]:
+        model = model_from_transfer_function(out.b[0], out.a[0], current.dt_s, int(out.delay[0]))
+    return RefreshResult(
+        model=model,
+        accepted=bool(out.accepted[0]),
+        reason=str(out.reason[0]),
+        moved=float(out.moved[0]),
+        candidate_moved=float(out.candidate_moved[0]),
+        cv_loss_current_m2=float(out.cv_current[0]),
+        cv_loss_candidate_m2=float(out.cv_candidate[0]),
+        pairs=int(out.pairs[0]),
+        snr=float(out.snr[0]),
+    )

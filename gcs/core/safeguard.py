@@ -1,0 +1,164 @@
+"""Safeguard of the learning: fall back to the best trial when a trial comes out worse.
+
+A pure decision on the e_pos history. Trial ``j`` is *worse* when
+
+    e_j - e_best > k sqrt(2) sigma,
+
+``e_best`` the smallest e_pos of the earlier trials and ``sigma`` the scatter of one trial's
+e_pos at the floor (:class:`gcs.core.floor.Floor`): the difference of two trials' e_pos
+scatters by ``sqrt(2) sigma`` when nothing but the vehicle's non-repeatability separates them,
+so with ``k = 2`` a trial is called worse by chance with probability 2.3 % (and less, since
+``e_best`` is the minimum of several). Then the next update starts from the best trial's
+setpoints and takes only a fraction ``step`` of the QP's step from there:
+``U_next = U_best + step (U* - U_best)``. Both ends satisfy the arena and every setpoint limit
+(they are convex), so the convex combination does too; the anchor is also clipped into the
+arena box, so the decision never hands out a setpoint outside it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gcs.core.trajectory import Box
+
+__all__ = ["SafeguardSettings", "SafeguardDecision", "safeguard"]
+
+
+@dataclass(frozen=True)
+class SafeguardSettings:
+    """Thresholds of the safeguard.
+
+    Parameters
+    ----------
+    k_sigma : float
+        Trigger when ``e_j - e_best > k_sigma sqrt(2) sigma``.
+    step : float
+        Fraction of the update taken from the best trial's setpoints after a trigger, in
+        ``(0, 1]``.
+    """
+
+    k_sigma: float = 3.0
+    step: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.k_sigma) and self.k_sigma >= 0):
+            raise ValueError(f"k_sigma must be finite and >= 0, got {self.k_sigma}")
+        if not 0 < self.step <= 1:
+            raise ValueError(f"step must lie in (0, 1], got {self.step}")
+
+
+@dataclass(frozen=True)
+class SafeguardDecision:
+    """What the next update starts from.
+
+    Parameters
+    ----------
+    action : str
+        ``"continue"`` (from the newest trial, full step) or ``"revert"`` (from the best
+        trial, reduced step).
+    anchor_trial : int
+        Trial whose setpoints the update starts from.
+    step : float
+        Fraction of the QP's step taken.
+    anchor_ne_m : ndarray, shape (N, 2)
+        The anchor's north/east setpoints, absolute local NED, inside the arena [m].
+    epos_m : float
+        e_pos of the newest trial [m].
+    best_trial : int
+        Earlier trial with the smallest e_pos (the newest itself when it is the only one).
+    best_epos_m : float
+        Its e_pos [m].
+    threshold_m : float
+        ``e_best + k sqrt(2) sigma`` [m].
+    reason : str
+        The decision in words.
+    """
+
+    action: str
+    anchor_trial: int
+    step: float
+    anchor_ne_m: np.ndarray
+    epos_m: float
+    best_trial: int
+    best_epos_m: float
+    threshold_m: float
+    reason: str
+
+    def as_dict(self) -> dict:
+        """JSON-ready dictionary (without the anchor's setpoints)."""
+        return {
+            "action": self.action,
+            "anchor_trial": self.anchor_trial,
+            "step": self.step,
+            "epos_m": self.epos_m,
+            "best_trial": self.best_trial,
+            "best_epos_m": self.best_epos_m,
+            "threshold_m": self.threshold_m,
+            "reason": self.reason,
+        }
+
+
+def safeguard(
+    epos_m: np.ndarray,
+    setpoints_ne_m: np.ndarray,
+    scatter_m: float,
+    arena: Box,
+    settings: SafeguardSettings,
+) -> SafeguardDecision:
+    """Decide where the next update starts from.
+
+    Parameters
+    ----------
+    epos_m : ndarray, shape (T,)
+        e_pos of trials j = 0..T-1 [m] (eq. 10).
+    setpoints_ne_m : ndarray, shape (T, N, 2)
+        Their north/east setpoints, absolute local NED [m].
+    scatter_m : float
+        Scatter of one trial's e_pos at the floor [m] (``Floor.scatter_m``).
+    arena : Box
+        Flight volume, local NED [m].
+    settings : SafeguardSettings
+        Thresholds.
+
+    Returns
+    -------
+    SafeguardDecision
+    """
+    e = np.asarray(epos_m, dtype=float)
+    sp = np.asarray(setpoints_ne_m, dtype=float)
+    if e.ndim != 1 or e.size == 0 or not np.all(np.isfinite(e)):
+        raise ValueError(f"epos_m must be a non-empty finite 1-D array, got shape {e.shape}")
+    if sp.ndim != 3 or sp.shape[0] != e.size or sp.shape[-1] != 2:
+        raise ValueError(f"setpoints_ne_m must have shape ({e.size}, N, 2), got {sp.shape}")
+    if not (np.isfinite(scatter_m) and scatter_m >= 0):
+        raise ValueError(f"scatter_m must be finite and >= 0, got {scatter_m}")
+    newest = e.size - 1
+    best = int(np.argmin(e[:-1])) if e.size > 1 else newest
+    threshold = float(e[best] + settings.k_sigma * np.sqrt(2.0) * scatter_m)
+    worse = e.size > 1 and e[newest] > threshold
+    anchor = best if worse else newest
+    (n_lo, n_hi), (e_lo, e_hi), _ = arena.bounds()
+    anchor_ne = np.column_stack(
+        [np.clip(sp[anchor, :, 0], n_lo, n_hi), np.clip(sp[anchor, :, 1], e_lo, e_hi)]
+    )
+    if worse:
+        reason = (
+            f"trial {newest} e_pos {e[newest]:.4f} m is above the best trial {best} "
+            f"({e[best]:.4f} m) by more than {settings.k_sigma:g} sqrt(2) x scatter "
+            f"({scatter_m:.4f} m): start from trial {best} with step {settings.step:g}"
+        )
+    else:
+        reason = f"trial {newest} e_pos {e[newest]:.4f} m within {threshold:.4f} m: continue"
+    return SafeguardDecision(
+        action="revert" if worse else "continue",
+        anchor_trial=anchor,
+        step=settings.step if worse else 1.0,
+        anchor_ne_m=anchor_ne,
+        epos_m=float(e[newest]),
+        best_trial=best,
+        best_epos_m=float(e[best]),
+        threshold_m=threshold,
+        reason=reason,
+    )

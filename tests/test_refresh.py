@@ -1,0 +1,144 @@
+"""Tests of the model refresh between trials (gcs.core.refresh)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gcs.core.model import from_transfer_function, markov_parameters, simulate
+from gcs.core.refresh import (
+    RefreshSettings,
+    fit_output_error,
+    model_change,
+    model_from_transfer_function,
+    refresh_model,
+    simulate_tf,
+    transfer_function,
+)
+
+EQ11 = from_transfer_function([0.08, 1.94], [1.0, 1.752, 2.01], 0.25, 0.05)
+
+
+def loop(wn: float, zeta: float, gain: float, delay_s: float, dt: float = 0.05):
+    k = gain * wn * wn
+    return from_transfer_function([k], [1.0, 2 * zeta * wn, wn * wn], delay_s, dt)
+
+
+def excitation(seed: int, pairs: int = 2, n: int = 280) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.cumsum(rng.standard_normal((pairs, n)), axis=1) * 0.05
+
+
+@pytest.mark.parametrize("model", [EQ11, loop(1.3, 0.7, 1.0, 0.0), loop(2.0, 0.4, 0.9, 0.1)])
+def test_transfer_function_round_trip(model) -> None:
+    b, a = transfer_function(model)
+    back = model_from_transfer_function(b, a, model.dt_s, model.delay_samples)
+    np.testing.assert_allclose(
+        markov_parameters(back, 80), markov_parameters(model, 80), atol=1e-12
+    )
+    u = excitation(0, 3)
+    np.testing.assert_allclose(
+        simulate_tf(b[None], a[None], model.delay_samples, u[None])[0],
+        simulate(model, u.T).T,
+        atol=1e-10,
+    )
+
+
+@settings(max_examples=10, deadline=None)
+@given(
+    wn=st.floats(0.8, 2.5),
+    zeta=st.floats(0.3, 1.2),
+    gain=st.floats(0.7, 1.3),
+    seed=st.integers(0, 1000),
+)
+def test_refresh_recovers_a_known_plant_from_noiseless_data(wn, zeta, gain, seed) -> None:
+    true = loop(wn, zeta, gain, 0.25)
+    du = excitation(seed)
+    dy = simulate(true, du.T).T
+    res = refresh_model(EQ11, du, dy, 1e-8, RefreshSettings(delay_search=0), 0.01)
+    assert res.accepted, res.reason
+    assert res.model.delay_samples == true.delay_samples
+    assert res.model.is_stable()
+    scale = np.max(np.abs(markov_parameters(true, 200)))
+    err = np.max(np.abs(markov_parameters(res.model, 200) - markov_parameters(true, 200)))
+    assert err <= 1e-6 * scale
+    # how far it moved: the peak relative change over the learning band, here vs the truth
+    b0, a0 = transfer_function(EQ11)
+    bt, at = transfer_function(true)
+    expected = model_change(b0[None], a0[None], bt[None], at[None], 5, 0.05, 0.01)[0]
+    assert res.moved == pytest.approx(expected, rel=1e-4)
+
+
+def test_refresh_finds_the_delay() -> None:
+    true = loop(1.5, 0.6, 1.0, 0.15)  # 3 samples, the model has 5
+    du = excitation(3)
+    res = refresh_model(EQ11, du, simulate(true, du.T).T, 1e-8, RefreshSettings(), 0.01)
+    assert res.accepted and res.model.delay_samples == 3
+    kept = refresh_model(
+        EQ11, du, simulate(true, du.T).T, 1e-8, RefreshSettings(delay_search=0), 0.01
+    )
+    assert kept.model.delay_samples == 5
+
+
+def test_refresh_rejects_a_candidate_no_better_on_held_out_data() -> None:
+    """The current model is the truth: a fit to noise must not replace it."""
+    rng = np.random.default_rng(4)
+    du = excitation(4)
+    dy = simulate(EQ11, du.T).T + 0.01 * rng.standard_normal(du.shape)
+    res = refresh_model(EQ11, du, dy, 1e-4 / 2, RefreshSettings(), 0.01)
+    assert not res.accepted and res.model is EQ11
+    assert "held-out" in res.reason
+    assert res.cv_loss_candidate_m2 >= res.cv_loss_current_m2
+    assert res.moved == 0.0 and res.candidate_moved > 0
+
+
+def test_refresh_skips_a_pair_within_the_noise() -> None:
+    du = excitation(5) * 1e-3
+    dy = simulate(loop(1.2, 0.8, 1.0, 0.25), du.T).T
+    res = refresh_model(EQ11, du, dy, 1e-2, RefreshSettings(), 0.01)
+    assert not res.accepted and res.reason.startswith("skipped")
+    assert res.snr < 1.0
+
+
+def test_refresh_without_pairs() -> None:
+    res = refresh_model(EQ11, np.zeros((0, 50)), np.zeros((0, 50)), 1e-4, RefreshSettings(), 0.01)
+    assert not res.accepted and res.pairs == 0
+
+
+def test_refresh_refuses_bad_shapes() -> None:
+    with pytest.raises(ValueError):
+        refresh_model(EQ11, np.zeros((2, 50)), np.zeros((2, 49)), 1e-4, RefreshSettings(), 0.01)
+    bad = np.zeros((1, 50))
+    bad[0, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        refresh_model(EQ11, bad, np.zeros((1, 50)), 1e-4, RefreshSettings(), 0.01)
+    with pytest.raises(ValueError):
+        RefreshSettings(delay_search=-1)
+
+
+def test_model_change_measures_relative_change() -> None:
+    b, a = transfer_function(EQ11)
+    assert model_change(b[None], a[None], b[None], a[None], 5, 0.05, 0.01)[0] == pytest.approx(
+        0, abs=1e-12
+    )
+    moved = model_change(b[None], a[None], 1.1 * b[None], a[None], 5, 0.05, 0.01)[0]
+    assert moved == pytest.approx(0.1, rel=1e-9)
+    # one sample more delay: |e^{-j w T} - 1| peaks at 2 where the band reaches Nyquist
+    later = model_change(b[None], a[None], b[None], a[None], 5, 0.05, 0.0, delay_new=6)[0]
+    assert later == pytest.approx(2.0, rel=1e-3)
+
+
+def test_fit_output_error_is_batched() -> None:
+    true = loop(1.6, 0.5, 1.0, 0.25)
+    b0, a0 = transfer_function(EQ11)
+    du = np.stack([excitation(6), excitation(7)])
+    dy = np.stack([simulate(true, du[0].T).T, simulate(EQ11, du[1].T).T])
+    b, a, loss = fit_output_error(
+        np.stack([b0, b0]), np.stack([a0, a0]), 5, du, dy, np.ones(du.shape, bool)
+    )
+    bt, at = transfer_function(true)
+    np.testing.assert_allclose(b[0], bt, rtol=1e-6)
+    np.testing.assert_allclose(a[1], a0, rtol=1e-9)
+    assert np.all(loss < 1e-18)
