@@ -66,7 +66,7 @@ def test_names_and_paths_resolve(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 @pytest.mark.parametrize(
     ("value", "message"),
     [
-        ("antz", "no packaged profile of that name (antx, mock"),
+        ("antz", "no packaged profile of that name (antx, "),
         ("profiles/antx.yaml", "no such file"),  # a path is never looked up by name
         ("../antx", "no such file"),
     ],
