@@ -141,7 +141,9 @@ class Fence:
         -------
         Fence
         """
-        b = np.asarray(arena_ned_m, dtype=float).reshape(3, 2)
+        b = np.asarray(arena_ned_m, dtype=float)
+        if b.shape != (3, 2):  # a (2, 3) array read as pairs would be another box
+            raise ValueError(f"arena_ned_m must have shape (3, 2), got {b.shape}")
         pairs = tuple((float(lo), float(hi)) for lo, hi in b)
         return cls(
             arena_ned_m=pairs,  # type: ignore[arg-type]
