@@ -11,7 +11,8 @@ default thresholds (``FlightSettings``, profile ``antx.yaml``'s arena and vehicl
 - **mock-gps**: ``profiles/mock-gps.yaml`` flown offline (its physics and estimator, no
   network) as a flight session: take-off at ``MPC_TKO_SPEED``, the 4 s hold and 10 s hover
   measurement, four trials of the shared repeat experiment's eight, each after a 1 m/s move
-  back, a settle and a 4 s hold, and a landing; reported state sampled at 50 Hz, seeds 0-9.
+  back, a settle and a 4 s hold, the two 60 s PRBS experiments of the shared ``identify/`` run
+  (``gcs identify``), and a landing; reported state sampled at 50 Hz, seeds 0-9.
 
 For each it prints the largest value of every watched statistic next to its threshold, the
 breaches (there must be none), and for the margin the two figures it is set against: the largest
@@ -184,6 +185,10 @@ def mock_gps(fence: Fence, seeds: list[int]) -> dict:
     cfg = load_mock_config(ROOT / "profiles" / "mock-gps.yaml")
     sp = np.genfromtxt(SITL / "repeat" / "trial-000.csv", delimiter=",", names=True)
     setpoints = _cols(sp, "sp", "m")[:-1]
+    excitations = [
+        _cols(np.genfromtxt(path, delimiter=",", names=True), "sp", "m")[:-1]
+        for path in sorted(glob.glob(str(SITL / "identify" / "trial-*.csv")))
+    ]
     results, hover, box, duration = [], [], [], 0.0
     for seed in seeds:
         s = MockSession(replace(cfg), seed)
@@ -203,6 +208,11 @@ def mock_gps(fence: Fence, seeds: list[int]) -> dict:
             h, b = hover_and_box(pos, setpoints)
             hover += [] if h is None else [h]
             box.append(b)
+        for excitation in excitations:  # gcs identify's two 60 s PRBS experiments
+            s.goto(excitation[0])
+            s.run(5.0)
+            s.fly(excitation)
+        s.goto(setpoints[0])
         s.land(cfg.px4.mpc_land_speed_m_s)
         a = np.array(s.rows)
         results.append(watch(fence, a[:, 0], a[:, 1:4], a[:, 4:7]))

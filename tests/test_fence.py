@@ -247,3 +247,38 @@ def test_the_geofence_status_line_says_what_the_vehicle_has() -> None:
     assert "only while gcs is connected" in refused.text(1.5)
     partial = GeofenceState(True, (47.0, 8.0, 400.0), ((47.0, 8.0),) * 4, None, None, 2.0, "x")
     assert not partial.ok and "GF_MAX_HOR_DIST 2 m;" in partial.text(1.5)
+
+
+# -- the vehicle's side: one place for every send, one abort path for every watch -------------
+
+
+def test_the_vehicle_sends_no_setpoint_outside_the_arena_and_none_without_a_fence() -> None:
+    import asyncio
+
+    from gcs.errors import VehicleError
+    from gcs.flight.vehicle import Vehicle
+
+    vehicle = Vehicle(SETTINGS, FENCE)
+    with pytest.raises(VehicleError, match=r"^fence: setpoint NED \(0.00, 3.50, -1.00\) m is 0.50"):
+        asyncio.run(vehicle.send_setpoint([0.0, 3.5, -1.0]))
+    with pytest.raises(VehicleError, match="no arena fence"):
+        asyncio.run(Vehicle(SETTINGS).send_setpoint([0.0, 0.0, -1.0]))
+
+
+def test_every_watch_trips_the_same_abort_path_and_only_while_armed() -> None:
+    import asyncio
+
+    from gcs.errors import VehicleError
+    from gcs.flight.vehicle import Vehicle
+
+    vehicle = Vehicle(SETTINGS, FENCE)
+    reasons = ["mocap stream stale (0.40 s since the last frame)"]
+    vehicle.add_watch("mocap", lambda: reasons[0])  # a motion-capture client's problem()
+    assert vehicle.safety_problem() is None  # on the ground, disarmed: not watched
+    vehicle.armed = True
+    assert vehicle.safety_problem() == "mocap: mocap stream stale (0.40 s since the last frame)"
+    vehicle.trip("fence", "something else")  # the first breach is the one kept
+    assert vehicle.breach == "mocap: mocap stream stale (0.40 s since the last frame)"
+    assert vehicle.control_problem() == vehicle.breach  # ends moves, holds and trials
+    with pytest.raises(VehicleError, match="^mocap: mocap stream stale .* while waiting for a"):
+        asyncio.run(vehicle.wait_healthy_local_position(timeout_s=1.0))  # and every wait
