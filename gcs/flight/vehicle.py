@@ -394,7 +394,7 @@ class Vehicle:
         """
         if self.breach is None:
             self.breach = f"{source}: {reason}"
-            _log.warning("breach: %s", self.breach)
+            _log.info("breach: %s", self.breach)
             self._notify()
 
     def add_watch(self, source: str, problem: Callable[[], str | None]) -> None:
