@@ -43,7 +43,7 @@ def read_only(path: Path) -> Iterator[Path]:
 
 
 def test_packaged_files_are_the_repository_files() -> None:
-    assert packaged_names("profile") == ["antx", "mock"]
+    assert packaged_names("profile") == ["antx", "mock", "mock-gps"]
     assert packaged_names("trajectory") == ["eight", "eight-short"]
     for kind, folder in (("profile", "profiles"), ("trajectory", "trajectories")):
         for name in packaged_names(kind):
@@ -65,7 +65,7 @@ def test_names_and_paths_resolve(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 @pytest.mark.parametrize(
     ("value", "message"),
     [
-        ("antz", "no packaged profile of that name (antx, mock)"),
+        ("antz", "no packaged profile of that name (antx, mock, mock-gps)"),
         ("profiles/antx.yaml", "no such file"),  # a path is never looked up by name
         ("../antx", "no such file"),
     ],
