@@ -282,3 +282,51 @@ def test_every_watch_trips_the_same_abort_path_and_only_while_armed() -> None:
     assert vehicle.control_problem() == vehicle.breach  # ends moves, holds and trials
     with pytest.raises(VehicleError, match="^mocap: mocap stream stale .* while waiting for a"):
         asyncio.run(vehicle.wait_healthy_local_position(timeout_s=1.0))  # and every wait
+
+
+class _Refusing:
+    """Just enough of Vehicle for install_geofence; each call can be made to fail."""
+
+    def __init__(self, fail: str | None) -> None:
+        self.fail, self.uploaded, self.params = fail, None, None
+
+    def _maybe(self, what: str) -> None:
+        from gcs.errors import VehicleError
+
+        if self.fail == what:
+            raise VehicleError(f"{what} failed: ERROR")
+
+    async def gps_global_origin(self):  # type: ignore[no-untyped-def]
+        self._maybe("origin")
+        return (47.3977431, 8.5455947, 489.244)
+
+    async def upload_inclusion_polygon(self, vertices):  # type: ignore[no-untyped-def]
+        self._maybe("upload")
+        self.uploaded = vertices
+
+    async def set_params(self, values):  # type: ignore[no-untyped-def]
+        self._maybe("params")
+        self.params = values
+
+    async def read_float_param(self, name: str) -> float | None:
+        return 0.0
+
+
+@pytest.mark.parametrize("fail", [None, "origin", "upload", "params"])
+def test_a_vehicle_that_refuses_the_geofence_is_said_not_stopped(fail: str | None) -> None:
+    import asyncio
+
+    from gcs.flight.geofence import install_geofence
+
+    vehicle = _Refusing(fail)
+    state = asyncio.run(install_geofence(vehicle, FENCE))  # never raises
+    assert state.ok == (fail is None)
+    assert state.uploaded == (fail in (None, "params"))
+    if fail is None:
+        assert vehicle.params == {"GF_ACTION": 5, "GF_MAX_VER_DIST": 4.5}
+        assert vehicle.uploaded == fence_polygon(FENCE, 47.3977431, 8.5455947)
+    elif fail == "params":  # the polygon is there, but what PX4 does on a breach is unknown
+        assert state.gf_action is None and "breach action is unknown" in state.text(1.5)
+    else:
+        assert state.text(1.5).startswith("geofence not installed on the vehicle")
+        assert f"{fail} failed: ERROR" in state.text(1.5)
