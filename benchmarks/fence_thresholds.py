@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from mock_gps_calibration import parse_seeds  # noqa: E402
-from px4_data import shared  # noqa: E402
+from px4_data import capture_armed, shared  # noqa: E402
 
 from gcs.app.fly import flight_fence, flight_settings  # noqa: E402
 from gcs.flight.fence import DRIFT_WINDOW_S, EstimateMonitor, Fence  # noqa: E402
@@ -105,20 +105,9 @@ def shared_runs(fence: Fence, vision: bool) -> dict:
 
 def capture(fence: Fence) -> dict:
     """The shared capture's LOCAL_POSITION_NED while armed."""
-    from pymavlink import mavutil
-
-    log = mavutil.mavlink_connection(str(shared() / "data" / "px4-sih-offboard.tlog"))
-    rows, armed = [], False
-    while (m := log.recv_match(type=["LOCAL_POSITION_NED", "HEARTBEAT"])) is not None:
-        if m.get_srcSystem() != 1:
-            continue
-        if m.get_type() == "HEARTBEAT":
-            armed = bool(m.base_mode & 128)
-        elif armed:
-            rows.append((m.time_boot_ms / 1e3, m.x, m.y, m.z, m.vx, m.vy, m.vz))
-    a = np.array(rows)
-    out = {"recordings": 1, "duration_s": float(a[-1, 0] - a[0, 0])}
-    return _merge(out, [watch(fence, a[:, 0], a[:, 1:4], a[:, 4:7])])
+    t, pos, vel = capture_armed()
+    out = {"recordings": 1, "duration_s": float(t[-1] - t[0])}
+    return _merge(out, [watch(fence, t, pos, vel)])
 
 
 def _merge(out: dict, results: list[dict]) -> dict:

@@ -6,7 +6,6 @@ trial of the shared PX4 SITL runs (GPS and vision) and the shared capture while 
 
 from __future__ import annotations
 
-import functools
 import glob
 import math
 
@@ -14,7 +13,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from px4_data import shared
+from px4_data import capture_armed, shared
 
 from gcs.flight.fence import (
     DRIFT_WINDOW_S,
@@ -169,24 +168,6 @@ def test_every_step_beyond_physics_is_caught(step, gap_s, axis) -> None:
     assert (problem is not None and "jumped" in problem) == (step > allowed)
 
 
-@functools.lru_cache(maxsize=1)
-def _capture_armed() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """LOCAL_POSITION_NED of the shared capture while PX4 was armed: t, pos, vel."""
-    from pymavlink import mavutil
-
-    log = mavutil.mavlink_connection(str(shared() / "data" / "px4-sih-offboard.tlog"))
-    rows, armed = [], False
-    while (m := log.recv_match(type=["LOCAL_POSITION_NED", "HEARTBEAT"])) is not None:
-        if m.get_srcSystem() != 1:
-            continue
-        if m.get_type() == "HEARTBEAT":
-            armed = bool(m.base_mode & 128)
-        elif armed:
-            rows.append((m.time_boot_ms / 1e3, m.x, m.y, m.z, m.vx, m.vy, m.vz))
-    a = np.array(rows)
-    return a[:, 0], a[:, 1:4], a[:, 4:7]
-
-
 def test_the_thresholds_do_not_fire_on_the_shared_px4_data() -> None:
     # every trial of PX4 v1.16 SITL on GPS and on vision, and the capture from take-off to
     # landing: a vehicle that is merely poor is never stopped (benchmarks/fence_thresholds.py
@@ -203,7 +184,7 @@ def test_the_thresholds_do_not_fire_on_the_shared_px4_data() -> None:
         assert _run(monitor, t["t_s"][ok], pos[ok], vel[ok]) == [], path
         peaks = {k: max(v, monitor.peaks[k]) for k, v in peaks.items()}
     monitor = EstimateMonitor(FENCE)
-    assert _run(monitor, *_capture_armed()) == []
+    assert _run(monitor, *capture_armed()) == []
     # and not by a hair: the GPS vehicle's own contradiction is below half the threshold
     assert peaks["drift_m"] < 0.5 * FENCE.drift_m and monitor.peaks["drift_m"] < 0.5 * FENCE.drift_m
     assert peaks["jump_m"] < 0.1 * FENCE.jump_m
