@@ -8,6 +8,7 @@ from the same catalogue.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -37,3 +38,19 @@ def test_bad_input_is_one_line_exit_2_and_changes_nothing(
     assert outcome.lines[0].startswith("error: "), outcome.output
     assert case.expect in outcome.output, outcome.output
     assert outcome.changed == [], outcome.changed
+
+
+def test_docs_table_lists_exactly_the_catalogue() -> None:
+    """docs/bad-inputs.md is generated from this catalogue: a case added or renamed without
+    running tools/bad_inputs.py leaves the table stale, which this catches cheaply (the
+    behaviour of every case is asserted above)."""
+    doc = Path(__file__).resolve().parents[1] / "docs" / "bad-inputs.md"
+    rows = doc.read_text().split("## Every case", 1)[1].splitlines()
+    listed = []
+    for row in rows:
+        if not row.startswith("| ") or row.startswith(("| class ", "|---")):
+            continue
+        cells = [c.strip() for c in re.split(r"(?<!\\)\|", row)[1:-1]]
+        listed.append((cells[0], cells[1], cells[2]))
+    expected = [(c.klass, c.command, c.what.replace("|", "\\|")) for c in CASES]
+    assert listed == expected, "docs/bad-inputs.md is stale: run tools/bad_inputs.py"
