@@ -158,9 +158,10 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
             f"  trial {v['trial']}: {v['ratio']:.2f}x the floor ({1e3 * floor['epos_m']:.1f} mm "
             f"± {1e3 * floor['scatter_m']:.1f}), z {v['z']:.1f}: {word}"
         )
-    for line in decision_lines(record):
-        style = "yellow" if line.startswith("safeguard") else "dim"
-        style = "cyan" if line.startswith("model") and "refreshed" in line else style
+    for line in decision_lines(record):  # the report has them all; live, what changed
+        if line.startswith(("model kept", "estimate")):
+            continue
+        style = {"safeguard": "yellow", "model refreshed": "cyan"}.get(line.split(":")[0], "dim")
         lines.append(f"  [{style}]{escape(line)}[/]")
     return lines
 

@@ -401,17 +401,18 @@ def decision_lines(record: dict) -> list[str]:
             f"{1e3 * _num(guard.get('threshold_m')):.1f} mm): fell back to trial "
             f"{guard.get('anchor_trial')} with step {_num(guard.get('step')):g}"
         )
-    refresh = []
+    refresh, accepted = [], False
     for name, ax in zip(("north", "east"), decision["axes"], strict=True):
         r = ax.get("refresh")
         if not isinstance(r, dict):
             continue
+        accepted |= r["accepted"]
         if r["accepted"]:
-            refresh.append(f"{name} refreshed, moved {100 * _num(r.get('moved')):.0f} %")
+            refresh.append(f"{name} moved {100 * _num(r.get('moved')):.0f} %")
         else:
             refresh.append(f"{name} kept ({r.get('reason')})")
     if refresh:
-        lines.append("model: " + "; ".join(refresh))
+        lines.append(("model refreshed: " if accepted else "model kept: ") + "; ".join(refresh))
     noise = []
     for name, ax in zip(("north", "east"), decision["axes"], strict=True):
         n = ax.get("noise") if isinstance(ax.get("noise"), dict) else {}
