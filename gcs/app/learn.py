@@ -414,7 +414,9 @@ def check_history(run: RunDir, profile: Profile, j: int) -> None:
         The newest complete trial.
     """
     _history(run, j)
-    models_in_use(run, profile, j + 1)
+    for k in range(profile.learning.repeats, j + 1):
+        if run.read_learn_record(k)["model_file"] is not None:
+            run.read_model(k)
 
 
 def models_in_use(
