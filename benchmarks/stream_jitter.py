@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from gcs.flight.campaign import FlightSession, run_campaign
+from gcs.flight.fence import Fence
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.mock.config import Faults
@@ -74,7 +75,8 @@ def run_one(rate_hz: float, t_ilc_s: float, duration_s: float, workdir: Path) ->
     source = CircleSource(duration_s, t_ilc_s)
     stats_path = workdir / f"stats-{rate_hz:g}-{t_ilc_s:g}.json"
     with MockProcess(config_path=None, seed=0, faults=Faults(), stats_path=stats_path) as mock:
-        run_campaign(mock.url, source, 1, 0, settings, t_ilc_s)
+        fence = Fence.around([[-3, 3], [-3, 3], [-3, 0]], settings, 3.0, 1.5)  # antx's arena
+        run_campaign(mock.url, source, 1, 0, settings, t_ilc_s, fence=fence)
     rec = source.recording
     assert rec is not None and rec.complete
     arrivals = setpoint_arrivals_s(stats_path)

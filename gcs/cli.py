@@ -10,7 +10,6 @@ Ctrl-C exits with 130; anything else is a bug, reported in one line with exit co
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
 import os
@@ -677,82 +676,37 @@ def montecarlo(
     Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
     interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
-    import os
-    import time
-
     # one BLAS thread: the study is many small products, where threads only contend
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from rich.progress import Progress
 
-    from gcs.app.study_view import study_json, study_tables
-    from gcs.core.montecarlo import StudySettings, run_study
+    from gcs.app.study import run_montecarlo, study_document, study_settings
+    from gcs.app.study_view import comparison_lines, study_tables
     from gcs.io.paths import check_output_file
     from gcs.io.runlog import atomic_write_text
 
     try:
-        level_values = tuple(float(v) for v in levels.split(",") if v.strip())
-    except ValueError:
-        raise typer.BadParameter(
-            f"not a list of numbers: {levels!r}", param_hint="--levels"
-        ) from None
-    if not level_values:
-        raise typer.BadParameter("give at least one level, e.g. 0.05", param_hint="--levels")
-    try:
-        settings = StudySettings(
-            levels=level_values, plants=plants, repeats=repeats, iterations=iterations,
-            n_samples=samples, seed=seed, diverged_rule="include" if keep_diverged else "exclude",
-        )  # fmt: skip
-        if adaptive:
-            from gcs.core.montecarlo import check_adaptive_size
-
-            check_adaptive_size(settings)
+        settings = study_settings(
+            levels, plants, repeats, iterations, samples, seed, keep_diverged, adaptive
+        )
     except ValueError as exc:
         raise _study_error(str(exc)) from None
     if json_path is not None:
         check_output_file(json_path, "--json")
-    start = time.perf_counter()
     with Progress(console=err_console, transient=True) as progress:
-        task = progress.add_task("simulating", total=1)
-        rows = run_study(
-            settings, lambda done, total: progress.update(task, completed=done, total=total)
-        )
-    elapsed = time.perf_counter() - start
-    comparison = []
-    if adaptive:
-        rows, comparison = _adaptive_study(settings, rows)
-    console.print(study_tables(rows, settings))
-    for c in comparison:
-        console.print(
-            f"±{100 * c.uncertainty:g} %: mean ||E_j||_2 over j = 2..5 {c.paper_mean_2_5:.3f} "
-            f"(paper's method) -> {c.new_mean_2_5:.3f} (adaptive), {c.change_pct:+.1f} % "
-            f"(plants that diverge under neither: {c.paper_kept_2_5:.3f} -> "
-            f"{c.new_kept_2_5:.3f}); diverged {c.paper_diverged} -> {c.new_diverged} of "
-            f"{c.plants}; models refreshed in {c.refreshed_pct:.0f} % of the runs; "
-            f"{c.seconds:.0f} s"
-        )
-    console.print(f"[dim]{elapsed:.1f} s[/]")
+
+        def follow(label: str) -> Callable[[int, int], None]:
+            task = progress.add_task(label, total=1)
+            return lambda done, total: progress.update(task, completed=done, total=total)
+
+        outcome = run_montecarlo(settings, adaptive, follow)
+    console.print(study_tables(outcome.rows, settings))
+    for line in comparison_lines(outcome.comparison):
+        console.print(line)
+    console.print(f"[dim]{outcome.seconds:.1f} s[/]")
     if json_path is not None:
-        out: Any = study_json(rows, settings)
-        if adaptive:
-            out = {"rows": out, "comparison": [dataclasses.asdict(c) for c in comparison]}
-        atomic_write_text(json_path, json.dumps(out, indent=2) + "\n")
-
-
-def _adaptive_study(settings: Any, rows: list) -> tuple[list, list]:
-    """The adaptive rows and the comparison for ``gcs montecarlo --adaptive``."""
-    from rich.progress import Progress
-
-    from gcs.core.learning import AdaptiveSettings
-    from gcs.core.montecarlo import compare_study
-
-    options = AdaptiveSettings(noise="data", refresh=True)
-    with Progress(console=err_console, transient=True) as progress:
-        task = progress.add_task("simulating the adaptive options", total=1)
-        new_rows, comparison = compare_study(
-            settings, options, "smoother",
-            lambda done, total: progress.update(task, completed=done, total=total),
-        )  # fmt: skip
-    return rows + new_rows, comparison
+        document = study_document(outcome, settings)
+        atomic_write_text(json_path, json.dumps(document, indent=2) + "\n")
 
 
 #: StudySettings fields and the options that set them.
@@ -764,6 +718,8 @@ _STUDY_OPTIONS = {
 
 def _study_error(message: str) -> typer.BadParameter:
     """A StudySettings refusal, with the option's name instead of the field's."""
+    if message.startswith("--levels: "):
+        return typer.BadParameter(message.removeprefix("--levels: "), param_hint="--levels")
     for field, option in _STUDY_OPTIONS.items():
         if message.startswith(f"StudySettings.{field} "):
             text = message.removeprefix(f"StudySettings.{field} ")

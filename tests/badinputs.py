@@ -327,6 +327,7 @@ def _profile_cases() -> Iterator[Case]:
         ("t_ilc_s", 0.0, "t_ilc_s"),
         ("vehicle.max_accel_m_s2", float("inf"), "vehicle.max_accel_m_s2"),
         ("vehicle.max_speed_m_s", -1.0, "vehicle.max_speed_m_s"),
+        ("vehicle.max_vertical_speed_m_s", 0.0, "vehicle.max_vertical_speed_m_s"),
         ("model.delay_s", -0.1, "model"),
         ("learning.weights.we", 0.0, "learning.weights.we"),
         ("arena.north_m", [3.0, -3.0], "arena.north_m"),
@@ -358,6 +359,8 @@ def _profile_cases() -> Iterator[Case]:
         ("flight.yaw_deg", float("nan"), "yaw_deg"),
         ("flight.min_battery_pct", 120, "min_battery_pct"),
         ("flight.hover_measure_s", 0.5, "hover_measure_s"),
+        ("flight.fence_margin_m", 0.0, "fence_margin_m"),
+        ("flight.fence_speed_factor", 0.5, "fence_speed_factor"),
     ):
         yield Case(
             k,

@@ -95,3 +95,24 @@ def sitl_hovers() -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
         pos = np.column_stack([t["pos_north_m"], t["pos_east_m"], t["pos_down_m"]])
         out.append((str(Path(path).relative_to(base)), t["t_s"][:21], pos[:21], ref[0]))
     return out
+
+
+@functools.lru_cache(maxsize=1)
+def capture_armed() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every LOCAL_POSITION_NED of the capture while PX4 was armed (take-off to landing).
+
+    Returns ``(t_vehicle_s (N,), pos_ned_m (N, 3), vel_ned_m_s (N, 3))``, 30 Hz.
+    """
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(shared() / "data" / "px4-sih-offboard.tlog"))
+    rows, armed = [], False
+    while (m := log.recv_match(type=["LOCAL_POSITION_NED", "HEARTBEAT"])) is not None:
+        if m.get_srcSystem() != 1:
+            continue
+        if m.get_type() == "HEARTBEAT":
+            armed = bool(m.base_mode & 128)
+        elif armed:
+            rows.append((m.time_boot_ms / 1e3, m.x, m.y, m.z, m.vx, m.vy, m.vz))
+    a = np.array(rows)
+    return a[:, 0], a[:, 1:4], a[:, 4:7]

@@ -11,7 +11,7 @@ import yaml
 
 from gcs.core.model import from_transfer_function, markov_parameters
 from gcs.errors import ProfileError, TrajectoryError
-from gcs.io.config import load_profile, load_trajectory
+from gcs.io.config import DEFAULT_MAX_VERTICAL_SPEED_M_S, load_profile, load_trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 ANTX = ROOT / "profiles" / "antx.yaml"
@@ -63,6 +63,7 @@ def test_antx_profile_loads_with_eq11_model_and_table_one_settings():
         assert (s.q, s.r, s.p0, s.d0) == (0.1, 0.01, 0.1, 0.0)
     assert ln.max_step_m == 0.5 and ln.max_deviation_m == 2.5
     assert (p.max_speed_m_s, p.max_accel_m_s2) == (3.0, 5.0)
+    assert p.max_vertical_speed_m_s == DEFAULT_MAX_VERTICAL_SPEED_M_S == 1.5  # optional: default
     assert p.arena.north_m == (-3.0, 3.0) and p.arena.down_m == (-3.0, 0.0)
     assert p.flight == antx_data()["flight"]
     ratio = p.flight["stream_rate_hz"] * p.t_ilc_s  # documented: integer multiple of 1/t_ilc
@@ -185,6 +186,8 @@ _DELETE = object()
         # out of range
         ("t_ilc_s", 0.0, "t_ilc_s"),
         ("vehicle.max_speed_m_s", -1.0, "vehicle.max_speed_m_s"),
+        ("vehicle.max_vertical_speed_m_s", 0.0, "vehicle.max_vertical_speed_m_s"),
+        ("vehicle.max_vertical_speed_m_s", "fast", "vehicle.max_vertical_speed_m_s"),
         ("learning.smoother.r", 0.0, "learning.smoother"),
         ("learning.weights.we", 0.0, "learning.weights.we"),
         ("model.delay_s", -0.05, "model"),

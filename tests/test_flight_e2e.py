@@ -24,6 +24,7 @@ from gcs.flight.campaign import (
     TrialStarted,
     fly_campaign,
 )
+from gcs.flight.fence import Fence
 from gcs.flight.hover import SPEED_SPAN_S
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
@@ -39,6 +40,7 @@ SETTINGS = FlightSettings(
     settle_time_s=0.5, settle_tolerance_m=0.2, connect_timeout_s=5.0,
     max_setpoint_late_s=0.4, max_telemetry_age_s=1.0, hover_measure_s=2.0,
 )  # fmt: skip
+FENCE = Fence.around([[-3.0, 3.0], [-3.0, 3.0], [-3.0, 0.0]], SETTINGS, 3.0, 1.5)  # antx's
 
 
 class CircleSource:
@@ -110,7 +112,7 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
 
     started = time.monotonic()
     with _mock(tmp_path) as mock:
-        asyncio.run(fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event=on_event))
+        asyncio.run(fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event, fence=FENCE))
     assert time.monotonic() - started < 50.0
     assert source.asked == [0, 1]
     assert [j for j, _ in source.recorded] == [0, 1] and not source.incomplete
@@ -145,7 +147,11 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     assert stamps[holds[0]] - stamps[measuring] >= (
         SETTINGS.hover_before_trial_s + SETTINGS.hover_measure_s
     )
-    (session,) = source.sessions
+    # recorded before take-off (fence, the vehicle's geofence), again once the hover was judged
+    before, session = source.sessions
+    assert not before.hovers and before.fence == FENCE and before.geofence is not None
+    assert before.geofence.ok and session.geofence == before.geofence
+    assert session.abort_reason is None
     (hover,) = session.hovers
     assert hover.verdict.ok and hover.why == "measurement" and hover.before_trial == 0
     assert hover.stats.duration_s == pytest.approx(SETTINGS.hover_measure_s, abs=0.1)
@@ -171,7 +177,7 @@ def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
     with MockProcess(config, faults=faults, stats_path=tmp_path / STATS) as mock:  # noqa: SIM117
         with pytest.raises((TrialAborted, VehicleError)):
             asyncio.run(
-                fly_campaign(mock.url, source, 1, 0, SETTINGS, T_ILC_S, on_event=events.append)
+                fly_campaign(mock.url, source, 1, 0, SETTINGS, T_ILC_S, events.append, fence=FENCE)
             )
     assert time.monotonic() - started < 40.0
     assert not source.recorded
@@ -206,7 +212,7 @@ def test_cancellation_mid_trial_lands_and_marks_incomplete(tmp_path: Path) -> No
                 statuses.append(event.text)
 
         task = asyncio.create_task(
-            fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event=on_event)
+            fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event, fence=FENCE)
         )
         await in_trial.wait()
         task.cancel()  # what Ctrl-C does to asyncio.run's main task

@@ -248,3 +248,55 @@ def test_bad_estimator_fields_are_refused_by_name(section: dict, message: str) -
     with pytest.raises(ProfileError, match=message) as info:
         mock_config_from_dict({"estimator": section}, "mock-gps.yaml")
     assert "mock-gps.yaml" in str(info.value)
+
+
+# -- injected faults ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kind", "vector", "expected"),
+    [
+        # (after 0.5 s, after 1.5 s, after 4 s: the growth stops at 2 s)
+        ("drift", (0.0, 2.0, 0.0), (1.0, 3.0, 4.0)),
+        ("divergence", (0.0, 2.0, 0.0), (0.25, 2.25, 4.0)),
+        ("jump", (0.0, 2.0, 0.0), (2.0, 2.0, 2.0)),
+    ],
+)
+def test_injected_faults_follow_their_law_from_their_onset(kind, vector, expected) -> None:
+    from gcs.mock.estimator import PositionDivergence, PositionDrift, PositionJump
+
+    cls = {"drift": PositionDrift, "divergence": PositionDivergence, "jump": PositionJump}[kind]
+    fault = cls(1.0, 2.0 if kind != "jump" else None, vector)
+    dt = 0.005
+    for _ in range(400):  # 2 s before the clock starts: nothing
+        fault.step(dt)
+    assert fault.pos_err_m == [0.0, 0.0, 0.0] and fault.onset_s is None
+    fault.start_clock(fault.t_s)  # "armed" at 2 s: onset at 3 s
+    fault.start_clock(99.0)  # later arming: changes nothing
+    assert fault.onset_s == pytest.approx(3.0)
+    seen = []
+    for elapsed in (0.5, 1.5, 4.0):
+        while fault.t_s < 3.0 + elapsed - 1e-9:
+            fault.step(dt)
+        seen.append(fault.pos_err_m[1])
+        assert fault.pos_err_m[0] == fault.pos_err_m[2] == 0.0
+        assert fault.vel_err_m_s == [0.0, 0.0, 0.0]  # the velocity stays the inertial one
+    np.testing.assert_allclose(seen, expected, atol=0.02)
+    assert fault.record()["kind"] == kind and fault.record()["onset_vehicle_s"] == fault.onset_s
+
+
+def test_faults_on_the_indoor_mock_change_nothing_until_their_onset() -> None:
+    from gcs.mock.estimator import PositionJump
+
+    plain = QuadPhysics(MockConfig(), seed=3, pos_ned_m=(0.0, 0.0, -2.0))
+    faulty = QuadPhysics(MockConfig(), seed=3, pos_ned_m=(0.0, 0.0, -2.0))
+    jump = PositionJump(1.0, None, (0.5, 0.0, 0.0))
+    faulty.add_error(jump)
+    for sim in (plain, faulty):
+        sim.command(0.0, Target((0.3, -0.2, -2.0)))
+    jump.start_clock(0.0)
+    plain.advance_to(0.9)
+    faulty.advance_to(0.9)
+    assert plain.pos == faulty.pos and plain.measure() == faulty.measure()  # bit for bit
+    faulty.advance_to(1.2)
+    assert faulty.nav_pos[0] == pytest.approx(faulty.pos[0] + 0.5)

@@ -214,3 +214,108 @@ def test_clock_rate_is_a_fault_of_the_run_passed_on_the_command_line() -> None:
     for rate in (0.0, 0.05, 11.0):
         with pytest.raises(ValueError, match="clock rate"):
             Faults(clock_rate=rate)
+
+
+# -- the geofence (gcs.mock.geofence) and the estimator faults ------------------------------
+
+
+def fenced(action: int, faults=()) -> Vehicle:  # noqa: ANN001
+    """In OFFBOARD at (0, 0, -2.5), a 9 m square fence stored, ``GF_ACTION = action``."""
+    from test_mock_geofence import square
+
+    v = Vehicle(CFG, faults=faults)
+    assert v.params.set("GF_ACTION", encode_param(action, 6)) is not None
+    v.fence_stored(square(4.5))
+    v.arm(True)
+    v.takeoff()
+    v.update(5.0)
+    stream(v, 5.0, 5.5, pos=(0.0, 0.0, -2.5))
+    assert v.set_mode(Mode.OFFBOARD) is MavResult.ACCEPTED
+    return v
+
+
+@pytest.mark.parametrize(("action", "mode"), [(1, Mode.OFFBOARD), (2, Mode.HOLD), (5, Mode.LAND)])
+def test_a_breach_of_the_estimate_takes_gf_action(action: int, mode: Mode) -> None:
+    from gcs.mock.estimator import PositionJump
+
+    jump = PositionJump(7.0, None, (0.0, 6.0, 0.0))  # 7 s after arming, 6 m east
+    v = fenced(action, [jump])
+    stream(v, 5.5, 6.9, pos=(0.0, 0.0, -2.5))
+    assert v.mode is Mode.OFFBOARD and not v.gf_breaches
+    stream(v, 6.9, 7.3, pos=(0.0, 0.0, -2.5))  # the setpoints keep coming
+    assert v.mode is mode
+    (breach,) = v.gf_breaches
+    assert breach["kinds"] == ["fence"] and breach["action"] == action
+    assert 7.0 <= breach["t_vehicle_s"] - v.first_armed_t_s <= 7.0 + 0.2 + CFG.physics.dt_s
+    texts = [text for _, text in v.events]
+    assert "Geofence: approaching or outside geofence" in texts and "Failsafe activated" in texts
+    if action == 5:  # Land is taken again while outside; a mode change does not escape it
+        assert v.set_mode(Mode.HOLD) is MavResult.ACCEPTED
+        stream(v, v.t_s, v.t_s + 0.3, pos=(0.0, 0.0, -2.5))
+        assert v.mode is Mode.LAND
+    if (
+        action == 2
+    ):  # the operator may take over Hold, and the setpoints do not resume by themselves
+        stream(v, v.t_s, v.t_s + 2.0, pos=(0.0, 0.0, -2.5))
+        assert v.mode is Mode.HOLD
+        assert v.set_mode(Mode.OFFBOARD) is MavResult.ACCEPTED
+        stream(v, v.t_s, v.t_s + 0.3, pos=(0.0, 0.0, -2.5))
+        assert v.mode is Mode.OFFBOARD and len(v.gf_breaches) == 1  # one breach, one action
+
+
+def test_no_breach_action_without_gf_action_and_arming_is_refused_outside() -> None:
+    from test_mock_geofence import square
+
+    from gcs.mock.estimator import PositionJump
+
+    v = fenced(0, [PositionJump(7.0, None, (0.0, 6.0, 0.0))])
+    stream(v, 5.5, 8.0, pos=(0.0, 0.0, -2.5))
+    assert v.mode is Mode.OFFBOARD and not v.gf_breaches  # GF_ACTION 0: no check at all
+    w = Vehicle(CFG)
+    w.fence_stored(square(4.5))
+    assert w.armable
+    w.home_ned_m = (0.0, 0.0, 0.0)
+    w.physics.pos[1] = 6.0  # carried out of the fence on the ground
+    w.update(0.3)
+    assert not w.armable and w.arm(True) is MavResult.TEMPORARILY_REJECTED
+    texts = [text for _, text in w.events]
+    assert "Geofence: approaching or outside geofence" in texts
+    assert "Arming denied: Resolve system health failures first" in texts
+
+
+def test_estimator_faults_count_from_the_first_arming() -> None:
+    from gcs.mock.estimator import PositionDrift
+
+    drift = PositionDrift(1.0, 2.0, (0.0, 1.0, 0.0))
+    v = Vehicle(CFG, faults=[drift])
+    v.update(5.0)  # on the ground, disarmed: nothing yet, whatever the time
+    assert drift.onset_s is None and v.physics.nav_pos == v.physics.pos
+    v.arm(True)
+    assert drift.onset_s == pytest.approx(v.t_s + 1.0)
+    v.update(v.t_s + 2.0)
+    assert drift.pos_err_m[1] == pytest.approx(1.0, abs=0.01)
+    assert v.physics.nav_pos[1] == pytest.approx(v.physics.pos[1] + drift.pos_err_m[1])
+
+
+def test_estimator_faults_are_passed_on_the_command_line() -> None:
+    from gcs.mock.cli import _estimator_faults
+
+    faults = Faults(
+        drift_start_s=1.0, drift_duration_s=None, drift_ned_m_s=(0.0, 3.0, 0.0),
+        divergence_start_s=0.3, divergence_duration_s=4.0, divergence_ned_m_s2=(0.0, 0.0, 2.0),
+        jump_at_s=9.0, jump_ned_m=(0.0, 6.0, 0.0),
+    )  # fmt: skip
+    args = faults_cli_args(faults)
+    assert args == [
+        "--drift", "1.0:inf:0.0:3.0:0.0", "--divergence", "0.3:4.0:0.0:0.0:2.0",
+        "--jump", "9.0:0.0:6.0:0.0",
+    ]  # fmt: skip
+    options = dict(zip(args[::2], args[1::2], strict=True))
+    back = _estimator_faults(options["--drift"], options["--divergence"], options["--jump"])
+    assert Faults(**back) == faults
+    with pytest.raises(ValueError, match="jump needs both"):
+        Faults(jump_at_s=1.0)
+    with pytest.raises(ValueError, match="three finite numbers"):
+        Faults(drift_start_s=1.0, drift_ned_m_s=(0.0, float("nan"), 0.0))
+    with pytest.raises(ValueError, match="drift_duration_s"):
+        Faults(drift_start_s=1.0, drift_duration_s=-1.0, drift_ned_m_s=(0.0, 1.0, 0.0))

@@ -35,6 +35,7 @@ from gcs.core.trajectory import (
 )
 from gcs.errors import PathError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import FlightSession, run_campaign
+from gcs.flight.fence import Fence
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec, load_profile, load_trajectory
@@ -51,6 +52,7 @@ __all__ = [
     "SessionRecorder",
     "flyable_setpoints",
     "flight_settings",
+    "flight_fence",
     "prepare_run",
     "to_record",
     "trial_extra",
@@ -92,6 +94,25 @@ def flight_settings(profile: Profile, where: str | None = None) -> FlightSetting
         detail = text.split(":", 1)[1].strip() if text.startswith("flight.") else text
         raise ProfileError(f"{where}: field '{field}': {detail}") from None
     return settings
+
+
+def flight_fence(profile: Profile, settings: FlightSettings) -> Fence:
+    """The live fence of a flight: the profile's arena and vehicle limits, the flight settings.
+
+    Parameters
+    ----------
+    profile : Profile
+        The profile (``arena``, ``vehicle``).
+    settings : FlightSettings
+        Its flight settings (``fence_*``).
+
+    Returns
+    -------
+    Fence
+    """
+    return Fence.around(
+        profile.arena.bounds(), settings, profile.max_speed_m_s, profile.max_vertical_speed_m_s
+    )
 
 
 #: MAVSDK connection URLs (MAVSDK 2: udpin/udpout/tcpin/tcpout/serial/serial_flowcontrol;
@@ -471,8 +492,10 @@ def session_record(session: FlightSession) -> dict[str, Any]:
     -------
     dict
         ``url``, ``first_trial``, ``navigation`` (source name, line, parameters),
-        ``tolerance_m``, ``speed_tolerance_m_s`` and ``hovers`` (statistics, verdict and
-        clock rate of each judged hover), plus ``written_utc``.
+        ``tolerance_m``, ``speed_tolerance_m_s``, ``hovers`` (statistics, verdict and
+        clock rate of each judged hover), ``fence`` (arena, margin and limits watched),
+        ``geofence`` (the vehicle's own fence as set up before take-off), ``abort_reason``
+        (why the session stopped early, or None), plus ``written_utc``.
     """
     from datetime import UTC, datetime
 
@@ -481,6 +504,9 @@ def session_record(session: FlightSession) -> dict[str, Any]:
         "url": session.url,
         "first_trial": session.first_trial,
         "navigation": {"source": nav.name, "text": nav.text, "params": nav.params},
+        "fence": None if session.fence is None else asdict(session.fence),
+        "geofence": None if session.geofence is None else asdict(session.geofence),
+        "abort_reason": session.abort_reason,
         "tolerance_m": session.tolerance_m,
         "speed_tolerance_m_s": session.speed_tolerance_m_s,
         "hovers": [asdict(h) for h in session.hovers],
@@ -753,5 +779,6 @@ def fly_run(
     if first > 0 and not (run.path / f"setpoints-{first:03d}.csv").exists():
         raise RunLogError(f"{run.path}: no setpoints for trial {first}; run 'gcs learn' first")
     source = RunSource(run, on_row, on_learn=on_learn, until_converged=until_converged)
-    run_campaign(url, source, iterations, first, settings, run.t_ilc_s, on_event)
+    fence = flight_fence(run.profile(), settings)
+    run_campaign(url, source, iterations, first, settings, run.t_ilc_s, on_event, fence=fence)
     return source

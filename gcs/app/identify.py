@@ -33,7 +33,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gcs.app.fly import SessionRecorder, flyable_setpoints, to_record, trial_extra
+from gcs.app.fly import (
+    SessionRecorder,
+    flight_fence,
+    flyable_setpoints,
+    to_record,
+    trial_extra,
+)
 from gcs.app.report import save_figure
 from gcs.core.excitation import multisine, prbs
 from gcs.core.model import DiscreteModel
@@ -509,7 +515,8 @@ def fly_identification(
     """
     center = np.asarray(_run_source(run)["center_ned_m"], dtype=float)
     source = IdentificationSource(run, center)
-    run_campaign(url, source, 2, 0, settings, run.t_ilc_s, on_event)
+    fence = flight_fence(run.profile(), settings)
+    run_campaign(url, source, 2, 0, settings, run.t_ilc_s, on_event, fence=fence)
 
 
 # --------------------------------------------------------------------------- identification

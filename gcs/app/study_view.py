@@ -5,9 +5,9 @@ from __future__ import annotations
 from rich.markup import escape
 from rich.table import Table
 
-from gcs.core.montecarlo import PAPER_TABLES, StudyRow, StudySettings
+from gcs.core.montecarlo import PAPER_TABLES, ComparisonRow, StudyRow, StudySettings
 
-__all__ = ["study_tables", "study_json"]
+__all__ = ["study_tables", "study_json", "comparison_lines"]
 
 _NAMES = {"smoother": "smoother", "kilc": "K-ILC"}
 
@@ -94,3 +94,26 @@ def study_json(rows: list[StudyRow], settings: StudySettings) -> list[dict]:
             }
         )
     return out
+
+
+def comparison_lines(comparison: list[ComparisonRow]) -> list[str]:
+    """One line per level: the paper's method against the new options (``--adaptive``).
+
+    Parameters
+    ----------
+    comparison : list of ComparisonRow
+        Results of :func:`gcs.core.montecarlo.compare_study`.
+
+    Returns
+    -------
+    list of str
+    """
+    return [
+        f"±{100 * c.uncertainty:g} %: mean ||E_j||_2 over j = 2..5 {c.paper_mean_2_5:.3f} "
+        f"(paper's method) -> {c.new_mean_2_5:.3f} (adaptive), {c.change_pct:+.1f} % "
+        f"(plants that diverge under neither: {c.paper_kept_2_5:.3f} -> "
+        f"{c.new_kept_2_5:.3f}); diverged {c.paper_diverged} -> {c.new_diverged} of "
+        f"{c.plants}; models refreshed in {c.refreshed_pct:.0f} % of the runs; "
+        f"{c.seconds:.0f} s"
+        for c in comparison
+    ]

@@ -505,16 +505,6 @@ def _polish(
         # Weakly active rows Clarabel classified wrongly: add the violated, drop the negative.
         act = (act | violated) & ~negative
     return x
-    scale = max(1.0, float(np.max(np.abs(b_in))))
-    lam = nu[n_eq:]
-    lam_scale = max(1.0, float(np.max(np.abs(lam)))) if lam.size else 1.0
-    if (
-        np.all(A_in @ z <= b_in + 1e-10 * scale)
-        and np.all(np.abs(G @ z - h) <= 1e-10 * scale)
-        and np.all(lam >= -1e-9 * lam_scale)
-    ):
-        return z
-    return x
 
 
 # ---------------------------------------------------------------------------------------------

@@ -14,9 +14,17 @@ so that every trial starts from the same state; fly it, hover at its end while
 flown on with wider tolerances (and a warning), or refused. After the last trial: land and
 disarm. Every trial's vehicle-time rate is checked (:func:`gcs.flight.clock.rate_warning`).
 
-Safety: on Ctrl-C (``CancelledError``/``KeyboardInterrupt``), link loss, offboard rejection or any
-other exception after connecting, the vehicle is stopped (:meth:`Vehicle.emergency_stop`:
-streaming stops, Hold, land, disarm on the ground); a trial that was in flight is handed to
+The fence (:mod:`gcs.flight.fence`): before take-off the campaign says what it watches, uploads
+the arena to the autopilot as its own geofence (:mod:`gcs.flight.geofence`; a refusal is a
+warning) and records both in the session; from arming to disarming every phase (take-off,
+offboard start, moves, settle, holds, the hover measurement, trials, the hovers while learning,
+landing) stops on a breach. Every setpoint is checked against the arena where it is sent
+(:meth:`Vehicle.send_setpoint`), each trial's sequence also before the move to its start.
+
+Safety: on Ctrl-C (``CancelledError``/``KeyboardInterrupt``), link loss, offboard rejection, a
+breach of the fence or any other exception after connecting, the vehicle is stopped
+(:meth:`Vehicle.emergency_stop`: streaming stops, Hold, land, disarm on the ground); the session
+record notes why; a trial that was in flight is handed to
 ``source.record_incomplete`` with its partial recording; then the exception is re-raised.
 Completed trials were handed to ``source.record`` already. :func:`run_campaign` runs a campaign
 from synchronous code (a command line) so that a second Ctrl-C cannot cut that stop short.
@@ -35,6 +43,8 @@ import numpy as np
 
 from gcs.errors import TrajectoryError, TrialAborted, VehicleError
 from gcs.flight.clock import rate_warning
+from gcs.flight.fence import Fence
+from gcs.flight.geofence import GeofenceState, install_geofence
 from gcs.flight.hover import HoverStats, HoverVerdict, hover_stats, judge_hover, widened
 from gcs.flight.interrupts import run_guarded
 from gcs.flight.preflight import (
@@ -271,6 +281,13 @@ class FlightSession:
         Settle tolerance on the distance in force now [m].
     speed_tolerance_m_s : float
         Settle tolerance on the speed in force now [m/s].
+    fence : Fence or None
+        The arena and limits watched while armed.
+    geofence : GeofenceState or None
+        The vehicle's own geofence as gcs set it up before take-off.
+    abort_reason : str or None
+        Why the session stopped early (a breach, a refused hover, Ctrl-C ...); None if it ran
+        to its end (or is still running).
     """
 
     url: str
@@ -279,6 +296,9 @@ class FlightSession:
     hovers: tuple[HoverRecord, ...] = ()
     tolerance_m: float = math.nan
     speed_tolerance_m_s: float = math.nan
+    fence: Fence | None = None
+    geofence: GeofenceState | None = None
+    abort_reason: str | None = None
 
 
 CampaignEvent = Status | TrialStarted | TrialProgress | TrialFinished
@@ -293,6 +313,8 @@ async def fly_campaign(
     settings: FlightSettings,
     t_ilc_s: float,
     on_event: EventCallback | None = None,
+    *,
+    fence: Fence,
 ) -> None:
     """Fly ``iterations`` trials ``first_trial, first_trial + 1, ...`` and land.
 
@@ -313,12 +335,14 @@ async def fly_campaign(
     on_event : callable, optional
         Receives :class:`Status`, :class:`TrialStarted`, :class:`TrialProgress` and
         :class:`TrialFinished` events on the event loop; must return quickly.
+    fence : Fence
+        The arena every setpoint must lie in and the limits watched while armed.
 
     Raises
     ------
     VehicleError
-        Unreachable vehicle, refused command, lost link, a hover refused (drifting,
-        oscillating, too far off).
+        Unreachable vehicle, refused command, lost link, a breach of the fence, a hover
+        refused (drifting, oscillating, too far off).
     TrialAborted
         The trial watchdog fired (the trial went to ``source.record_incomplete``).
     asyncio.CancelledError
@@ -332,20 +356,25 @@ async def fly_campaign(
         if on_event is not None:
             on_event(event)
 
-    vehicle = Vehicle(settings)
+    vehicle = Vehicle(settings, fence)
     emit(Status(f"connecting to {url}"))
     await vehicle.connect(url)
     run: TrialRun | None = None
+    session: FlightSession | None = None
     j = first_trial
     try:
-        hover, setpoints = await asyncio.to_thread(_plan, source, j)
+        hover, setpoints = await asyncio.to_thread(_plan, source, j, fence)
         for warning in link_loss_warnings(await vehicle.read_int_params(LINK_LOSS_PARAMS)):
             emit(Status(warning, warning=True))
         navigation = navigation_source(await vehicle.read_int_params(NAV_PARAMS))
         emit(Status(navigation.text, warning=navigation.warning))
-        session = FlightSession(url, first_trial, navigation)
         emit(Status("waiting for a valid local position"))
         await vehicle.wait_healthy_local_position()
+        emit(Status(fence.describe()))
+        geofence = await install_geofence(vehicle, fence)
+        emit(Status(geofence.text(fence.margin_m), warning=not geofence.ok))
+        session = FlightSession(url, first_trial, navigation, fence=fence, geofence=geofence)
+        await asyncio.to_thread(source.record_session, session)
         check_battery(vehicle.battery_pct, settings.min_battery_pct, "taking off")
         altitude_m = -float(hover[2])
         emit(Status(f"arming and taking off to {altitude_m:.1f} m"))
@@ -355,7 +384,7 @@ async def fly_campaign(
         for number, j in enumerate(range(first_trial, first_trial + iterations), start=1):
             if number > 1:
                 hover, setpoints = await vehicle.hover_while(
-                    asyncio.to_thread(_plan, source, j), f"setpoints of trial {j}"
+                    asyncio.to_thread(_plan, source, j, fence), f"setpoints of trial {j}"
                 )
             check_battery(vehicle.battery_pct, settings.min_battery_pct, f"trial {j}")
             emit(Status(f"moving to the start point of trial {j}"))
@@ -410,9 +439,18 @@ async def fly_campaign(
         emit(Status("landed and disarmed"))
     except BaseException as exc:
         reason = _describe(exc)
+        named = _breach_first(vehicle.breach, exc, reason)
+        reason = str(named) if named is not None else reason
         emit(Status(f"aborting: {reason}"))
         outcome = await vehicle.emergency_stop(reason)
         emit(Status(f"emergency stop: {outcome}"))
+        if session is not None:
+            try:
+                await asyncio.to_thread(
+                    source.record_session, replace(session, abort_reason=reason)
+                )
+            except Exception:  # keep the original exception; the failure is logged
+                _log.exception("record_session failed")
         if run is not None:
             partial = getattr(exc, "recording", None)
             if not isinstance(partial, TrialRecording):
@@ -422,6 +460,8 @@ async def fly_campaign(
                 await asyncio.to_thread(source.record_incomplete, j, partial, reason)
             except Exception:  # keep the original exception; the handover failure is logged
                 _log.exception("record_incomplete(%d) failed", j)
+        if named is not None:
+            raise named from exc
         raise
     finally:
         await vehicle.close()
@@ -435,6 +475,8 @@ def run_campaign(
     settings: FlightSettings,
     t_ilc_s: float,
     on_event: EventCallback | None = None,
+    *,
+    fence: Fence,
 ) -> None:
     """Fly a campaign from synchronous code: :func:`fly_campaign` under :func:`run_guarded`.
 
@@ -458,6 +500,8 @@ def run_campaign(
         ILC sample time [s].
     on_event : callable, optional
         Receives the campaign events, and the notice of a repeated Ctrl-C.
+    fence : Fence
+        The arena and the limits watched while armed.
 
     Raises
     ------
@@ -472,9 +516,10 @@ def run_campaign(
             text = f"interrupt {count} ignored: stopping the vehicle (land, disarm)"
             on_event(Status(text, warning=True))
 
-    run_guarded(
-        fly_campaign(url, source, iterations, first_trial, settings, t_ilc_s, on_event), on_repeat
+    campaign = fly_campaign(
+        url, source, iterations, first_trial, settings, t_ilc_s, on_event, fence=fence
     )
+    run_guarded(campaign, on_repeat)
 
 
 async def _measure_hover(
@@ -587,12 +632,16 @@ def _fmt(ned_m: np.ndarray) -> str:
     return "NED (" + ", ".join(f"{x:.2f}" for x in ned_m) + ") m"
 
 
-def _plan(source: TrialSource, j: int) -> tuple[np.ndarray, np.ndarray]:
-    """Trial j's hover point and checked setpoints (blocking: runs in a worker thread)."""
+def _plan(source: TrialSource, j: int, fence: Fence) -> tuple[np.ndarray, np.ndarray]:
+    """Trial j's hover point and setpoints, checked against the arena (worker thread)."""
     setpoints = check_setpoints(source.setpoints_for(j))
     hover = np.asarray(source.hover_point_for(j), dtype=float).reshape(3)
-    if not np.all(np.isfinite(hover)):
-        raise TrajectoryError(f"hover point of trial {j} is not finite: {hover.tolist()}")
+    problem = fence.setpoint_problem(hover)
+    if problem is not None:
+        raise TrajectoryError(f"hover point of trial {j}: {problem}; not flown")
+    problem = fence.setpoints_problem(setpoints)
+    if problem is not None:
+        raise TrajectoryError(f"trial {j}: {problem}; not flown")
     return hover, setpoints
 
 
@@ -619,6 +668,14 @@ def check_battery(level_pct: float, min_pct: float, before: str) -> None:
             f"battery at {level_pct:.0f} % before {before}, below flight.min_battery_pct "
             f"({min_pct:g} %): swap it and continue with --resume"
         )
+
+
+def _breach_first(breach: str | None, exc: BaseException, reason: str) -> VehicleError | None:
+    """The breach as the campaign's error, when another error (say, a hover judged as
+    drifting, on the same samples) came out first; None when ``exc`` already names it."""
+    if breach is None or breach in reason or not isinstance(exc, VehicleError):
+        return None
+    return VehicleError(breach)
 
 
 def _describe(exc: BaseException) -> str:

@@ -97,6 +97,30 @@ class FlightSettings:
         swap the battery and ``--resume``. The default leaves a trial and a landing of margin
         above PX4's own low-battery failsafe (``BAT_LOW_THR`` 15 %, ``BAT_CRIT_THR`` 7 %),
         which would otherwise end a trial half-way.
+    fence_margin_m : float
+        From arming to disarming the flight is stopped (Hold, land) when the measured position
+        is further than this outside the arena along an axis [m] (setpoints themselves always
+        lie inside it; ``gcs.flight.fence``). The default is ``hover_max_offset_m``: a vehicle
+        whose hover the hover check accepts is not stopped hovering anywhere in the arena.
+        Hovers measured (``benchmarks/fence_thresholds.py``): PX4 SITL on GPS up to 0.79 m off
+        the setpoint along an axis, mock-gps 0.88 m, PX4 SITL on vision 0.14 m; with motion
+        capture 0.3 m is plenty. The arena plus this margin is also the geofence uploaded to
+        the autopilot.
+    fence_speed_factor : float
+        The flight is stopped when the measured speed exceeds this factor times the profile's
+        vehicle limits (``vehicle.max_speed_m_s`` horizontally,
+        ``vehicle.max_vertical_speed_m_s`` vertically): a vehicle overshoots the speed of what
+        it tracks (PX4 SITL: 2.55 m/s on an eight of 2.13 m/s, 1.2 times).
+    fence_jump_m : float
+        The flight is stopped when the position steps between two samples this much further
+        than its velocity explains [m]. PX4 SITL (GPS, vision, the capture while armed) and
+        mock-gps: at most 2.9 cm.
+    fence_drift_m : float
+        The flight is stopped when the position moves this much against the integral of its
+        velocity within 1 s [m]: the estimate contradicts itself. A GPS-aided EKF2 does so by
+        itself by up to 0.87 m in 1 s (PX4 SITL), mock-gps by 1.09 m; with a perfect vision
+        feed 0.30 m. Only a faster drift can be told from GPS wander by the estimate alone;
+        on a motion-capture vehicle 0.6 m is safe.
     """
 
     stream_rate_hz: float = 60.0
@@ -121,6 +145,10 @@ class FlightSettings:
     link_regain_s: float = 10.0
     yaw_deg: float = 0.0
     min_battery_pct: float = 30.0
+    fence_margin_m: float = 1.5
+    fence_speed_factor: float = 1.5
+    fence_jump_m: float = 0.5
+    fence_drift_m: float = 2.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -136,6 +164,11 @@ class FlightSettings:
         if self.hover_measure_s < 1.0:
             raise ProfileError(
                 f"flight.hover_measure_s: a hover needs at least 1 s, got {self.hover_measure_s:g}"
+            )
+        if self.fence_speed_factor < 1.0:
+            raise ProfileError(
+                "flight.fence_speed_factor: must be at least 1 (the vehicle's own limits), got "
+                f"{self.fence_speed_factor:g}"
             )
         if self.stream_rate_hz < 2.0:
             raise ProfileError(

@@ -10,6 +10,14 @@ Position samples carry two times: the receipt time on ``time.monotonic()`` and t
 time stamp. MAVSDK's ``position_velocity_ned`` has no time stamp, so LOCAL_POSITION_NED is read
 raw through MAVSDK's MavlinkDirect plugin (its ``time_boot_ms``); :attr:`Vehicle.clock` makes
 that a continuous vehicle time and fits it to the local clock (:mod:`gcs.flight.clock`).
+
+The fence (:mod:`gcs.flight.fence`). :meth:`Vehicle.send_setpoint` is the one place every
+setpoint goes through, and it refuses one outside the arena. From the arm command to the
+disarmed state every position sample goes through an :class:`gcs.flight.fence.EstimateMonitor`;
+what it names, and what any other watch reports (:meth:`Vehicle.trip`, :meth:`Vehicle.add_watch`:
+a motion-capture stream's health, say), is a *breach*: every wait, move, hold and trial of the
+flight layer raises it at once as a :class:`gcs.errors.VehicleError` (or ``TrialAborted``), and the
+campaign stops the vehicle (:meth:`Vehicle.emergency_stop`).
 """
 
 from __future__ import annotations
@@ -34,6 +42,13 @@ from mavsdk.asyncio import (
     System,
 )
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.geofence import (
+    FenceType,
+    GeofenceAsync,
+    GeofenceData,
+    Point,
+    Polygon,
+)
 from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
@@ -41,6 +56,7 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryA
 
 from gcs.errors import VehicleError
 from gcs.flight.clock import ClockFit, VehicleClock
+from gcs.flight.fence import EstimateMonitor, Fence
 from gcs.flight.hover import SPEED_SPAN_S, is_settled
 from gcs.flight.settings import FlightSettings
 
@@ -143,10 +159,18 @@ class Vehicle:
     ----------
     settings : FlightSettings
         Rates, timeouts and limits.
+    fence : Fence or None
+        The arena and the limits watched while armed; without one the vehicle can be
+        listened to but sends no setpoint.
     """
 
-    def __init__(self, settings: FlightSettings) -> None:
+    def __init__(self, settings: FlightSettings, fence: Fence | None = None) -> None:
         self.settings = settings
+        self.fence = fence
+        self.breach: str | None = None  # the first breach seen; ends the flight
+        self._monitor = EstimateMonitor(fence) if fence is not None else None
+        self._watches: list[tuple[str, Callable[[], str | None]]] = []
+        self._arm_requested = False
         self.latest: TelemetrySample | None = None
         self.flight_mode: FlightMode = FlightMode.UNKNOWN
         self.armed: bool = False
@@ -261,6 +285,10 @@ class Vehicle:
                 continue  # an estimator without a position: not a sample
             t_vehicle_s = self.clock.add(f["time_boot_ms"] / 1000.0, receipt_s)
             sample = TelemetrySample(receipt_s, pos, vel, t_vehicle_s)
+            if self._monitor is not None:
+                problem = self._monitor.update(t_vehicle_s, pos, vel)
+                if problem is not None and self.fence_active:
+                    self.trip("fence", problem)
             if self.latest is None or t_vehicle_s >= self.latest.t_vehicle_s:
                 self.latest = sample
             for recorder in self._recorders:
@@ -287,6 +315,8 @@ class Vehicle:
         async for armed in self._telemetry.subscribe_armed():
             if armed != self.armed:
                 self.armed = armed
+                if armed:
+                    self._arm_requested = False  # armed now: the armed state covers it
                 self._notify()
 
     async def _watch_landed_state(self) -> None:
@@ -341,6 +371,68 @@ class Vehicle:
             raise VehicleError("no time-stamped position samples from the vehicle yet")
         return fit
 
+    # ------------------------------------------------------------------ the fence
+
+    @property
+    def fence_active(self) -> bool:
+        """Whether breaches count now: from the arm command until the vehicle is disarmed."""
+        return self.armed or self._arm_requested
+
+    def trip(self, source: str, reason: str) -> None:
+        """Report a breach: the flight stops at once (the first one is kept).
+
+        The entry point of every watch: the estimate monitor calls it for each sample that
+        breaks the fence, a motion-capture health check would call it with its own reason. Call
+        it on the event loop (from another thread: ``loop.call_soon_threadsafe``).
+
+        Parameters
+        ----------
+        source : str
+            What saw it, e.g. ``"fence"`` or ``"mocap"``.
+        reason : str
+            One line naming what was seen.
+        """
+        if self.breach is None:
+            self.breach = f"{source}: {reason}"
+            _log.info("breach: %s", self.breach)
+            self._notify()
+
+    def add_watch(self, source: str, problem: Callable[[], str | None]) -> None:
+        """Watch one more condition while the vehicle is armed (polled at every check).
+
+        Parameters
+        ----------
+        source : str
+            Its name in the breach line, e.g. ``"mocap"``.
+        problem : callable
+            Returns None while all is well, else one line (e.g. a motion-capture client's
+            ``problem``); called on the event loop at every state change, so it must be fast.
+        """
+        self._watches.append((source, problem))
+
+    def safety_problem(self) -> str | None:
+        """The breach that ends the flight, or None (see :meth:`trip`).
+
+        Returns
+        -------
+        str or None
+        """
+        if self.breach is None and self.fence_active:
+            for source, problem in self._watches:
+                reason = problem()
+                if reason is not None:
+                    self.trip(source, reason)
+                    break
+        return self.breach
+
+    def _require_inside(self, what: str) -> None:
+        """Refuse to start ``what`` from a measured position outside the arena plus margin."""
+        if self.fence is None or self.latest is None:
+            return
+        problem = self.fence.position_problem(self.latest.pos_ned_m)
+        if problem is not None:
+            raise VehicleError(f"fence: {problem}; not {what}")
+
     def telemetry_age_s(self) -> float:
         """Age of the newest position sample [s] (infinite before the first one)."""
         return math.inf if self.latest is None else time.monotonic() - self.latest.t_s
@@ -351,9 +443,12 @@ class Vehicle:
         Returns
         -------
         str or None
-            "link lost", a flight mode other than OFFBOARD, or stale position telemetry
-            (older than ``settings.max_telemetry_age_s``).
+            A breach (:meth:`safety_problem`), "link lost", a flight mode other than OFFBOARD,
+            or stale position telemetry (older than ``settings.max_telemetry_age_s``).
         """
+        breach = self.safety_problem()
+        if breach is not None:
+            return breach
         if not self.connected:
             return "link lost (no heartbeat for 3 s)"
         if self.flight_mode != FlightMode.OFFBOARD:
@@ -364,20 +459,32 @@ class Vehicle:
         return None
 
     async def _wait_until(
-        self, predicate: Callable[[], bool], timeout_s: float, what: str, *, in_control: bool
+        self,
+        predicate: Callable[[], bool],
+        timeout_s: float,
+        what: str,
+        *,
+        in_control: bool,
+        stopping: bool = False,
     ) -> None:
         """Wait (on state-change events) until ``predicate()`` holds.
 
-        Raises :class:`_WaitTimeout` (a VehicleError) on timeout, VehicleError on link loss
-        and, with ``in_control``, on any :meth:`control_problem`.
+        Raises :class:`_WaitTimeout` (a VehicleError) on timeout, VehicleError on link loss,
+        on a breach (unless ``stopping``: the emergency stop itself) and, with ``in_control``,
+        on any :meth:`control_problem`.
         """
         deadline_s = time.monotonic() + timeout_s
-        while not predicate():
+        while True:
+            # problems first: a breach seen with the sample that also ends the wait ends it
             problem = self.control_problem() if in_control else None
-            if problem is None and not self.connected:
-                problem = "link lost (no heartbeat for 3 s)"
+            if problem is None and not stopping:
+                problem = self.safety_problem()
             if problem is not None:
                 raise VehicleError(f"{problem} while waiting for {what}")
+            if predicate():
+                return
+            if not self.connected:
+                raise VehicleError(f"link lost (no heartbeat for 3 s) while waiting for {what}")
             remaining_s = deadline_s - time.monotonic()
             if remaining_s <= 0:
                 raise _WaitTimeout(f"{what} did not happen within {timeout_s:g} s")
@@ -432,6 +539,98 @@ class Vehicle:
             param.destroy()
         return values
 
+    async def set_params(self, values: dict[str, int | float]) -> None:
+        """Set autopilot parameters (an int as INT32, a float as REAL32), one after the other.
+
+        Parameters
+        ----------
+        values : dict of str to int or float
+            PX4 parameter names and values.
+
+        Raises
+        ------
+        VehicleError
+            A parameter was refused or not answered.
+        """
+        if self._system is None:
+            raise VehicleError("setting parameters: not connected")
+        param = ParamAsync(self._system)
+        try:
+            for name, value in values.items():
+                if isinstance(value, int):
+                    call = lambda n=name, v=value: param.set_param_int(n, v)  # noqa: E731
+                else:
+                    call = lambda n=name, v=value: param.set_param_float(n, float(v))  # noqa: E731
+                await self._command(f"set {name}", call)
+        finally:
+            param.destroy()
+
+    async def read_float_param(self, name: str) -> float | None:
+        """Read one float parameter of the autopilot; None if it does not answer.
+
+        Parameters
+        ----------
+        name : str
+            PX4 parameter name.
+
+        Returns
+        -------
+        float or None
+        """
+        if self._system is None:
+            raise VehicleError("reading parameters: not connected")
+        param = ParamAsync(self._system)
+        try:
+            return float(await self._command(f"read {name}", lambda: param.get_param_float(name)))
+        except VehicleError as exc:
+            _log.warning("%s", exc)
+            return None
+        finally:
+            param.destroy()
+
+    async def gps_global_origin(self) -> tuple[float, float, float]:
+        """The global position of the local NED frame's origin (PX4's GPS_GLOBAL_ORIGIN).
+
+        Returns
+        -------
+        tuple of float
+            Latitude [deg], longitude [deg], altitude AMSL [m].
+
+        Raises
+        ------
+        VehicleError
+            Not answered, or not a finite position.
+        """
+        telemetry = self._require(self._telemetry)
+        origin = await self._command("read the global origin", telemetry.get_gps_global_origin)
+        values = (origin.latitude_deg, origin.longitude_deg, origin.altitude_m)
+        if not all(math.isfinite(float(x)) for x in values):
+            raise VehicleError(f"read the global origin: not a position {values}")
+        return (float(values[0]), float(values[1]), float(values[2]))
+
+    async def upload_inclusion_polygon(self, vertices_deg: list[tuple[float, float]]) -> None:
+        """Replace the autopilot's geofence by one inclusion polygon (MAVSDK's Geofence plugin).
+
+        Parameters
+        ----------
+        vertices_deg : list of (float, float)
+            The polygon's vertices, (latitude, longitude) [deg].
+
+        Raises
+        ------
+        VehicleError
+            The upload was refused or not answered.
+        """
+        if self._system is None:
+            raise VehicleError("geofence upload: not connected")
+        fence = GeofenceAsync(self._system)
+        points = [Point(lat, lon) for lat, lon in vertices_deg]
+        data = GeofenceData([Polygon(points, FenceType.INCLUSION)], [])
+        try:
+            await self._command("geofence upload", lambda: fence.upload_geofence(data))
+        finally:
+            fence.destroy()
+
     # ------------------------------------------------------------------ flight
 
     async def wait_healthy_local_position(self, timeout_s: float | None = None) -> None:
@@ -478,6 +677,14 @@ class Vehicle:
         """
         if not (math.isfinite(altitude_m) and altitude_m > 0):
             raise VehicleError(f"take-off altitude must be positive, got {altitude_m} m")
+        if self.fence is not None:
+            (down_lo, down_hi) = self.fence.arena_ned_m[2]
+            if not down_lo <= -altitude_m <= down_hi:
+                raise VehicleError(
+                    f"fence: take-off altitude {altitude_m:g} m is outside the arena "
+                    f"{self.fence.arena_text()}; not taking off"
+                )
+            self._require_inside("arming")
         action = self._require(self._action)
         try:
             await self._command(
@@ -485,10 +692,15 @@ class Vehicle:
             )
         except VehicleError as exc:
             _log.warning("%s; taking off to the vehicle's default altitude", exc)
-        await self._command("arm", action.arm)
-        await self._wait_until(
-            lambda: self.armed, self.settings.command_timeout_s, "armed state", in_control=False
-        )
+        self._arm_requested = True  # the fence watches from the arm command on
+        try:
+            await self._command("arm", action.arm)
+            await self._wait_until(
+                lambda: self.armed, self.settings.command_timeout_s, "armed state", in_control=False
+            )
+        except BaseException:
+            self._arm_requested = self.armed
+            raise
         await self._command("take-off", action.takeoff)
         tolerance_m = self.settings.settle_tolerance_m
         seen_takeoff_mode = [False]
@@ -523,10 +735,16 @@ class Vehicle:
         Raises
         ------
         VehicleError
-            After :meth:`emergency_stop` (streaming is over for good), or MAVSDK refused it.
+            The setpoint lies outside the arena (or the vehicle has no fence), after
+            :meth:`emergency_stop` (streaming is over for good), or MAVSDK refused it.
         """
         if self._streaming_stopped:
             raise VehicleError("setpoint streaming was stopped by an emergency stop")
+        if self.fence is None:
+            raise VehicleError("no arena fence: gcs sends setpoints only inside an arena")
+        problem = self.fence.setpoint_problem(pos_ned_m)
+        if problem is not None:
+            raise VehicleError(f"fence: {problem}; not sent")
         offboard = self._require(self._offboard)
         n, e, d = (float(x) for x in pos_ned_m)
         setpoint = PositionNedYaw(n, e, d, self.settings.yaw_deg)
@@ -541,7 +759,9 @@ class Vehicle:
 
         PX4 wants setpoints flowing before the switch (about 1 s); the last one is sent
         immediately before ``offboard.start()`` (MAVSDK stops its re-send 3 s after the first
-        setpoint if the vehicle is not in OFFBOARD by then).
+        setpoint if the vehicle is not in OFFBOARD by then). The hover setpoint is the point of
+        the arena nearest to the measured position (the same point inside it); a position
+        beyond the fence's margin is refused.
 
         Parameters
         ----------
@@ -555,11 +775,15 @@ class Vehicle:
         """
         if self.latest is None or self.telemetry_age_s() > self.settings.max_telemetry_age_s:
             raise VehicleError("cannot start offboard: no fresh position telemetry")
-        hover_ned_m = np.array(self.latest.pos_ned_m)
+        self._require_inside("starting offboard")
+        hover_ned_m = self._hover_point(np.array(self.latest.pos_ned_m))
         period_s = 1.0 / self.settings.stream_rate_hz
         t0 = time.monotonic()
         for i in range(max(1, math.ceil(preroll_s / period_s))):
             await sleep_until(t0 + i * period_s)
+            breach = self.safety_problem()
+            if breach is not None:
+                raise VehicleError(f"{breach} while starting offboard")
             await self.send_setpoint(hover_ned_m)
         offboard = self._require(self._offboard)
         await self.send_setpoint(hover_ned_m)
@@ -593,10 +817,13 @@ class Vehicle:
             Lost control during the move (see :meth:`control_problem`).
         """
         target = np.asarray(ned_m, dtype=float).reshape(3)
+        if self.fence is not None and (problem := self.fence.setpoint_problem(target)):
+            raise VehicleError(f"fence: cannot move to {_fmt(target)}: {problem}")
+        self._require_inside(f"moving to {_fmt(target)}")
         if self.target_ned_m is not None:
             start = self.target_ned_m.copy()
         elif self.latest is not None:
-            start = np.array(self.latest.pos_ned_m)
+            start = self._hover_point(np.array(self.latest.pos_ned_m))
         else:
             raise VehicleError("cannot move: no position telemetry yet")
         distance_m = float(np.linalg.norm(target - start))
@@ -703,11 +930,15 @@ class Vehicle:
         if self.target_ned_m is not None:
             hover = self.target_ned_m.copy()
         elif self.latest is not None:
-            hover = np.array(self.latest.pos_ned_m)
+            hover = self._hover_point(np.array(self.latest.pos_ned_m))
         else:
             raise VehicleError("cannot hold: no position telemetry yet")
         await self.send_setpoint(hover)
         return hover
+
+    def _hover_point(self, pos_ned_m: np.ndarray) -> np.ndarray:
+        """A hover setpoint at a measured position: its nearest point of the arena."""
+        return pos_ned_m if self.fence is None else self.fence.clamp(pos_ned_m)
 
     async def hover_while(self, work: Awaitable[_T], what: str) -> _T:
         """Hover while ``work`` (e.g. ``asyncio.to_thread(...)``) runs, watching the vehicle.
@@ -732,8 +963,18 @@ class Vehicle:
         await self.hold_position()
         task = asyncio.ensure_future(work)
         while True:
-            done, _ = await asyncio.wait({task}, timeout=self.settings.max_telemetry_age_s / 2)
-            if done:
+            # woken by every state change (each position sample), at the latest at half the
+            # telemetry-age limit so that silence is noticed
+            changed = asyncio.ensure_future(self._changed.wait())
+            try:
+                await asyncio.wait(
+                    {task, changed},
+                    timeout=self.settings.max_telemetry_age_s / 2,
+                    return_when=asyncio.FIRST_COMPLETED,
+                )
+            finally:
+                changed.cancel()
+            if task.done():
                 return task.result()
             problem = self.control_problem()
             if problem is not None:
@@ -750,6 +991,7 @@ class Vehicle:
         action = self._require(self._action)
         self._streaming_stopped = True
         await self._command("land", action.land)
+        self._offboard_started = False  # PX4 lands now: a stop must not switch it to Hold
         await self._wait_until(
             lambda: self.landed_state == LandedState.ON_GROUND,
             self.settings.land_timeout_s,
@@ -785,7 +1027,7 @@ class Vehicle:
         self._streaming_stopped = True
         if self._system is None or self._action is None or self._offboard is None:
             return "not connected"
-        if not self.armed and not self._offboard_started:
+        if not (self.armed or self._arm_requested) and not self._offboard_started:
             return "vehicle not armed; nothing to do"
         action, offboard = self._action, self._offboard
         notes: list[str] = []
@@ -805,7 +1047,7 @@ class Vehicle:
         on_ground = self.landed_state == LandedState.ON_GROUND
         if self.armed and not on_ground:
             on_ground = await self._land_with_retries(lambda: attempt("land", action.land), notes)
-        if on_ground and self.armed and self.connected:
+        if on_ground and (self.armed or self._arm_requested) and self.connected:
             await attempt("disarm", action.disarm)
             with contextlib.suppress(VehicleError):
                 await self._wait_until(
@@ -813,6 +1055,7 @@ class Vehicle:
                     self.settings.command_timeout_s,
                     "disarmed state",
                     in_control=False,
+                    stopping=True,
                 )
         if not self.connected:
             return "link lost: vehicle left to its own failsafe (" + "; ".join(notes) + ")"

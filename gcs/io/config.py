@@ -30,11 +30,15 @@ __all__ = [
     "profile_from_dict",
     "trajectory_from_dict",
     "ALGORITHMS",
+    "DEFAULT_MAX_VERTICAL_SPEED_M_S",
 ]
 
 ALGORITHMS = ("smoother", "kilc")
 #: Most repeats of trial 0 a profile may ask for (each is a flight: a battery's worth is a few).
 MAX_REPEATS = 5
+#: ``vehicle.max_vertical_speed_m_s`` when a profile leaves it out [m/s]: PX4's take-off speed
+#: (``MPC_TKO_SPEED`` 1.5 m/s, v1.16); gcs itself moves at ``flight.transit_speed_m_s`` (1 m/s).
+DEFAULT_MAX_VERTICAL_SPEED_M_S = 1.5
 #: A trajectory's name becomes part of a run directory's name.
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
@@ -203,6 +207,10 @@ class Profile:
         Learning settings.
     max_speed_m_s, max_accel_m_s2 : float
         Vehicle limits a trajectory must respect (horizontal) [m/s], [m/s^2].
+    max_vertical_speed_m_s : float
+        Vehicle's vertical speed limit, up or down [m/s] (optional in the file, default
+        :data:`DEFAULT_MAX_VERTICAL_SPEED_M_S`); the live fence watches it (with
+        ``max_speed_m_s``) from arming to disarming.
     arena : Box
         Flight volume, local NED [m].
     flight : dict
@@ -224,6 +232,7 @@ class Profile:
     flight: dict = field(default_factory=dict)
     identification: dict = field(default_factory=dict)
     source: dict = field(default_factory=dict)
+    max_vertical_speed_m_s: float = DEFAULT_MAX_VERTICAL_SPEED_M_S
 
     def models(self) -> tuple[DiscreteModel, DiscreteModel]:
         """The (north, east) models."""
@@ -382,6 +391,9 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
         learning=_learning(f.sub("learning", {})),
         max_speed_m_s=vehicle.number("max_speed_m_s", positive=True),
         max_accel_m_s2=vehicle.number("max_accel_m_s2", positive=True),
+        max_vertical_speed_m_s=vehicle.number(
+            "max_vertical_speed_m_s", DEFAULT_MAX_VERTICAL_SPEED_M_S, positive=True
+        ),
         arena=box,
         flight=f.mapping("flight"),
         identification=f.mapping("identification"),

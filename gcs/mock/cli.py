@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import signal
 import sys
 from pathlib import Path
@@ -12,7 +13,14 @@ import typer
 from gcs.errors import GcsError
 from gcs.mock.config import Faults, load_mock_config
 
-__all__ = ["mock_command", "parse_dropout", "parse_gust", "faults_cli_args", "run_mock"]
+__all__ = [
+    "mock_command",
+    "parse_dropout",
+    "parse_gust",
+    "parse_estimator_fault",
+    "faults_cli_args",
+    "run_mock",
+]
 
 
 def _floats(text: str, count: int, what: str, fmt: str) -> list[float]:
@@ -60,6 +68,37 @@ def parse_gust(text: str) -> tuple[float, float, float, float]:
     return start, duration, vn, ve
 
 
+def parse_estimator_fault(
+    text: str, option: str, timed: bool = True
+) -> tuple[float, float | None, tuple[float, float, float]]:
+    """Parse ``T:D:N:E:D`` (``--drift``, ``--divergence``) or ``T:N:E:D`` (``--jump``).
+
+    Parameters
+    ----------
+    text : str
+        Option value.
+    option : str
+        The option's name, for the message.
+    timed : bool
+        The value has a duration (drift, divergence); ``--jump`` has none.
+
+    Returns
+    -------
+    tuple
+        Start [s], duration [s] (None for a jump) and the NED vector.
+    """
+    if timed:
+        start, duration, n, e, d = _floats(text, 5, option, "T:D:N:E:D")
+        return start, duration, (n, e, d)
+    start, n, e, d = _floats(text, 4, option, "T:N:E:D")
+    return start, None, (n, e, d)
+
+
+def _vector(v: tuple[float, float, float] | None) -> str:
+    assert v is not None
+    return ":".join(repr(float(x)) for x in v)
+
+
 def faults_cli_args(faults: Faults) -> list[str]:
     """Command-line options of ``gcs mock`` that reproduce a :class:`Faults`.
 
@@ -92,6 +131,19 @@ def faults_cli_args(faults: Faults) -> list[str]:
             f"{faults.gust_start_s!r}:{faults.gust_duration_s!r}:"
             f"{faults.gust_vn_m_s!r}:{faults.gust_ve_m_s!r}",
         ]
+    if faults.drift_start_s is not None:
+        duration = faults.drift_duration_s if faults.drift_duration_s is not None else math.inf
+        args += [
+            "--drift",
+            f"{faults.drift_start_s!r}:{duration!r}:{_vector(faults.drift_ned_m_s)}",
+        ]
+    if faults.divergence_start_s is not None:
+        d = faults.divergence_duration_s
+        duration = d if d is not None else math.inf
+        vector = _vector(faults.divergence_ned_m_s2)
+        args += ["--divergence", f"{faults.divergence_start_s!r}:{duration!r}:{vector}"]
+    if faults.jump_at_s is not None:
+        args += ["--jump", f"{faults.jump_at_s!r}:{_vector(faults.jump_ned_m)}"]
     return args
 
 
@@ -184,6 +236,30 @@ def mock_command(
             help="Vehicle seconds per wall second, like a simulator under load (e.g. 0.9).",
         ),
     ] = 1.0,
+    drift: Annotated[
+        str | None,
+        typer.Option(
+            "--drift",
+            help="Estimator drift T:D:VN:VE:VD: from T s after arming, for D s (inf: for good), "
+            "the estimated position walks away at (VN, VE, VD) m/s.",
+        ),
+    ] = None,
+    divergence: Annotated[
+        str | None,
+        typer.Option(
+            "--divergence",
+            help="Estimator divergence T:D:AN:AE:AD: from T s after arming, for D s, the "
+            "estimated position runs away as a t^2/2 with a = (AN, AE, AD) m/s^2.",
+        ),
+    ] = None,
+    jump: Annotated[
+        str | None,
+        typer.Option(
+            "--jump",
+            help="Estimator jump T:DN:DE:DD: T s after arming the estimated position steps by "
+            "(DN, DE, DD) m.",
+        ),
+    ] = None,
 ) -> None:
     """Run a mock PX4 quadrotor that MAVSDK cannot tell from the real one.
 
@@ -210,10 +286,16 @@ def mock_command(
     timeouts, stream rates and every time stamp the mock sends follow it; fault times count
     on it.
 
+    Estimator faults count from the vehicle's first **arming** (so that one can strike during
+    take-off): ``--drift``, ``--divergence`` and ``--jump`` move the estimated position (what
+    the mock reports and flies on) away from the truth; the estimated velocity stays right.
+    The mock honours a geofence uploaded with MAVSDK's Geofence plugin (the MAVLink mission
+    protocol) as PX4 does, with ``GF_ACTION``, ``GF_MAX_HOR_DIST`` and ``GF_MAX_VER_DIST``.
+
     SIGTERM or Ctrl-C stops it; with ``--stats-out`` it then writes, atomically, a JSON file
     with the arrival time (monotonic clock and vehicle time) and value of every position
     setpoint, the mode changes and packet counters, and with an estimator the true position
-    and the estimator's error every 0.1 s.
+    and the estimator's error every 0.02 s.
 
     Examples:
 
@@ -224,6 +306,8 @@ def mock_command(
         gcs mock --config profiles/mock-gps.yaml --seed 1 --stats-out /tmp/mock-gps.json
 
         gcs mock --clock-rate 0.8
+
+        gcs mock --divergence 1.0:30:0:0:1.5 --stats-out /tmp/incident.json
     \f
     Parameters
     ----------
@@ -251,6 +335,12 @@ def mock_command(
         JSON statistics file written on exit.
     clock_rate : float
         Vehicle time per wall-clock second.
+    drift : str or None
+        Estimator drift ``T:D:VN:VE:VD`` [s after the first arming, s, m/s].
+    divergence : str or None
+        Estimator divergence ``T:D:AN:AE:AD`` [s after the first arming, s, m/s^2].
+    jump : str or None
+        Estimator jump ``T:DN:DE:DD`` [s after the first arming, m].
     """
     try:
         faults = Faults(
@@ -265,9 +355,30 @@ def mock_command(
             gust_vn_m_s=parse_gust(gust)[2] if gust else 0.0,
             gust_ve_m_s=parse_gust(gust)[3] if gust else 0.0,
             clock_rate=clock_rate,
+            **_estimator_faults(drift, divergence, jump),
         )
     except ValueError as exc:
         if isinstance(exc, GcsError):
             raise
         raise typer.BadParameter(str(exc)) from exc
     run_mock(config, faults, seed=seed, port=port, gcs_port=gcs_port, stats_out=stats_out)
+
+
+def _estimator_faults(
+    drift: str | None, divergence: str | None, jump: str | None
+) -> dict[str, object]:
+    """The ``Faults`` fields of the estimator options (a duration of ``inf``: for good)."""
+    fields: dict[str, object] = {}
+    for option, text, prefix, unit in (
+        ("--drift", drift, "drift", "ned_m_s"),
+        ("--divergence", divergence, "divergence", "ned_m_s2"),
+    ):
+        if text is not None:
+            start, duration, vector = parse_estimator_fault(text, option)
+            fields[f"{prefix}_start_s"] = start
+            fields[f"{prefix}_duration_s"] = None if duration == math.inf else duration
+            fields[f"{prefix}_{unit}"] = vector
+    if jump is not None:
+        start, _, vector = parse_estimator_fault(jump, "--jump", timed=False)
+        fields["jump_at_s"], fields["jump_ned_m"] = start, vector
+    return fields

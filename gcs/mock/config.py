@@ -7,7 +7,9 @@ command line (``gcs mock --loss ... --gust ...``).
 
 Times in :class:`Faults` (dropout, link loss, gust) count in seconds from the moment the
 vehicle **first enters OFFBOARD**, so that a fault lands at the same point of a trial whatever
-the connection and take-off took. Packet loss and added latency apply from the start.
+the connection and take-off took. Packet loss and added latency apply from the start. The
+estimator faults (drift, divergence, jump) count from the first **arming**, so that one can
+strike during take-off, before any OFFBOARD (as the EKF2 divergence of issue P7 did).
 
 Units are SI; frames are local NED (north, east, down) with the origin at the take-off spot.
 """
@@ -319,6 +321,13 @@ class Px4Config:
     ekf2_hgt_ref : int
         ``EKF2_HGT_REF``, height reference: 0 barometer, 1 GPS, 2 range sensor, 3 vision.
         Default 1, as in the SIH capture.
+    gf_action : int
+        ``GF_ACTION``, geofence breach action: 0 none, 1 warning, 2 Hold (PX4's default),
+        5 Land; 3 (Return) and 4 (Terminate) are not modelled and land.
+    gf_max_hor_dist_m : float
+        ``GF_MAX_HOR_DIST``: largest distance from home (0: off, PX4's default) [m].
+    gf_max_ver_dist_m : float
+        ``GF_MAX_VER_DIST``: largest height above home (0: off, PX4's default) [m].
     """
 
     system_id: int = 1
@@ -341,6 +350,9 @@ class Px4Config:
     ekf2_gps_ctrl: int = 7
     ekf2_ev_ctrl: int = 0
     ekf2_hgt_ref: int = 1
+    gf_action: int = 2
+    gf_max_hor_dist_m: float = 0.0
+    gf_max_ver_dist_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -401,6 +413,21 @@ class Faults:
         Vehicle time per wall-clock second, like a simulator under load (PX4 SITL lockstep
         was seen at 0.72-0.9): the physics, the PX4 timeouts, the stream rates and every time
         stamp sent run on ``clock_rate x`` the wall clock. The link's latency stays wall time.
+    drift_start_s, drift_duration_s : float or None
+        Estimator drift: from ``start`` (after the first **arming**) for ``duration`` seconds
+        the estimated position walks away from the truth at ``drift_ned_m_s``, then stays off
+        (:class:`gcs.mock.estimator.PositionDrift`).
+    drift_ned_m_s : tuple of float or None
+        Its velocity (north, east, down) [m/s].
+    divergence_start_s, divergence_duration_s : float or None
+        Estimator divergence: from ``start`` (after the first arming) for ``duration`` seconds
+        the estimated position runs away as ``a t^2 / 2``, then stays off.
+    divergence_ned_m_s2 : tuple of float or None
+        Its ``a`` (north, east, down) [m/s^2]; issue P7's incident is one along down.
+    jump_at_s : float or None
+        Estimator jump: at this time (after the first arming) the estimated position steps.
+    jump_ned_m : tuple of float or None
+        The step (north, east, down) [m].
     """
 
     loss_fraction: float = 0.0
@@ -414,22 +441,44 @@ class Faults:
     gust_vn_m_s: float = 0.0
     gust_ve_m_s: float = 0.0
     clock_rate: float = 1.0
+    drift_start_s: float | None = None
+    drift_duration_s: float | None = None
+    drift_ned_m_s: tuple[float, float, float] | None = None
+    divergence_start_s: float | None = None
+    divergence_duration_s: float | None = None
+    divergence_ned_m_s2: tuple[float, float, float] | None = None
+    jump_at_s: float | None = None
+    jump_ned_m: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.loss_fraction < 1.0:
             raise ValueError(f"loss fraction must be in [0, 1), got {self.loss_fraction}")
         if not 0.0 <= self.latency_ms <= 10_000.0:
             raise ValueError(f"latency must be in [0, 10000] ms, got {self.latency_ms}")
-        for name in ("dropout_duration_s", "gust_duration_s", "link_loss_duration_s"):
+        for name in (
+            "dropout_duration_s", "gust_duration_s", "link_loss_duration_s", "drift_duration_s",
+            "divergence_duration_s", "drift_start_s", "divergence_start_s", "jump_at_s",
+        ):  # fmt: skip
             value = getattr(self, name)
-            if value is not None and value < 0:
-                raise ValueError(f"{name} must be >= 0, got {value}")
+            if value is not None and not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
         if not 0.1 <= self.clock_rate <= 10.0:
             raise ValueError(f"clock rate must be in [0.1, 10], got {self.clock_rate}")
         if (self.dropout_start_s is None) != (self.dropout_duration_s is None):
             raise ValueError("dropout needs both a start and a duration")
         if (self.gust_start_s is None) != (self.gust_duration_s is None):
             raise ValueError("gust needs both a start and a duration")
+        for what, start, vector in (
+            ("drift", self.drift_start_s, self.drift_ned_m_s),
+            ("divergence", self.divergence_start_s, self.divergence_ned_m_s2),
+            ("jump", self.jump_at_s, self.jump_ned_m),
+        ):
+            if (start is None) != (vector is None):
+                raise ValueError(f"{what} needs both a time and a vector")
+            if vector is not None and not (
+                len(vector) == 3 and all(math.isfinite(x) for x in vector)
+            ):
+                raise ValueError(f"{what} vector must be three finite numbers, got {vector}")
 
     def dropout_active(self, t_offboard_s: float | None) -> bool:
         """Whether the telemetry dropout window covers a time.
@@ -612,6 +661,9 @@ def _validate(cfg: MockConfig, where: str) -> None:
         ("px4.ekf2_gps_ctrl", 0 <= cfg.px4.ekf2_gps_ctrl <= 15, "must be a bitmask in [0, 15]"),
         ("px4.ekf2_ev_ctrl", 0 <= cfg.px4.ekf2_ev_ctrl <= 15, "must be a bitmask in [0, 15]"),
         ("px4.ekf2_hgt_ref", cfg.px4.ekf2_hgt_ref in (0, 1, 2, 3), "must be 0, 1, 2 or 3"),
+        ("px4.gf_action", 0 <= cfg.px4.gf_action <= 5, "must be in [0, 5] (PX4's GF_ACTION)"),
+        ("px4.gf_max_hor_dist_m", cfg.px4.gf_max_hor_dist_m >= 0, "must be >= 0"),
+        ("px4.gf_max_ver_dist_m", cfg.px4.gf_max_ver_dist_m >= 0, "must be >= 0"),
         ("rates.heartbeat_hz", cfg.rates.heartbeat_hz > 0, "must be > 0 (MAVSDK needs it)"),
     ]
     for name, ok, message in checks:

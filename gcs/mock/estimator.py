@@ -31,6 +31,25 @@ velocity and the derivative of the reported position: ``d(pos_est)/dt - vel_est`
 ``-(p_err - g) / T``, which follows ``-v_err`` low-passed by ``T``. The truth is available for
 the docs and tests (:attr:`Estimator.pos_err_m`).
 
+Injected estimator faults (``gcs mock --drift/--divergence/--jump``,
+:class:`gcs.mock.config.Faults`) are further error processes of the same sum
+(:class:`InjectedFault`), timed on the vehicle's clock from its first arming
+(:meth:`InjectedFault.start_clock`). Each moves the estimated
+*position* only; the estimated velocity stays the inertial one, as when the position source
+(motion capture, GPS, an external-vision height) goes wrong while the IMU does not:
+
+- :class:`PositionDrift`: the position error grows at a constant velocity for a while, then
+  stays;
+- :class:`PositionDivergence`: it grows at a growing rate (``a t^2 / 2``), then stays: the
+  height divergence of issue P7, where EKF2's height went 480 m below ground while the vehicle
+  climbed, is one along down;
+- :class:`PositionJump`: it steps once and stays (a mis-solved motion-capture frame, an
+  estimator reset).
+
+PX4 flies on its estimate, and so does the mock: while the controller can, it holds the
+*estimate* at the setpoint and the true vehicle moves the other way; the reported velocity (the
+truth's) then shows a motion the reported position does not.
+
 Plain floats and the standard library only: the mock steps this at 200 Hz in real time.
 """
 
@@ -41,7 +60,7 @@ import random
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
-from gcs.mock.config import EstimatorConfig
+from gcs.mock.config import EstimatorConfig, Faults
 
 __all__ = [
     "ErrorProcess",
@@ -49,6 +68,11 @@ __all__ = [
     "Estimator",
     "make_estimator",
     "ESTIMATOR_SEED_OFFSET",
+    "InjectedFault",
+    "PositionDrift",
+    "PositionDivergence",
+    "PositionJump",
+    "injected_faults",
 ]
 
 ESTIMATOR_SEED_OFFSET = 0xE571
@@ -187,6 +211,17 @@ class Estimator:
         """Resets of all processes so far."""
         return sum(p.resets for p in self.processes)
 
+    def add(self, process: ErrorProcess) -> None:
+        """Add one more error process to the sum.
+
+        Parameters
+        ----------
+        process : ErrorProcess
+            Stepped after the others.
+        """
+        self.processes.append(process)
+        self._sum()
+
     def step(self, dt_s: float) -> None:
         """Advance every process by ``dt_s``.
 
@@ -240,3 +275,144 @@ def make_estimator(cfg: EstimatorConfig, seed: int) -> Estimator | None:
         return None
     rng = random.Random(seed + ESTIMATOR_SEED_OFFSET)
     return Estimator([AidedInertialError(cfg, rng)])
+
+
+class InjectedFault:
+    """An injected position error, timed from the vehicle's first arming (an ErrorProcess).
+
+    Parameters
+    ----------
+    start_s : float
+        When it begins, after the first arming [s, vehicle time].
+    duration_s : float or None
+        How long it grows [s]; afterwards the error stays as it is. None: for ever.
+    vector : tuple of float
+        Its size per NED axis (unit by kind: m/s, m/s^2 or m).
+
+    Attributes
+    ----------
+    origin_s : float or None
+        Vehicle time of the first arming (None before it).
+    """
+
+    kind = "fault"
+
+    def __init__(self, start_s: float, duration_s: float | None, vector: Sequence[float]) -> None:
+        self.start_s, self.duration_s = float(start_s), duration_s
+        self.vector = tuple(float(x) for x in vector)
+        self.origin_s: float | None = None
+        self.t_s = 0.0
+        self.pos_err_m = [0.0, 0.0, 0.0]
+        self.vel_err_m_s = [0.0, 0.0, 0.0]
+        self.resets = 0
+
+    def start_clock(self, t_s: float) -> None:
+        """Start counting (the vehicle's first arming; later calls change nothing).
+
+        Parameters
+        ----------
+        t_s : float
+            Vehicle time [s].
+        """
+        if self.origin_s is None:
+            self.origin_s = t_s
+
+    @property
+    def onset_s(self) -> float | None:
+        """Vehicle time at which the fault begins (None before the first arming)."""
+        return None if self.origin_s is None else self.origin_s + self.start_s
+
+    def _size(self, elapsed_s: float) -> float:
+        """Error per unit of ``vector`` after ``elapsed_s`` of growth."""
+        raise NotImplementedError
+
+    def step(self, dt_s: float) -> None:
+        """Advance by ``dt_s``; the error follows the kind's law once the fault has begun.
+
+        Parameters
+        ----------
+        dt_s : float
+            Step [s].
+        """
+        self.t_s += dt_s
+        onset = self.onset_s
+        if onset is None or self.t_s < onset - 1e-9:
+            return
+        elapsed = self.t_s - onset
+        if self.duration_s is not None:
+            elapsed = min(elapsed, self.duration_s)
+        k = self._size(elapsed)
+        for i in range(3):
+            self.pos_err_m[i] = k * self.vector[i]
+
+    def record(self) -> dict[str, object]:
+        """The fault for the statistics file.
+
+        Returns
+        -------
+        dict
+            ``kind``, ``start_s``, ``duration_s``, ``vector``, ``onset_vehicle_s``.
+        """
+        return {
+            "kind": self.kind,
+            "start_s": self.start_s,
+            "duration_s": self.duration_s,
+            "vector": list(self.vector),
+            "onset_vehicle_s": self.onset_s,
+        }
+
+
+class PositionDrift(InjectedFault):
+    """The estimated position walks away at ``vector`` [m/s] for ``duration_s`` (see above)."""
+
+    kind = "drift"
+
+    def _size(self, elapsed_s: float) -> float:
+        return elapsed_s
+
+
+class PositionDivergence(InjectedFault):
+    """The estimated position runs away as ``vector t^2 / 2`` ([m/s^2]) for ``duration_s``."""
+
+    kind = "divergence"
+
+    def _size(self, elapsed_s: float) -> float:
+        return 0.5 * elapsed_s * elapsed_s
+
+
+class PositionJump(InjectedFault):
+    """The estimated position steps by ``vector`` [m] and stays."""
+
+    kind = "jump"
+
+    def _size(self, elapsed_s: float) -> float:
+        return 1.0
+
+
+def injected_faults(faults: Faults) -> list[InjectedFault]:
+    """The estimator faults a run's :class:`Faults` ask for.
+
+    Parameters
+    ----------
+    faults : Faults
+        The run's faults.
+
+    Returns
+    -------
+    list of InjectedFault
+        Drift, divergence and jump, those given; empty for none.
+    """
+    out: list[InjectedFault] = []
+    if faults.drift_start_s is not None and faults.drift_ned_m_s is not None:
+        out.append(
+            PositionDrift(faults.drift_start_s, faults.drift_duration_s, faults.drift_ned_m_s)
+        )
+    if faults.divergence_start_s is not None and faults.divergence_ned_m_s2 is not None:
+        out.append(
+            PositionDivergence(
+                faults.divergence_start_s, faults.divergence_duration_s, faults.divergence_ned_m_s2
+            )
+        )
+    if faults.jump_at_s is not None and faults.jump_ned_m is not None:
+        out.append(PositionJump(faults.jump_at_s, None, faults.jump_ned_m))
+    return out

@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from gcs.mock.config import DisturbanceConfig, MockConfig
-from gcs.mock.estimator import Estimator, make_estimator
+from gcs.mock.estimator import ErrorProcess, Estimator, make_estimator
 
 if TYPE_CHECKING:  # NumPy and SciPy are imported lazily: the real-time mock does not need them
     import numpy as np
@@ -191,6 +191,23 @@ class QuadPhysics:
             New target.
         """
         self._queue.append((t_s + self.cfg.physics.input_delay_s, target))
+
+    def add_error(self, process: ErrorProcess) -> None:
+        """Add a navigation error (an injected estimator fault); an estimator is made if needed.
+
+        Without one so far the navigation state becomes its own copy of the truth (the same
+        numbers while the error is zero).
+
+        Parameters
+        ----------
+        process : ErrorProcess
+            The error.
+        """
+        if self.estimator is None:
+            self.estimator = Estimator([])
+            self.nav_pos, self.nav_vel = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        self.estimator.add(process)
+        self.estimator.apply(self.pos, self.vel, self.nav_pos, self.nav_vel)
 
     def set_armed(self, armed: bool) -> None:
         """Start or stop the motors; disarming resets the controller's integrators.

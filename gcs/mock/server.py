@@ -35,6 +35,8 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs.mock.config import Faults, MockConfig
+from gcs.mock.estimator import injected_faults
+from gcs.mock.geofence import FenceItem, FenceTransfer, Reply
 from gcs.mock.vehicle import MODE_FROM_CUSTOM, MavResult, Vehicle, encode_param
 
 __all__ = ["MockServer", "STREAMS", "TRUTH_PERIOD_S", "write_json_atomic"]
@@ -66,13 +68,13 @@ _SENSORS_PRESENT = 50348079
 _SENSORS_ENABLED = 50413615
 _SENSORS_HEALTH = 52480063
 _PREARM_CHECK = 0x10000000
-_EARTH_RADIUS_M = 6_371_000.0
-TRUTH_PERIOD_S = 0.1
+TRUTH_PERIOD_S = 0.02
 """Period of the truth-and-error record in the statistics (vehicle time) [s]."""
 _TRUTH_KEYS = (
     "t_vehicle_s", "north_m", "east_m", "down_m", "err_north_m", "err_east_m", "err_down_m",
-    "err_vn_m_s", "err_ve_m_s", "err_vd_m_s",
+    "err_vn_m_s", "err_ve_m_s", "err_vd_m_s", "vn_m_s", "ve_m_s", "vd_m_s",
 )  # fmt: skip
+_MISSION_PLANNER = 190  # MAV_COMP_ID_MISSIONPLANNER, also addressed by mission messages
 _FORCE_MAGIC = 21196
 
 
@@ -146,7 +148,9 @@ class MockServer:
         self.mav = mavlink2.MAVLink(_Writer(self), srcSystem=self.sysid, srcComponent=1)
         self.parser = mavlink2.MAVLink(None)
         self.parser.robust_parsing = True
-        self.vehicle = Vehicle(cfg, seed)
+        self.vehicle = Vehicle(cfg, seed, injected_faults(self.faults))
+        self.fence_transfer = FenceTransfer()
+        self.texts: list[dict[str, Any]] = []  # every STATUSTEXT sent, for the statistics
         self._fault_rng = random.Random(seed + 0xFA17)
         self._delayed: list[tuple[float, int, str, bytes, tuple[str, int] | None]] = []
         self._delayed_seq = 0
@@ -257,10 +261,26 @@ class MockServer:
             ],
             "packets": {k: self.counts[k] for k in ("rx", "tx", "rx_dropped", "tx_dropped")},
             "estimator": self._truth_stats(),
+            "first_armed_vehicle_s": v.first_armed_t_s,
+            "estimator_faults": [f.record() for f in v.faults],
+            "geofence": self._geofence_stats(),
+            "statustexts": self.texts,
             "physics_steps": self.counts["steps"],
             "max_physics_lag_s": self.max_lag_s,
             "cpu_s": time.process_time(),
             "wall_s": time.monotonic() - self.t0,
+        }
+
+    def _geofence_stats(self) -> dict[str, Any]:
+        """The fence stored and in force, its parameters, uploads and breaches."""
+        v, transfer = self.vehicle, self.fence_transfer
+        return {
+            "items": [dataclasses.asdict(i) for i in transfer.items],
+            "areas_in_force": len(v.geofence.areas),
+            "uploads": transfer.uploads,
+            "clears": transfer.clears,
+            "params": {n: v.params[n] for n in ("GF_ACTION", "GF_MAX_HOR_DIST", "GF_MAX_VER_DIST")},
+            "breaches": v.gf_breaches,
         }
 
     def _truth_stats(self) -> dict[str, Any] | None:
@@ -276,7 +296,7 @@ class MockServer:
         if self._truth is None or est is None or ph.t_s < self._truth_next_t - 1e-9:
             return
         self._truth_next_t = ph.t_s + TRUTH_PERIOD_S
-        row = (ph.t_s, *ph.pos, *est.pos_err_m, *est.vel_err_m_s)
+        row = (ph.t_s, *ph.pos, *est.pos_err_m, *est.vel_err_m_s, *ph.vel)
         for key, value in zip(_TRUTH_KEYS, row, strict=True):
             self._truth[key].append(value)
 
@@ -306,11 +326,13 @@ class MockServer:
 
     def _after_update(self) -> None:
         v = self.vehicle
+        self._mission_replies(self.fence_transfer.tick(v.t_s))
         if v.state_changed:
             v.state_changed = False
             self._send_heartbeat()
         while v.events:
             severity, text = v.events.pop(0)
+            self.texts.append({"t_vehicle_s": v.t_s, "severity": severity, "text": text})
             self.mav.statustext_send(severity, text.encode()[:50], 0, 0)
 
     # -- transport ------------------------------------------------------------------------
@@ -406,6 +428,63 @@ class MockServer:
             # proof of life only: the mock flies position setpoints, not velocity/acceleration
             v.on_setpoint(t, v.setpoint.pos_ned_m, v.setpoint.yaw_rad)
 
+    # -- the fence transfer (MAV_MISSION_TYPE_FENCE, gcs.mock.geofence) --------------------
+    def _for_missions(self, msg: Any) -> bool:
+        return msg.target_system == self.sysid and msg.target_component in (
+            0, 1, _MISSION_PLANNER,
+        )  # fmt: skip
+
+    def _mission_call(self, msg: Any, method: str, *args: Any) -> None:
+        if not self._for_missions(msg):
+            return
+        v = self.vehicle
+        v.update(self._t())
+        sender = (msg.get_srcSystem(), msg.get_srcComponent())
+        handler = getattr(self.fence_transfer, method)
+        self._mission_replies(handler(v.t_s, sender, *args, msg.mission_type))
+        self._after_update()
+
+    def _on_mission_count(self, msg: Any) -> None:
+        self._mission_call(msg, "on_count", msg.count)
+
+    def _on_mission_item_int(self, msg: Any) -> None:
+        item = FenceItem(msg.seq, msg.frame, msg.command, msg.param1, msg.x, msg.y, msg.z)
+        self._mission_call(msg, "on_item", item)
+
+    def _on_mission_request_list(self, msg: Any) -> None:
+        self._mission_call(msg, "on_request_list")
+
+    def _on_mission_request_int(self, msg: Any) -> None:
+        self._mission_call(msg, "on_request", msg.seq)
+
+    _on_mission_request = _on_mission_request_int  # answered with items in the INT form
+
+    def _on_mission_ack(self, msg: Any) -> None:
+        self._mission_call(msg, "on_ack", msg.type)
+
+    def _on_mission_clear_all(self, msg: Any) -> None:
+        self._mission_call(msg, "on_clear")
+
+    def _mission_replies(self, replies: list[Reply]) -> None:
+        for r in replies:
+            target = r.target
+            if r.kind == "request":
+                self.mav.mission_request_int_send(*target, r.value, r.mission_type)
+            elif r.kind == "ack":
+                self.mav.mission_ack_send(*target, r.value, r.mission_type)
+            elif r.kind == "count":
+                self.mav.mission_count_send(*target, r.value, r.mission_type)
+            elif r.kind == "item" and r.item is not None:
+                i = r.item
+                self.mav.mission_item_int_send(
+                    *target, i.seq, i.frame, i.command, 0, 0, i.param1, 0.0, 0.0, 0.0,
+                    i.x, i.y, i.z, r.mission_type,
+                )  # fmt: skip
+            elif r.kind == "text":
+                self.vehicle.events.append((r.value, r.text))
+            elif r.kind == "stored":
+                self.vehicle.fence_stored(r.items)
+
     def _on_heartbeat(self, msg: Any) -> None:
         if msg.type == mavlink2.MAV_TYPE_GCS:  # not our own echo, not a companion computer
             t = self._t()
@@ -487,6 +566,8 @@ class MockServer:
     def _sender_for(self, msg_id: int) -> Any:
         if msg_id == mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             return self._send_autopilot_version
+        if msg_id == mavlink2.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN:
+            return self._send_gps_global_origin
         name = _ID_TO_STREAM.get(msg_id)
         return None if name is None else getattr(self, f"_send_{name}")
 
@@ -567,12 +648,16 @@ class MockServer:
         ]
 
     def _global(self, pos: tuple[float, float, float]) -> tuple[int, int, float]:
+        lat, lon, alt = self.vehicle.global_position(pos)
+        return int(round(lat * 1e7)), int(round(lon * 1e7)), alt
+
+    def _send_gps_global_origin(self) -> None:
+        """The local frame's origin (PX4 sends it on request and when EKF2 sets it)."""
         p = self.cfg.px4
-        lat = p.home_lat_deg + math.degrees(pos[0] / _EARTH_RADIUS_M)
-        lon = p.home_lon_deg + math.degrees(
-            pos[1] / (_EARTH_RADIUS_M * math.cos(math.radians(p.home_lat_deg)))
-        )
-        return int(round(lat * 1e7)), int(round(lon * 1e7)), p.home_alt_m - pos[2]
+        self.mav.gps_global_origin_send(
+            int(round(p.home_lat_deg * 1e7)), int(round(p.home_lon_deg * 1e7)),
+            int(round(p.home_alt_m * 1000)), int(self.vehicle.t_s * 1e6),
+        )  # fmt: skip
 
     def _send_heartbeat(self) -> None:
         v = self.vehicle

@@ -28,6 +28,15 @@ Behaviour copied from PX4 v1.16 (commander sources and the SIH capture in
   landing). Other values, which PARAM_SET may store, are not modelled and land.
 - Home is set at arming to the current position as the estimator has it; hold, take-off and
   land targets are estimated positions too (PX4 flies on its estimate).
+- Geofence (:mod:`gcs.mock.geofence`, navigator and failsafe sources): every 0.2 s the
+  estimated position is checked against the stored fence, ``GF_MAX_HOR_DIST`` and
+  ``GF_MAX_VER_DIST`` (unless ``GF_ACTION`` is 0). Armed and in the air, a breach takes
+  ``GF_ACTION``: 1 a warning, 2 Hold, 5 Land (3 Return and 4 Terminate are not modelled and
+  land), with PX4's texts ("Geofence: approaching or outside geofence", "Failsafe activated").
+  Hold can be left by a mode change (PX4 allows the user to take over); Land is taken again
+  while the vehicle is still outside (PX4's failsafe re-engages), and neither resumes
+  OFFBOARD by itself. Outside the fence arming is refused, as PX4's arming check does.
+- Estimator faults (:mod:`gcs.mock.estimator`) start counting at the first arming.
 """
 
 from __future__ import annotations
@@ -35,9 +44,12 @@ from __future__ import annotations
 import enum
 import math
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from gcs.mock.config import MockConfig
+from gcs.mock.estimator import InjectedFault
+from gcs.mock.geofence import CHECK_PERIOD_S, FenceItem, Geofence, breach_kinds, ned_to_global
 from gcs.mock.physics import QuadPhysics, Target
 
 __all__ = [
@@ -83,6 +95,14 @@ class LandedState(enum.IntEnum):
     IN_AIR = 2
     TAKEOFF = 3
     LANDING = 4
+
+
+_GF_TEXTS = {
+    "fence": "Geofence: approaching or outside geofence",
+    "max_alt": "Geofence: exceeding maximum altitude above Home",
+    "max_dist": "Geofence: exceeding maximum distance to Home",
+}
+"""PX4's critical texts of the geofence checks (HealthAndArmingChecks/checks/geofenceCheck)."""
 
 
 class MavResult(enum.IntEnum):
@@ -143,7 +163,8 @@ class Px4Params:
 
     The ones the mock models (``MIS_TAKEOFF_ALT``, ``COM_OF_LOSS_T``, ``COM_DISARM_LAND``,
     ``COM_DISARM_PRFLT``, ``MPC_LAND_SPEED``, ``MPC_TKO_SPEED``, ``NAV_DLL_ACT``,
-    ``COM_DL_LOSS_T``) take effect when set. ``EKF2_GPS_CTRL``, ``EKF2_EV_CTRL`` and
+    ``COM_DL_LOSS_T``, ``GF_ACTION``, ``GF_MAX_HOR_DIST``, ``GF_MAX_VER_DIST``) take effect
+    when set. ``EKF2_GPS_CTRL``, ``EKF2_EV_CTRL`` and
     ``EKF2_HGT_REF`` come from the profile (``px4.ekf2_*``): they say what the vehicle navigates
     on, for a GCS to read. The others carry the values of the PX4 v1.16 SIH capture so that a
     GCS reading them sees a plausible vehicle; setting them has no effect.
@@ -175,6 +196,9 @@ class Px4Params:
             "EKF2_GPS_CTRL": (integer, p.ekf2_gps_ctrl),
             "EKF2_EV_CTRL": (integer, p.ekf2_ev_ctrl),
             "EKF2_HGT_REF": (integer, p.ekf2_hgt_ref),
+            "GF_ACTION": (integer, p.gf_action),
+            "GF_MAX_HOR_DIST": (real, p.gf_max_hor_dist_m),
+            "GF_MAX_VER_DIST": (real, p.gf_max_ver_dist_m),
             "MPC_XY_P": (real, 0.95),
             "MPC_Z_P": (real, 1.0),
             "MPC_XY_VEL_P_ACC": (real, 1.8),
@@ -264,11 +288,24 @@ class Vehicle:
         Mock configuration.
     seed : int
         Seed of the gusts and the measurement noise.
+    faults : sequence of InjectedFault
+        Estimator faults, added to the estimator's sum; their clocks start at the first arming.
     """
 
-    def __init__(self, cfg: MockConfig, seed: int = 0) -> None:
+    def __init__(
+        self, cfg: MockConfig, seed: int = 0, faults: Sequence[InjectedFault] = ()
+    ) -> None:
         self.cfg = cfg
         self.physics = QuadPhysics(cfg, seed)
+        self.faults = list(faults)
+        for fault in self.faults:
+            self.physics.add_error(fault)
+        self.first_armed_t_s: float | None = None
+        self.geofence = Geofence()
+        self.gf_breach: tuple[str, ...] = ()  # the kinds of the last check's breach
+        self.gf_failsafe = False  # the geofence action is in force
+        self.gf_breaches: list[dict[str, object]] = []
+        self._gf_next_check_s = 0.0
         self.params = Px4Params(cfg)
         self.armed = False
         self.mode = Mode[cfg.px4.initial_mode]
@@ -342,7 +379,76 @@ class Vehicle:
     @property
     def armable(self) -> bool:
         """Pre-arm checks pass in the current mode (SYS_STATUS PREARM_CHECK health bit)."""
-        return self.can_run(self.mode) and self.mode is not Mode.LAND
+        return self.can_run(self.mode) and self.mode is not Mode.LAND and not self._gf_denies
+
+    @property
+    def _gf_denies(self) -> bool:
+        """PX4's geofence arming check: outside the fence with a breach action set."""
+        return bool(self.gf_breach) and int(self.params["GF_ACTION"]) != 0
+
+    # -- geofence -------------------------------------------------------------------------
+    def global_position(self, pos_ned_m: Sequence[float]) -> tuple[float, float, float]:
+        """Latitude, longitude [deg] and altitude AMSL [m] of a local position.
+
+        Parameters
+        ----------
+        pos_ned_m : sequence of float
+            Local NED [m] (the origin is the profile's ``px4.home_*``).
+
+        Returns
+        -------
+        tuple of float
+        """
+        p = self.cfg.px4
+        return ned_to_global((p.home_lat_deg, p.home_lon_deg, p.home_alt_m), pos_ned_m)
+
+    def fence_stored(self, items: tuple[FenceItem, ...]) -> None:
+        """A fence transfer ended: put its items in force as PX4's navigator does.
+
+        Parameters
+        ----------
+        items : tuple of FenceItem
+            The fence (empty: cleared).
+        """
+        home = self.global_position(self.home_ned_m)
+        here = self.global_position(self.physics.nav_pos)
+        action = int(self.params["GF_ACTION"])
+        texts = self.geofence.load(items, home[:2], here[:2], not self.landed, action)
+        self.events.extend(texts)
+        self._gf_next_check_s = self.t_s  # check at once
+
+    def _check_geofence(self, t: float) -> None:
+        """PX4's geofence check (every CHECK_PERIOD_S) and the commander's failsafe action."""
+        if t < self._gf_next_check_s:
+            return
+        self._gf_next_check_s = t + CHECK_PERIOD_S
+        action = int(self.params["GF_ACTION"])
+        if action == 0:
+            self.gf_breach = ()
+            return
+        kinds = breach_kinds(
+            self.geofence,
+            self.global_position(self.physics.nav_pos),
+            self.global_position(self.home_ned_m),
+            self.params["GF_MAX_HOR_DIST"],
+            self.params["GF_MAX_VER_DIST"],
+        )
+        new = bool(kinds) and not self.gf_breach
+        self.gf_breach = kinds
+        if not kinds or not self.armed or self.landed:
+            return
+        if new:
+            self.gf_breaches.append({"t_vehicle_s": t, "kinds": list(kinds), "action": action})
+            for kind in kinds:
+                self.events.append((2, _GF_TEXTS[kind]))
+            self.events.append((2, "Failsafe activated"))
+            if action == 2:
+                self.gf_failsafe = True
+                self._enter(Mode.HOLD)
+        if action >= 3 and self.mode is not Mode.LAND:
+            # Land (and the unmodelled Return, Terminate): taken again while still outside
+            self.gf_failsafe = True
+            self._enter(Mode.LAND)
 
     @property
     def landed_state(self) -> LandedState:
@@ -409,11 +515,20 @@ class Vehicle:
             if self.armed:
                 return MavResult.ACCEPTED
             if not force and not self.armable:
-                why = "mode not available" if self.mode is not Mode.LAND else "landing"
+                if self._gf_denies:
+                    for kind in self.gf_breach:
+                        self.events.append((2, _GF_TEXTS[kind]))
+                    why = "Resolve system health failures first"
+                else:
+                    why = "mode not available" if self.mode is not Mode.LAND else "landing"
                 self.events.append((2, f"Arming denied: {why}"))
                 return MavResult.TEMPORARILY_REJECTED
             self.armed = True
             self.t_armed_s = self.t_s
+            if self.first_armed_t_s is None:
+                self.first_armed_t_s = self.t_s
+                for fault in self.faults:
+                    fault.start_clock(self.t_s)
             self.took_off = False
             nav = self.physics.nav_pos  # PX4 sets home where its estimator says it is
             self.home_ned_m = (nav[0], nav[1], nav[2])
@@ -449,6 +564,7 @@ class Vehicle:
         if mode is not Mode.LAND:
             self._mode_after_disarm = mode
         self.failsafe = False
+        self.gf_failsafe = False  # the user takes over (a Land action is taken again if due)
         self._enter(mode)
         return MavResult.ACCEPTED
 
@@ -497,6 +613,7 @@ class Vehicle:
             self._enter(Mode.HOLD)
         elif (
             self.failsafe
+            and not self.gf_failsafe
             and self.user_mode is Mode.OFFBOARD
             and self.cfg.px4.offboard_resume
             and not self.data_link_lost
@@ -506,6 +623,7 @@ class Vehicle:
             self.events.append((6, "Offboard signal regained"))
             self._enter(Mode.OFFBOARD)
         self._check_data_link(t)
+        self._check_geofence(t)
         # land detector
         if self.landed:
             if self.armed and ph.pos[2] < -0.1:
@@ -576,6 +694,7 @@ class Vehicle:
         self.armed = False
         self.physics.set_armed(False)
         self.failsafe = False
+        self.gf_failsafe = False
         self.events.append((6, reason))
         self.user_mode = self._mode_after_disarm
         if not self._enter(self._mode_after_disarm):
