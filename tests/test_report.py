@@ -196,9 +196,14 @@ def test_a_trial_flown_again_says_so(tmp_path: Path) -> None:
 
 
 def test_a_run_with_a_repeat_reports_trial_and_j_the_floor_verdicts_and_decisions(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from synthetic import make_adaptive_run
+
+    import gcs.cli
+
+    # the console's width is fixed when it is made (COLUMNS then): wide, so no header wraps
+    monkeypatch.setattr(gcs.cli.console, "width", 200)
 
     run = make_adaptive_run(tmp_path, trials=5, gust_m=0.01)
     rows = json.loads(invoke("report", run.path, "--json").output)
