@@ -169,6 +169,31 @@ def table(results: dict, iterations: int) -> None:
             )
 
 
+def summary(results: dict) -> None:
+    """Medians over the seeds, and the new options against the paper's in the same runs."""
+    rows = {}
+    for _, by_method in sorted(results.items()):
+        floor = (by_method.get("adaptive") or {}).get("floor")
+        for method, s in by_method.items():
+            e = np.array(s["epos_m"])
+            if floor is None or e.size < 6:
+                continue
+            f = floor["epos_m"]
+            rows.setdefault(method, []).append(
+                (np.median(e[3:6]) / f, np.max(e[2:]) / f, 100 * e[3] / s["epos0_m"],
+                 np.median(e[3:6]), np.max(s["sp_rms_m"]))
+            )  # fmt: skip
+    names = ("med(3..5)/floor", "max(j>=2)/floor", "j=3 [%]", "med(3..5) [m]", "max sp RMS [m]")
+    print("median over the seeds | " + " | ".join(names))
+    for method, vals in rows.items():
+        med = np.median(np.array(vals), axis=0)
+        print(f"{method} ({len(vals)} seeds) | " + " | ".join(f"{v:.3g}" for v in med))
+    if "paper" in rows and "adaptive" in rows and len(rows["paper"]) == len(rows["adaptive"]):
+        ratio = [a[3] / p[3] for a, p in zip(rows["adaptive"], rows["paper"], strict=True)]
+        each = " ".join(f"{r:.2f}" for r in ratio)
+        print(f"new / paper, median(j = 3..5) per seed: {each}; median {np.median(ratio):.2f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--set", choices=sorted(SETS), default="indoor")
@@ -192,6 +217,7 @@ def main() -> None:
             if path.exists():
                 results[seed][method] = summarise(path)
     table(results, args.iterations)
+    summary(results)
     if args.json is not None:
         args.json.write_text(json.dumps(results, indent=1) + "\n")
 
