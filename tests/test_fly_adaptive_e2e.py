@@ -18,6 +18,7 @@ from synthetic import CI_FLIGHT
 from test_fly_e2e import finish, gcs
 
 from gcs.flight.campaign import FlightSession, Status, TrialStarted, fly_campaign
+from gcs.flight.fence import Fence
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.runlog import RunDir
@@ -129,9 +130,11 @@ def test_a_source_that_says_no_further_trial_lands_the_vehicle_early(tmp_path: P
         max_setpoint_late_s=0.4, max_telemetry_age_s=1.0, hover_measure_s=2.0,
         hover_before_trial_s=1.0,
     )  # fmt: skip
+    fence = Fence.around([[-3.0, 3.0], [-3.0, 3.0], [-3.0, 0.0]], settings, 3.0, 1.5)  # antx's
     source, events = StopAfter(0), []
     with MockProcess(seed=0, stats_path=tmp_path / "stats.json") as mock:
-        asyncio.run(fly_campaign(mock.url, source, 3, 0, settings, 0.05, events.append))
+        campaign = fly_campaign(mock.url, source, 3, 0, settings, 0.05, events.append, fence=fence)
+        asyncio.run(campaign)
     assert source.asked == [0] and source.recorded == [0]
     assert sum(isinstance(e, TrialStarted) for e in events) == 1
     texts = [e.text for e in events if isinstance(e, Status)]
