@@ -231,6 +231,17 @@ def fly(
             "would be flown; create, connect and fly nothing.",
         ),
     ] = False,
+    until_converged: Annotated[
+        bool,
+        typer.Option(
+            "--until-converged",
+            help="Land as soon as learning has converged: two trials in a row at the floor "
+            "(the repeat of trial 0 measures it) and their mean within one trial's scatter of "
+            "it, so that no further trial could show an improvement. --iter stays the most "
+            "trials flown. Needs a profile with learning.adaptive and a repeat "
+            "(antx-adaptive).",
+        ),
+    ] = False,
 ) -> None:
     """Fly N learning trials: take off, fly, learn, fly again, land.
 
@@ -252,6 +263,14 @@ def fly(
     hovering (the same step as 'gcs learn') and prints the new row of the e_pos table and the
     vehicle's clock rate. After the last trial it lands and disarms.
 
+    With a profile that has learning.adaptive (antx-adaptive): trial 0 is flown again with
+    identical setpoints (learning.adaptive.repeats, 1: a repeat, iteration j = 0 still) to
+    measure the floor, one flight's non-repeatable error; then every trial learns from all the
+    trials so far, and the live table says what each learning step decided (a safeguard's fall
+    back to the best trial, a refreshed model and how far it moved, a trial at the floor,
+    converged), as learn-JJJ.json and model-JJJ.yaml in the run record it. --iter counts
+    flights, the repeat included: --iter 7 flies j = 0..5.
+
     Safety: Ctrl-C, a lost link, an offboard rejection or any error mid-trial stops streaming,
     holds, lands and disarms; completed trials stay on disk, the interrupted one is marked
     incomplete, and --resume continues from the last complete trial. A second Ctrl-C while
@@ -260,6 +279,8 @@ def fly(
     Examples:
 
         gcs fly --mock --iter 3
+
+        gcs fly --mock --profile antx-adaptive --iter 10 --until-converged
 
         gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc --check
 
@@ -291,6 +312,7 @@ def fly(
         logs=logs,
         use_mock=mock,
         check_only=check,
+        until_converged=until_converged,
     )
 
 
@@ -317,6 +339,14 @@ def learn(
     refused and nothing is written. The learned setpoints are checked on their grid against
     the arena, max_step_m and max_deviation_m before they are written.
 
+    A run whose profile has learning.adaptive (antx-adaptive) learns from every complete
+    trial instead (docs/learning-floor.md): after trial 0 it writes the setpoints of its
+    repeat (trial 0's, to measure the floor), after that it starts from the models of the
+    previous step and also writes `learn-<j>.json` (every decision: noise model and weights,
+    model refresh and how far it moved, safeguard, floor verdicts), `model-<j>.yaml` when a
+    model was refreshed (a profile: fly it with --profile) and `floor.json`. Every trial
+    0..j must be complete, and every earlier record and model must agree with its name.
+
     Example: gcs learn logs/latest
 
     Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
@@ -328,12 +358,23 @@ def learn(
     _check_algorithm(algorithm)
     run = RunDir.open(run_dir)
     outcome = learn_run(run, algorithm, _named(profile, "profile", "--profile"))
+    if outcome.repeat_of is not None:
+        console.print(
+            f"trial {outcome.next_trial} repeats trial {outcome.repeat_of} (identical "
+            f"setpoints, j = 0: it measures the floor): {outcome.setpoints_path}"
+        )
+        return
     console.print(
         f"learned from trial {outcome.trial} ({run.algorithm}); "
         f"setpoints for trial {outcome.next_trial}: {outcome.setpoints_path} "
         f"[dim](solver {'/'.join(outcome.methods)}, "
         f"{outcome.active_constraints} active limits)[/]"
     )
+    if outcome.record is not None:
+        from gcs.app.report import decision_lines
+
+        for line in decision_lines(outcome.record):
+            console.print(f"  {escape(line)}", highlight=False)
 
 
 @app.command()
@@ -345,7 +386,10 @@ def report(
         typer.Option(
             "--json",
             help="Print a JSON list of {iteration, epos_m, epos_pct, delta_pct, max_err_m, "
-            "vehicle_time_rate}.",
+            "vehicle_time_rate, trial, repeat_of, sp_rms_m, sp_max_m} per trial; with "
+            "learning.adaptive also the floor (floor_m, floor_scatter_m, floor_ratio, floor_z, "
+            "at_floor, converged) and the learning step's record (learning). 'iteration' is "
+            "the paper's j (a repeat is j = 0), 'trial' the order of flight.",
         ),
     ] = False,
     plot: Annotated[
@@ -379,7 +423,17 @@ def report(
     real vehicle; a simulator under load runs slower). Below the table: every missing or
     incomplete trial, and one line per flight session (navigation source, the hover measured
     before its first trial, the settle tolerance derived from it). --json lists every trial,
-    with its status.
+    with its status. Every learning run adds the setpoints' RMS distance from the reference
+    per trial ('sp RMS [m]': what learning adds to the reference).
+
+    A run whose profile has learning.adaptive adds: the trial number beside the paper's
+    iteration j (the repeat of trial 0 is a flight of j = 0); e_pos / floor, the floor being
+    one flight's non-repeatable error measured from the repeat, and the verdict 'at floor'
+    (z = (e_pos - floor) / scatter <= learning.adaptive.floor_z, 2) or 'converged' (two
+    trials in a row at the floor, their mean within one trial's scatter of it: no further
+    trial can show a gain); the learning step's decisions (a safeguard's fall back 'from K,
+    step 0.5', a refreshed model and how far it moved 'model N 26 %'); and below the table the
+    floor and every step's decisions in words. The e_pos figure draws the floor and its band.
 
     Figures (--plot, --html), for both axes: the horizontal path per iteration (paper Fig. 4),
     north and east against time (Fig. 5), the setpoints flown against the reference, the
@@ -398,9 +452,11 @@ def report(
     from gcs.app.report import (
         aborted_attempts,
         choose_iterations,
+        learning_notes,
         metrics_json,
         metrics_table,
         parse_iterations,
+        run_learning,
         run_metrics,
         session_lines,
         trial_clock_rates,
@@ -422,11 +478,16 @@ def report(
         check_output_dir(plot, "--plot")
     if html is not None:
         check_output_file(html, "--html")
+    learning = run_learning(run) if run.kind == "learning" else None
     if as_json:
-        typer.echo(json.dumps(metrics_json(rows, rates, entries), indent=2))
+        from gcs.io.runlog import json_safe
+
+        out = metrics_json(rows, rates, entries, learning)
+        typer.echo(json.dumps(json_safe(out), indent=2, allow_nan=False))
     else:
-        console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})", rates))
-        for line in trial_notes(entries, aborted_attempts(run)) + session_lines(run):
+        console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})", rates, learning))
+        notes = learning_notes(learning) if learning is not None else []
+        for line in notes + trial_notes(entries, aborted_attempts(run)) + session_lines(run):
             console.print(escape(line), highlight=False)
     if plot is not None:
         for path in write_plots(run, plot, chosen):

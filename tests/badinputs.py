@@ -100,6 +100,16 @@ def _learning_run(root: Path) -> Path:
     return run.path
 
 
+def _adaptive_run(root: Path) -> Path:
+    """A synthetic run with antx-adaptive.yaml: trials 0, 1 (the repeat of 0), 2 and 3
+    complete, learned with history after each (model-002.yaml refreshed), setpoints of 4."""
+    from synthetic import make_adaptive_run
+
+    run = make_adaptive_run(root, trials=4)
+    assert (run.path / "model-002.yaml").exists()  # the catalogue damages it
+    return run.path
+
+
 class Templates:
     """Runs built once and copied into every workspace that needs one."""
 
@@ -111,7 +121,10 @@ class Templates:
         if name not in self._built:
             where = self.root / name
             where.mkdir(parents=True)
-            build = {"learning": _learning_run, "ident": _identification_run}[name]
+            build = {
+                "learning": _learning_run, "ident": _identification_run,
+                "adaptive": _adaptive_run,
+            }[name]  # fmt: skip
             self._built[name] = build(where)
         return self._built[name]
 
@@ -133,8 +146,10 @@ class Workspace:
             p.write_text(text)
         return p
 
-    def profile(self, dotted: str | None = None, value: Any = None, **more: Any) -> Path:
-        data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
+    def profile(
+        self, dotted: str | None = None, value: Any = None, base: str = "antx.yaml", **more: Any
+    ) -> Path:
+        data = yaml.safe_load((ROOT / "profiles" / base).read_text())
         if dotted is not None:
             data = _set(data, dotted, value)
         for key, v in more.items():
@@ -534,6 +549,131 @@ def _learning_run_damage() -> list[tuple[str, Callable[[Path], None], str]]:
         ),
         ("reference.csv truncated", lambda r: _truncate(r / "reference.csv"), "reference.csv"),
     ]
+
+
+def _edit_yaml(path: Path, dotted: str, value: Any) -> None:
+    path.write_text(yaml.safe_dump(_set(yaml.safe_load(path.read_text()), dotted, value)))
+
+
+def _adaptive_run_damage() -> list[tuple[str, Callable[[Path], None], str]]:
+    """(what, damage to a run learned with history, expected message): trials 0-3 complete."""
+    return [
+        (
+            "learn-002.json names trial 1",
+            lambda r: _edit_json(r / "learn-002.json", "trial", 1),
+            "as the file's name says",
+        ),
+        (
+            "learn-002.json truncated",
+            lambda r: _truncate(r / "learn-002.json"),
+            "malformed learning record",
+        ),
+        ("learn-002.json missing", lambda r: (r / "learn-002.json").unlink(), "learn-002.json"),
+        (
+            "learn-002.json without its model",
+            lambda r: _edit_json(r / "learn-002.json", "model_file", None),
+            "must name the refreshed model",
+        ),
+        (
+            "model-002.yaml holds another model",
+            lambda r: _edit_yaml(r / "model-002.yaml", "model.C", [[1.5, 0.0]]),
+            "is not the one learn-002.json records",
+        ),
+        ("model-002.yaml missing", lambda r: (r / "model-002.yaml").unlink(), "model-002.yaml"),
+        (
+            "model-002.yaml not a profile",
+            lambda r: (r / "model-002.yaml").write_text("model: 5\n"),
+            "model-002.yaml",
+        ),
+        (
+            "a trial of the history missing",
+            lambda r: [(r / f"trial-001.{e}").unlink() for e in ("json", "csv")],
+            "trial 1 is not complete",
+        ),
+        (
+            "the repeat's setpoints changed",
+            lambda r: _edit_csv(r / "setpoints-001.csv", 5, "sp_north_m", "0.123"),
+            "do not belong together",
+        ),
+    ]
+
+
+def _adaptive_cases() -> Iterator[Case]:
+    k = "run directory: learning with history"
+    for what, damage, expect in _adaptive_run_damage():
+
+        def learn(ws: Workspace, d=damage) -> list[str]:
+            run = ws.run("adaptive")
+            (run / "setpoints-004.csv").unlink()  # learning from trial 3 reads the history
+            d(run)
+            return ["learn", str(run)]
+
+        def resume(ws: Workspace, d=damage) -> list[str]:
+            run = ws.run("adaptive")
+            d(run)
+            return ["fly", "--connect", UNREACHABLE, "--resume", str(run)]
+
+        yield Case(k, "learn", what, learn, expect)
+        yield Case(k, "fly", what, resume, expect)
+
+    def floor_changed(ws: Workspace) -> list[str]:
+        run = ws.run("adaptive")
+        _edit_json(run / "floor.json", "epos_m", 0.5)
+        return ["learn", str(run)]
+
+    yield Case(k, "learn", "floor.json changed", floor_changed, "never rewritten")
+
+    def record_damaged(ws: Workspace) -> list[str]:
+        run = ws.run("adaptive")
+        _edit_json(run / "learn-001.json", "decision.converged", "yes")
+        return ["report", str(run)]
+
+    yield Case(k, "report", "learn-001.json field of the wrong type", record_damaged,
+               "decision.converged")  # fmt: skip
+    k = "options: fly --until-converged"
+    yield Case(
+        k,
+        "fly",
+        "a profile without learning.adaptive",
+        lambda ws: _fly(ws, "--until-converged", profile=ws.profile()),
+        "no learning.adaptive section",
+    )
+    yield Case(
+        k,
+        "fly",
+        "learning.adaptive.repeats 0",
+        lambda ws: _fly(
+            ws,
+            "--until-converged",
+            profile=ws.profile("learning.adaptive.repeats", 0, base="antx-adaptive.yaml"),
+        ),  # fmt: skip
+        "repeats to 0",
+    )
+    yield Case(
+        k,
+        "fly",
+        "resuming a run of the paper's method",
+        lambda ws: [
+            "fly",
+            "--connect",
+            UNREACHABLE,
+            "--resume",
+            str(ws.run()),
+            "--until-converged",
+        ],  # fmt: skip
+        "no learning.adaptive section",
+    )
+    k = "profile field: learning.adaptive.repeats"
+    for value in (-1, 6, "one", 1.5, True):
+        yield Case(
+            k,
+            "fly",
+            f"learning.adaptive.repeats {value!r}",
+            lambda ws, v=value: _fly(
+                ws, profile=ws.profile("learning.adaptive.repeats", v, base="antx-adaptive.yaml")
+            ),
+            "learning.adaptive.repeats",
+        )
 
 
 def _run_cases() -> Iterator[Case]:
@@ -1046,6 +1186,7 @@ def catalogue() -> list[Case]:
         *_resume_cases(),
         *_identify_cases(),
         *_output_cases(),
+        *_adaptive_cases(),
     ]
 
 

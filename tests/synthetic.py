@@ -37,17 +37,45 @@ def true_plants() -> tuple[DiscreteModel, DiscreteModel]:
     )
 
 
-def fly_synthetic(run: RunDir, j: int, seed: int = 0) -> TrialRecord:
-    """Simulate trial j from its setpoints file and record it as complete."""
+def synthetic_positions(
+    run: RunDir,
+    sp: np.ndarray,
+    seed: int,
+    plants: tuple[DiscreteModel, DiscreteModel] | None = None,
+    gust_m: float = 0.0,
+) -> np.ndarray:
+    """Positions y(0..N) of the synthetic vehicle flying setpoints ``sp`` (N, 3).
+
+    ``plants`` default :func:`true_plants`; a repeatable disturbance, 2 mm white noise, and
+    with ``gust_m`` a non-repeatable error correlated in time (white noise averaged over
+    0.75 s, scaled to this standard deviation [m]).
+    """
     ref = run.reference()
-    sp = run.read_setpoints(j)
     start = ref.pos_ned_m[0]
-    rng = np.random.default_rng(seed + j)
+    rng = np.random.default_rng(seed)
     pos = np.tile(start, (run.n_samples + 1, 1))
-    for a, plant in enumerate(true_plants()):
+    for a, plant in enumerate(plants or true_plants()):
         drift = 0.05 * np.sin(0.7 * ref.t_s[1:]) ** 2  # repeatable disturbance
         pos[1:, a] = start[a] + simulate(plant, sp[:, a] - start[a]) + drift
         pos[1:, a] += rng.normal(0.0, 0.002, run.n_samples)
+        if gust_m > 0:
+            gust = np.convolve(rng.standard_normal(run.n_samples), np.ones(15), mode="same")
+            pos[1:, a] += gust_m * gust / np.sqrt(15)
+    return pos
+
+
+def fly_synthetic(
+    run: RunDir,
+    j: int,
+    seed: int = 0,
+    plants: tuple[DiscreteModel, DiscreteModel] | None = None,
+    gust_m: float = 0.0,
+) -> TrialRecord:
+    """Simulate trial j from its setpoints file and record it as complete (see
+    :func:`synthetic_positions`; the noise is seeded with ``seed + j``)."""
+    ref = run.reference()
+    sp = run.read_setpoints(j)
+    pos = synthetic_positions(run, sp, seed + j, plants, gust_m)
     vel = np.gradient(pos, run.t_ilc_s, axis=0)
     record = TrialRecord(
         t_s=ref.t_s,
@@ -72,6 +100,30 @@ def make_run(tmp: Path, algorithm: str = "smoother", trials: int = 1) -> RunDir:
         fly_synthetic(run, j)
         if j < trials - 1:
             learn_run(run)
+    return run
+
+
+def adaptive_profile() -> Profile:
+    return load_profile(ROOT / "profiles" / "antx-adaptive.yaml")
+
+
+def make_adaptive_run(
+    tmp: Path,
+    trials: int,
+    seed: int = 0,
+    plants: tuple[DiscreteModel, DiscreteModel] | None = None,
+    gust_m: float = 0.0,
+    prof: Profile | None = None,
+) -> RunDir:
+    """A run of the tiny eight with antx-adaptive.yaml (or ``prof``): ``trials`` simulated
+    trials (trial 1 the repeat of trial 0), learning with history after each, the last too."""
+    from gcs.app.learn import learn_run
+
+    prof = prof or adaptive_profile()
+    run = RunDir.create(tmp, prof, trajectory_from_dict(SHORT), "smoother", run_id="run")
+    for j in range(trials):
+        fly_synthetic(run, j, seed, plants, gust_m)
+        learn_run(run)
     return run
 
 

@@ -46,8 +46,14 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     assert [r["iteration"] for r in rows] == [0, 1]
     assert set(rows[0]) == {
         "iteration", "status", "reason", "epos_m", "epos_pct", "delta_pct", "max_err_m",
-        "vehicle_time_rate",
+        "vehicle_time_rate", "trial", "repeat_of", "sp_rms_m", "sp_max_m",
     }  # fmt: skip
+    # the paper's method flies no repeat: trial and iteration are one; no floor keys
+    assert [(r["trial"], r["repeat_of"]) for r in rows] == [(0, None), (1, None)]
+    assert rows[0]["sp_rms_m"] == 0.0  # trial 0 flies the reference
+    dev = run.read_setpoints(1)[:, :2] - run.reference().pos_ned_m[:-1, :2]
+    assert rows[1]["sp_rms_m"] == pytest.approx(np.sqrt(np.mean(np.sum(dev**2, axis=1))))
+    assert rows[1]["sp_max_m"] == pytest.approx(np.max(np.hypot(dev[:, 0], dev[:, 1])))
     assert rows[0]["status"] == "complete" and rows[0]["reason"] is None
     assert rows[0]["vehicle_time_rate"] is None  # simulated trials: no vehicle clock
     assert rows[0]["epos_pct"] == pytest.approx(100.0)

@@ -555,3 +555,118 @@ def test_files_and_runs_get_the_modes_open_and_mkdir_give(tmp_path):
     assert stat.S_IMODE(run.path.stat().st_mode) == 0o777 & ~mask  # not mkdtemp's 0700
     for p in run.path.iterdir():
         assert stat.S_IMODE(p.stat().st_mode) == 0o666 & ~mask, p.name  # not mkstemp's 0600
+
+
+# ------------------------------------------------------------------ learning with history
+
+
+def plan_record(j: int, model_file: str | None = None) -> dict:
+    """A minimal ``learn-JJJ.json`` record as gcs.app.learn writes it."""
+    refresh = {"accepted": model_file is not None, "moved": 0.2 if model_file else 0.0}
+    axis = {"axis": "north", "noise": {}, "refresh": refresh, "robustness": None, "update": {}}
+    return {
+        "format": 1, "trial": j, "next_trial": j + 1, "next_iteration": j, "repeats": 1,
+        "learned_from": list(range(j + 1)), "models_from": "profile", "model_file": model_file,
+        "setpoints": {"rms_m": 1.0, "max_m": 2.0},
+        "decision": {"axes": [axis, {**axis, "axis": "east"}], "verdicts": [], "converged": False,
+                     "safeguard": None, "floor": None, "nan": float("nan")},
+    }  # fmt: skip
+
+
+def write_plan(run: RunDir, j: int, model_file: str | None = None, value: float = 0.0) -> Path:
+    n = run.n_samples
+    sp = run.read_setpoints(0)
+    text = "name: m\n" if model_file else None
+    floor = {"trials": [0, 1], "epos_m": 0.02, "scatter_m": 0.003}
+    return run.write_plan(
+        j, np.full((n, 2), value), np.ones((n, 2)), plan_record(j, model_file), sp, text, floor
+    )
+
+
+def test_a_learning_step_is_written_model_floor_estimate_record_and_setpoints_last(
+    tmp_path, monkeypatch
+):
+    import gcs.io.runlog as runlog
+
+    run = new_run(tmp_path)
+    order: list[str] = []
+    real = runlog.write_once
+
+    def spy(path: Path, text: str) -> bool:
+        order.append(Path(path).name)
+        return real(path, text)
+
+    monkeypatch.setattr(runlog, "write_once", spy)
+    assert write_plan(run, 1, "model-001.yaml").name == "setpoints-002.csv"
+    assert order == [
+        "model-001.yaml", "floor.json", "estimate-001.csv", "learn-001.json", "setpoints-002.csv"
+    ]  # fmt: skip
+    record = run.read_learn_record(1)
+    assert record["decision"]["nan"] is None  # strict JSON: NaN as null
+    assert run.read_floor()["trials"] == [0, 1]
+    assert run.learn_records() == {1: record}
+    # interrupted before the record: learning again completes the step with the same bytes
+    (run.path / "learn-001.json").unlink()
+    (run.path / "setpoints-002.csv").unlink()
+
+    def fail(path: Path, text: str) -> bool:
+        if Path(path).name.startswith("learn-"):
+            raise OSError(28, "No space left on device", str(path))
+        return real(path, text)
+
+    monkeypatch.setattr(runlog, "write_once", fail)
+    with pytest.raises(OSError):
+        write_plan(run, 1, "model-001.yaml")
+    assert not (run.path / "setpoints-002.csv").exists()  # the next trial cannot be flown
+    monkeypatch.setattr(runlog, "write_once", real)
+    write_plan(run, 1, "model-001.yaml")
+    assert (run.path / "setpoints-002.csv").exists() and not tmp_files(run.path)
+
+
+def test_a_learning_step_that_differs_from_what_is_recorded_writes_nothing(tmp_path):
+    run = new_run(tmp_path)
+    write_plan(run, 1)
+    (run.path / "setpoints-002.csv").unlink()
+    before = {p.name: p.read_bytes() for p in run.path.iterdir() if p.is_file()}
+    with pytest.raises(RunLogError, match="estimate-001.csv: exists with different content"):
+        write_plan(run, 1, value=0.5)
+    assert {p.name: p.read_bytes() for p in run.path.iterdir() if p.is_file()} == before
+    with pytest.raises(RunLogError, match="names trial 2"):
+        run.write_plan(1, *(np.zeros((run.n_samples, 2)),) * 2, plan_record(2),
+                       run.read_setpoints(0))  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("trial", 2, "field 'trial' must be 1, as the file's name says"),
+        ("next_trial", 3, "next_trial"),
+        ("learned_from", [1], "learned_from"),
+        ("next_iteration", "1", "next_iteration"),
+        ("model_file", "model-007.yaml", "model_file"),
+        ("decision", [], "field 'decision' must be an object"),
+        ("decision.axes", [{}], "decision.axes"),
+        ("decision.converged", "yes", "decision.converged"),
+        ("setpoints", {"rms_m": "x"}, "setpoints"),
+    ],
+)
+def test_a_learning_record_must_agree_with_its_name_and_types(tmp_path, key, value, message):
+    run = new_run(tmp_path)
+    write_plan(run, 1)
+    path = run.path / "learn-001.json"
+    data = json.loads(path.read_text())
+    node, *rest = key.split(".")
+    if rest:
+        data[node][rest[0]] = value
+    else:
+        data[node] = value
+    path.write_text(json.dumps(data))
+    with pytest.raises(RunLogError, match=re.escape(message)):
+        run.read_learn_record(1)
+
+
+def test_a_repeat_is_trial_0_byte_for_byte(tmp_path):
+    run = new_run(tmp_path)
+    assert run.write_repeat(1).read_bytes() == (run.path / "setpoints-000.csv").read_bytes()
+    with pytest.raises(RunLogError, match="cannot repeat"):
+        run.write_repeat(0)

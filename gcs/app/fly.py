@@ -15,7 +15,16 @@ from typing import Any
 
 import numpy as np
 
-from gcs.app.learn import check_learnable, check_learned, differing_field, learn_run, trial_errors
+from gcs.app.learn import (
+    LearnOutcome,
+    check_history,
+    check_learnable,
+    check_learned,
+    differing_field,
+    learn_run,
+    models_in_use,
+    trial_errors,
+)
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trajectory import (
     MAX_SAMPLES,
@@ -49,6 +58,9 @@ __all__ = [
     "trial_extra",
     "session_record",
     "fly_run",
+    "converged_reason",
+    "newest_record",
+    "check_until_converged",
 ]
 
 
@@ -198,6 +210,7 @@ def plan_fly(
     run_path: Path | None = None,
     resume: Path | None = None,
     logs: Path = Path("logs"),
+    until_converged: bool = False,
 ) -> FlyPlan:
     """Validate everything a flight needs; nothing is created, moved or flown here.
 
@@ -220,16 +233,24 @@ def plan_fly(
         Run to continue.
     logs : Path
         Parent of new runs.
+    until_converged : bool
+        ``--until-converged``: the profile must measure the floor (see
+        :func:`check_until_converged`).
 
     Returns
     -------
     FlyPlan
     """
     if resume is not None:
-        return _plan_resume(resume, profile_path, trajectory_path, algorithm, logs)
+        plan = _plan_resume(resume, profile_path, trajectory_path, algorithm, logs)
+        if until_converged:
+            check_until_converged(plan.profile, f"{resume}/manifest.json:profile")
+        return plan
     if profile_path is None or trajectory_path is None:
         raise ProfileError("a new run needs a profile and a trajectory")
     profile, where = load_profile(profile_path), str(profile_path)
+    if until_converged:
+        check_until_converged(profile, where)
     trajectory = load_trajectory(trajectory_path)
     algorithm = algorithm or profile.learning.algorithm
     settings = flight_settings(profile, where)
@@ -300,9 +321,40 @@ def _plan_resume(
             raise RunLogError(
                 f"{run.path}: no setpoints for trial {first}; run 'gcs learn {run.path}' first"
             )
+    if profile.learning.history and first > 0:
+        check_history(run, profile, first - 1)
     flyable_setpoints(run, first)
     run.check_writable()
     return FlyPlan(profile, trajectory, run.algorithm, settings, ref, first, run, None, logs)
+
+
+def check_until_converged(profile: Profile, where: str) -> None:
+    """Refuse ``--until-converged`` with a profile that cannot say when learning has converged.
+
+    "Converged" compares trials with the floor, which flights of identical setpoints measure:
+    the profile needs a ``learning.adaptive`` section with ``repeats`` of at least 1.
+
+    Parameters
+    ----------
+    profile : Profile
+        The run's profile.
+    where : str
+        The profile's file, for the message.
+
+    Raises
+    ------
+    ProfileError
+    """
+    if not profile.learning.history:
+        raise ProfileError(
+            f"--until-converged: {where} has no learning.adaptive section, so nothing measures "
+            "the floor that says when learning has converged (use profile antx-adaptive)"
+        )
+    if profile.learning.repeats < 1:
+        raise ProfileError(
+            f"--until-converged: {where} sets learning.adaptive.repeats to 0: without a repeat "
+            "of trial 0 there is no floor to converge to"
+        )
 
 
 def start_run(plan: FlyPlan) -> RunDir:
@@ -467,8 +519,9 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
 
     Every sequence must lie inside the profile's arena. A learned sequence of a learning run
     (j >= 1) must also keep the learning's limits (step per sample, deviation from the
-    reference; :func:`gcs.app.learn.check_learned`): the file on disk is what is flown, and
-    it is checked as such, whoever wrote it.
+    reference aligned by the models it was learned with; :func:`gcs.app.learn.check_learned`):
+    the file on disk is what is flown, and it is checked as such, whoever wrote it. A repeat
+    of trial 0 must have trial 0's setpoints exactly.
 
     Parameters
     ----------
@@ -492,11 +545,21 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
             f"setpoints-{j:03d}.csv: setpoint k = {k} {np.round(sp[k], 3).tolist()} is "
             f"outside the arena {arena}; not flown"
         )
-    if run.kind == "learning" and j > 0:
-        try:
-            check_learned(sp, profile, run.reference())
-        except TrajectoryError as exc:
-            raise TrajectoryError(f"{run.path}/setpoints-{j:03d}.csv: {exc}; not flown") from None
+    if run.kind != "learning" or j == 0:
+        return sp
+    repeats = profile.learning.repeats if profile.learning.history else 0
+    if j <= repeats:
+        if not np.array_equal(sp, run.read_setpoints(0)):
+            raise TrajectoryError(
+                f"{run.path}/setpoints-{j:03d}.csv: trial {j} repeats trial 0, but its "
+                "setpoints differ from setpoints-000.csv; not flown"
+            )
+        return sp
+    models = models_in_use(run, profile, j)[0] if profile.learning.history else None
+    try:
+        check_learned(sp, profile, run.reference(), models)
+    except TrajectoryError as exc:
+        raise TrajectoryError(f"{run.path}/setpoints-{j:03d}.csv: {exc}; not flown") from None
     return sp
 
 
@@ -533,11 +596,18 @@ class RunSource(SessionRecorder):
         Called with the Table IV rows of the run after each complete trial is recorded.
     session : int or None
         Number of this flight session's record in the run (set by :meth:`record_session`).
+    on_learn : callable, optional
+        Called with what each learning step did (:class:`gcs.app.learn.LearnOutcome`), after
+        ``on_row``.
+    until_converged : bool
+        Fly no further trial once the learning record says learning has converged.
     """
 
     run: RunDir
     on_row: Callable[[list[IterationMetrics]], None] | None = None
     session: int | None = None
+    on_learn: Callable[[LearnOutcome], None] | None = None
+    until_converged: bool = False
 
     def setpoints_for(self, j: int) -> np.ndarray:
         """Trial j's setpoints from the run directory, refused if any leaves the arena.
@@ -569,7 +639,7 @@ class RunSource(SessionRecorder):
         """
         return self.run.reference().pos_ned_m[0]
 
-    def record(self, j: int, recording: TrialRecording) -> None:
+    def record(self, j: int, recording: TrialRecording) -> str | None:
         """Write a complete trial, then learn the next trial's setpoints from it.
 
         Parameters
@@ -578,6 +648,12 @@ class RunSource(SessionRecorder):
             Trial index.
         recording : TrialRecording
             The complete recording.
+
+        Returns
+        -------
+        str or None
+            With ``until_converged``, why no further trial can help (the campaign lands);
+            else None.
         """
         record = to_record(self.run, recording)
         e, m = trial_errors(record)
@@ -586,9 +662,12 @@ class RunSource(SessionRecorder):
             extra=trial_extra(recording, self.session),
         )  # fmt: skip
         self.run.write_trial(j, record, status)
-        learn_run(self.run)
+        outcome = learn_run(self.run)
         if self.on_row is not None:
             self.on_row(self.rows())
+        if self.on_learn is not None:
+            self.on_learn(outcome)
+        return converged_reason(outcome.record) if self.until_converged else None
 
     def record_incomplete(self, j: int, recording: TrialRecording, reason: str) -> None:
         """Write an interrupted trial, marked incomplete (never learned from).
@@ -617,6 +696,50 @@ class RunSource(SessionRecorder):
         )
 
 
+def converged_reason(record: dict | None) -> str | None:
+    """Why further trials cannot help, from a decision record, or None (go on).
+
+    Parameters
+    ----------
+    record : dict or None
+        A ``learn-JJJ.json`` record (:meth:`gcs.io.runlog.RunDir.read_learn_record`).
+
+    Returns
+    -------
+    str or None
+        E.g. "learning has converged: trials 5 and 6 are at the floor (1.04x and 0.97x of
+        21.3 mm), their mean within one scatter (2.7 mm) of it".
+    """
+    if record is None or not record["decision"]["converged"]:
+        return None
+    decision = record["decision"]
+    floor, verdicts = decision["floor"], decision["verdicts"]
+    a, b = verdicts[-2], verdicts[-1]
+    return (
+        f"learning has converged: trials {a['trial']} and {b['trial']} are at the floor "
+        f"({a['ratio']:.2f}x and {b['ratio']:.2f}x of {1e3 * floor['epos_m']:.1f} mm), their "
+        f"mean within one scatter ({1e3 * floor['scatter_m']:.1f} mm) of it"
+    )
+
+
+def newest_record(run: RunDir) -> dict | None:
+    """The decision record of the run's newest learning step, or None.
+
+    Parameters
+    ----------
+    run : RunDir
+        A learning run.
+
+    Returns
+    -------
+    dict or None
+    """
+    j = run.newest_complete()
+    if j is None or not (run.path / f"learn-{j:03d}.json").exists():
+        return None
+    return run.read_learn_record(j)
+
+
 def fly_run(
     url: str,
     run: RunDir,
@@ -624,6 +747,8 @@ def fly_run(
     settings: FlightSettings,
     on_event: Callable[[object], None] | None = None,
     on_row: Callable[[list[IterationMetrics]], None] | None = None,
+    on_learn: Callable[[LearnOutcome], None] | None = None,
+    until_converged: bool = False,
 ) -> RunSource:
     """Fly ``iterations`` trials of ``run`` from its next trial, learning between trials.
 
@@ -641,6 +766,10 @@ def fly_run(
         Receives the flight layer's campaign events.
     on_row : callable, optional
         Receives the Table IV rows after each complete trial.
+    on_learn : callable, optional
+        Receives what each learning step did.
+    until_converged : bool
+        Land as soon as learning has converged (``iterations`` stays the cap).
 
     Returns
     -------
@@ -649,7 +778,7 @@ def fly_run(
     first = run.next_trial()
     if first > 0 and not (run.path / f"setpoints-{first:03d}.csv").exists():
         raise RunLogError(f"{run.path}: no setpoints for trial {first}; run 'gcs learn' first")
-    source = RunSource(run, on_row)
+    source = RunSource(run, on_row, on_learn=on_learn, until_converged=until_converged)
     fence = flight_fence(run.profile(), settings)
     run_campaign(url, source, iterations, first, settings, run.t_ilc_s, on_event, fence=fence)
     return source

@@ -10,14 +10,23 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from gcs.app.fly import check_mock_config, check_url, fly_run, plan_fly, start_run
-from gcs.app.report import metrics_table
+from gcs.app.fly import (
+    check_mock_config,
+    check_url,
+    converged_reason,
+    fly_run,
+    newest_record,
+    plan_fly,
+    start_run,
+)
+from gcs.app.learn import LearnOutcome, iteration_of, repeat_of
+from gcs.app.report import decision_lines, metrics_table
 from gcs.core.metrics import IterationMetrics
 from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
 from gcs.io.runlog import RunDir
 
-__all__ = ["fly_with_display", "live_progress", "vehicle_url"]
+__all__ = ["fly_with_display", "live_progress", "vehicle_url", "learning_lines"]
 
 
 @contextlib.contextmanager
@@ -112,6 +121,51 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
     return progress, on_event
 
 
+def learning_lines(outcome: LearnOutcome) -> list[str]:
+    """What a learning step decided, for the live table (rich markup, escaped).
+
+    The newest trial's verdict against the floor (e.g. "trial 6: 1.08x the floor, at the
+    floor"; "converged" in green), a safeguard's fall back, a refreshed model and how far it
+    moved, and what comes next; a repeat of trial 0 says so.
+
+    Parameters
+    ----------
+    outcome : LearnOutcome
+        From :func:`gcs.app.learn.learn_run`.
+
+    Returns
+    -------
+    list of str
+    """
+    if outcome.repeat_of is not None:
+        return [
+            f"  [cyan]trial {outcome.next_trial} repeats trial {outcome.repeat_of}[/] (identical "
+            "setpoints, j = 0): it measures the floor"
+        ]
+    record = outcome.record
+    if record is None:
+        return []
+    lines = []
+    decision = record["decision"]
+    floor, verdicts = decision["floor"], decision["verdicts"]
+    if floor is not None and verdicts:
+        v = verdicts[-1]
+        word = (
+            "[bold green]converged[/]" if v["converged"]
+            else "[green]at the floor[/]" if v["at_floor"] else "above the floor"
+        )  # fmt: skip
+        lines.append(
+            f"  trial {v['trial']}: {v['ratio']:.2f}x the floor ({1e3 * floor['epos_m']:.1f} mm "
+            f"± {1e3 * floor['scatter_m']:.1f}), z {v['z']:.1f}: {word}"
+        )
+    for line in decision_lines(record):  # the report has them all; live, what changed
+        if line.startswith(("model kept", "estimate")):
+            continue
+        style = {"safeguard": "yellow", "model refreshed": "cyan"}.get(line.split(":")[0], "dim")
+        lines.append(f"  [{style}]{escape(line)}[/]")
+    return lines
+
+
 def fly_with_display(
     *,
     console: Console,
@@ -127,6 +181,7 @@ def fly_with_display(
     logs: Path,
     use_mock: bool,
     check_only: bool = False,
+    until_converged: bool = False,
 ) -> RunDir | None:
     """Validate everything, then set up (or resume) a run and fly it with a live display.
 
@@ -161,18 +216,27 @@ def fly_with_display(
         Fly the mock drone.
     check_only : bool
         Validate and say what would be flown, then stop: nothing is created or connected.
+    until_converged : bool
+        Land once learning has converged (``iterations`` stays the cap); a resumed run that
+        has converged already is not flown.
 
     Returns
     -------
     RunDir or None
         The run flown (None with ``check_only``).
     """
-    plan = plan_fly(profile_path, trajectory_path, algorithm, run_path, resume, logs)
+    plan = plan_fly(profile_path, trajectory_path, algorithm, run_path, resume, logs,
+                    until_converged)  # fmt: skip
     if use_mock:
         check_mock_config(mock_config)
     else:
         assert connect is not None
         check_url(connect)
+    if until_converged and plan.run is not None:
+        reason = converged_reason(newest_record(plan.run))
+        if reason is not None:
+            console.print(f"{plan.run.path}: {reason}; nothing flown")
+            return plan.run
     if check_only:
         where = plan.run.path if plan.run is not None else (plan.run_path or plan.logs)
         console.print(
@@ -188,23 +252,35 @@ def fly_with_display(
 
     progress, on_event = live_progress(console)
 
+    ln = run.profile().learning
+    repeats = ln.repeats if ln.history else 0
+
     def on_row(rows: list[IterationMetrics]) -> None:
         r = rows[-1]
         delta = ""
         if len(rows) > 1:  # signed, unlike Table IV's |change|: a worse trial shows as +
             change = 100.0 * (r.epos_m - rows[-2].epos_m) / rows[-2].epos_m
             delta = f", {change:+.1f} % vs previous"
+        which, base = f"trial {r.iteration}", "j=0"
+        if ln.history:  # the trial number and the paper's iteration j differ after a repeat
+            again = ", a repeat" if repeat_of(r.iteration, repeats) is not None else ""
+            which += f" (j = {iteration_of(r.iteration, repeats)}{again})"
+            base = "trial 0"
         progress.console.print(
-            f"trial {r.iteration}: e_pos {r.epos_m:.4f} m ({r.epos_pct:5.1f} % of j=0{delta}), "
+            f"{which}: e_pos {r.epos_m:.4f} m ({r.epos_pct:5.1f} % of {base}{delta}), "
             f"max {r.max_err_m:.3f} m"
         )
+
+    def on_learn(outcome: LearnOutcome) -> None:
+        for line in learning_lines(outcome):
+            progress.console.print(line, highlight=False)
 
     try:
         with (
             vehicle_url(connect, use_mock, mock_config, seed, console) as url,
             progress,
         ):
-            fly_run(url, run, iterations, settings, on_event, on_row)
+            fly_run(url, run, iterations, settings, on_event, on_row, on_learn, until_converged)
     except KeyboardInterrupt:
         console.print(
             f"interrupted; completed trials are in {run.path}. "
@@ -214,8 +290,9 @@ def fly_with_display(
     except GcsError as exc:
         console.print(f"[dim]completed trials are in {run.path}[/]")
         raise exc
-    from gcs.app.report import run_metrics, trial_clock_rates
+    from gcs.app.report import run_learning, run_metrics, trial_clock_rates
 
     title = f"{run.path.name} ({run.algorithm})"
-    console.print(metrics_table(run_metrics(run), title, trial_clock_rates(run)))
+    learning = run_learning(run)
+    console.print(metrics_table(run_metrics(run), title, trial_clock_rates(run), learning))
     return run

@@ -1,8 +1,21 @@
-"""Learning on a run directory: newest complete trial -> estimate -> next setpoints.
+"""Learning on a run directory: complete trials -> estimate -> next setpoints.
 
 This is the one function behind both ``gcs learn`` and the learning between trials of
 ``gcs fly``. It is deterministic and idempotent: learning twice from the same trial writes the
 same files.
+
+Two ways, chosen by the run's profile. Without ``learning.adaptive`` (the paper's method,
+``profiles/antx.yaml``): the step of :func:`gcs.core.learning.learning_step` on the newest
+complete trial, exactly as it always was. With it (``profiles/antx-adaptive.yaml``): trial 0 is
+flown again ``learning.adaptive.repeats`` times with identical setpoints (the floor), then every
+step learns from every complete trial with :func:`gcs.core.learning.plan_next_trial`, from the
+models of the previous step (read back from the run directory, so that a resumed run learns
+exactly as an uninterrupted one), and records every decision (``learn-JJJ.json``), every
+refreshed model (``model-JJJ.yaml``) and the floor (``floor.json``).
+
+Indexing: trials are numbered in the order they are flown (``trial-JJJ``); the paper's
+iteration j counts learning updates, so a repeat is a flight of iteration 0 and trial t is
+iteration ``max(0, t - repeats)``.
 """
 
 from __future__ import annotations
@@ -14,9 +27,10 @@ from typing import Any
 import numpy as np
 
 from gcs.core.estimators import KilcState
-from gcs.core.learning import LearningInputs, learning_step
+from gcs.core.floor import identical_groups
+from gcs.core.learning import LearningInputs, LearningPlan, learning_step, plan_next_trial
 from gcs.core.metrics import epos, max_error
-from gcs.core.model import relative_degree
+from gcs.core.model import DiscreteModel, relative_degree
 from gcs.core.trajectory import Reference, check_setpoints
 from gcs.errors import GcsError, ProfileError, RunLogError, TrajectoryError
 from gcs.io.config import Profile, load_profile
@@ -27,6 +41,11 @@ __all__ = [
     "learning_inputs",
     "learn_run",
     "trial_errors",
+    "setpoint_deviation",
+    "iteration_of",
+    "repeat_of",
+    "models_in_use",
+    "check_history",
     "check_learned",
     "check_learnable",
     "differing_field",
@@ -46,9 +65,16 @@ class LearnOutcome:
     setpoints_path : Path
         The file written.
     methods : tuple of str
-        Solver path per axis ("direct" or "clarabel").
+        Solver path per axis ("direct" or "clarabel"; "-" for a repeat).
     active_constraints : int
         Active setpoint limits, both axes.
+    next_iteration : int
+        The paper's iteration j of the next trial (learning updates so far).
+    repeat_of : int or None
+        The trial the next trial repeats (identical setpoints, nothing learned), or None.
+    record : dict or None
+        The decision record written to ``learn-JJJ.json`` (profiles with
+        ``learning.adaptive``), or None.
     """
 
     trial: int
@@ -56,6 +82,9 @@ class LearnOutcome:
     setpoints_path: Path
     methods: tuple[str, str]
     active_constraints: int
+    next_iteration: int
+    repeat_of: int | None = None
+    record: dict | None = None
 
 
 def learning_inputs(profile: Profile, algorithm: str) -> LearningInputs:
@@ -83,6 +112,63 @@ def learning_inputs(profile: Profile, algorithm: str) -> LearningInputs:
         max_step_m=ln.max_step_m,
         max_deviation_m=ln.max_deviation_m,
     )
+
+
+def iteration_of(trial: int, repeats: int) -> int:
+    """The paper's iteration j of a trial: learning updates before it (a repeat is j = 0).
+
+    Parameters
+    ----------
+    trial : int
+        Trial number (order of flight).
+    repeats : int
+        Repeats of trial 0 the run flies (``learning.adaptive.repeats``).
+
+    Returns
+    -------
+    int
+    """
+    return max(0, trial - repeats)
+
+
+def repeat_of(trial: int, repeats: int) -> int | None:
+    """The trial that ``trial`` repeats (0 for trials 1..repeats), or None.
+
+    Parameters
+    ----------
+    trial : int
+        Trial number.
+    repeats : int
+        Repeats of trial 0 the run flies.
+
+    Returns
+    -------
+    int or None
+    """
+    return 0 if 1 <= trial <= repeats else None
+
+
+def setpoint_deviation(sp_ned_m: np.ndarray, ref_ned_m: np.ndarray) -> tuple[float, float]:
+    """RMS and largest horizontal distance of the setpoints from the reference [m].
+
+    What learning adds to the reference, sample by sample (u(k) - yd(k), not aligned by the
+    delay): it shows the setpoints growing, with noise or with a model the vehicle does not
+    follow.
+
+    Parameters
+    ----------
+    sp_ned_m : ndarray, shape (N, 3)
+        Setpoints u(0..N-1), local NED [m].
+    ref_ned_m : ndarray, shape (N+1, 3)
+        Reference yd(0..N) [m].
+
+    Returns
+    -------
+    tuple of float
+        ``(rms_m, max_m)``.
+    """
+    dev = np.hypot(*(np.asarray(sp_ned_m)[:, :2] - np.asarray(ref_ned_m)[:-1, :2]).T)
+    return float(np.sqrt(np.mean(dev**2))), float(np.max(dev))
 
 
 def trial_errors(record: TrialRecord) -> tuple[float, float]:
@@ -139,7 +225,12 @@ def _check_profile(run: RunDir, profile_path: Path | None) -> Profile:
     return profile
 
 
-def check_learned(sp_ned_m: np.ndarray, profile: Profile, ref: Reference) -> None:
+def check_learned(
+    sp_ned_m: np.ndarray,
+    profile: Profile,
+    ref: Reference,
+    models: tuple[DiscreteModel, DiscreteModel] | None = None,
+) -> None:
     """Refuse setpoints that break a limit of the profile's learning, on the grid flown.
 
     Arena, step per sample and deviation from the reference (aligned by each model's
@@ -153,6 +244,9 @@ def check_learned(sp_ned_m: np.ndarray, profile: Profile, ref: Reference) -> Non
         The run's profile (arena, limits, models).
     ref : Reference
         The run's reference.
+    models : tuple of DiscreteModel, optional
+        The (north, east) models the setpoints were learned with (a refreshed model may have
+        another delay); default the profile's.
 
     Raises
     ------
@@ -160,9 +254,10 @@ def check_learned(sp_ned_m: np.ndarray, profile: Profile, ref: Reference) -> Non
         Naming the limit, sample and axis.
     """
     ln = profile.learning
+    north, east = models if models is not None else profile.models()
     check_setpoints(
         sp_ned_m, ref, profile.arena, ln.max_step_m, ln.max_deviation_m,
-        (relative_degree(profile.model_x), relative_degree(profile.model_y)),
+        (relative_degree(north), relative_degree(east)),
     )  # fmt: skip
 
 
@@ -244,6 +339,8 @@ def learn_run(
     j = run.newest_complete()
     if j is None:
         raise RunLogError(f"{run.path}: no complete trial to learn from")
+    if profile.learning.history:
+        return _learn_history(run, profile, j)
     record = run.read_trial(j)
     ref = run.reference()
     if np.max(np.abs(record.ref_ned_m - ref.pos_ned_m)) > 1e-6:
@@ -277,4 +374,188 @@ def learn_run(
         setpoints_path=path,
         methods=(step.updates[0].method, step.updates[1].method),
         active_constraints=sum(u.active_constraints for u in step.updates),
+        next_iteration=j + 1,
     )
+
+
+# ----------------------------------------------------------------------- learning with history
+
+
+def _history(run: RunDir, j: int) -> list[TrialRecord]:
+    """Trials 0..j, every one complete and on the run's reference (a gap is refused)."""
+    done = set(run.complete_trials())
+    missing = [t for t in range(j + 1) if t not in done]
+    if missing:
+        raise RunLogError(
+            f"{run.path}: trial {missing[0]} is not complete, but learning with history needs "
+            f"every trial 0..{j} (trial-{missing[0]:03d}.json)"
+        )
+    ref = run.reference().pos_ned_m
+    records = [run.read_trial(t) for t in range(j + 1)]
+    for t, record in enumerate(records):
+        if np.max(np.abs(record.ref_ned_m - ref)) > 1e-6:
+            raise RunLogError(
+                f"{run.path}/trial-{t:03d}.csv: reference columns differ from the run's"
+            )
+    return records
+
+
+def check_history(run: RunDir, profile: Profile, j: int) -> None:
+    """Refuse a run whose history cannot be learned from: trials 0..j complete and on the
+    run's reference, every decision record and refreshed model from the first step on.
+
+    Parameters
+    ----------
+    run : RunDir
+        A learning run whose profile has ``learning.adaptive``.
+    profile : Profile
+        Its profile.
+    j : int
+        The newest complete trial.
+    """
+    _history(run, j)
+    for k in range(profile.learning.repeats, j + 1):
+        if run.read_learn_record(k)["model_file"] is not None:
+            run.read_model(k)
+
+
+def models_in_use(
+    run: RunDir, profile: Profile, j: int
+) -> tuple[tuple[DiscreteModel, DiscreteModel], str]:
+    """The models the learning step from trial j starts from: the newest refreshed ones.
+
+    Walks the decision records back from ``learn-(j-1).json`` to the first learning step; the
+    newest that refreshed a model gives ``model-KKK.yaml`` (checked against its record), none
+    gives the profile's models. Every step on the way must have its record.
+
+    Parameters
+    ----------
+    run : RunDir
+        A learning run whose profile has ``learning.adaptive``.
+    profile : Profile
+        Its profile.
+    j : int
+        The newest trial the step learns from.
+
+    Returns
+    -------
+    models : tuple of DiscreteModel
+        (north, east).
+    source : str
+        ``"model-KKK.yaml"`` or ``"profile"``.
+    """
+    for k in range(j - 1, profile.learning.repeats - 1, -1):
+        if run.read_learn_record(k)["model_file"] is not None:
+            return run.read_model(k), run.model_path(k).name
+    return profile.models(), "profile"
+
+
+def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
+    """A repeat of trial 0, or a step of :func:`plan_next_trial` on trials 0..j, recorded."""
+    repeats = profile.learning.repeats
+    records = _history(run, j)
+    if j < repeats:
+        path = run.write_repeat(j + 1)
+        return LearnOutcome(j, j + 1, path, ("-", "-"), 0, 0, repeat_of=0)
+    ref = run.reference()
+    models, source = models_in_use(run, profile, j)
+    plan = _plan(run, profile, records, models, j)
+    sp = np.column_stack([plan.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
+    try:  # the QP keeps these limits; this guards against a solver that did not
+        check_learned(sp, profile, ref, plan.models)
+    except TrajectoryError as exc:
+        raise RunLogError(f"{run.path}: learned from trial {j}: {exc}; nothing written") from None
+    refreshed = any(a.refresh is not None and a.refresh.accepted for a in plan.record.axes)
+    rms, largest = setpoint_deviation(sp, ref.pos_ned_m)
+    record = {
+        "format": 1,
+        "trial": j,
+        "next_trial": j + 1,
+        "next_iteration": iteration_of(j + 1, repeats),
+        "learned_from": list(range(j + 1)),
+        "repeats": repeats,
+        "models_from": source,
+        "model_file": run.model_path(j).name if refreshed else None,
+        "setpoints": {"rms_m": rms, "max_m": largest},
+        "decision": plan.record.as_dict(),
+    }
+    model_text = _refreshed_profile(run, profile, plan.models, j) if refreshed else None
+    floor = _floor_record(records, plan)
+    path = run.write_plan(j, plan.d_hat_ne_m, plan.p_ne_m2, record, sp, model_text, floor)
+    updates = [a.update for a in plan.record.axes]
+    return LearnOutcome(
+        trial=j,
+        next_trial=j + 1,
+        setpoints_path=path,
+        methods=(updates[0].method, updates[1].method),
+        active_constraints=sum(u.active_constraints for u in updates),
+        next_iteration=record["next_iteration"],
+        record=run.read_learn_record(j),
+    )
+
+
+def _plan(
+    run: RunDir,
+    profile: Profile,
+    records: list[TrialRecord],
+    models: tuple[DiscreteModel, DiscreteModel],
+    j: int,
+) -> LearningPlan:
+    ref = run.reference().pos_ned_m
+    sp = np.array([r.sp_ned_m[:-1, :2] for r in records])
+    pos = np.array([r.pos_ned_m[:, :2] for r in records])
+    try:
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            return plan_next_trial(
+                learning_inputs(profile, run.algorithm), profile.learning.adaptive,
+                ref[:, :2], sp, pos, models=models,
+            )  # fmt: skip
+    except (ArithmeticError, RuntimeError, ValueError) as exc:
+        if isinstance(exc, GcsError):  # they name their cause
+            raise
+        raise RunLogError(
+            f"{run.path}: the learning update from trials 0..{j} failed ({exc}); nothing written"
+        ) from None
+
+
+def _floor_record(records: list[TrialRecord], plan: LearningPlan) -> dict | None:
+    """``floor.json``: the plan's floor and the trials of identical setpoints it came from."""
+    floor = plan.record.floor
+    if floor is None:
+        return None
+    groups = identical_groups(np.array([r.sp_ned_m[:-1, :2] for r in records]))
+    return {"trials": max(groups, key=len), **floor.as_dict()}
+
+
+def _refreshed_profile(
+    run: RunDir, profile: Profile, models: tuple[DiscreteModel, DiscreteModel], j: int
+) -> str:
+    """The run's profile with the refreshed models, as YAML a user can fly (no clock in it:
+    learning again from trial j gives the same bytes)."""
+    import copy
+
+    import yaml
+
+    from gcs.app.identify import model_to_dict
+    from gcs.io.config import profile_from_dict
+
+    data = copy.deepcopy(profile.source)
+    name = str(data.get("name", profile.name))
+    data["name"] = name if name.endswith("-refreshed") else f"{name}-refreshed"
+    data["description"] = (
+        f"Profile '{name}' with the models refreshed by gcs learn from trials 0..{j} of the "
+        f"run created {run.manifest.get('created_utc')} (trajectory "
+        f"'{run.manifest['trajectory'].get('name')}')."
+    )
+    data["model"], data["model_y"] = model_to_dict(models[0]), model_to_dict(models[1])
+    ordered = {k: data[k] for k in ("name", "description", "t_ilc_s", "model", "model_y")}
+    ordered.update({k: v for k, v in data.items() if k not in ordered})
+    header = (
+        f"# Written by gcs learn: the models refreshed from trials 0..{j} of this run (the\n"
+        f"# decisions are in learn-{j:03d}.json). model / model_y: discrete state spaces at\n"
+        f"# t_ilc_s = {profile.t_ilc_s:g} s. Everything else is the run's profile. Fly it with\n"
+        "# gcs fly --profile <this file>.\n"
+    )
+    text = header + yaml.safe_dump(ordered, sort_keys=False, default_flow_style=None, width=100)
+    profile_from_dict(yaml.safe_load(text), f"{run.model_path(j)}")  # it must load
+    return text

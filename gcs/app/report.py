@@ -5,6 +5,12 @@ whose e_pos,0 is zero, has no percentages and is refused); trials that are missi
 incomplete are listed, never silently left out. The figures follow the paper's (Fig. 2, 4
 and 5) for both horizontal axes, and add what ILC changes: the setpoints against the
 reference and the limits, the error over time, and the learned disturbance.
+
+Every learning run also gets the setpoints' RMS distance from the reference per trial. A run
+whose profile has ``learning.adaptive`` gets the rest of what learning knows: which trial is a
+repeat and the paper's iteration j of each, e_pos against the floor (the repeat's) with the
+verdicts "at the floor" and "converged" (docs/learning-floor.md), and the decisions of every
+learning step (refresh, safeguard, noise weights) from its ``learn-JJJ.json``.
 """
 
 from __future__ import annotations
@@ -20,7 +26,8 @@ import numpy as np
 from rich.markup import escape
 from rich.table import Table
 
-from gcs.app.learn import trial_errors
+from gcs.app.learn import iteration_of, repeat_of, setpoint_deviation, trial_errors
+from gcs.core.floor import Floor, FloorVerdict, floor_from_flights, floor_verdicts, identical_groups
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.model import relative_degree
 from gcs.errors import ProfileError, RunLogError
@@ -28,6 +35,13 @@ from gcs.io.runlog import RunDir, TrialRecord, atomic_write_text
 
 __all__ = [
     "TrialEntry",
+    "TrialLearning",
+    "RunLearning",
+    "run_learning",
+    "decision_summary",
+    "decision_lines",
+    "floor_line",
+    "learning_notes",
     "trial_overview",
     "trial_notes",
     "aborted_attempts",
@@ -204,6 +218,245 @@ def run_metrics(run: RunDir) -> list[IterationMetrics]:
     ]
 
 
+@dataclass(frozen=True)
+class TrialLearning:
+    """What learning says about one complete trial.
+
+    Parameters
+    ----------
+    trial : int
+        Trial number (order of flight).
+    iteration : int
+        The paper's iteration j (learning updates before it; a repeat is j = 0).
+    repeat_of : int or None
+        The trial it repeats, or None.
+    sp_rms_m, sp_max_m : float
+        RMS and largest horizontal distance of its setpoints from the reference [m].
+    verdict : FloorVerdict or None
+        e_pos against the floor (None without a floor).
+    record : dict or None
+        The decision record of the learning step from this trial (``learn-JJJ.json``).
+    """
+
+    trial: int
+    iteration: int
+    repeat_of: int | None
+    sp_rms_m: float
+    sp_max_m: float
+    verdict: FloorVerdict | None = None
+    record: dict | None = None
+
+
+@dataclass(frozen=True)
+class RunLearning:
+    """What learning says about a run.
+
+    Parameters
+    ----------
+    history : bool
+        The profile has ``learning.adaptive`` (every trial learned from, decisions recorded).
+    repeats : int
+        Repeats of trial 0.
+    floor : Floor or None
+        The floor, from the largest group of complete trials flown with identical setpoints.
+    floor_trials : tuple of int
+        The trials it was measured from.
+    floor_z : float
+        Threshold of the "at the floor" statistic.
+    trials : dict of int to TrialLearning
+        By trial number (complete trials).
+    """
+
+    history: bool
+    repeats: int
+    floor: Floor | None
+    floor_trials: tuple[int, ...]
+    floor_z: float
+    trials: dict[int, TrialLearning]
+
+
+def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> RunLearning:
+    """Setpoint deviation, iteration, repeats, floor, verdicts and decisions of every trial.
+
+    The floor and the verdicts are computed from the trials themselves with the functions the
+    learning uses (:mod:`gcs.core.floor`), so that a trial not yet learned from has its verdict
+    too.
+
+    Parameters
+    ----------
+    run : RunDir
+        A learning run.
+    records : dict of int to TrialRecord, optional
+        Its complete trials, if read already (:func:`complete_records`).
+
+    Returns
+    -------
+    RunLearning
+    """
+    records = complete_records(run) if records is None else records
+    ref = run.reference().pos_ned_m
+    ln = run.profile().learning
+    history = ln.history and run.kind == "learning"
+    repeats = ln.repeats if history else 0
+    order = sorted(records)
+    floor, group, verdicts = None, (), {}
+    if history and len(order) > 1:
+        groups = identical_groups(np.array([records[t].sp_ned_m[:-1, :2] for t in order]))
+        if groups:
+            group = tuple(order[i] for i in max(groups, key=len))
+            floor = floor_from_flights(np.array([records[t].pos_ned_m[1:, :2] for t in group]))
+            epos_all = [trial_errors(records[t])[0] for t in order]
+            found = floor_verdicts(np.array(epos_all), floor, ln.adaptive.floor_z)
+            verdicts = {order[i]: v for i, v in enumerate(found)}
+    learned = run.learn_records() if history else {}
+    trials = {}
+    for t in order:
+        rms, largest = setpoint_deviation(records[t].sp_ned_m[:-1], ref)
+        trials[t] = TrialLearning(
+            t, iteration_of(t, repeats), repeat_of(t, repeats), rms, largest,
+            verdicts.get(t), learned.get(t),
+        )  # fmt: skip
+    return RunLearning(history, repeats, floor, group, ln.adaptive.floor_z, trials)
+
+
+def floor_line(learning: RunLearning) -> str | None:
+    """One line on the floor: its e_pos, scatter and RMS, the trials it came from.
+
+    Parameters
+    ----------
+    learning : RunLearning
+        From :func:`run_learning`.
+
+    Returns
+    -------
+    str or None
+        None when the run has no floor.
+    """
+    f = learning.floor
+    if f is None:
+        if learning.history and learning.repeats == 0:
+            return "floor: not measured (learning.adaptive.repeats is 0)"
+        return None
+    trials = ", ".join(map(str, learning.floor_trials))
+    return (
+        f"floor (one flight's non-repeatable error, trials {trials}: identical setpoints): "
+        f"e_pos {1e3 * f.epos_m:.1f} mm, scatter of one trial {1e3 * f.scatter_m:.1f} mm, "
+        f"RMS {1e3 * f.rms_m:.1f} mm; 'at floor': z = (e_pos - floor) / scatter <= "
+        f"{learning.floor_z:g}; 'converged': two trials at the floor, their mean within one "
+        "scatter of it"
+    )
+
+
+def decision_summary(record: dict) -> str:
+    """The decisions of one learning step in a few words (a table cell).
+
+    Parameters
+    ----------
+    record : dict
+        A ``learn-JJJ.json`` record.
+
+    Returns
+    -------
+    str
+        E.g. ``"from 3, step 0.5; model N 26 %"``, ``"-"`` when nothing beyond the update.
+    """
+    decision = record["decision"]
+    parts = []
+    guard = decision.get("safeguard")
+    if isinstance(guard, dict) and guard.get("action") == "revert":
+        parts.append(f"from {guard.get('anchor_trial')}, step {_num(guard.get('step')):g}")
+    moved = [
+        f"{name} {100 * _num(ax['refresh'].get('moved')):.0f} %"
+        for name, ax in zip("NE", decision["axes"], strict=True)
+        if isinstance(ax.get("refresh"), dict) and ax["refresh"]["accepted"]
+    ]
+    if moved:
+        parts.append("model " + ", ".join(moved))
+    return "; ".join(parts) or "-"
+
+
+def decision_lines(record: dict) -> list[str]:
+    """The decisions of one learning step in words, one line each.
+
+    Safeguard (a fall back to the best trial), model refresh per axis (accepted and how far
+    it moved, or why not), the estimate's weight of the newest trial and the noise, and the
+    next trial's setpoints.
+
+    Parameters
+    ----------
+    record : dict
+        A ``learn-JJJ.json`` record.
+
+    Returns
+    -------
+    list of str
+    """
+    decision, j = record["decision"], record["trial"]
+    lines = []
+    guard = decision.get("safeguard")
+    if isinstance(guard, dict) and guard.get("action") == "revert":
+        lines.append(
+            f"safeguard: trial {j} came out worse than trial {guard.get('best_trial')} "
+            f"(e_pos {1e3 * _num(guard.get('epos_m')):.1f} mm > "
+            f"{1e3 * _num(guard.get('threshold_m')):.1f} mm): fell back to trial "
+            f"{guard.get('anchor_trial')} with step {_num(guard.get('step')):g}"
+        )
+    refresh, accepted = [], False
+    for name, ax in zip(("north", "east"), decision["axes"], strict=True):
+        r = ax.get("refresh")
+        if not isinstance(r, dict):
+            continue
+        accepted |= r["accepted"]
+        if r["accepted"]:
+            refresh.append(f"{name} moved {100 * _num(r.get('moved')):.0f} %")
+        else:
+            refresh.append(f"{name} kept ({r.get('reason')})")
+    if refresh:
+        lines.append(("model refreshed: " if accepted else "model kept: ") + "; ".join(refresh))
+    noise = []
+    for name, ax in zip(("north", "east"), decision["axes"], strict=True):
+        n = ax.get("noise") if isinstance(ax.get("noise"), dict) else {}
+        weights = n.get("weights") if isinstance(n.get("weights"), list) else []
+        if n.get("method") == "data" and weights:
+            noise.append(
+                f"{name} newest trial's weight {_num(weights[-1]):.2f}, one flight "
+                f"{1e3 * np.sqrt(max(_num(n.get('r_m2')), 0.0)):.1f} mm RMS"
+            )
+    if noise:
+        lines.append("estimate: " + "; ".join(noise))
+    sp = record["setpoints"]
+    lines.append(
+        f"trial {record['next_trial']} (j = {record['next_iteration']}): setpoints "
+        f"{_num(sp['rms_m']):.2f} m RMS from the reference (largest {_num(sp['max_m']):.2f} m)"
+    )
+    return lines
+
+
+def learning_notes(learning: RunLearning) -> list[str]:
+    """The floor, and the decisions of every learning step, as lines below the table.
+
+    Parameters
+    ----------
+    learning : RunLearning
+        From :func:`run_learning`.
+
+    Returns
+    -------
+    list of str
+    """
+    out = [line for line in (floor_line(learning),) if line is not None]
+    for t in learning.trials.values():
+        if t.record is not None:
+            out.append(f"after trial {t.trial}: " + "; ".join(decision_lines(t.record)))
+    converged = [t.trial for t in learning.trials.values() if t.verdict and t.verdict.converged]
+    if converged:
+        out.append(
+            f"learning has converged at trial {converged[0]}: further trials cannot show an "
+            "improvement over the floor"
+        )
+    return out
+
+
 def trial_clock_rates(run: RunDir) -> dict[int, float | None]:
     """The vehicle-time / wall-time rate each trial was flown at, from the sidecars.
 
@@ -268,42 +521,61 @@ def metrics_table(
     rows: list[IterationMetrics],
     title: str = "",
     rates: dict[int, float | None] | None = None,
+    learning: RunLearning | None = None,
 ) -> Table:
-    """A rich table with one row per trial (the columns of the paper's Table IV).
+    """A rich table with one row per trial (the columns of the paper's Table IV, and more).
 
     Parameters
     ----------
     rows : list of IterationMetrics
-        The rows.
+        The rows (``iteration``: the trial number).
     title : str
         Table title.
     rates : dict of int to float or None, optional
         Vehicle-time rate per trial (:func:`trial_clock_rates`): adds a column when one is
         known.
+    learning : RunLearning, optional
+        What learning says (:func:`run_learning`): adds the setpoints' RMS distance from the
+        reference; with ``learning.adaptive`` the trial number beside the iteration j (a
+        repeat is j = 0), and with a floor e_pos / floor and the verdict; and the decisions of
+        the learning step from each trial.
 
     Returns
     -------
     rich.table.Table
     """
     table = Table(title=title or None)
+    headers, cells = _table(rows, rates, learning)
+    for header in headers:
+        # headers may wrap in a narrow terminal; the numbers never do
+        short = header in ("j", "trial")
+        table.add_column(escape(header), justify="right", min_width=len(header) if short else 6)
+    for row in cells:
+        table.add_row(*row)
+    return table
+
+
+def _table(
+    rows: list[IterationMetrics],
+    rates: dict[int, float | None] | None,
+    learning: RunLearning | None,
+) -> tuple[list[str], list[list[str]]]:
+    """Headers and cells of the table (the rich table and the HTML report share them)."""
     headers = ["j", "e_pos [m]", "e_pos/e_pos0 [%]", "|Δe_pos|/prev [%]", "max err [m]"]
     if rates is not None and all(rate is None for rate in rates.values()):
         rates = None  # a run flown before rates were recorded
     if rates is not None:
         headers.append("clock [x]")
-    for header in headers:
-        # headers may wrap in a narrow terminal; the numbers never do
-        table.add_column(
-            escape(header), justify="right", min_width=len(header) if header == "j" else 6
-        )
-    for cells in _table_cells(rows, rates):
-        table.add_row(*cells)
-    return table
-
-
-def _table_cells(
-    rows: list[IterationMetrics], rates: dict[int, float | None] | None
-) -> list[list[str]]:
+    history = learning is not None and learning.history
+    floor = learning.floor if learning is not None else None
+    if history:
+        headers.insert(0, "trial")
+    if learning is not None:
+        headers.append("sp RMS [m]")
+    if floor is not None:
+        headers += ["e_pos/floor", "verdict"]
+    if history:
+        headers.append("learning step")
     out = []
     for r in rows:
         delta = "-" if r.delta_pct is None else f"{r.delta_pct:.2f}"
@@ -313,31 +585,66 @@ def _table_cells(
         if rates is not None:
             rate = rates.get(r.iteration)
             cells.append("-" if rate is None else f"{rate:.3f}")
+        if learning is not None:
+            cells = _with_learning(cells, learning, r.iteration)
         out.append(cells)
-    return out
+    return headers, out
+
+
+def _verdict_word(v: FloorVerdict | None) -> str:
+    if v is None or not v.at_floor:
+        return "-"
+    return "converged" if v.converged else "at floor"
+
+
+def _with_learning(cells: list[str], learning: RunLearning, trial: int) -> list[str]:
+    """A row's cells with what learning says about the trial (see :func:`metrics_table`)."""
+    t = learning.trials[trial]
+    cells = [*cells, f"{t.sp_rms_m:.3f}"]
+    if learning.floor is not None:
+        v = t.verdict
+        cells += ["-" if v is None else f"{v.ratio:.2f}", _verdict_word(v)]
+    if not learning.history:
+        return cells
+    if t.record is not None:
+        step = decision_summary(t.record)
+    elif trial < learning.repeats:
+        step = "next: repeat of 0"
+    else:
+        step = "-"
+    j = f"{t.iteration} (repeat)" if t.repeat_of is not None else str(t.iteration)
+    return [str(trial), j, *cells[1:], step]
 
 
 def metrics_json(
     rows: list[IterationMetrics],
     rates: dict[int, float | None] | None = None,
     entries: list[TrialEntry] | None = None,
+    learning: RunLearning | None = None,
 ) -> list[dict]:
     """One JSON object per trial: iteration, status, epos_m, epos_pct, delta_pct, max_err_m.
 
     Parameters
     ----------
     rows : list of IterationMetrics
-        The rows of the complete trials.
+        The rows of the complete trials (``iteration``: the trial number).
     rates : dict of int to float or None, optional
         Vehicle-time rate per trial: adds the key ``vehicle_time_rate`` (null if unknown).
     entries : list of TrialEntry, optional
         Every trial (:func:`trial_overview`): missing and incomplete trials are listed too,
         with ``status``, ``reason`` and null metrics.
+    learning : RunLearning, optional
+        What learning says (:func:`run_learning`): adds ``trial`` (the trial number; then
+        ``iteration`` is the paper's j, 0 for a repeat), ``repeat_of`` (the trial repeated,
+        or null), ``sp_rms_m`` and ``sp_max_m`` (the setpoints' distance from the
+        reference); with a floor ``floor_m``, ``floor_scatter_m``, ``floor_ratio``,
+        ``floor_z``, ``at_floor``, ``converged``; with ``learning.adaptive`` ``learning``
+        (the record of the learning step from the trial: ``learn-JJJ.json``, or null).
 
     Returns
     -------
     list of dict
-        By trial index.
+        By trial number.
     """
     by_trial = {r.iteration: {**asdict(r), "status": "complete", "reason": None} for r in rows}
     for e in entries or []:
@@ -349,6 +656,30 @@ def metrics_json(
     if rates is not None:
         for row in out:
             row["vehicle_time_rate"] = rates.get(row["iteration"])
+    if learning is not None:
+        out = [_learning_json(row, learning) for row in out]
+    return out
+
+
+def _learning_json(row: dict, learning: RunLearning) -> dict:
+    trial = row["iteration"]
+    t = learning.trials.get(trial)
+    repeats = learning.repeats
+    out = {"trial": trial, **row, "iteration": iteration_of(trial, repeats),
+           "repeat_of": repeat_of(trial, repeats)}  # fmt: skip
+    out["sp_rms_m"] = None if t is None else t.sp_rms_m
+    out["sp_max_m"] = None if t is None else t.sp_max_m
+    f = learning.floor
+    if f is not None:
+        v = None if t is None else t.verdict
+        out |= {
+            "floor_m": f.epos_m, "floor_scatter_m": f.scatter_m,
+            "floor_ratio": None if v is None else v.ratio, "floor_z": None if v is None else v.z,
+            "at_floor": None if v is None else v.at_floor,
+            "converged": None if v is None else v.converged,
+        }  # fmt: skip
+    if learning.history:
+        out["learning"] = None if t is None else t.record
     return out
 
 
@@ -412,13 +743,13 @@ def _colors(iterations: list[int]) -> dict[int, Any]:
     return {j: cmap(0.85 * i / n) for i, j in enumerate(iterations)}
 
 
-def _fig_xy(plt: Any, ref: Any, records: dict, iterations: list[int]) -> Any:
+def _fig_xy(plt: Any, ref: Any, records: dict, iterations: list[int], names: dict) -> Any:
     colors = _colors(iterations)
     fig, ax = plt.subplots(figsize=(5.6, 6.0))
     ax.plot(ref.pos_ned_m[:, 1], ref.pos_ned_m[:, 0], "k--", lw=1.6, label="reference")
     for j in iterations:
         p = records[j].pos_ned_m
-        ax.plot(p[:, 1], p[:, 0], lw=1.1, color=colors[j], label=f"j = {j}")
+        ax.plot(p[:, 1], p[:, 0], lw=1.1, color=colors[j], label=names[j])
     ax.set_xlabel("east [m]")
     ax.set_ylabel("north [m]")
     ax.set_aspect("equal", adjustable="datalim")
@@ -437,20 +768,22 @@ def _two_axes(plt: Any, title: str) -> tuple[Any, Any]:
     return fig, axs
 
 
-def _fig_position(plt: Any, ref: Any, records: dict, iterations: list[int]) -> Any:
+def _fig_position(plt: Any, ref: Any, records: dict, iterations: list[int], names: dict) -> Any:
     colors = _colors(iterations)
     fig, axs = _two_axes(plt, "Position per iteration (paper Fig. 5, both axes)")
     for ax, (name, c) in zip(axs, AXES, strict=True):
         ax.plot(ref.t_s, ref.pos_ned_m[:, c], "k--", lw=1.6, label="reference")
         for j in iterations:
             r = records[j]
-            ax.plot(r.t_s, r.pos_ned_m[:, c], lw=1.1, color=colors[j], label=f"j = {j}")
+            ax.plot(r.t_s, r.pos_ned_m[:, c], lw=1.1, color=colors[j], label=names[j])
         ax.set_ylabel(f"{name} [m]")
     axs[0].legend(fontsize=8, ncol=len(iterations) + 1, loc="lower left")  # the hover: empty
     return fig
 
 
-def _fig_setpoints(plt: Any, run: RunDir, ref: Any, records: dict, iterations: list[int]) -> Any:
+def _fig_setpoints(
+    plt: Any, run: RunDir, ref: Any, records: dict, iterations: list[int], names: dict
+) -> Any:
     profile = run.profile()
     colors = _colors(iterations)
     fig, axs = _two_axes(plt, "Setpoints flown per iteration, against the reference and limits")
@@ -470,7 +803,7 @@ def _fig_setpoints(plt: Any, run: RunDir, ref: Any, records: dict, iterations: l
             )  # fmt: skip
         for j in iterations:
             sp = records[j].sp_ned_m[:-1, c]
-            ax.step(t_u, sp, where="post", lw=1.0, color=colors[j], label=f"u, j = {j}")
+            ax.step(t_u, sp, where="post", lw=1.0, color=colors[j], label=f"u, {names[j]}")
         for edge in limits[c]:
             ax.axhline(edge, color="C3", lw=1.2, ls=":")
         ax.plot([], [], color="C3", lw=1.2, ls=":", label="arena")
@@ -483,36 +816,66 @@ def _fig_setpoints(plt: Any, run: RunDir, ref: Any, records: dict, iterations: l
     return fig
 
 
-def _fig_error(plt: Any, ref: Any, records: dict, iterations: list[int]) -> Any:
+def _fig_error(plt: Any, ref: Any, records: dict, iterations: list[int], names: dict) -> Any:
     colors = _colors(iterations)
     fig, axs = _two_axes(plt, "Tracking error per iteration (position - reference)")
     for ax, (name, c) in zip(axs, AXES, strict=True):
         for j in iterations:
             r = records[j]
             ax.plot(r.t_s, r.pos_ned_m[:, c] - ref.pos_ned_m[:, c], lw=1.0, color=colors[j],
-                    label=f"j = {j}")  # fmt: skip
+                    label=names[j])  # fmt: skip
         ax.axhline(0.0, color="k", lw=0.8)
         ax.set_ylabel(f"{name} error [m]")
     axs[0].legend(fontsize=8, ncol=len(iterations), loc="lower left")
     return fig
 
 
-def _fig_epos(plt: Any, rows: list[IterationMetrics], algorithm: str) -> Any:
+def _fig_epos(
+    plt: Any, rows: list[IterationMetrics], algorithm: str, learning: RunLearning | None = None
+) -> Any:
     from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter
 
     e0 = rows[0].epos_m
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    js = [r.iteration for r in rows]
-    ax.semilogy(js, [r.epos_m for r in rows], "o-", color="C0")
+    js = [r.iteration for r in rows]  # trial numbers
+    ax.semilogy(js, [r.epos_m for r in rows], "o-", color="C0", label="e_pos")
     for r in rows:
         ax.annotate(f"{r.epos_pct:.1f} %", (r.iteration, r.epos_m), textcoords="offset points",
                     xytext=(7, 3), ha="left", fontsize=8)  # fmt: skip
-    ax.set_xlabel("iteration j")
-    ax.set_ylabel("e_pos,j [m]")
-    ax.set_xticks(js)
-    ax.set_xlim(min(js) - 0.4, max(js) + 0.4)
     low = min(r.epos_m for r in rows)
-    ax.set_ylim(low / 1.6, e0 * 1.6)
+    floor = learning.floor if learning is not None else None
+    if floor is not None:
+        # the band a trial at the floor falls in (z <= floor_z), and the floor itself
+        top = floor.epos_m + learning.floor_z * float(
+            np.hypot(floor.scatter_m, floor.floor_scatter_m)
+        )
+        ax.axhspan(
+            max(floor.epos_m - floor.scatter_m, floor.epos_m / 3),
+            top,
+            color="C2",
+            alpha=0.15,
+            lw=0,
+            label=f"at the floor (z <= {learning.floor_z:g})",
+        )
+        ax.axhline(floor.epos_m, color="C2", lw=1.2,
+                   label=f"floor {1e3 * floor.epos_m:.1f} mm (repeat)")  # fmt: skip
+        low = min(low, floor.epos_m - floor.scatter_m)
+    labels = [str(j) for j in js]
+    if learning is not None and learning.history:
+        trials = [learning.trials[t] for t in js]
+        labels = [f"{t.iteration}{'r' if t.repeat_of is not None else ''}" for t in trials]
+        conv = [t.trial for t in trials if t.verdict is not None and t.verdict.converged]
+        if conv:
+            e = {r.iteration: r.epos_m for r in rows}
+            ax.plot(conv, [e[t] for t in conv], "s", mfc="none", mec="C3", ms=10,
+                    label="converged")  # fmt: skip
+        ax.set_xlabel("iteration j (r: a repeat of j = 0, which measures the floor)")
+    else:
+        ax.set_xlabel("iteration j")
+    ax.set_ylabel("e_pos,j [m]")
+    ax.set_xticks(js, labels)
+    ax.set_xlim(min(js) - 0.4, max(js) + 0.4)
+    ax.set_ylim(max(low, 1e-6) / 1.6, e0 * 1.6)
     # plain numbers on both log axes: 1-2-5 steps read better than powers of ten
     steps = [m * 10.0**e for e in range(-4, 3) for m in (1, 2, 5)]
     ax.yaxis.set_major_locator(FixedLocator(steps))
@@ -524,6 +887,8 @@ def _fig_epos(plt: Any, rows: list[IterationMetrics], algorithm: str) -> Any:
     right.yaxis.set_major_formatter(FormatStrFormatter("%g"))
     right.yaxis.set_minor_formatter(NullFormatter())
     right.set_ylabel("e_pos,j / e_pos,0 [%]")
+    if floor is not None:
+        ax.legend(fontsize=8, loc="upper right")
     ax.set_title(f"Average position error per iteration ({algorithm}; paper Fig. 2)")
     return fig
 
@@ -546,6 +911,11 @@ def _fig_disturbance(plt: Any, run: RunDir, iterations: list[int]) -> Any | None
     return fig
 
 
+def _trial_name(t: TrialLearning) -> str:
+    """A trial's label in the figures of a run with repeats: its number and its j."""
+    return f"trial {t.trial}, j = {t.iteration}" + (" (repeat)" if t.repeat_of is not None else "")
+
+
 def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
     """The report's figures, by name (matplotlib figures; the caller saves and closes them).
 
@@ -553,8 +923,10 @@ def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
     north and east against time per iteration (Fig. 5, both axes); ``setpoints``: the
     setpoints flown per iteration against the reference, the ``max_deviation_m`` band and the
     arena; ``error``: position minus reference against time per iteration; ``epos``: e_pos,j
-    per iteration, log scale, with its percentage of e_pos,0 (Fig. 2); ``disturbance``: the
-    learned D per iteration (only where estimates exist).
+    per iteration, log scale, with its percentage of e_pos,0 (Fig. 2), and with a floor the
+    band of e_pos a trial at the floor falls in; ``disturbance``: the learned D per iteration
+    (only where estimates exist). In a run with repeats the trials are labelled with their
+    number and their iteration j.
 
     Parameters
     ----------
@@ -579,12 +951,16 @@ def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
         run.profile()
     except ProfileError as exc:
         raise RunLogError(f"{run.path}/manifest.json: {exc}") from None
+    learning = run_learning(run) if run.kind == "learning" else None
+    names = {j: f"j = {j}" for j in iterations}
+    if learning is not None and learning.history:
+        names = {j: _trial_name(learning.trials[j]) for j in iterations}
     figures = {
-        "xy": _fig_xy(plt, ref, records, iterations),
-        "position": _fig_position(plt, ref, records, iterations),
-        "setpoints": _fig_setpoints(plt, run, ref, records, iterations),
-        "error": _fig_error(plt, ref, records, iterations),
-        "epos": _fig_epos(plt, rows, run.algorithm),
+        "xy": _fig_xy(plt, ref, records, iterations, names),
+        "position": _fig_position(plt, ref, records, iterations, names),
+        "setpoints": _fig_setpoints(plt, run, ref, records, iterations, names),
+        "error": _fig_error(plt, ref, records, iterations, names),
+        "epos": _fig_epos(plt, rows, run.algorithm, learning),
     }
     disturbance = _fig_disturbance(plt, run, iterations)
     if disturbance is not None:
@@ -621,7 +997,9 @@ _CAPTIONS = {
     "setpoints": "Setpoints flown (what ILC changes) against the reference, the "
     "max_deviation_m band the update keeps to, and the arena (dotted).",
     "error": "Position minus reference against time, per iteration and axis.",
-    "epos": "e_pos,j (eq. 10) per iteration; right axis in % of e_pos,0.",
+    "epos": "e_pos,j (eq. 10) per iteration; right axis in % of e_pos,0. With a repeat of "
+    "trial 0: the floor (one flight's non-repeatable error) and the band a trial at the floor "
+    "falls in.",
     "disturbance": "Repetitive disturbance D estimated from each trial, per axis.",
 }
 
@@ -668,9 +1046,8 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
         ("created (UTC)", str(m.get("created_utc"))), ("gcs", str(m.get("gcs_version"))),
         ("iterations drawn", ", ".join(map(str, chosen))),
     ]  # fmt: skip
-    headers = ["j", "e_pos [m]", "e_pos/e_pos0 [%]", "|Δe_pos|/prev [%]", "max err [m]"]
-    if rates is not None:
-        headers.append("clock [x]")
+    learning = run_learning(run) if run.kind == "learning" else None
+    headers, cells = _table(rows, rates, learning)
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -683,10 +1060,12 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
         + "".join(f"<th>{e(h)}</th>" for h in headers)
         + "</tr>",
         *("<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>"
-          for row in _table_cells(rows, rates)),
+          for row in cells),
         "</table>",
     ]  # fmt: skip
     notes = trial_notes(trial_overview(run), aborted_attempts(run)) + session_lines(run)
+    if learning is not None:
+        notes = learning_notes(learning) + notes
     if notes:
         parts.append("<ul>" + "".join(f"<li>{e(n)}</li>" for n in notes) + "</ul>")
     parts.append("<h2>Figures</h2>")

@@ -112,7 +112,7 @@ class TrialSource(Protocol):
         """
         ...
 
-    def record(self, j: int, recording: TrialRecording) -> None:
+    def record(self, j: int, recording: TrialRecording) -> str | None:
         """Take the complete recording of trial ``j`` (write files, learn).
 
         Parameters
@@ -121,6 +121,11 @@ class TrialSource(Protocol):
             Trial index.
         recording : TrialRecording
             The complete recording.
+
+        Returns
+        -------
+        str or None
+            A reason to fly no further trial (the campaign lands and says it), or None.
         """
         ...
 
@@ -423,9 +428,12 @@ async def fly_campaign(
                 warning = rate_warning(j, recording.clock.rate, n * t_ilc_s, t_ilc_s)
                 if warning is not None:
                     emit(Status(warning, warning=True))
-            await vehicle.hover_while(
+            stop = await vehicle.hover_while(
                 asyncio.to_thread(source.record, j, recording), f"recording trial {j}"
             )
+            if stop:
+                emit(Status(f"no further trial after trial {j}: {stop}"))
+                break
         emit(Status("landing"))
         await vehicle.land_and_disarm()
         emit(Status("landed and disarmed"))

@@ -34,6 +34,8 @@ __all__ = [
 ]
 
 ALGORITHMS = ("smoother", "kilc")
+#: Most repeats of trial 0 a profile may ask for (each is a flight: a battery's worth is a few).
+MAX_REPEATS = 5
 #: ``vehicle.max_vertical_speed_m_s`` when a profile leaves it out [m/s]: PX4's take-off speed
 #: (``MPC_TKO_SPEED`` 1.5 m/s, v1.16); gcs itself moves at ``flight.transit_speed_m_s`` (1 m/s).
 DEFAULT_MAX_VERTICAL_SPEED_M_S = 1.5
@@ -166,6 +168,16 @@ class LearningConfig:
         Bound on the distance of a setpoint from the reference [m].
     adaptive : AdaptiveSettings
         Options beyond the paper (``learning.adaptive``); the default is the paper's method.
+    history : bool
+        True when the profile has a ``learning.adaptive`` section: ``gcs learn`` and
+        ``gcs fly`` then learn from every complete trial
+        (:func:`gcs.core.learning.plan_next_trial`) and record every decision and every
+        refreshed model in the run directory; False (no section): the paper's step on the
+        newest trial, exactly as before the section existed.
+    repeats : int
+        Flights of trial 0's setpoints after the first (``learning.adaptive.repeats``,
+        default 1 in the section, 0 without it): identical flights measure the vehicle's
+        repeatability, the floor of learning.
     """
 
     algorithm: str = "smoother"
@@ -175,6 +187,8 @@ class LearningConfig:
     max_step_m: float | None = None
     max_deviation_m: float | None = None
     adaptive: AdaptiveSettings = field(default_factory=AdaptiveSettings)
+    history: bool = False
+    repeats: int = 0
 
 
 @dataclass(frozen=True)
@@ -292,6 +306,11 @@ def _learning(f: _Fields) -> LearningConfig:
             raise ProfileError(f"{s.where}: field '{s.path}': {exc}") from exc
         s.done()
     limits = f.sub("limits", {})
+    history = f.has("adaptive")
+    adaptive = f.sub("adaptive", {})
+    repeats = adaptive.integer("repeats", 1 if history else 0)
+    if not 0 <= repeats <= MAX_REPEATS:
+        raise adaptive.fail("repeats", f"must be in [0, {MAX_REPEATS}], got {repeats}")
     config = LearningConfig(
         algorithm=f.string("algorithm", "smoother", ALGORITHMS),
         weights=weights,
@@ -299,7 +318,9 @@ def _learning(f: _Fields) -> LearningConfig:
         kilc=settings["kilc"],
         max_step_m=limits.optional_number("max_step_m"),
         max_deviation_m=limits.optional_number("max_deviation_m"),
-        adaptive=_adaptive(f.sub("adaptive", {})),
+        adaptive=_adaptive(adaptive),
+        history=history,
+        repeats=repeats,
     )
     limits.done()
     f.done()
