@@ -468,7 +468,7 @@ class VisionAidedError:
     fused, rejected, resets : int
         Samples fused, samples rejected by the gate, resets onto the vision.
     last_sample_s : float or None
-        Vehicle time of the last accepted sample's arrival (None before the first).
+        Vehicle time of the last sample's arrival, fused or rejected (None before the first).
     events : list of str
         What happened, for the commander to say (``"vision data stopped"``, ...).
     """
@@ -599,9 +599,13 @@ class VisionAidedError:
     def xy_valid(self, t_s: float, noaid_timeout_s: float) -> bool:
         """Whether EKF2 would report a horizontal local position at ``t_s``.
 
-        Valid while fusing; after fusion stopped, until ``noaid_timeout_s`` past the moment
-        the aiding ended less ``no_aid_timeout_max`` (EKF2's ``_time_last_horizontal_aiding``),
-        i.e. ``last sample + 0.4 s - 1 s + EKF2_NOAID_TOUT``. Never before the first sample.
+        EKF2 counts the vision as aiding while its fusion is on and a sample was fused within
+        ``no_aid_timeout_max`` (1 s); while aiding it keeps ``_time_last_horizontal_aiding`` at
+        now less that 1 s, and declares the position invalid ``EKF2_NOAID_TOUT`` after it
+        (``updateHorizontalDeadReckoningstatus``). The aiding ends when the fusion stops (last
+        sample + 0.4 s: invalid at ``last sample + 0.4 s - 1 s + EKF2_NOAID_TOUT``) or 1 s
+        after the last accepted sample while every sample is rejected (invalid at ``last
+        accepted + EKF2_NOAID_TOUT``), whichever comes first. Never before the first sample.
 
         Parameters
         ----------
@@ -614,9 +618,9 @@ class VisionAidedError:
         -------
         bool
         """
-        if self.last_sample_s is None or not self._axes[0]:
+        if self.last_sample_s is None or self._last_accept_s is None or not self._axes[0]:
             return False
-        if self.fusing:
-            return True
-        aiding_end_s = self.last_sample_s + 2 * EV_MAX_INTERVAL_S
+        aiding_end_s = self._last_accept_s + NO_AID_TIMEOUT_S
+        if not self.fusing:
+            aiding_end_s = min(aiding_end_s, self.last_sample_s + 2 * EV_MAX_INTERVAL_S)
         return t_s - (aiding_end_s - NO_AID_TIMEOUT_S) <= noaid_timeout_s
