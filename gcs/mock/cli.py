@@ -12,6 +12,7 @@ import typer
 
 from gcs.errors import GcsError
 from gcs.mock.config import Faults, load_mock_config
+from gcs.mock.mocap.arena import ArenaOptions, parse_arena_fault
 
 __all__ = [
     "mock_command",
@@ -20,6 +21,7 @@ __all__ = [
     "parse_estimator_fault",
     "faults_cli_args",
     "run_mock",
+    "arena_options",
 ]
 
 
@@ -154,8 +156,11 @@ def run_mock(
     port: int = 0,
     gcs_port: int | None = None,
     stats_out: Path | None = None,
+    arena: ArenaOptions | None = None,
 ) -> None:
     """Bind, announce ``READY <url>`` on stdout, run until SIGTERM/SIGINT, write the stats.
+
+    With ``arena``, a ``MOCAP <url>`` line (the mock Motive's URL) comes first.
 
     Parameters
     ----------
@@ -171,13 +176,22 @@ def run_mock(
         Also send to a GCS listening on 127.0.0.1:gcs_port.
     stats_out : Path or None
         Where to write the JSON statistics on exit.
+    arena : ArenaOptions or None
+        Serve the vehicle's true pose over NatNet (a mock OptiTrack Motive).
     """
     from gcs.mock.server import MockServer, write_json_atomic
 
     cfg = load_mock_config(config)
-    server = MockServer(cfg, faults, seed=seed, port=port, gcs_port=gcs_port)
+    server = MockServer(cfg, faults, seed=seed, port=port, gcs_port=gcs_port, arena=arena)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: server.stop())
+    if server.arena is not None:
+        sys.stdout.write(f"MOCAP {server.arena.url}\n")
+        print(
+            f"mock Motive (NatNet) of the vehicle's true pose at {server.arena.url}",
+            file=sys.stderr,
+            flush=True,
+        )
     sys.stdout.write(f"READY {server.url}\n")
     sys.stdout.flush()
     print(
@@ -260,6 +274,47 @@ def mock_command(
             "(DN, DE, DD) m.",
         ),
     ] = None,
+    mocap: Annotated[
+        bool,
+        typer.Option(
+            "--mocap",
+            help="Also serve the vehicle's true pose as a mock OptiTrack Motive (NatNet) and "
+            "print 'MOCAP <url>' before READY.",
+        ),
+    ] = False,
+    mocap_rate: Annotated[
+        float, typer.Option("--mocap-rate", min=50.0, max=360.0, help="Mocap frame rate, Hz.")
+    ] = 120.0,
+    mocap_noise_mm: Annotated[
+        float, typer.Option("--mocap-noise-mm", min=0.0, help="Marker noise, mm (1 sigma).")
+    ] = 0.2,
+    mocap_room: Annotated[
+        str, typer.Option("--mocap-room", help="Axes of the room's mocap (optitrack: Y up).")
+    ] = "optitrack",
+    mocap_yaw_offset_deg: Annotated[
+        float, typer.Option("--mocap-yaw-offset-deg", help="Heading of the room's north axis.")
+    ] = 0.0,
+    mocap_body: Annotated[str, typer.Option("--mocap-body", help="Rigid body name.")] = "drone",
+    mocap_occlusion: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--mocap-occlusion",
+            help="Body not tracked START:DURATION (s after the first OFFBOARD; repeatable).",
+        ),
+    ] = None,  # fmt: skip
+    mocap_dropout: Annotated[
+        list[str] | None, typer.Option("--mocap-dropout", help="No frames START:DURATION, s.")
+    ] = None,
+    mocap_freeze: Annotated[
+        list[str] | None,
+        typer.Option("--mocap-freeze", help="The same frame repeated START:DURATION, s."),
+    ] = None,
+    mocap_jump: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--mocap-jump", help="Solved pose offset START:DURATION:DX:DY:DZ (room axes)."
+        ),
+    ] = None,
 ) -> None:
     """Run a mock PX4 quadrotor that MAVSDK cannot tell from the real one.
 
@@ -274,6 +329,13 @@ def mock_command(
     repeatable position-dependent disturbance, random gusts and millimetre mocap noise.
     ``--config profiles/mock-gps.yaml`` is instead a vehicle like PX4 SITL on GPS + EKF2:
     it flies on an estimate that wanders by decimetres (the truth goes to ``--stats-out``).
+
+    Indoor arena: ``--mocap`` serves the vehicle's true pose as a mock OptiTrack Motive over
+    NatNet (multicast on loopback; URL on a 'MOCAP' line before READY) at ``--mocap-rate``
+    with marker noise and faults (``--mocap-occlusion``, ``--mocap-dropout``,
+    ``--mocap-freeze``, ``--mocap-jump``, timed from the first OFFBOARD). With ``--config
+    profiles/mock-mocap.yaml`` the vehicle has no GPS and a position only while external
+    vision arrives (``gcs fly --mocap`` forwards it), as EKF2 on vision alone.
 
     Faults: ``--loss`` and ``--latency-ms`` apply from the start and to both directions. The
     times of ``--dropout``, ``--link-loss-at`` and ``--gust`` count in seconds from the
@@ -341,7 +403,28 @@ def mock_command(
         Estimator divergence ``T:D:AN:AE:AD`` [s after the first arming, s, m/s^2].
     jump : str or None
         Estimator jump ``T:DN:DE:DD`` [s after the first arming, m].
+    mocap : bool
+        Serve the true pose as a mock Motive.
+    mocap_rate : float
+        Its frame rate [Hz].
+    mocap_noise_mm : float
+        Its marker noise [mm].
+    mocap_room : str
+        Named convention of the room's axes.
+    mocap_yaw_offset_deg : float
+        Heading of the room's north axis [deg].
+    mocap_body : str
+        Rigid body name.
+    mocap_occlusion, mocap_dropout, mocap_freeze, mocap_jump : list of str or None
+        Mocap faults, timed from the first OFFBOARD.
     """
+    arena = None
+    if mocap:
+        arena = arena_options(
+            mocap_rate, mocap_noise_mm, mocap_room, mocap_yaw_offset_deg, mocap_body, seed,
+            {"occlusion": mocap_occlusion, "dropout": mocap_dropout, "freeze": mocap_freeze,
+             "jump": mocap_jump},
+        )  # fmt: skip
     try:
         faults = Faults(
             loss_fraction=loss,
@@ -361,7 +444,54 @@ def mock_command(
         if isinstance(exc, GcsError):
             raise
         raise typer.BadParameter(str(exc)) from exc
-    run_mock(config, faults, seed=seed, port=port, gcs_port=gcs_port, stats_out=stats_out)
+    run_mock(
+        config, faults, seed=seed, port=port, gcs_port=gcs_port, stats_out=stats_out,
+        arena=arena,
+    )  # fmt: skip
+
+
+def arena_options(
+    rate_hz: float,
+    noise_mm: float,
+    room: str,
+    yaw_offset_deg: float,
+    body: str,
+    seed: int,
+    faults: dict[str, list[str] | None],
+) -> ArenaOptions:
+    """The arena options of ``gcs mock --mocap ...`` (a bad value is a usage error).
+
+    Parameters
+    ----------
+    rate_hz : float
+        Frame rate [Hz].
+    noise_mm : float
+        Marker noise [mm].
+    room : str
+        Named convention of the room's axes.
+    yaw_offset_deg : float
+        Heading of the room's north axis [deg].
+    body : str
+        Rigid body name.
+    seed : int
+        Seed of the marker noise.
+    faults : dict of str to list of str or None
+        Option values by fault kind.
+
+    Returns
+    -------
+    ArenaOptions
+    """
+    try:
+        windows = tuple(
+            parse_arena_fault(kind, text) for kind, texts in faults.items() for text in texts or []
+        )
+        return ArenaOptions(
+            rate_hz=rate_hz, noise_m=noise_mm / 1000.0, room=room, yaw_offset_deg=yaw_offset_deg,
+            body=body, faults=windows, seed=seed,
+        )  # fmt: skip
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
 
 
 def _estimator_faults(

@@ -32,6 +32,7 @@ __all__ = [
     "DisturbanceConfig",
     "NoiseConfig",
     "EstimatorConfig",
+    "VisionConfig",
     "RatesConfig",
     "Px4Config",
     "MockConfig",
@@ -238,6 +239,44 @@ class EstimatorConfig:
 
 
 @dataclass(frozen=True)
+class VisionConfig:
+    """External vision only, as EKF2 in an indoor arena (``profiles/mock-mocap.yaml``).
+
+    Off by default. On, the vehicle has no GPS: its horizontal position estimate exists only
+    while external vision (MAVLink ``ODOMETRY`` or ``VISION_POSITION_ESTIMATE``, e.g. forwarded
+    by ``gcs fly --mocap``) arrives and is fused, as PX4's EKF2 does with ``EKF2_GPS_CTRL 0``
+    and ``EKF2_EV_CTRL`` set (:class:`gcs.mock.estimator.VisionAidedError`). Which axes are fused,
+    the delay the samples are compared at and the dead-reckoning timeout are PX4's parameters
+    (``px4.ekf2_ev_ctrl``, ``px4.ekf2_ev_delay_ms``, ``px4.ekf2_noaid_tout_s``).
+
+    Parameters
+    ----------
+    enabled : bool
+        Navigate on external vision only (True) or as before (False, the default).
+    time_constant_s : float
+        Time constant with which the estimate is pulled onto the vision measurements [s]
+        (EKF2's correction of the delayed state, propagated by the output predictor).
+    innovation_gate_m : float
+        A sample further than this from the estimate (per axis, at its delayed time) is
+        rejected [m]: EKF2's ``EKF2_EVP_GATE`` (5) times its minimum observation noise
+        ``EKF2_EVP_NOISE`` (0.1 m).
+    reset_after_s : float
+        After this long with every sample rejected the estimate is reset onto the vision
+        [s] (EKF2's ``reset_timeout_max``, 7 s).
+    dead_reckoning_accel_m_s2 : float
+        Accelerometer error integrated while no vision is fused (inertial dead reckoning):
+        the estimate drifts away as ``a t^2 / 2`` [m/s^2]; its horizontal direction is drawn
+        from the run's seed.
+    """
+
+    enabled: bool = False
+    time_constant_s: float = 0.1
+    innovation_gate_m: float = 0.5
+    reset_after_s: float = 7.0
+    dead_reckoning_accel_m_s2: float = 0.05
+
+
+@dataclass(frozen=True)
 class RatesConfig:
     """Default stream rates [Hz] (0 disables); MAVSDK's SET_MESSAGE_INTERVAL overrides them.
 
@@ -321,6 +360,14 @@ class Px4Config:
     ekf2_hgt_ref : int
         ``EKF2_HGT_REF``, height reference: 0 barometer, 1 GPS, 2 range sensor, 3 vision.
         Default 1, as in the SIH capture.
+    ekf2_ev_delay_ms : float
+        ``EKF2_EV_DELAY``: how much older than its arrival an external-vision sample is
+        taken to be [ms] (PX4's default 175, meant for cameras; a motion-capture chain is a
+        few ms). With :class:`VisionConfig` on, the mock compares each sample with its
+        estimate that long ago, as EKF2 does.
+    ekf2_noaid_tout_s : float
+        ``EKF2_NOAID_TOUT`` [s] (PX4 stores microseconds, 5 000 000): how long EKF2 dead
+        reckons without aiding before the local position is declared invalid.
     gf_action : int
         ``GF_ACTION``, geofence breach action: 0 none, 1 warning, 2 Hold (PX4's default),
         5 Land; 3 (Return) and 4 (Terminate) are not modelled and land.
@@ -350,6 +397,8 @@ class Px4Config:
     ekf2_gps_ctrl: int = 7
     ekf2_ev_ctrl: int = 0
     ekf2_hgt_ref: int = 1
+    ekf2_ev_delay_ms: float = 175.0
+    ekf2_noaid_tout_s: float = 5.0
     gf_action: int = 2
     gf_max_hor_dist_m: float = 0.0
     gf_max_ver_dist_m: float = 0.0
@@ -371,6 +420,8 @@ class MockConfig:
         Measurement noise.
     estimator : EstimatorConfig
         Navigation error (off: the vehicle flies on its true state).
+    vision : VisionConfig
+        External vision only: no local position without it (off by default).
     rates : RatesConfig
         Default telemetry rates.
     px4 : Px4Config
@@ -382,6 +433,7 @@ class MockConfig:
     disturbance: DisturbanceConfig = field(default_factory=DisturbanceConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
+    vision: VisionConfig = field(default_factory=VisionConfig)
     rates: RatesConfig = field(default_factory=RatesConfig)
     px4: Px4Config = field(default_factory=Px4Config)
 
@@ -614,7 +666,9 @@ def mock_config_from_dict(data: Any, where: str = "<dict>") -> MockConfig:
 
 def _validate(cfg: MockConfig, where: str) -> None:
     """Range and cross-field checks that a plain type check cannot make."""
-    for section in ("physics", "controller", "disturbance", "noise", "estimator", "rates"):
+    for section in (
+        "physics", "controller", "disturbance", "noise", "estimator", "vision", "rates",
+    ):  # fmt: skip
         sub = getattr(cfg, section)
         for f in dataclasses.fields(sub):
             value = getattr(sub, f.name)
@@ -665,6 +719,15 @@ def _validate(cfg: MockConfig, where: str) -> None:
         ("px4.gf_max_hor_dist_m", cfg.px4.gf_max_hor_dist_m >= 0, "must be >= 0"),
         ("px4.gf_max_ver_dist_m", cfg.px4.gf_max_ver_dist_m >= 0, "must be >= 0"),
         ("rates.heartbeat_hz", cfg.rates.heartbeat_hz > 0, "must be > 0 (MAVSDK needs it)"),
+        ("vision.time_constant_s", cfg.vision.time_constant_s > 0, "must be > 0"),
+        ("vision.innovation_gate_m", cfg.vision.innovation_gate_m > 0, "must be > 0"),
+        ("px4.ekf2_ev_delay_ms", 0 <= cfg.px4.ekf2_ev_delay_ms <= 300, "must be in [0, 300] ms"),
+        ("px4.ekf2_noaid_tout_s", 0.5 <= cfg.px4.ekf2_noaid_tout_s <= 10, "must be in [0.5, 10] s"),
+        (
+            "vision.enabled",
+            not cfg.vision.enabled or not cfg.estimator.enabled,
+            "and estimator.enabled cannot both be true (GPS wander or vision, not both)",
+        ),
     ]
     for name, ok, message in checks:
         if not ok:

@@ -50,6 +50,20 @@ PX4 flies on its estimate, and so does the mock: while the controller can, it ho
 *estimate* at the setpoint and the true vehicle moves the other way; the reported velocity (the
 truth's) then shows a motion the reported position does not.
 
+:class:`VisionAidedError` is EKF2 on external vision only (an indoor arena, no GPS,
+``profiles/mock-mocap.yaml``): the estimate *is* the fused vision. Each vision sample (the
+server hands over what arrived as ODOMETRY or VISION_POSITION_ESTIMATE) is given the time
+``arrival - EKF2_EV_DELAY`` and compared with the estimate at that time (EKF2 fuses on a
+delayed horizon); the innovation pulls the estimate towards the sample with the time constant
+``vision.time_constant_s``, or is rejected beyond ``vision.innovation_gate_m``. The first
+sample resets the estimate onto the vision. Without samples for ``2 EV_MAX_INTERVAL`` (0.4 s)
+fusion stops ("vision data stopped"), the estimate dead-reckons (drifts with an accelerometer
+error), and ``EKF2_NOAID_TOUT`` later (less the 1 s of ``no_aid_timeout_max`` plus the 0.4 s)
+the local position is invalid: PX4 sends no LOCAL_POSITION_NED and its commander takes the
+failsafe (:mod:`gcs.mock.vehicle`). Before the first sample there is no local position at all.
+A wrong ``EKF2_EV_DELAY`` shows as PX4's: the estimate leads (or lags) the truth by the
+velocity times the difference between the set and the true delay.
+
 Plain floats and the standard library only: the mock steps this at 200 Hz in real time.
 """
 
@@ -57,10 +71,11 @@ from __future__ import annotations
 
 import math
 import random
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
-from gcs.mock.config import EstimatorConfig, Faults
+from gcs.mock.config import EstimatorConfig, Faults, VisionConfig
 
 __all__ = [
     "ErrorProcess",
@@ -73,11 +88,24 @@ __all__ = [
     "PositionDivergence",
     "PositionJump",
     "injected_faults",
+    "VisionAidedError",
+    "EV_MAX_INTERVAL_S",
+    "NO_AID_TIMEOUT_S",
+    "VISION_SEED_OFFSET",
 ]
 
 ESTIMATOR_SEED_OFFSET = 0xE571
 """The estimator's random stream is ``random.Random(seed + ESTIMATOR_SEED_OFFSET)``, apart from
 the gusts' and the measurement noise's, so that the mock without an estimator is unchanged."""
+
+
+VISION_SEED_OFFSET = 0x7151
+"""The vision process draws its dead-reckoning direction from ``seed + VISION_SEED_OFFSET``."""
+EV_MAX_INTERVAL_S = 0.2
+"""EKF2's ``EV_MAX_INTERVAL``: fusion stops ``2 x`` this after the last vision sample [s]."""
+NO_AID_TIMEOUT_S = 1.0
+"""EKF2's ``no_aid_timeout_max``: a source fused this recently still counts as aiding [s]."""
+_HISTORY_S = 1.0  # how far back a delayed sample can be compared [s]
 
 
 class ErrorProcess(Protocol):
@@ -416,3 +444,183 @@ def injected_faults(faults: Faults) -> list[InjectedFault]:
     if faults.jump_at_s is not None and faults.jump_ned_m is not None:
         out.append(PositionJump(faults.jump_at_s, None, faults.jump_ned_m))
     return out
+
+
+class VisionAidedError:
+    """EKF2 on external vision only: the estimate is the fused vision (an ErrorProcess).
+
+    See the module docstring for the model. The process keeps a short history of the truth
+    and of its own error, so that a sample is compared with the estimate at its (delayed)
+    sample time; :meth:`fuse` takes the samples, :meth:`xy_valid` says whether PX4 would
+    report a local position.
+
+    Parameters
+    ----------
+    cfg : VisionConfig
+        Time constant, gate, reset time and dead-reckoning error.
+    true_pos_ned_m : list of float
+        The physics' true position, read (never written) at every step.
+    rng : random.Random
+        The process's own random stream (direction of the dead-reckoning error).
+
+    Attributes
+    ----------
+    fused, rejected, resets : int
+        Samples fused, samples rejected by the gate, resets onto the vision.
+    last_sample_s : float or None
+        Vehicle time of the last sample's arrival, fused or rejected (None before the first).
+    events : list of str
+        What happened, for the commander to say (``"vision data stopped"``, ...).
+    """
+
+    def __init__(self, cfg: VisionConfig, true_pos_ned_m: list[float], rng: random.Random) -> None:
+        self.cfg = cfg
+        self._truth = true_pos_ned_m
+        angle = rng.uniform(0.0, 2.0 * math.pi)
+        a = cfg.dead_reckoning_accel_m_s2
+        self._drift = (a * math.cos(angle), a * math.sin(angle), 0.0)
+        self.pos_err_m = [0.0, 0.0, 0.0]
+        self.vel_err_m_s = [0.0, 0.0, 0.0]
+        self.resets = 0
+        self.fused = 0
+        self.rejected = 0
+        self.t_s = 0.0
+        self.fusing = False
+        self.last_sample_s: float | None = None
+        self._last_accept_s: float | None = None
+        self._axes: tuple[bool, bool, bool] = (False, False, False)
+        self._history: deque[tuple[float, tuple[float, ...], tuple[float, ...]]] = deque()
+        self.events: list[str] = []
+
+    def step(self, dt_s: float) -> None:
+        """Advance by ``dt_s``: stop fusing after 0.4 s without samples, then dead-reckon.
+
+        Parameters
+        ----------
+        dt_s : float
+            Step [s].
+        """
+        self.t_s += dt_s
+        if (
+            self.fusing
+            and self.last_sample_s is not None
+            and self.t_s - self.last_sample_s > 2 * EV_MAX_INTERVAL_S
+        ):
+            self.fusing = False
+            self.events.append("vision data stopped")
+        if not self.fusing and self.last_sample_s is not None:
+            for i in range(3):
+                self.vel_err_m_s[i] += self._drift[i] * dt_s
+                self.pos_err_m[i] += self.vel_err_m_s[i] * dt_s
+        history = self._history
+        history.append((self.t_s, tuple(self._truth), tuple(self.pos_err_m)))
+        while history and history[0][0] < self.t_s - _HISTORY_S:
+            history.popleft()
+
+    def _at(self, t_s: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """Truth and own error at ``t_s`` (the nearest recorded step not after it)."""
+        if not self._history:
+            return tuple(self._truth), tuple(self.pos_err_m)
+        for t, truth, err in reversed(self._history):
+            if t <= t_s + 1e-9:
+                return truth, err
+        _, truth, err = self._history[0]
+        return truth, err
+
+    def fuse(
+        self,
+        t_arrival_s: float,
+        pos_ned_m: tuple[float, float, float],
+        delay_s: float,
+        ev_ctrl: int,
+    ) -> bool:
+        """Fuse one vision sample, as EKF2 would.
+
+        Parameters
+        ----------
+        t_arrival_s : float
+            Vehicle time the sample arrived [s] (the physics has been stepped to it).
+        pos_ned_m : tuple of float
+            The measured position, local NED [m].
+        delay_s : float
+            ``EKF2_EV_DELAY`` [s]: the sample is compared with the estimate this long ago.
+        ev_ctrl : int
+            ``EKF2_EV_CTRL``: bit 0 fuses the horizontal position, bit 1 the height.
+
+        Returns
+        -------
+        bool
+            The sample was fused (False: rejected by the gate, or nothing to fuse).
+        """
+        axes = (bool(ev_ctrl & 1), bool(ev_ctrl & 1), bool(ev_ctrl & 2))
+        if not any(axes) or not all(math.isfinite(x) for x in pos_ned_m):
+            return False
+        truth, err = self._at(t_arrival_s - delay_s)
+        if not self.fusing or axes != self._axes:
+            self._reset(pos_ned_m, truth, axes)
+            self.last_sample_s = self._last_accept_s = t_arrival_s
+            return True
+        innov = [pos_ned_m[i] - truth[i] - err[i] for i in range(3)]
+        gate = self.cfg.innovation_gate_m
+        if any(on and abs(v) > gate for on, v in zip(axes, innov, strict=True)):
+            self.rejected += 1
+            self.last_sample_s = t_arrival_s
+            assert self._last_accept_s is not None
+            if t_arrival_s - self._last_accept_s > self.cfg.reset_after_s:
+                self._reset(pos_ned_m, truth, axes)
+                self._last_accept_s = t_arrival_s
+                self.events.append("vision position reset (innovations rejected)")
+                return True
+            return False
+        dt = t_arrival_s - (self.last_sample_s or t_arrival_s)
+        gain = 1.0 - math.exp(-max(dt, 0.0) / self.cfg.time_constant_s)
+        for i in range(3):
+            if axes[i]:
+                self.pos_err_m[i] += gain * innov[i]
+        self.fused += 1
+        self.last_sample_s = self._last_accept_s = t_arrival_s
+        return True
+
+    def _reset(
+        self, pos_ned_m: tuple[float, float, float], truth: tuple[float, ...],
+        axes: tuple[bool, bool, bool],
+    ) -> None:  # fmt: skip
+        """Start (or restart) fusion: the estimate at the sample's time becomes the sample."""
+        for i in range(3):
+            if axes[i]:
+                self.pos_err_m[i] = pos_ned_m[i] - truth[i]
+            self.vel_err_m_s[i] = 0.0
+        if not self.fusing:
+            self.events.append("vision fusion started")
+        self.fusing, self._axes = True, axes
+        self.resets += 1
+        self.fused += 1
+
+    def xy_valid(self, t_s: float, noaid_timeout_s: float) -> bool:
+        """Whether EKF2 would report a horizontal local position at ``t_s``.
+
+        EKF2 counts the vision as aiding while its fusion is on and a sample was fused within
+        ``no_aid_timeout_max`` (1 s); while aiding it keeps ``_time_last_horizontal_aiding`` at
+        now less that 1 s, and declares the position invalid ``EKF2_NOAID_TOUT`` after it
+        (``updateHorizontalDeadReckoningstatus``). The aiding ends when the fusion stops (last
+        sample + 0.4 s: invalid at ``last sample + 0.4 s - 1 s + EKF2_NOAID_TOUT``) or 1 s
+        after the last accepted sample while every sample is rejected (invalid at ``last
+        accepted + EKF2_NOAID_TOUT``), whichever comes first. Never before the first sample.
+
+        Parameters
+        ----------
+        t_s : float
+            Vehicle time [s].
+        noaid_timeout_s : float
+            ``EKF2_NOAID_TOUT`` [s].
+
+        Returns
+        -------
+        bool
+        """
+        if self.last_sample_s is None or self._last_accept_s is None or not self._axes[0]:
+            return False
+        aiding_end_s = self._last_accept_s + NO_AID_TIMEOUT_S
+        if not self.fusing:
+            aiding_end_s = min(aiding_end_s, self.last_sample_s + 2 * EV_MAX_INTERVAL_S)
+        return t_s - (aiding_end_s - NO_AID_TIMEOUT_S) <= noaid_timeout_s

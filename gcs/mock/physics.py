@@ -32,7 +32,13 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from gcs.mock.config import DisturbanceConfig, MockConfig
-from gcs.mock.estimator import ErrorProcess, Estimator, make_estimator
+from gcs.mock.estimator import (
+    VISION_SEED_OFFSET,
+    ErrorProcess,
+    Estimator,
+    VisionAidedError,
+    make_estimator,
+)
 
 if TYPE_CHECKING:  # NumPy and SciPy are imported lazily: the real-time mock does not need them
     import numpy as np
@@ -66,12 +72,16 @@ class Target:
         ``pos_ned_m[2]`` (used by LAND).
     vel_up_max_m_s : float or None
         Climb-speed limit for this target [m/s] (used by TAKEOFF), below the configured one.
+    hold_xy : bool
+        Control the horizontal position (False: level attitude, no horizontal control, as
+        PX4's Descend when it has no local position).
     """
 
     pos_ned_m: tuple[float, float, float]
     yaw_rad: float = 0.0
     vz_m_s: float | None = None
     vel_up_max_m_s: float | None = None
+    hold_xy: bool = True
 
 
 class DisturbanceField:
@@ -140,6 +150,9 @@ class QuadPhysics:
         ``vel`` lists without an estimator, the estimate with one.
     estimator : Estimator or None
         The navigation error (None: the vehicle flies on its true state).
+    vision : VisionAidedError or None
+        With ``cfg.vision.enabled``: the external-vision fusion among the estimator's
+        processes (fed by the server through :meth:`VisionAidedError.fuse`).
     """
 
     def __init__(
@@ -165,6 +178,11 @@ class QuadPhysics:
         self._rng = random.Random(seed)
         self._noise_rng = random.Random(seed + 0x5EED)
         self.estimator: Estimator | None = make_estimator(cfg.estimator, seed)
+        self.vision: VisionAidedError | None = None
+        if cfg.vision.enabled:
+            rng = random.Random(seed + VISION_SEED_OFFSET)
+            self.vision = VisionAidedError(cfg.vision, self.pos, rng)
+            self.estimator = Estimator([self.vision])
         self.nav_pos, self.nav_vel = self.pos, self.vel
         if self.estimator is not None:
             self.nav_pos, self.nav_vel = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
@@ -285,6 +303,9 @@ class QuadPhysics:
                 asp[i] = self._kv[i] * err + self._ki[i] * self.vel_int[i]
                 if i < 2:
                     asp[i] -= c.vel_d_xy * a_i
+            if not tgt.hold_xy:  # level: no horizontal control (PX4 Descend)
+                asp[0] = asp[1] = 0.0
+                self.vel_int[0] = self.vel_int[1] = 0.0
             axy = math.hypot(asp[0], asp[1])
             if axy > self._acc_xy_max:
                 s = self._acc_xy_max / axy

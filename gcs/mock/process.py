@@ -16,6 +16,7 @@ from typing import IO, Any
 from gcs.errors import VehicleError
 from gcs.mock.cli import faults_cli_args
 from gcs.mock.config import Faults
+from gcs.mock.mocap.arena import ArenaOptions
 
 __all__ = ["MockProcess"]
 
@@ -46,6 +47,8 @@ class MockProcess:
         How long to wait for the READY line.
     stop_timeout_s : float
         How long to wait after SIGTERM before SIGKILL.
+    arena : ArenaOptions or None
+        Also serve the vehicle's true pose as a mock OptiTrack Motive (``--mocap``).
 
     Attributes
     ----------
@@ -57,6 +60,8 @@ class MockProcess:
         Process id of the mock.
     stats : dict or None
         Statistics read on exit (None if the mock wrote none).
+    mocap_url : str
+        The mock Motive's URL with ``arena`` (empty without).
     """
 
     def __init__(
@@ -69,6 +74,7 @@ class MockProcess:
         gcs_port: int | None = None,
         ready_timeout_s: float = 30.0,
         stop_timeout_s: float = 5.0,
+        arena: ArenaOptions | None = None,
     ) -> None:
         self.config_path = None if config_path is None else Path(config_path)
         self.seed = seed
@@ -80,6 +86,8 @@ class MockProcess:
         self.gcs_port = gcs_port
         self.ready_timeout_s = ready_timeout_s
         self.stop_timeout_s = stop_timeout_s
+        self.arena = arena
+        self.mocap_url = ""
         self.url = ""
         self.port = 0
         self.pid = 0
@@ -104,6 +112,8 @@ class MockProcess:
             args += ["--gcs-port", str(self.gcs_port)]
         if self.stats_path is not None:
             args += ["--stats-out", str(self.stats_path)]
+        if self.arena is not None:
+            args += self.arena.cli_args()
         return args + faults_cli_args(self.faults)
 
     def __enter__(self) -> MockProcess:
@@ -149,6 +159,8 @@ class MockProcess:
     def _read_stdout(self) -> None:
         assert self._proc is not None and self._proc.stdout is not None
         for line in self._proc.stdout:
+            if line.startswith("MOCAP ") and not self.mocap_url:
+                self.mocap_url = line.split(None, 1)[1].strip()
             if line.startswith("READY ") and not self.url:
                 self.url = line.split(None, 1)[1].strip()
                 self.port = int(self.url.rsplit(":", 1)[1])

@@ -15,6 +15,20 @@ Vehicle time. The vehicle's clock is ``Faults.clock_rate`` times the monotonic c
 boot (1 by default): the physics, the PX4 timeouts, the stream periods and every time stamp
 sent (``time_boot_ms``, ``time_usec``, TIMESYNC) run on it, as in a simulator that is slower
 (or faster) than real time. Only the injected link latency is wall time.
+
+External vision, as PX4's ``mavlink_receiver`` takes it: ``ODOMETRY`` with ``frame_id``
+LOCAL_NED or LOCAL_FRD (ENU and FLU converted; any other frame, e.g. MAVSDK's MOCAP_NED, leaves
+the position unset) and ``estimator_type`` UNKNOWN, NAIVE, VISION or VIO goes to EKF2;
+``estimator_type`` MOCAP goes to PX4's ``vehicle_mocap_odometry``, which EKF2 does not read
+(the mock counts it and fuses nothing); ``VISION_POSITION_ESTIMATE`` is NED. Every sample is
+stamped on arrival (PX4's ``sync_stamp`` without a converged time sync) and handed to the
+vehicle (:meth:`gcs.mock.vehicle.Vehicle.on_vision`). Without a local position the mock sends
+no LOCAL_POSITION_NED, GLOBAL_POSITION_INT or ODOMETRY (PX4 sends them only with
+``xy_valid``), and in vision mode SYS_STATUS reports no GPS and the vision position sensor
+healthy only while the local position is valid (what MAVSDK's ``is_local_position_ok`` reads).
+
+The arena (:mod:`gcs.mock.mocap.arena`): with ``arena`` options a mock OptiTrack Motive serves
+the vehicle's true pose, published after every physics step.
 """
 
 from __future__ import annotations
@@ -37,6 +51,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from gcs.mock.config import Faults, MockConfig
 from gcs.mock.estimator import injected_faults
 from gcs.mock.geofence import FenceItem, FenceTransfer, Reply
+from gcs.mock.mocap.arena import Arena, ArenaOptions, quat_from_euler
 from gcs.mock.vehicle import MODE_FROM_CUSTOM, MavResult, Vehicle, encode_param
 
 __all__ = ["MockServer", "STREAMS", "TRUTH_PERIOD_S", "write_json_atomic"]
@@ -68,6 +83,17 @@ _SENSORS_PRESENT = 50348079
 _SENSORS_ENABLED = 50413615
 _SENSORS_HEALTH = 52480063
 _PREARM_CHECK = 0x10000000
+_GPS_BIT = mavlink2.MAV_SYS_STATUS_SENSOR_GPS
+_VISION_BIT = mavlink2.MAV_SYS_STATUS_SENSOR_VISION_POSITION
+#: ODOMETRY estimator types PX4 publishes as visual odometry (EKF2's input).
+_EV_ESTIMATORS = (
+    mavlink2.MAV_ESTIMATOR_TYPE_UNKNOWN, mavlink2.MAV_ESTIMATOR_TYPE_NAIVE,
+    mavlink2.MAV_ESTIMATOR_TYPE_VISION, mavlink2.MAV_ESTIMATOR_TYPE_VIO,
+)  # fmt: skip
+_VISION_KEYS = (
+    "t_rx_monotonic_s", "t_rx_vehicle_s", "time_usec", "message", "frame_id",
+    "estimator_type", "quality", "north_m", "east_m", "down_m", "fused",
+)  # fmt: skip
 TRUTH_PERIOD_S = 0.02
 """Period of the truth-and-error record in the statistics (vehicle time) [s]."""
 _TRUTH_KEYS = (
@@ -124,6 +150,8 @@ class MockServer:
         UDP port to bind on 127.0.0.1 (0 = ephemeral).
     gcs_port : int or None
         Also send to 127.0.0.1:gcs_port.
+    arena : ArenaOptions or None
+        Serve the vehicle's true pose over NatNet (a mock OptiTrack Motive), started here.
     """
 
     def __init__(
@@ -133,6 +161,7 @@ class MockServer:
         seed: int = 0,
         port: int = 0,
         gcs_port: int | None = None,
+        arena: ArenaOptions | None = None,
     ) -> None:
         self.cfg = cfg
         self.faults = faults or Faults()
@@ -176,6 +205,13 @@ class MockServer:
         if self.vehicle.physics.estimator is not None:
             self._truth = {key: [] for key in _TRUTH_KEYS}
         self._truth_next_t = 0.0
+        # external vision received (ODOMETRY, VISION_POSITION_ESTIMATE), one row per message
+        self._vision: dict[str, list[Any]] = {key: [] for key in _VISION_KEYS}
+        self.arena: Arena | None = None
+        if arena is not None:
+            self.arena = Arena(arena)
+            self._publish_truth()
+            self.arena.start()
 
     # -- public ---------------------------------------------------------------------------
     @property
@@ -220,6 +256,8 @@ class MockServer:
             if self.peers:
                 self._send_streams(self._t(now))
         self.sock.close()
+        if self.arena is not None:
+            self.arena.stop()
 
     def stats(self) -> dict[str, Any]:
         """Raw statistics of the run (setpoint arrivals, modes, counters).
@@ -264,6 +302,8 @@ class MockServer:
             "first_armed_vehicle_s": v.first_armed_t_s,
             "estimator_faults": [f.record() for f in v.faults],
             "geofence": self._geofence_stats(),
+            "vision": self._vision_stats(),
+            "arena": None if self.arena is None else self.arena.stats(),
             "statustexts": self.texts,
             "physics_steps": self.counts["steps"],
             "max_physics_lag_s": self.max_lag_s,
@@ -281,6 +321,19 @@ class MockServer:
             "clears": transfer.clears,
             "params": {n: v.params[n] for n in ("GF_ACTION", "GF_MAX_HOR_DIST", "GF_MAX_VER_DIST")},
             "breaches": v.gf_breaches,
+        }
+
+    def _vision_stats(self) -> dict[str, Any]:
+        """External vision received and what became of it; the local position's validity."""
+        v = self.vehicle
+        vision = v.vision
+        return {
+            "enabled": vision is not None,
+            "fused": None if vision is None else vision.fused,
+            "rejected": None if vision is None else vision.rejected,
+            "resets": None if vision is None else vision.resets,
+            "local_position": v.lpos_log,
+            **self._vision,
         }
 
     def _truth_stats(self) -> dict[str, Any] | None:
@@ -313,11 +366,23 @@ class MockServer:
         first = self.vehicle.first_offboard_t_s
         return None if first is None else self._t() - first
 
+    def _publish_truth(self) -> None:
+        """Hand the arena the vehicle's true pose (its mocap serves it)."""
+        arena = self.arena
+        if arena is None:
+            return
+        ph = self.vehicle.physics
+        roll, pitch, yaw, *_ = ph.attitude()
+        arena.publish(ph.pos, quat_from_euler(roll, pitch, yaw))
+        if self.vehicle.first_offboard_t_s is not None:
+            arena.on_first_offboard()
+
     def _advance(self, now: float) -> None:
         v = self.vehicle
         v.physics.wind_ne_m_s = self.faults.wind_ned_m_s(self._t_offboard())
         before = v.physics.t_s
         v.update(self._t(now))
+        self._publish_truth()
         self._record_truth()
         steps = int(round((v.physics.t_s - before) / v.physics.dt_s))
         self.counts["steps"] += steps
@@ -427,6 +492,52 @@ class MockServer:
         elif v.setpoint is not None:
             # proof of life only: the mock flies position setpoints, not velocity/acceleration
             v.on_setpoint(t, v.setpoint.pos_ned_m, v.setpoint.yaw_rad)
+
+    # -- external vision ----------------------------------------------------------------
+    def _vision_sample(
+        self, msg: Any, time_usec: int, frame: int, estimator: int, quality: int,
+        pos: tuple[float, float, float] | None, to_ekf2: bool,
+    ) -> None:  # fmt: skip
+        """Record one external-vision message; hand its position to the vehicle's EKF2."""
+        now = time.monotonic()
+        t = self._t(now)
+        v = self.vehicle
+        v.update(t)
+        fused = to_ekf2 and pos is not None and v.on_vision(t, pos)
+        n, e, d = pos if pos is not None else (math.nan,) * 3
+        row = (now, t, time_usec, msg.get_type(), frame, estimator, quality, n, e, d, fused)
+        for key, value in zip(_VISION_KEYS, row, strict=True):
+            self._vision[key].append(value)
+        self._after_update()
+
+    def _on_odometry(self, msg: Any) -> None:
+        if msg.get_srcSystem() == self.sysid:
+            return  # another instance of ourselves
+        x, y, z = msg.x, msg.y, msg.z
+        frame = msg.frame_id
+        pos: tuple[float, float, float] | None = None
+        if not all(math.isfinite(c) for c in (x, y, z)):
+            pos = None
+        elif frame in (mavlink2.MAV_FRAME_LOCAL_NED, mavlink2.MAV_FRAME_LOCAL_FRD):
+            pos = (x, y, z)  # FRD taken as NED: the mock's heading is the vision's
+        elif frame == mavlink2.MAV_FRAME_LOCAL_ENU:
+            pos = (y, x, -z)
+        elif frame == mavlink2.MAV_FRAME_LOCAL_FLU:
+            pos = (x, -y, -z)
+        # other frames (MAVSDK's MOCAP_NED, 14, among them) leave the position unset
+        estimator = msg.estimator_type
+        if estimator not in _EV_ESTIMATORS and estimator != mavlink2.MAV_ESTIMATOR_TYPE_MOCAP:
+            self.vehicle.events.append((2, f"ODOMETRY: estimator_type {estimator} unsupported"))
+        # MOCAP goes to PX4's vehicle_mocap_odometry, which EKF2 does not read
+        to_ekf2 = estimator in _EV_ESTIMATORS
+        self._vision_sample(msg, msg.time_usec, frame, estimator, msg.quality, pos, to_ekf2)
+
+    def _on_vision_position_estimate(self, msg: Any) -> None:
+        pos = (msg.x, msg.y, msg.z)
+        finite = all(math.isfinite(c) for c in pos)
+        self._vision_sample(
+            msg, msg.usec, mavlink2.MAV_FRAME_LOCAL_NED, -1, -1, pos if finite else None, True
+        )
 
     # -- the fence transfer (MAV_MISSION_TYPE_FENCE, gcs.mock.geofence) --------------------
     def _for_missions(self, msg: Any) -> bool:
@@ -673,9 +784,15 @@ class MockServer:
         return max(0, int(round(100 - used)))
 
     def _send_sys_status(self) -> None:
-        health = _SENSORS_HEALTH | (_PREARM_CHECK if self.vehicle.armable else 0)
+        v = self.vehicle
+        present, enabled = _SENSORS_PRESENT, _SENSORS_ENABLED
+        health = _SENSORS_HEALTH | (_PREARM_CHECK if v.armable else 0)
+        if v.vision is not None:  # no GPS; the vision position healthy while it is valid
+            present = (present & ~_GPS_BIT) | _VISION_BIT
+            enabled = (enabled & ~_GPS_BIT) | _VISION_BIT
+            health = (health & ~_GPS_BIT) | (_VISION_BIT if v.local_position_valid else 0)
         self.mav.sys_status_send(
-            _SENSORS_PRESENT, _SENSORS_ENABLED, health, 117, 16200, -100, self._battery_pct(),
+            present, enabled, health, 117, 16200, -100, self._battery_pct(),
             0, 0, 0, 0, 0, 0, 0, 0, 1,
         )  # fmt: skip
 
@@ -687,6 +804,8 @@ class MockServer:
         self._ping_seq += 1
 
     def _send_gps_raw_int(self) -> None:
+        if self.vehicle.vision is not None:
+            return  # no GPS receiver indoors
         pos, vel = self._measured()
         lat, lon, alt = self._global(pos)
         speed = math.hypot(vel[0], vel[1])
@@ -706,10 +825,14 @@ class MockServer:
         )
 
     def _send_local_position_ned(self) -> None:
+        if not self.vehicle.local_position_valid:
+            return  # PX4 sends it only with xy_valid and v_xy_valid
         pos, vel = self._measured()
         self.mav.local_position_ned_send(self._boot_ms(), *pos, *vel)
 
     def _send_global_position_int(self) -> None:
+        if not self.vehicle.local_position_valid:
+            return
         pos, vel = self._measured()
         lat, lon, alt = self._global(pos)
         rel = -(pos[2] - self.vehicle.home_ned_m[2])
@@ -755,6 +878,8 @@ class MockServer:
         self.mav.extended_sys_state_send(0, int(self.vehicle.landed_state))
 
     def _send_odometry(self) -> None:
+        if not self.vehicle.local_position_valid:
+            return
         pos, vel = self._measured()
         roll, pitch, yaw, p, q, r = self._attitude()
         n = self.cfg.noise

@@ -37,6 +37,17 @@ Behaviour copied from PX4 v1.16 (commander sources and the SIH capture in
   while the vehicle is still outside (PX4's failsafe re-engages), and neither resumes
   OFFBOARD by itself. Outside the fence arming is refused, as PX4's arming check does.
 - Estimator faults (:mod:`gcs.mock.estimator`) start counting at the first arming.
+- External vision only (``vision.enabled``, :class:`gcs.mock.estimator.VisionAidedError`): no
+  local position until vision is fused; without one, arming, Takeoff, Hold and OFFBOARD
+  (position setpoints) are refused, as PX4's mode requirements (``mode_requirements.cpp``)
+  and its offboard check (position setpoints with ``local_position_invalid`` count as no
+  offboard signal) make them. When the local position is lost armed in the air (EKF2
+  declares it invalid ``EKF2_NOAID_TOUT`` after the aiding ended), PX4's failsafe falls
+  through its actions (``failsafe/framework.cpp``): the offboard-loss fallback (Position
+  mode) and Hold need a local position, Return a global one, Land the relaxed local one;
+  Descend needs only the attitude. The mock takes that end of the chain: LAND mode (PX4
+  reports Descend as AUTO.LAND) without horizontal control, level, at ``MPC_LAND_SPEED``,
+  then the land detector and auto-disarm as usual.
 """
 
 from __future__ import annotations
@@ -196,6 +207,8 @@ class Px4Params:
             "EKF2_GPS_CTRL": (integer, p.ekf2_gps_ctrl),
             "EKF2_EV_CTRL": (integer, p.ekf2_ev_ctrl),
             "EKF2_HGT_REF": (integer, p.ekf2_hgt_ref),
+            "EKF2_EV_DELAY": (real, p.ekf2_ev_delay_ms),
+            "EKF2_NOAID_TOUT": (integer, round(p.ekf2_noaid_tout_s * 1e6)),
             "GF_ACTION": (integer, p.gf_action),
             "GF_MAX_HOR_DIST": (real, p.gf_max_hor_dist_m),
             "GF_MAX_VER_DIST": (real, p.gf_max_ver_dist_m),
@@ -329,6 +342,10 @@ class Vehicle:
         self.mode_log: list[ModeChange] = []
         self.state_changed = False
         self.mode_log.append(ModeChange(0.0, self.mode.name, False))
+        self.vision = self.physics.vision
+        self._lpos_valid = self.vision is None
+        self.lpos_log: list[dict[str, object]] = []  # local position validity changes
+        self.lpos_failsafe = False  # descending without a local position
 
     # -- queries --------------------------------------------------------------------------
     @property
@@ -353,6 +370,16 @@ class Vehicle:
         long_enough = max(t - self._stream_start_t_s, 0.0) >= self.cfg.px4.offboard_min_stream_s
         return fresh and long_enough
 
+    @property
+    def local_position_valid(self) -> bool:
+        """EKF2 reports a horizontal local position (always, without external vision only)."""
+        return self._lpos_valid
+
+    def _lpos_now(self, t_s: float) -> bool:
+        if self.vision is None:
+            return True
+        return self.vision.xy_valid(t_s, self.params["EKF2_NOAID_TOUT"] / 1e6)
+
     def can_run(self, mode: Mode) -> bool:
         """PX4's ``canRun``: whether a mode may be engaged while armed.
 
@@ -365,6 +392,8 @@ class Vehicle:
         -------
         bool
         """
+        if mode in (Mode.OFFBOARD, Mode.HOLD, Mode.TAKEOFF) and not self.local_position_valid:
+            return False
         return mode is not Mode.OFFBOARD or self.offboard_signal()
 
     def armed_seconds(self) -> float:
@@ -379,7 +408,12 @@ class Vehicle:
     @property
     def armable(self) -> bool:
         """Pre-arm checks pass in the current mode (SYS_STATUS PREARM_CHECK health bit)."""
-        return self.can_run(self.mode) and self.mode is not Mode.LAND and not self._gf_denies
+        return (
+            self.can_run(self.mode)
+            and self.mode is not Mode.LAND
+            and not self._gf_denies
+            and self.local_position_valid
+        )
 
     @property
     def _gf_denies(self) -> bool:
@@ -484,6 +518,28 @@ class Vehicle:
         if self.mode is Mode.OFFBOARD and self.armed:
             self.physics.command(t_s, self.setpoint)
 
+    def on_vision(self, t_s: float, pos_ned_m: tuple[float, float, float]) -> bool:
+        """An external-vision position arrived (ODOMETRY or VISION_POSITION_ESTIMATE, NED).
+
+        Parameters
+        ----------
+        t_s : float
+            Arrival time [s] on the vehicle clock (the physics has been stepped to it).
+        pos_ned_m : tuple of float
+            The position, local NED [m].
+
+        Returns
+        -------
+        bool
+            It was fused (False without external-vision navigation, or rejected).
+        """
+        if self.vision is None:
+            return False
+        delay_s = self.params["EKF2_EV_DELAY"] / 1000.0
+        fused = self.vision.fuse(t_s, pos_ned_m, delay_s, int(self.params["EKF2_EV_CTRL"]))
+        self._update_lpos(t_s)
+        return fused
+
     def on_gcs_heartbeat(self, t_s: float) -> None:
         """A ground station's HEARTBEAT arrived: the data link is up.
 
@@ -519,6 +575,8 @@ class Vehicle:
                     for kind in self.gf_breach:
                         self.events.append((2, _GF_TEXTS[kind]))
                     why = "Resolve system health failures first"
+                elif not self.local_position_valid:
+                    why = "no local position estimate (is vision fused?)"
                 else:
                     why = "mode not available" if self.mode is not Mode.LAND else "landing"
                 self.events.append((2, f"Arming denied: {why}"))
@@ -603,9 +661,38 @@ class Vehicle:
             physics.step()
             self._commander()
 
+    def _update_lpos(self, t: float) -> None:
+        """Follow the local position's validity; take PX4's failsafe when it is lost flying."""
+        if self.vision is not None:
+            while self.vision.events:
+                self.events.append((4, f"EKF2: {self.vision.events.pop(0)}"))
+        valid = self._lpos_now(t)
+        if valid == self._lpos_valid:
+            return
+        self._lpos_valid = valid
+        self.lpos_log.append({"t_vehicle_s": t, "valid": valid})
+        self.state_changed = True
+        if valid:
+            self.events.append((6, "Local position estimate valid"))
+            if self.mode is Mode.LAND and self.armed:
+                self._apply_mode_target()  # hold the horizontal position again
+            return
+        self.events.append((3, "Local position estimate invalid"))
+        if not self.armed or self.landed:
+            return
+        if self.mode in (Mode.OFFBOARD, Mode.HOLD, Mode.TAKEOFF):
+            # Position mode, Hold, Return and Land cannot run: Descend (reported as AUTO.LAND)
+            self.failsafe = self.lpos_failsafe = True
+            self.events.append((2, "Failsafe activated: no local position, descending"))
+            self._enter(Mode.LAND)
+        elif self.mode is Mode.LAND:
+            self.lpos_failsafe = True
+            self._apply_mode_target()  # keep descending, now without horizontal control
+
     def _commander(self) -> None:
         t = self.t_s
         ph = self.physics
+        self._update_lpos(t)
         # offboard loss and resume
         if self.armed and self.mode is Mode.OFFBOARD and not self.offboard_signal(t):
             self.failsafe = True
@@ -617,6 +704,7 @@ class Vehicle:
             and self.user_mode is Mode.OFFBOARD
             and self.cfg.px4.offboard_resume
             and not self.data_link_lost
+            and not self.lpos_failsafe
             and self.offboard_signal(t)
         ):
             self.failsafe = False
@@ -695,6 +783,7 @@ class Vehicle:
         self.physics.set_armed(False)
         self.failsafe = False
         self.gf_failsafe = False
+        self.lpos_failsafe = False
         self.events.append((6, reason))
         self.user_mode = self._mode_after_disarm
         if not self._enter(self._mode_after_disarm):
@@ -733,7 +822,13 @@ class Vehicle:
                 ),
             )
         elif mode is Mode.LAND:
-            ph.command(t, Target(here, ph.yaw_rad, vz_m_s=self.params["MPC_LAND_SPEED"]))
+            ph.command(
+                t,
+                Target(
+                    here, ph.yaw_rad, vz_m_s=self.params["MPC_LAND_SPEED"],
+                    hold_xy=self.local_position_valid,
+                ),
+            )  # fmt: skip
         else:  # HOLD, POSCTL without sticks: stay here
             ph.command(t, Target(here, ph.yaw_rad))
 
