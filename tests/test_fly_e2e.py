@@ -14,7 +14,6 @@ import pytest
 import yaml
 from synthetic import CI_FLIGHT, SHORT, ci_profile
 
-from gcs.flight.settings import FlightSettings
 from gcs.io.runlog import RunDir
 from gcs.mock.config import Faults
 from gcs.mock.process import MockProcess
@@ -246,13 +245,22 @@ def test_low_battery_before_a_trial_lands_and_keeps_the_run_resumable(
 def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: Path) -> None:
     run_path = tmp_path / "run"
     stats = tmp_path / "stats.json"
-    # 4 s after the first OFFBOARD plus what comes before trial 0: the hold and the hover
-    # measurement, the shortest settle (its window and 1 s of speed span) and the hold
-    s = FlightSettings(**CI_FLIGHT)
-    loss_at_s = 4.0 + 2 * s.hover_before_trial_s + s.hover_measure_s + s.settle_time_s + 1.0
-    faults = Faults(link_loss_at_s=loss_at_s, link_loss_duration_s=2.0)
+    # the loss starts when gcs says trial 0 started (the mock's SIGUSR1): on a loaded machine
+    # take-off and settling take longer than any fixed time after the first OFFBOARD
+    faults = Faults(link_loss_duration_s=2.0)
     with MockProcess(seed=2, stats_path=stats, faults=faults) as mock:
-        code, out = fly_two_trials(tmp_path, tiny, run_path, "--connect", mock.url)
+        proc = gcs(
+            "fly", "--connect", mock.url, "--iter", 2, "--trajectory", tiny, "--run", run_path,
+            "--profile", ci_profile(tmp_path),
+        )  # fmt: skip
+        seen = []
+        for line in proc.stdout:
+            seen.append(line)
+            if "trial 0 started" in line:
+                mock.lose_link()
+                break
+        code, rest = finish(proc)
+    out = "".join(seen) + rest
     assert code == 2, out
     assert "landed and disarmed" in out, out
     run = RunDir.open(run_path)
@@ -260,6 +268,13 @@ def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: P
     assert not status.complete and status.reason
     assert run.complete_trials() == []
     assert final_state(stats)["armed"] is False
+    assert stats_link_loss_started(stats)
+
+
+def stats_link_loss_started(stats_path: Path) -> bool:
+    """Whether the mock recorded a link loss begun after the first OFFBOARD (by the signal)."""
+    faults = json.loads(stats_path.read_text())["faults"]
+    return faults["link_loss_at_s"] is not None and faults["link_loss_at_s"] > 0.0
 
 
 def test_out_of_arena_trajectory_is_refused_before_connecting(tmp_path: Path) -> None:

@@ -185,6 +185,7 @@ def run_mock(
     server = MockServer(cfg, faults, seed=seed, port=port, gcs_port=gcs_port, arena=arena)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: server.stop())
+    signal.signal(signal.SIGUSR1, lambda *_: server.lose_link_now())
     if server.arena is not None:
         sys.stdout.write(f"MOCAP {server.arena.url}\n")
         print(
@@ -233,7 +234,12 @@ def mock_command(
     ] = None,
     link_loss_for: Annotated[
         float | None,
-        typer.Option("--link-loss-for", min=0.0, help="Link loss duration, s (default: for good)."),
+        typer.Option(
+            "--link-loss-for",
+            min=0.0,
+            help="Link loss duration, s (default: for good). "
+            "SIGUSR1 to the mock starts a link loss of this length at once.",
+        ),
     ] = None,
     gust: Annotated[
         str | None, typer.Option("--gust", help="Wind gust START:DURATION:VN:VE (s, s, m/s, m/s).")

@@ -155,6 +155,15 @@ class MockProcess:
         finally:
             self._cleanup()
 
+    def lose_link(self) -> None:
+        """Start a link loss of ``faults.link_loss_duration_s`` now (the mock's SIGUSR1).
+
+        Lets a test time the loss on an event it saw (e.g. gcs printed that a trial started)
+        instead of guessing from the clock how long take-off and settling will take.
+        """
+        assert self._proc is not None, "the mock is not running"
+        self._proc.send_signal(signal.SIGUSR1)
+
     # -- internals ------------------------------------------------------------------------
     def _read_stdout(self) -> None:
         assert self._proc is not None and self._proc.stdout is not None

@@ -223,6 +223,16 @@ class MockServer:
         """Ask the loop to end (safe from a signal handler)."""
         self._stop = True
 
+    def lose_link_now(self) -> None:
+        """Start the link loss now, for ``link_loss_duration_s`` (``SIGUSR1``; signal-safe).
+
+        For tests that time the loss on an event (a trial has started) rather than on the
+        clock: the loop reads :attr:`faults` afresh every step, so one assignment starts it.
+        Before the first OFFBOARD it starts with the first OFFBOARD, as timed faults do.
+        """
+        t = self._t_offboard()
+        self.faults = dataclasses.replace(self.faults, link_loss_at_s=0.0 if t is None else t)
+
     def run(self, duration_s: float | None = None) -> None:
         """Run the real-time loop until :meth:`stop` (or for ``duration_s``).
 
