@@ -231,6 +231,15 @@ def fly(
             "would be flown; create, connect and fly nothing.",
         ),
     ] = False,
+    mocap: Annotated[
+        str | None,
+        typer.Option(
+            "--mocap",
+            help="Motion capture: SYSTEM://HOST[:PORT]/RIGID_BODY[?interface=IP] (optitrack, "
+            "vicon, qualisys, vrpn), or 'mock' with --mock (the mock drone's indoor arena, "
+            "vision only). Default: the profile's mocap.url, if any.",
+        ),
+    ] = None,
 ) -> None:
     """Fly N learning trials: take off, fly, learn, fly again, land.
 
@@ -257,9 +266,20 @@ def fly(
     incomplete, and --resume continues from the last complete trial. A second Ctrl-C while
     the vehicle lands is ignored. Setpoints outside the profile's arena are never sent.
 
+    Motion capture (--mocap, the profile's mocap section): the rigid body's pose is mapped to
+    NED (mocap.frame, yaw_offset_deg, origin_m; a mirrored mapping is refused) and forwarded
+    to PX4 as external vision from its own thread (mocap.forward). Before arming: EKF2's
+    EV_CTRL, HGT_REF, GPS_CTRL and EV_DELAY are read and judged, the body must be tracked and
+    the estimate agree with the mocap; after take-off one small move per horizontal axis must
+    go the right way in both. A stale, occluded, frozen or jumping stream aborts like a lost
+    link. Every trial keeps its raw samples (mocap-JJJ.csv) and the mocap on its grid;
+    learning and e_pos use the mocap (mocap.measurement).
+
     Examples:
 
         gcs fly --mock --iter 3
+
+        gcs fly --mock --mocap mock --iter 3
 
         gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc --check
 
@@ -291,6 +311,7 @@ def fly(
         logs=logs,
         use_mock=mock,
         check_only=check,
+        mocap=mocap,
     )
 
 
@@ -400,6 +421,7 @@ def report(
         choose_iterations,
         metrics_json,
         metrics_table,
+        mocap_lines,
         parse_iterations,
         run_metrics,
         session_lines,
@@ -426,7 +448,9 @@ def report(
         typer.echo(json.dumps(metrics_json(rows, rates, entries), indent=2))
     else:
         console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})", rates))
-        for line in trial_notes(entries, aborted_attempts(run)) + session_lines(run):
+        for line in (
+            trial_notes(entries, aborted_attempts(run)) + session_lines(run) + mocap_lines(run)
+        ):
             console.print(escape(line), highlight=False)
     if plot is not None:
         for path in write_plots(run, plot, chosen):

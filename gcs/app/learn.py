@@ -101,6 +101,27 @@ def trial_errors(record: TrialRecord) -> tuple[float, float]:
     return epos(ref, pos), max_error(ref, pos)
 
 
+def run_measurement(profile: Profile) -> str:
+    """What learning and e_pos use: the profile's ``mocap.measurement`` (default ``mocap``).
+
+    ``mocap`` takes a trial's motion-capture columns where it has them and the estimate in
+    trials without (flown without mocap); ``estimate`` always takes the vehicle's estimate.
+
+    Parameters
+    ----------
+    profile : Profile
+        The run's profile.
+
+    Returns
+    -------
+    str
+        ``"mocap"`` or ``"estimate"``.
+    """
+    from gcs.flight.mocap.settings import mocap_settings
+
+    return mocap_settings(profile.mocap, f"profile '{profile.name}'").measurement
+
+
 def differing_field(given: Any, recorded: Any, prefix: str = "") -> str | None:
     """The first field (dotted path, sorted) where two parsed YAML documents differ, or None.
 
@@ -244,7 +265,10 @@ def learn_run(
     j = run.newest_complete()
     if j is None:
         raise RunLogError(f"{run.path}: no complete trial to learn from")
-    record = run.read_trial(j)
+    try:
+        record = run.read_trial(j).measured(run_measurement(profile))
+    except RunLogError as exc:
+        raise RunLogError(f"{run.path}/trial-{j:03d}.csv: {exc}") from None
     ref = run.reference()
     if np.max(np.abs(record.ref_ned_m - ref.pos_ned_m)) > 1e-6:
         raise RunLogError(f"{run.path}/trial-{j:03d}.csv: reference columns differ from the run's")

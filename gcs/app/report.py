@@ -20,7 +20,7 @@ import numpy as np
 from rich.markup import escape
 from rich.table import Table
 
-from gcs.app.learn import trial_errors
+from gcs.app.learn import run_measurement, trial_errors
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.model import relative_degree
 from gcs.errors import ProfileError, RunLogError
@@ -34,6 +34,7 @@ __all__ = [
     "run_metrics",
     "trial_clock_rates",
     "session_lines",
+    "mocap_lines",
     "metrics_table",
     "metrics_json",
     "parse_iterations",
@@ -148,8 +149,33 @@ def aborted_attempts(run: RunDir) -> dict[int, int]:
     return counts
 
 
-def complete_records(run: RunDir) -> dict[int, TrialRecord]:
-    """Every complete trial of ``run``, by index.
+def complete_records(run: RunDir, measurement: str | None = None) -> dict[int, TrialRecord]:
+    """Every complete trial of ``run``, by index, measured as asked.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+    measurement : str or None
+        ``"mocap"`` or ``"estimate"`` (:meth:`TrialRecord.measured`); None: the run's own
+        (``mocap.measurement`` of its profile, default mocap where a trial has it).
+
+    Returns
+    -------
+    dict of int to TrialRecord
+    """
+    measurement = measurement or run_measurement(run.profile())
+    out = {}
+    for j in run.complete_trials():
+        try:
+            out[j] = run.read_trial(j).measured(measurement)
+        except RunLogError as exc:
+            raise RunLogError(f"{run.path}/trial-{j:03d}.csv: {exc}") from None
+    return out
+
+
+def mocap_lines(run: RunDir) -> list[str]:
+    """With motion capture: e_pos by the mocap and by the estimate per trial, and the lag.
 
     Parameters
     ----------
@@ -158,12 +184,31 @@ def complete_records(run: RunDir) -> dict[int, TrialRecord]:
 
     Returns
     -------
-    dict of int to TrialRecord
+    list of str
+        Empty when no complete trial has mocap columns.
     """
-    return {j: run.read_trial(j) for j in run.complete_trials()}
+    lines = []
+    for j in run.complete_trials():
+        record = run.read_trial(j)
+        if record.mocap_ned_m is None:
+            continue
+        e_est, _ = trial_errors(record)
+        try:
+            e_moc = f"{trial_errors(record.measured('mocap'))[0]:.4f} m"
+        except RunLogError:
+            e_moc = "n/a (mocap gaps)"
+        lag = _num((run.read_status(j).extra or {}).get("mocap_lag_s"))
+        lag_text = f"{lag * 1e3:.0f} ms" if np.isfinite(lag) else "n/a"
+        lines.append(
+            f"trial {j}: e_pos by mocap {e_moc}, by the estimate {e_est:.4f} m; the estimate "
+            f"lags the mocap by {lag_text}"
+        )
+    if lines:
+        lines.insert(0, f"measurement: {run_measurement(run.profile())} (mocap.measurement)")
+    return lines
 
 
-def run_metrics(run: RunDir) -> list[IterationMetrics]:
+def run_metrics(run: RunDir, measurement: str | None = None) -> list[IterationMetrics]:
     """Table IV rows of the complete trials of ``run`` (computed from the CSV files).
 
     Percentages are relative to trial 0, and the change column compares consecutive trials
@@ -173,6 +218,8 @@ def run_metrics(run: RunDir) -> list[IterationMetrics]:
     ----------
     run : RunDir
         The run directory.
+    measurement : str or None
+        ``"mocap"`` or ``"estimate"``; None: the run's own.
 
     Returns
     -------
@@ -183,7 +230,7 @@ def run_metrics(run: RunDir) -> list[IterationMetrics]:
     RunLogError
         No complete trial 0 (missing or incomplete), or e_pos,0 = 0.
     """
-    records = complete_records(run)
+    records = complete_records(run, measurement)
     if 0 not in records:
         what = "incomplete" if (run.path / "trial-000.json").exists() else "missing"
         raise RunLogError(
