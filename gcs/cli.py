@@ -530,6 +530,14 @@ def identify(
             "connect, fly and write nothing.",
         ),
     ] = False,
+    mocap: Annotated[
+        str | None,
+        typer.Option(
+            "--mocap",
+            help="Motion capture (as for gcs fly): a URL or 'mock' with --mock; the experiments "
+            "are then measured by it (mocap.measurement).",
+        ),
+    ] = None,
 ) -> None:
     """Identify the closed loop "position setpoint -> position" with PBSID and write a profile.
 
@@ -588,6 +596,7 @@ def identify(
         run_path=run_dir,
         default_profile=_named(DEFAULT_PROFILE, "profile", "--profile"),
         check_only=check,
+        mocap=mocap,
     )
 
 

@@ -62,6 +62,7 @@ __all__ = [
     "trial_extra",
     "session_record",
     "fly_run",
+    "raw_mocap",
 ]
 
 
@@ -713,7 +714,7 @@ class RunSource(SessionRecorder):
             j, True, epos_m=e, max_err_m=m, interpolated_share=recording.interpolated_share,
             extra=extra,
         )  # fmt: skip
-        self.run.write_trial(j, record, status, _raw(recording))
+        self.run.write_trial(j, record, status, raw_mocap(recording))
         learn_run(self.run)
         if self.on_row is not None:
             self.on_row(self.rows())
@@ -735,7 +736,7 @@ class RunSource(SessionRecorder):
             j, False, reason=reason, interpolated_share=recording.interpolated_share,
             extra=trial_extra(recording, self.session),
         )  # fmt: skip
-        self.run.write_trial(j, record, status, _raw(recording))
+        self.run.write_trial(j, record, status, raw_mocap(recording))
 
     def rows(self) -> list[IterationMetrics]:
         """Table IV rows of the complete trials so far (from the sidecars)."""
@@ -745,8 +746,18 @@ class RunSource(SessionRecorder):
         )
 
 
-def _raw(recording: TrialRecording) -> Any:
-    """A recording's raw mocap samples (None without mocap)."""
+def raw_mocap(recording: TrialRecording) -> Any:
+    """A recording's raw mocap samples (None without mocap).
+
+    Parameters
+    ----------
+    recording : TrialRecording
+        What the flight layer recorded.
+
+    Returns
+    -------
+    MocapSeries or None
+    """
     return None if recording.mocap is None else recording.mocap.series
 
 
