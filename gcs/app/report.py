@@ -198,10 +198,14 @@ def mocap_lines(run: RunDir) -> list[str]:
         except RunLogError:
             e_moc = "n/a (mocap gaps)"
         lag = _num((run.read_status(j).extra or {}).get("mocap_lag_s"))
-        lag_text = f"{lag * 1e3:.0f} ms" if np.isfinite(lag) else "n/a"
+        if not np.isfinite(lag):
+            lag_text = "the estimate's lag behind the mocap not measurable"
+        elif lag >= 0:
+            lag_text = f"the estimate lags the mocap by {lag * 1e3:.0f} ms"
+        else:
+            lag_text = f"the estimate leads the mocap by {-lag * 1e3:.0f} ms"
         lines.append(
-            f"trial {j}: e_pos by mocap {e_moc}, by the estimate {e_est:.4f} m; the estimate "
-            f"lags the mocap by {lag_text}"
+            f"trial {j}: e_pos by mocap {e_moc}, by the estimate {e_est:.4f} m; {lag_text}"
         )
     if lines:
         lines.insert(0, f"measurement: {run_measurement(run.profile())} (mocap.measurement)")
