@@ -227,6 +227,8 @@ def identify_with_display(
                 f"{', '.join(experiments.axes)}, two experiments of "
                 f"{settings.n_samples(profile.t_ilc_s)} samples; nothing flown"
             )
+            if mocap_plan is not None:
+                console.print(f"checked: {mocap_plan.describe()}")
             return None
         run_root, run_id = (logs, None) if run_path is None else (run_path.parent, run_path.name)
         run = create_identification_run(run_root, profile, settings, experiments, run_id)
