@@ -5,7 +5,9 @@ Everything flies the mock drone through ``gcs fly`` (real MAVSDK, real NatNet fr
 arena, the ``motioncapture`` library), under the live lock:
 
 - **jitter**: the default mock (its own estimate, so it flies without vision) with its arena
-  streaming at 120 Hz; one trial of ``eight-short`` with ``mocap.forward: false``, then one
+  streaming at 120 Hz and the EKF2 parameters of an indoor PX4 (so that forwarding passes the
+  pre-flight checks; the mock counts the vision and navigates on its own estimate); one trial
+  of ``eight-short`` with ``mocap.forward: false``, then one
   with ``true``, alternated ``--pairs`` times. Per flight: the setpoint inter-arrival times the
   mock recorded on its own clock within the trial, their deviation from 1/60 s (median, 99th
   percentile), and the largest send delay gcs saw. The ratio with/without is of medians
@@ -66,10 +68,16 @@ def gcs(*args: object) -> str:
     return proc.stdout
 
 
+INDOOR_PARAMS = {"ekf2_gps_ctrl": 0, "ekf2_ev_ctrl": 11, "ekf2_hgt_ref": 3, "ekf2_ev_delay_ms": 5.0}
+
+
 def jitter_flight(tmp: Path, forward: bool, seed: int) -> dict:
     run_path = tmp / f"jitter-{'on' if forward else 'off'}-{seed}"
     stats = tmp / f"stats-{run_path.name}.json"
-    with MockProcess(seed=seed, stats_path=stats, arena=ArenaOptions(seed=seed)) as mock:
+    config = tmp / "mock-own-estimate.yaml"
+    config.write_text(yaml.safe_dump({"px4": INDOOR_PARAMS}))
+    arena = ArenaOptions(seed=seed)
+    with MockProcess(config_path=config, seed=seed, stats_path=stats, arena=arena) as mock:
         gcs(
             "fly", "--connect", mock.url, "--mocap", mock.mocap_url, "--iter", 1,
             "--trajectory", "eight-short", "--run", run_path,

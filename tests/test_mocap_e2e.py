@@ -83,7 +83,8 @@ def test_indoor_flight_on_mocap_only_forwards_vision_logs_it_and_learns(
         assert samples.tracked.all()
         extra = run.read_status(j).extra
         assert extra["measurement"] == "mocap" and extra["mocap_samples"] == len(samples)
-        assert 0.0 <= extra["mocap_lag_s"] < 0.3
+        # the estimate leads by about EKF2_EV_DELAY (5 ms) less the loopback chain (docs/mocap.md)
+        assert -0.02 <= extra["mocap_lag_s"] <= 0.02
     statuses = [run.read_status(j) for j in (0, 1)]
     assert statuses[1].epos_m < statuses[0].epos_m  # learning on the mocap: e_pos falls
     session = json.loads((run_path / "session-001.json").read_text())
