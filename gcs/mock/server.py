@@ -496,14 +496,14 @@ class MockServer:
     # -- external vision ----------------------------------------------------------------
     def _vision_sample(
         self, msg: Any, time_usec: int, frame: int, estimator: int, quality: int,
-        pos: tuple[float, float, float] | None,
+        pos: tuple[float, float, float] | None, to_ekf2: bool,
     ) -> None:  # fmt: skip
-        """Record one external-vision message and hand its position to the vehicle."""
+        """Record one external-vision message; hand its position to the vehicle's EKF2."""
         now = time.monotonic()
         t = self._t(now)
         v = self.vehicle
         v.update(t)
-        fused = pos is not None and v.on_vision(t, pos)
+        fused = to_ekf2 and pos is not None and v.on_vision(t, pos)
         n, e, d = pos if pos is not None else (math.nan,) * 3
         row = (now, t, time_usec, msg.get_type(), frame, estimator, quality, n, e, d, fused)
         for key, value in zip(_VISION_KEYS, row, strict=True):
@@ -516,27 +516,27 @@ class MockServer:
         x, y, z = msg.x, msg.y, msg.z
         frame = msg.frame_id
         pos: tuple[float, float, float] | None = None
-        if frame in (mavlink2.MAV_FRAME_LOCAL_NED, mavlink2.MAV_FRAME_LOCAL_FRD):
-            pos = (x, y, z)  # FRD taken as NED: the EV yaw defines the frame (EKF2_EV_CTRL)
+        if not all(math.isfinite(c) for c in (x, y, z)):
+            pos = None
+        elif frame in (mavlink2.MAV_FRAME_LOCAL_NED, mavlink2.MAV_FRAME_LOCAL_FRD):
+            pos = (x, y, z)  # FRD taken as NED: the mock's heading is the vision's
         elif frame == mavlink2.MAV_FRAME_LOCAL_ENU:
             pos = (y, x, -z)
         elif frame == mavlink2.MAV_FRAME_LOCAL_FLU:
             pos = (x, -y, -z)
-        if msg.estimator_type not in _EV_ESTIMATORS:
-            if msg.estimator_type != mavlink2.MAV_ESTIMATOR_TYPE_MOCAP:
-                self.vehicle.events.append(
-                    (2, f"ODOMETRY: estimator_type {msg.estimator_type} unsupported")
-                )
-            pos = None  # MOCAP: PX4's vehicle_mocap_odometry, which EKF2 does not read
-        if pos is not None and not all(math.isfinite(c) for c in pos):
-            pos = None
-        self._vision_sample(msg, msg.time_usec, frame, msg.estimator_type, msg.quality, pos)
+        # other frames (MAVSDK's MOCAP_NED, 14, among them) leave the position unset
+        estimator = msg.estimator_type
+        if estimator not in _EV_ESTIMATORS and estimator != mavlink2.MAV_ESTIMATOR_TYPE_MOCAP:
+            self.vehicle.events.append((2, f"ODOMETRY: estimator_type {estimator} unsupported"))
+        # MOCAP goes to PX4's vehicle_mocap_odometry, which EKF2 does not read
+        to_ekf2 = estimator in _EV_ESTIMATORS
+        self._vision_sample(msg, msg.time_usec, frame, estimator, msg.quality, pos, to_ekf2)
 
     def _on_vision_position_estimate(self, msg: Any) -> None:
         pos = (msg.x, msg.y, msg.z)
         finite = all(math.isfinite(c) for c in pos)
         self._vision_sample(
-            msg, msg.usec, mavlink2.MAV_FRAME_LOCAL_NED, -1, -1, pos if finite else None
+            msg, msg.usec, mavlink2.MAV_FRAME_LOCAL_NED, -1, -1, pos if finite else None, True
         )
 
     # -- the fence transfer (MAV_MISSION_TYPE_FENCE, gcs.mock.geofence) --------------------
