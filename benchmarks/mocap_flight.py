@@ -41,6 +41,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from synthetic import CI_FLIGHT  # noqa: E402
 
 from gcs.app.learn import trial_errors  # noqa: E402
+from gcs.errors import RunLogError  # noqa: E402
 from gcs.io.runlog import RunDir  # noqa: E402
 from gcs.mock.mocap.arena import ArenaOptions  # noqa: E402
 from gcs.mock.process import MockProcess  # noqa: E402
@@ -112,10 +113,14 @@ def learning_flight(tmp: Path, measurement: str, iterations: int) -> dict:
     rows = []
     for j in run.complete_trials():
         record = run.read_trial(j)
+        try:
+            by_mocap = trial_errors(record.measured("mocap"))[0]
+        except RunLogError:  # a grid point without mocap (said in the output)
+            by_mocap = None
         rows.append(
             {
                 "j": j,
-                "epos_mocap_m": trial_errors(record.measured("mocap"))[0],
+                "epos_mocap_m": by_mocap,
                 "epos_estimate_m": trial_errors(record)[0],
                 "lag_s": run.read_status(j).extra.get("mocap_lag_s"),
             }
@@ -130,16 +135,17 @@ def figures(out: Path, jitter: list[dict], learning: list[dict]) -> None:
     import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
-    for forward, color in ((False, "tab:blue"), (True, "tab:orange")):
-        iv = np.concatenate([r["intervals_ms"] for r in jitter if r["forward"] == forward])
-        label = "forwarding on" if forward else "forwarding off"
-        ax.hist(iv, bins=np.arange(0, 40, 0.5), histtype="step", color=color, label=label)
-    ax.axvline(1e3 / STREAM_HZ, color="k", ls="--", lw=0.8)
-    ax.set_xlabel("setpoint inter-arrival at the vehicle [ms] (nominal 16.7)")
-    ax.set_ylabel("count")
-    ax.set_yscale("log")
-    ax.legend()
+    fig, ax = plt.subplots(figsize=(6.4, 3.4))
+    for i, r in enumerate(jitter):
+        color = "tab:orange" if r["forward"] else "tab:blue"
+        ax.bar(i - 0.2, r["dev_p50_ms"], 0.4, color=color, alpha=0.9)
+        ax.bar(i + 0.2, r["dev_p99_ms"], 0.4, color=color, alpha=0.45)
+    ax.set_xticks(
+        range(len(jitter)),
+        [f"{'on' if r['forward'] else 'off'} (seed {r['seed']})" for r in jitter],
+    )
+    ax.set_xlabel("forwarding (solid: median, light: 99th percentile)")
+    ax.set_ylabel("|inter-arrival - 1/60 s| [ms]")
     fig.tight_layout()
     fig.savefig(out / "mocap-jitter.png", dpi=110)
     fig, ax = plt.subplots(figsize=(6.4, 3.2))
@@ -153,9 +159,13 @@ def figures(out: Path, jitter: list[dict], learning: list[dict]) -> None:
     fig.savefig(out / "mocap-lag.png", dpi=110)
     fig, ax = plt.subplots(figsize=(6.4, 3.6))
     for run, color in zip(learning, ("tab:orange", "tab:blue"), strict=True):
-        j = [t["j"] for t in run["trials"]]
+        trials = run["trials"]
+        j = [t["j"] for t in trials]
         m = run["measurement"]
-        ax.plot(j, [t["epos_mocap_m"] for t in run["trials"]], "-o", color=color,
+        by_mocap = [
+            np.nan if t["epos_mocap_m"] is None else t["epos_mocap_m"] for t in run["trials"]
+        ]
+        ax.plot(j, by_mocap, "-o", color=color,
                 label=f"learning on {m}: e_pos by mocap")  # fmt: skip
         ax.plot(j, [t["epos_estimate_m"] for t in run["trials"]], "--x", color=color,
                 label=f"learning on {m}: e_pos by estimate")  # fmt: skip
@@ -171,11 +181,20 @@ def main() -> None:
     parser.add_argument("--pairs", type=int, default=2)
     parser.add_argument("--iter", type=int, default=6)
     parser.add_argument("--figures", type=Path)
+    parser.add_argument(
+        "--jitter-from", type=Path, help="take the jitter flights' JSON lines from this log"
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="gcs-mocap-bench-") as tmp_name:
         tmp = Path(tmp_name)
         jitter = []
-        for seed in range(args.pairs):
+        if args.jitter_from is not None:
+            jitter = [
+                json.loads(line)
+                for line in args.jitter_from.read_text().splitlines()
+                if line.startswith('{"forward"')
+            ]
+        for seed in range(args.pairs if not jitter else 0):
             for forward in (False, True):
                 jitter.append(jitter_flight(tmp, forward, seed))
                 r = jitter[-1]

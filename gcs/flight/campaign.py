@@ -33,6 +33,7 @@ from synchronous code (a command line) so that a second Ctrl-C cannot cut that s
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
 from collections.abc import Callable
@@ -449,7 +450,10 @@ async def fly_campaign(
             run = TrialRun(vehicle, setpoints, t_ilc_s, settings, progress)
             if mocap is not None:
                 mocap.drain()  # the trial's raw file starts here
-            recording = _with_mocap(await run.fly(), mocap)
+            recording = await run.fly()
+            if mocap is not None:  # y(N) needs a mocap sample on both sides
+                await asyncio.to_thread(_mocap_past_end, mocap, recording)
+            recording = _with_mocap(recording, mocap)
             run = None  # handed over below: no longer "in flight"
             emit(TrialFinished(j, recording))
             if recording.clock is not None:
@@ -720,6 +724,17 @@ def _with_mocap(recording: TrialRecording, mocap: MocapLink | None) -> TrialReco
     if mocap is None:
         return recording
     return replace(recording, mocap=trial_mocap(mocap.drain(), mocap.mapping, recording))
+
+
+def _mocap_past_end(mocap: MocapLink, recording: TrialRecording) -> None:
+    """Wait briefly (worker thread) for a tracked mocap sample after the trial's last grid
+    time; a stream that delivers none leaves y(N) without mocap, which learning then names."""
+    clock = recording.clock
+    if clock is None or not np.isfinite(recording.t0_vehicle_s):
+        return
+    end_local = float(clock.to_local(recording.t0_vehicle_s + recording.t_s[-1]))
+    with contextlib.suppress(MocapError):
+        mocap.client.wait_until(lambda s: s.tracked and s.t_receipt_s > end_local, 0.3)
 
 
 async def _mocap_before_arming(vehicle: Vehicle, mocap: MocapLink, emit: EventCallback) -> dict:
