@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: setup test fly lint bench clean
+.PHONY: setup test fly fly-mocap lint bench clean
 
 setup: $(VENV)/.installed
 
@@ -19,6 +19,9 @@ test: setup
 
 fly: setup
 	$(BIN)/gcs fly --mock --iter 3
+
+fly-mocap: setup
+	$(BIN)/gcs fly --mock --mocap mock --iter 3
 
 lint: setup
 	$(BIN)/ruff check .

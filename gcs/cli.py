@@ -242,6 +242,15 @@ def fly(
             "(antx-adaptive).",
         ),
     ] = False,
+    mocap: Annotated[
+        str | None,
+        typer.Option(
+            "--mocap",
+            help="Motion capture: SYSTEM://HOST[:PORT]/RIGID_BODY[?interface=IP] (optitrack, "
+            "vicon, qualisys, vrpn), or 'mock' with --mock (the mock drone's indoor arena, "
+            "vision only). Default: the profile's mocap.url, if any.",
+        ),
+    ] = None,
 ) -> None:
     """Fly N learning trials: take off, fly, learn, fly again, land.
 
@@ -276,11 +285,21 @@ def fly(
     incomplete, and --resume continues from the last complete trial. A second Ctrl-C while
     the vehicle lands is ignored. Setpoints outside the profile's arena are never sent.
 
+    Motion capture (--mocap, the profile's mocap section): the rigid body's pose is mapped to
+    NED (mocap.frame, yaw_offset_deg, origin_m; a mirrored mapping is refused) and forwarded
+    to PX4 as external vision from its own thread (mocap.forward). Before arming: EKF2's
+    EV_CTRL, HGT_REF, GPS_CTRL and EV_DELAY are read and judged, the body must be tracked and
+    the estimate agree with the mocap; after take-off one small move per horizontal axis must
+    go the right way in both. A stale, occluded, frozen or jumping stream aborts like a lost
+    link. Every trial keeps its raw samples (mocap-JJJ.csv) and the mocap on its grid;
+    learning and e_pos use the mocap (mocap.measurement).
+
     Examples:
 
         gcs fly --mock --iter 3
 
         gcs fly --mock --profile antx-adaptive --iter 10 --until-converged
+        gcs fly --mock --mocap mock --iter 3
 
         gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc --check
 
@@ -313,6 +332,7 @@ def fly(
         use_mock=mock,
         check_only=check,
         until_converged=until_converged,
+        mocap=mocap,
     )
 
 
@@ -455,6 +475,7 @@ def report(
         learning_notes,
         metrics_json,
         metrics_table,
+        mocap_lines,
         parse_iterations,
         run_learning,
         run_metrics,
@@ -487,7 +508,12 @@ def report(
     else:
         console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})", rates, learning))
         notes = learning_notes(learning) if learning is not None else []
-        for line in notes + trial_notes(entries, aborted_attempts(run)) + session_lines(run):
+        for line in (
+            notes
+            + trial_notes(entries, aborted_attempts(run))
+            + session_lines(run)
+            + mocap_lines(run)
+        ):
             console.print(escape(line), highlight=False)
     if plot is not None:
         for path in write_plots(run, plot, chosen):
@@ -567,6 +593,14 @@ def identify(
             "connect, fly and write nothing.",
         ),
     ] = False,
+    mocap: Annotated[
+        str | None,
+        typer.Option(
+            "--mocap",
+            help="Motion capture (as for gcs fly): a URL or 'mock' with --mock; the experiments "
+            "are then measured by it (mocap.measurement).",
+        ),
+    ] = None,
 ) -> None:
     """Identify the closed loop "position setpoint -> position" with PBSID and write a profile.
 
@@ -625,6 +659,7 @@ def identify(
         run_path=run_dir,
         default_profile=_named(DEFAULT_PROFILE, "profile", "--profile"),
         check_only=check,
+        mocap=mocap,
     )
 
 

@@ -1177,11 +1177,45 @@ def _output_cases() -> Iterator[Case]:
     yield Case(k, "learn", "no run directory given", lambda ws: ["learn"], "run_dir")
 
 
+def _mocap_cases() -> Iterator[Case]:
+    k = "motion capture (--mocap, the profile's mocap section)"
+    for section, what, expect in (
+        ({"right_handed": False}, "a mirrored (left-handed) mapping", "mocap.right_handed"),
+        ({"frame": "motive"}, "an unknown frame convention", "mocap.frame"),
+        ({"north_axis": "+y"}, "north along Motive's up axis", "north_axis"),
+        ({"message": "pose"}, "an unknown message", "mocap.message"),
+        ({"measurement": "truth"}, "an unknown measurement", "mocap.measurement"),
+        ({"position_std_m": 0.0}, "a zero position standard deviation", "position_std_m"),
+        ({"forward": "yes"}, "forward not true or false", "mocap.forward"),
+        ({"url": "optitrack://motive.local/drone"}, "a host name for OptiTrack", "IPv4"),
+        ({"colour": 1}, "an unknown field", "mocap.colour"),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"mocap: {section!r} ({what})",
+            lambda ws, v=section: _fly(
+                ws, "--mocap", "optitrack://127.0.0.1/drone", profile=ws.profile("mocap", v)
+            ),  # fmt: skip
+            expect,
+        )
+    for url, what, expect in (
+        ("natnet://127.0.0.1/drone", "an unknown system", "scheme must be one of"),
+        ("optitrack://127.0.0.1", "no rigid body", "rigid body name is missing"),
+        ("optitrack://127.0.0.1:99999/drone", "a port out of range", "bad port"),
+        ("vicon://10.0.0.5/cf1?iface=1", "an unknown option", "unknown option"),
+        ("mock", "the mock's arena without --mock", "needs --mock"),
+    ):
+        yield Case(k, "fly", f"--mocap {url} ({what})", lambda ws, u=url: _fly(ws, "--mocap", u),
+                   expect)  # fmt: skip
+
+
 def catalogue() -> list[Case]:
     """Every case, in a stable order."""
     return [
         *_profile_cases(),
         *_trajectory_cases(),
+        *_mocap_cases(),
         *_run_cases(),
         *_resume_cases(),
         *_identify_cases(),

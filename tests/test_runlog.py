@@ -188,7 +188,9 @@ def test_complete_trial_never_overwritten(tmp_path):
 def test_wrong_length_record_refused(tmp_path):
     run = new_run(tmp_path)
     rec = record_for(run)
-    short = TrialRecord(*(getattr(rec, f)[:-3] for f in rec.__dataclass_fields__))
+    short = TrialRecord(
+        *(None if (v := getattr(rec, f)) is None else v[:-3] for f in rec.__dataclass_fields__)
+    )
     with pytest.raises(RunLogError, match="samples"):
         run.write_trial(0, short, complete(0))
     assert not (run.path / "trial-000.csv").exists()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ from gcs.app.learn import (
     differing_field,
     learn_run,
     models_in_use,
+    run_measurement,
     trial_errors,
 )
 from gcs.core.metrics import IterationMetrics, iteration_table
@@ -36,6 +37,9 @@ from gcs.core.trajectory import (
 from gcs.errors import PathError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.fence import Fence
+from gcs.flight.mocap.link import MocapLink
+from gcs.flight.mocap.settings import MocapSettings, mocap_settings
+from gcs.flight.mocap.source import MocapSource
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec, load_profile, load_trajectory
@@ -43,6 +47,9 @@ from gcs.io.paths import check_new_dir, check_output_dir
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
 
 __all__ = [
+    "MOCK_MOCAP",
+    "MocapPlan",
+    "plan_mocap",
     "FlyPlan",
     "plan_fly",
     "start_run",
@@ -61,6 +68,7 @@ __all__ = [
     "converged_reason",
     "newest_record",
     "check_until_converged",
+    "raw_mocap",
 ]
 
 
@@ -166,6 +174,89 @@ def check_mock_config(path: Path | None) -> None:
         load_mock_config(path)
 
 
+MOCK_MOCAP = "mock"
+"""``--mocap mock``: the mock drone's own arena (with ``--mock``)."""
+
+
+@dataclass(frozen=True)
+class MocapPlan:
+    """The motion capture of a flight, checked before anything starts.
+
+    Parameters
+    ----------
+    settings : MocapSettings
+        The profile's ``mocap`` section.
+    source : MocapSource or None
+        Where to read; None for the mock drone's arena (its URL is known once it runs).
+    """
+
+    settings: MocapSettings
+    source: MocapSource | None
+
+    def link(self, mock_url: str | None = None) -> MocapLink:
+        """The (not yet started) link of this plan.
+
+        Parameters
+        ----------
+        mock_url : str or None
+            The arena's URL, for a plan of the mock's arena.
+
+        Returns
+        -------
+        MocapLink
+        """
+        from gcs.flight.mocap.source import parse_mocap_url
+
+        source = self.source or parse_mocap_url(mock_url or "")
+        return MocapLink(source, self.settings.mapping(source), self.settings)
+
+    def describe(self) -> str:
+        """One line: source, mapping, forwarding, measurement.
+
+        Returns
+        -------
+        str
+        """
+        where = self.source.url() if self.source is not None else "the mock drone's arena"
+        s = self.settings
+        forward = f"forwarded as {s.message}" if s.forward else "not forwarded"
+        return f"mocap {where} ({forward}; learning on {s.measurement})"
+
+
+def plan_mocap(profile: Profile, where: str, mocap: str | None, use_mock: bool) -> MocapPlan | None:
+    """Check the profile's ``mocap`` section and ``--mocap``; None when no mocap is used.
+
+    Parameters
+    ----------
+    profile : Profile
+        The profile (its ``mocap`` section is checked even when no mocap is used).
+    where : str
+        The profile's file, for messages.
+    mocap : str or None
+        ``--mocap``: a URL, ``mock`` (with ``--mock``) or None (the profile's ``mocap.url``).
+    use_mock : bool
+        The flight is on the mock drone.
+
+    Returns
+    -------
+    MocapPlan or None
+    """
+    settings = mocap_settings(profile.mocap, where)
+    if mocap == MOCK_MOCAP:
+        if not use_mock:
+            raise PathError("--mocap mock: the mock's arena needs --mock (a real arena: its URL)")
+        settings.mapping(MocapSource("optitrack", "127.0.0.1", 1510, "drone"))  # axes valid
+        return MocapPlan(settings, None)
+    source = settings.source(mocap)
+    if source is None:
+        return None
+    try:
+        settings.mapping(source)
+    except ProfileError as exc:
+        raise ProfileError(f"{where}: field 'mocap': {exc}") from None
+    return MocapPlan(settings, source)
+
+
 @dataclass(frozen=True)
 class FlyPlan:
     """Everything ``gcs fly`` needs, validated before anything is created, moved or flown.
@@ -190,6 +281,8 @@ class FlyPlan:
         Exact path of the new run.
     logs : Path
         Parent of new runs.
+    mocap : MocapPlan or None
+        The motion capture of the flight.
     """
 
     profile: Profile
@@ -201,6 +294,7 @@ class FlyPlan:
     run: RunDir | None
     run_path: Path | None
     logs: Path
+    mocap: MocapPlan | None = None
 
 
 def plan_fly(
@@ -211,6 +305,8 @@ def plan_fly(
     resume: Path | None = None,
     logs: Path = Path("logs"),
     until_converged: bool = False,
+    mocap: str | None = None,
+    use_mock: bool = False,
 ) -> FlyPlan:
     """Validate everything a flight needs; nothing is created, moved or flown here.
 
@@ -236,6 +332,10 @@ def plan_fly(
     until_converged : bool
         ``--until-converged``: the profile must measure the floor (see
         :func:`check_until_converged`).
+    mocap : str or None
+        ``--mocap`` (see :func:`plan_mocap`).
+    use_mock : bool
+        The flight is on the mock drone.
 
     Returns
     -------
@@ -245,7 +345,8 @@ def plan_fly(
         plan = _plan_resume(resume, profile_path, trajectory_path, algorithm, logs)
         if until_converged:
             check_until_converged(plan.profile, f"{resume}/manifest.json:profile")
-        return plan
+        where = f"{plan.run.path}/manifest.json:profile" if plan.run else str(resume)
+        return replace(plan, mocap=plan_mocap(plan.profile, where, mocap, use_mock))
     if profile_path is None or trajectory_path is None:
         raise ProfileError("a new run needs a profile and a trajectory")
     profile, where = load_profile(profile_path), str(profile_path)
@@ -254,13 +355,16 @@ def plan_fly(
     trajectory = load_trajectory(trajectory_path)
     algorithm = algorithm or profile.learning.algorithm
     settings = flight_settings(profile, where)
+    mocap_plan = plan_mocap(profile, where, mocap, use_mock)
     ref = _reference(profile, trajectory, str(trajectory_path))
     check_learnable(profile, ref, algorithm, where)
     if run_path is not None:
         check_new_dir(run_path, "--run")
     else:
         check_output_dir(logs, "--logs")
-    return FlyPlan(profile, trajectory, algorithm, settings, ref, 0, None, run_path, logs)
+    return FlyPlan(
+        profile, trajectory, algorithm, settings, ref, 0, None, run_path, logs, mocap_plan
+    )
 
 
 def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Reference:
@@ -445,6 +549,7 @@ def to_record(
         vel_ned_m_s=recording.vel_ned_m_s,
         sp_sent_s=np.append(recording.sent_s, np.nan),
         interpolated=recording.interpolated,
+        mocap_ned_m=None if recording.mocap is None else recording.mocap.pos_ned_m,
     )
 
 
@@ -466,11 +571,21 @@ def trial_extra(recording: TrialRecording, session: int | None) -> dict[str, Any
         vehicle's grid), ``vehicle_time_rate`` (vehicle-time / wall-time rate of the trial,
         None if unknown), ``clock_latency_p50_s`` (median receipt delay above the
         clock fit), ``t0_vehicle_s`` (the trial's k = 0 on the vehicle's clock: time since
-        boot for PX4, to find the trial in its own log), ``session``.
+        boot for PX4, to find the trial in its own log), ``session``; with motion capture
+        also ``mocap_lag_s`` (how far the estimate lags the mocap), ``mocap_samples`` and
+        ``mocap_tracked_share``.
     """
     clock = recording.clock
     offset = np.abs(recording.sent_s - recording.t_s[:-1])
-    return {
+    mocap = {}
+    if recording.mocap is not None:
+        series = recording.mocap.series
+        mocap = {
+            "mocap_lag_s": recording.mocap.lag_s,
+            "mocap_samples": len(series),
+            "mocap_tracked_share": float(np.mean(series.tracked)) if len(series) else None,
+        }
+    return mocap | {
         "max_send_late_s": recording.max_send_late_s,
         "max_sent_offset_s": float(np.nanmax(offset)) if np.any(np.isfinite(offset)) else None,
         "t0_vehicle_s": recording.t0_vehicle_s,
@@ -494,7 +609,8 @@ def session_record(session: FlightSession) -> dict[str, Any]:
         ``url``, ``first_trial``, ``navigation`` (source name, line, parameters),
         ``tolerance_m``, ``speed_tolerance_m_s``, ``hovers`` (statistics, verdict and
         clock rate of each judged hover), ``fence`` (arena, margin and limits watched),
-        ``geofence`` (the vehicle's own fence as set up before take-off), ``abort_reason``
+        ``geofence`` (the vehicle's own fence as set up before take-off), ``mocap`` (source,
+        mapping, forwarding, EKF2 findings, pre-flight checks; None without), ``abort_reason``
         (why the session stopped early, or None), plus ``written_utc``.
     """
     from datetime import UTC, datetime
@@ -507,6 +623,7 @@ def session_record(session: FlightSession) -> dict[str, Any]:
         "fence": None if session.fence is None else asdict(session.fence),
         "geofence": None if session.geofence is None else asdict(session.geofence),
         "abort_reason": session.abort_reason,
+        "mocap": session.mocap,
         "tolerance_m": session.tolerance_m,
         "speed_tolerance_m_s": session.speed_tolerance_m_s,
         "hovers": [asdict(h) for h in session.hovers],
@@ -656,12 +773,17 @@ class RunSource(SessionRecorder):
             else None.
         """
         record = to_record(self.run, recording)
-        e, m = trial_errors(record)
+        extra = trial_extra(recording, self.session)
+        measured = record.measured(run_measurement(self.run.profile()))
+        e, m = trial_errors(measured)
+        if record.mocap_ned_m is not None:
+            extra["epos_estimate_m"] = trial_errors(record)[0]
+            extra["measurement"] = "estimate" if measured is record else "mocap"
         status = TrialStatus(
             j, True, epos_m=e, max_err_m=m, interpolated_share=recording.interpolated_share,
-            extra=trial_extra(recording, self.session),
+            extra=extra,
         )  # fmt: skip
-        self.run.write_trial(j, record, status)
+        self.run.write_trial(j, record, status, raw_mocap(recording))
         outcome = learn_run(self.run)
         if self.on_row is not None:
             self.on_row(self.rows())
@@ -686,7 +808,7 @@ class RunSource(SessionRecorder):
             j, False, reason=reason, interpolated_share=recording.interpolated_share,
             extra=trial_extra(recording, self.session),
         )  # fmt: skip
-        self.run.write_trial(j, record, status)
+        self.run.write_trial(j, record, status, raw_mocap(recording))
 
     def rows(self) -> list[IterationMetrics]:
         """Table IV rows of the complete trials so far (from the sidecars)."""
@@ -740,6 +862,21 @@ def newest_record(run: RunDir) -> dict | None:
     return run.read_learn_record(j)
 
 
+def raw_mocap(recording: TrialRecording) -> Any:
+    """A recording's raw mocap samples (None without mocap).
+
+    Parameters
+    ----------
+    recording : TrialRecording
+        What the flight layer recorded.
+
+    Returns
+    -------
+    MocapSeries or None
+    """
+    return None if recording.mocap is None else recording.mocap.series
+
+
 def fly_run(
     url: str,
     run: RunDir,
@@ -749,6 +886,7 @@ def fly_run(
     on_row: Callable[[list[IterationMetrics]], None] | None = None,
     on_learn: Callable[[LearnOutcome], None] | None = None,
     until_converged: bool = False,
+    mocap: MocapLink | None = None,
 ) -> RunSource:
     """Fly ``iterations`` trials of ``run`` from its next trial, learning between trials.
 
@@ -770,6 +908,8 @@ def fly_run(
         Receives what each learning step did.
     until_converged : bool
         Land as soon as learning has converged (``iterations`` stays the cap).
+    mocap : MocapLink or None
+        A started motion-capture link (forwarded, checked, watched, logged).
 
     Returns
     -------
@@ -780,5 +920,7 @@ def fly_run(
         raise RunLogError(f"{run.path}: no setpoints for trial {first}; run 'gcs learn' first")
     source = RunSource(run, on_row, on_learn=on_learn, until_converged=until_converged)
     fence = flight_fence(run.profile(), settings)
-    run_campaign(url, source, iterations, first, settings, run.t_ilc_s, on_event, fence=fence)
+    run_campaign(
+        url, source, iterations, first, settings, run.t_ilc_s, on_event, fence=fence, mocap=mocap
+    )
     return source

@@ -11,6 +11,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from gcs.app.fly import (
+    MocapPlan,
     check_mock_config,
     check_url,
     converged_reason,
@@ -24,6 +25,7 @@ from gcs.app.report import decision_lines, metrics_table
 from gcs.core.metrics import IterationMetrics
 from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
+from gcs.flight.mocap.link import MocapLink
 from gcs.io.runlog import RunDir
 
 __all__ = ["fly_with_display", "live_progress", "vehicle_url", "learning_lines"]
@@ -31,9 +33,18 @@ __all__ = ["fly_with_display", "live_progress", "vehicle_url", "learning_lines"]
 
 @contextlib.contextmanager
 def vehicle_url(
-    connect: str | None, use_mock: bool, mock_config: Path | None, seed: int, console: Console
-) -> Iterator[str]:
-    """Yield the MAVSDK URL to fly: a real vehicle's, or a mock drone started for the flight.
+    connect: str | None,
+    use_mock: bool,
+    mock_config: Path | None,
+    seed: int,
+    console: Console,
+    mocap: MocapPlan | None = None,
+) -> Iterator[tuple[str, MocapLink | None]]:
+    """Yield the MAVSDK URL to fly and the started mocap link (None without mocap).
+
+    A real vehicle's URL, or a mock drone started for the flight (with its arena's mock
+    Motive when ``mocap`` reads the mock's arena). The mocap link is started here and
+    stopped after the flight (the stream keeps feeding the vehicle while it lands).
 
     Parameters
     ----------
@@ -47,20 +58,36 @@ def vehicle_url(
         Seed of the mock drone.
     console : Console
         Where to print the mock's URL.
+    mocap : MocapPlan or None
+        The flight's motion capture.
 
     Yields
     ------
-    str
+    tuple of (str, MocapLink or None)
     """
-    if not use_mock:
-        assert connect is not None
-        yield connect
-        return
-    from gcs.mock.process import MockProcess
+    with contextlib.ExitStack() as stack:
+        url, mocap_url = connect, None
+        if use_mock:
+            from gcs.mock.mocap.arena import ArenaOptions
+            from gcs.mock.process import MockProcess
 
-    with MockProcess(config_path=mock_config, seed=seed) as mock:
-        console.print(f"[dim]mock drone at {mock.url}[/]")
-        yield mock.url
+            arena = None
+            if mocap is not None and mocap.source is None:
+                s = mocap.settings
+                arena = ArenaOptions(
+                    room=s.frame or "optitrack", yaw_offset_deg=s.yaw_offset_deg, seed=seed
+                )
+            mock = stack.enter_context(MockProcess(config_path=mock_config, seed=seed, arena=arena))
+            url, mocap_url = mock.url, mock.mocap_url or None
+            console.print(f"[dim]mock drone at {mock.url}[/]")
+            if mocap_url:
+                console.print(f"[dim]mock motion capture at {mocap_url}[/]")
+        link = None
+        if mocap is not None:
+            link = stack.enter_context(mocap.link(mocap_url))
+            console.print(f"[dim]mocap: {link.source.url()} streaming[/]")
+        assert url is not None
+        yield url, link
 
 
 def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]:
@@ -182,6 +209,7 @@ def fly_with_display(
     use_mock: bool,
     check_only: bool = False,
     until_converged: bool = False,
+    mocap: str | None = None,
 ) -> RunDir | None:
     """Validate everything, then set up (or resume) a run and fly it with a live display.
 
@@ -219,14 +247,23 @@ def fly_with_display(
     until_converged : bool
         Land once learning has converged (``iterations`` stays the cap); a resumed run that
         has converged already is not flown.
+    mocap : str or None
+        ``--mocap``: a URL, ``mock`` (the mock's arena), or None (the profile's
+        ``mocap.url``, if any).
 
     Returns
     -------
     RunDir or None
         The run flown (None with ``check_only``).
     """
-    plan = plan_fly(profile_path, trajectory_path, algorithm, run_path, resume, logs,
-                    until_converged)  # fmt: skip
+    plan = plan_fly(
+        profile_path, trajectory_path, algorithm, run_path, resume, logs, until_converged,
+        mocap, use_mock,
+    )  # fmt: skip
+    if use_mock and mock_config is None and plan.mocap is not None and plan.mocap.source is None:
+        from gcs.io.paths import resolve_named
+
+        mock_config = resolve_named("mock-mocap", "profile", "--mock-config")  # vision only
     if use_mock:
         check_mock_config(mock_config)
     else:
@@ -245,6 +282,8 @@ def fly_with_display(
             f"{plan.algorithm}, trials {plan.first_trial}..{plan.first_trial + iterations - 1} "
             f"in {where}; nothing flown"
         )
+        if plan.mocap is not None:
+            console.print(f"checked: {plan.mocap.describe()}")
         return None
     run = start_run(plan)
     settings = plan.settings
@@ -277,10 +316,20 @@ def fly_with_display(
 
     try:
         with (
-            vehicle_url(connect, use_mock, mock_config, seed, console) as url,
+            vehicle_url(connect, use_mock, mock_config, seed, console, plan.mocap) as (url, link),
             progress,
         ):
-            fly_run(url, run, iterations, settings, on_event, on_row, on_learn, until_converged)
+            fly_run(
+                url,
+                run,
+                iterations,
+                settings,
+                on_event,
+                on_row,
+                on_learn,
+                until_converged,
+                mocap=link,
+            )
     except KeyboardInterrupt:
         console.print(
             f"interrupted; completed trials are in {run.path}. "

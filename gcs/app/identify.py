@@ -37,6 +37,7 @@ from gcs.app.fly import (
     SessionRecorder,
     flight_fence,
     flyable_setpoints,
+    raw_mocap,
     to_record,
     trial_extra,
 )
@@ -55,6 +56,7 @@ from gcs.core.pbsid import (
 from gcs.core.trajectory import MAX_SAMPLES, Reference, points_outside
 from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import run_campaign
+from gcs.flight.mocap.link import MocapLink
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec, _Fields, profile_from_dict
@@ -472,7 +474,7 @@ class IdentificationSource(SessionRecorder):
             j, True, epos_m=e, max_err_m=m, interpolated_share=recording.interpolated_share,
             extra=trial_extra(recording, self.session),
         )  # fmt: skip
-        self.run.write_trial(j, record, status)
+        self.run.write_trial(j, record, status, raw_mocap(recording))
 
     def record_incomplete(self, j: int, recording: TrialRecording, reason: str) -> None:
         """Write an interrupted experiment, marked incomplete (never identified from).
@@ -491,7 +493,7 @@ class IdentificationSource(SessionRecorder):
             j, False, reason=reason, interpolated_share=recording.interpolated_share,
             extra=trial_extra(recording, self.session),
         )  # fmt: skip
-        self.run.write_trial(j, record, status)
+        self.run.write_trial(j, record, status, raw_mocap(recording))
 
 
 def fly_identification(
@@ -499,6 +501,7 @@ def fly_identification(
     run: RunDir,
     settings: FlightSettings,
     on_event: Callable[[object], None] | None = None,
+    mocap: MocapLink | None = None,
 ) -> None:
     """Fly both experiments of an identification run (take off, 2 trials, land).
 
@@ -512,11 +515,13 @@ def fly_identification(
         Flight settings of the profile.
     on_event : callable, optional
         Receives the campaign events.
+    mocap : MocapLink or None
+        A started motion-capture link (forwarded, checked, watched, logged).
     """
     center = np.asarray(_run_source(run)["center_ned_m"], dtype=float)
     source = IdentificationSource(run, center)
     fence = flight_fence(run.profile(), settings)
-    run_campaign(url, source, 2, 0, settings, run.t_ilc_s, on_event, fence=fence)
+    run_campaign(url, source, 2, 0, settings, run.t_ilc_s, on_event, fence=fence, mocap=mocap)
 
 
 # --------------------------------------------------------------------------- identification
@@ -608,9 +613,12 @@ def run_axes(run: RunDir, axis: str | None = None) -> tuple[str, ...]:
 
 
 def _trial(run: RunDir, j: int, what: str) -> TrialRecord:
+    """Experiment j as identification measures it (``mocap.measurement`` of the run)."""
+    from gcs.app.learn import measured_trial, run_measurement
+
     if not (run.path / f"trial-{j:03d}.json").exists():
         raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
-    return run.read_trial(j)
+    return measured_trial(run, j, run_measurement(run.profile()))
 
 
 def identify_run(

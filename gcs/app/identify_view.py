@@ -128,6 +128,7 @@ def identify_with_display(
     run_path: Path | None,
     default_profile: Path,
     check_only: bool = False,
+    mocap: str | None = None,
 ) -> Path | None:
     """Fly the two experiments (or read them), identify, print, write profile and plots.
 
@@ -167,6 +168,8 @@ def identify_with_display(
         Profile used when flying without ``profile_path``.
     check_only : bool
         Validate and say what would be done, then stop: nothing is created, flown or written.
+    mocap : str or None
+        ``--mocap``: a URL, ``mock`` (the mock's arena) or None (the profile's ``mocap.url``).
 
     Returns
     -------
@@ -194,13 +197,18 @@ def identify_with_display(
             console.print(f"checked: {run.path}, profile '{profile.name}'; nothing identified")
             return None
     else:
-        from gcs.app.fly import check_mock_config, check_url, flight_settings
+        from gcs.app.fly import check_mock_config, check_url, flight_settings, plan_mocap
         from gcs.app.fly_view import live_progress, vehicle_url
 
         path = profile_path or default_profile
         profile, where = load_profile(path), str(path)
         settings = identification_settings(profile, where, seed)
         flight = flight_settings(profile, where)
+        mocap_plan = plan_mocap(profile, where, mocap, use_mock)
+        if use_mock and mock_config is None and mocap_plan is not None and not mocap_plan.source:
+            from gcs.io.paths import resolve_named
+
+            mock_config = resolve_named("mock-mocap", "profile", "--mock-config")
         experiments = plan_experiments(
             settings, profile.t_ilc_s, axis or "both", profile.arena, where
         )
@@ -219,6 +227,8 @@ def identify_with_display(
                 f"{', '.join(experiments.axes)}, two experiments of "
                 f"{settings.n_samples(profile.t_ilc_s)} samples; nothing flown"
             )
+            if mocap_plan is not None:
+                console.print(f"checked: {mocap_plan.describe()}")
             return None
         run_root, run_id = (logs, None) if run_path is None else (run_path.parent, run_path.name)
         run = create_identification_run(run_root, profile, settings, experiments, run_id)
@@ -231,8 +241,14 @@ def identify_with_display(
         progress, on_event = live_progress(console)
         mock_seed = settings.seed if seed is None else seed
         try:
-            with vehicle_url(connect, use_mock, mock_config, mock_seed, console) as url, progress:
-                fly_identification(url, run, flight, on_event)
+            with (
+                vehicle_url(connect, use_mock, mock_config, mock_seed, console, mocap_plan) as (
+                    url,
+                    link,
+                ),
+                progress,
+            ):
+                fly_identification(url, run, flight, on_event, link)
         except KeyboardInterrupt:
             console.print(f"interrupted; no profile written. The experiments are in {run.path}")
             raise

@@ -26,7 +26,14 @@ import numpy as np
 from rich.markup import escape
 from rich.table import Table
 
-from gcs.app.learn import iteration_of, repeat_of, setpoint_deviation, trial_errors
+from gcs.app.learn import (
+    iteration_of,
+    measured_trial,
+    repeat_of,
+    run_measurement,
+    setpoint_deviation,
+    trial_errors,
+)
 from gcs.core.floor import Floor, FloorVerdict, floor_from_flights, floor_verdicts, identical_groups
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.model import relative_degree
@@ -48,6 +55,7 @@ __all__ = [
     "run_metrics",
     "trial_clock_rates",
     "session_lines",
+    "mocap_lines",
     "metrics_table",
     "metrics_json",
     "parse_iterations",
@@ -162,8 +170,27 @@ def aborted_attempts(run: RunDir) -> dict[int, int]:
     return counts
 
 
-def complete_records(run: RunDir) -> dict[int, TrialRecord]:
-    """Every complete trial of ``run``, by index.
+def complete_records(run: RunDir, measurement: str | None = None) -> dict[int, TrialRecord]:
+    """Every complete trial of ``run``, by index, measured as asked.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+    measurement : str or None
+        ``"mocap"`` or ``"estimate"`` (:meth:`TrialRecord.measured`); None: the run's own
+        (``mocap.measurement`` of its profile, default mocap where a trial has it).
+
+    Returns
+    -------
+    dict of int to TrialRecord
+    """
+    measurement = measurement or run_measurement(run.profile())
+    return {j: measured_trial(run, j, measurement) for j in run.complete_trials()}
+
+
+def mocap_lines(run: RunDir) -> list[str]:
+    """With motion capture: e_pos by the mocap and by the estimate per trial, and the lag.
 
     Parameters
     ----------
@@ -172,12 +199,35 @@ def complete_records(run: RunDir) -> dict[int, TrialRecord]:
 
     Returns
     -------
-    dict of int to TrialRecord
+    list of str
+        Empty when no complete trial has mocap columns.
     """
-    return {j: run.read_trial(j) for j in run.complete_trials()}
+    lines = []
+    for j in run.complete_trials():
+        record = run.read_trial(j)
+        if record.mocap_ned_m is None:
+            continue
+        e_est, _ = trial_errors(record)
+        try:
+            e_moc = f"{trial_errors(record.measured('mocap'))[0]:.4f} m"
+        except RunLogError:
+            e_moc = "n/a (mocap gaps)"
+        lag = _num((run.read_status(j).extra or {}).get("mocap_lag_s"))
+        if not np.isfinite(lag):
+            lag_text = "the estimate's lag behind the mocap not measurable"
+        elif lag >= 0:
+            lag_text = f"the estimate lags the mocap by {lag * 1e3:.0f} ms"
+        else:
+            lag_text = f"the estimate leads the mocap by {-lag * 1e3:.0f} ms"
+        lines.append(
+            f"trial {j}: e_pos by mocap {e_moc}, by the estimate {e_est:.4f} m; {lag_text}"
+        )
+    if lines:
+        lines.insert(0, f"measurement: {run_measurement(run.profile())} (mocap.measurement)")
+    return lines
 
 
-def run_metrics(run: RunDir) -> list[IterationMetrics]:
+def run_metrics(run: RunDir, measurement: str | None = None) -> list[IterationMetrics]:
     """Table IV rows of the complete trials of ``run`` (computed from the CSV files).
 
     Percentages are relative to trial 0, and the change column compares consecutive trials
@@ -187,6 +237,8 @@ def run_metrics(run: RunDir) -> list[IterationMetrics]:
     ----------
     run : RunDir
         The run directory.
+    measurement : str or None
+        ``"mocap"`` or ``"estimate"``; None: the run's own.
 
     Returns
     -------
@@ -197,7 +249,7 @@ def run_metrics(run: RunDir) -> list[IterationMetrics]:
     RunLogError
         No complete trial 0 (missing or incomplete), or e_pos,0 = 0.
     """
-    records = complete_records(run)
+    records = complete_records(run, measurement)
     if 0 not in records:
         what = "incomplete" if (run.path / "trial-000.json").exists() else "missing"
         raise RunLogError(
@@ -945,12 +997,12 @@ def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
     import matplotlib.pyplot as plt
 
     rows = run_metrics(run)
-    records = {j: run.read_trial(j) for j in iterations}
     ref = run.reference()
     try:
-        run.profile()
+        measurement = run_measurement(run.profile())
     except ProfileError as exc:
         raise RunLogError(f"{run.path}/manifest.json: {exc}") from None
+    records = {j: measured_trial(run, j, measurement) for j in iterations}  # what learning saw
     learning = run_learning(run) if run.kind == "learning" else None
     names = {j: f"j = {j}" for j in iterations}
     if learning is not None and learning.history:

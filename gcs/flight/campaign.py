@@ -33,6 +33,7 @@ from synchronous code (a command line) so that a second Ctrl-C cannot cut that s
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
 from collections.abc import Callable
@@ -41,12 +42,15 @@ from typing import Protocol
 
 import numpy as np
 
-from gcs.errors import TrajectoryError, TrialAborted, VehicleError
+from gcs.errors import MocapError, TrajectoryError, TrialAborted, VehicleError
 from gcs.flight.clock import rate_warning
 from gcs.flight.fence import Fence
 from gcs.flight.geofence import GeofenceState, install_geofence
 from gcs.flight.hover import HoverStats, HoverVerdict, hover_stats, judge_hover, widened
 from gcs.flight.interrupts import run_guarded
+from gcs.flight.mocap.checks import move_direction_problem, pose_agreement_problem
+from gcs.flight.mocap.link import MocapLink, trial_mocap
+from gcs.flight.mocap.preflight import EKF2_FLOAT_PARAMS, EKF2_INT_PARAMS, ekf2_findings
 from gcs.flight.preflight import (
     LINK_LOSS_PARAMS,
     NAV_PARAMS,
@@ -288,6 +292,9 @@ class FlightSession:
     abort_reason : str or None
         Why the session stopped early (a breach, a refused hover, Ctrl-C ...); None if it ran
         to its end (or is still running).
+    mocap : dict or None
+        The motion capture of the session (source, mapping, forwarding, EKF2 findings,
+        pre-flight checks), when there was one.
     """
 
     url: str
@@ -299,6 +306,7 @@ class FlightSession:
     fence: Fence | None = None
     geofence: GeofenceState | None = None
     abort_reason: str | None = None
+    mocap: dict | None = None
 
 
 CampaignEvent = Status | TrialStarted | TrialProgress | TrialFinished
@@ -315,6 +323,7 @@ async def fly_campaign(
     on_event: EventCallback | None = None,
     *,
     fence: Fence,
+    mocap: MocapLink | None = None,
 ) -> None:
     """Fly ``iterations`` trials ``first_trial, first_trial + 1, ...`` and land.
 
@@ -337,12 +346,19 @@ async def fly_campaign(
         :class:`TrialFinished` events on the event loop; must return quickly.
     fence : Fence
         The arena every setpoint must lie in and the limits watched while armed.
+    mocap : MocapLink or None
+        A started motion-capture link: forwarded to the vehicle from connection on (if its
+        settings say so), checked before arming (EKF2 settings, body tracked, pose agreement)
+        and after take-off (one move per horizontal axis), watched like the fence while armed,
+        and cut into each trial's recording.
 
     Raises
     ------
     VehicleError
         Unreachable vehicle, refused command, lost link, a breach of the fence, a hover
         refused (drifting, oscillating, too far off).
+    MocapError
+        The mocap stream or a pre-flight mocap check refused the flight.
     TrialAborted
         The trial watchdog fired (the trial went to ``source.record_incomplete``).
     asyncio.CancelledError
@@ -361,19 +377,28 @@ async def fly_campaign(
     await vehicle.connect(url)
     run: TrialRun | None = None
     session: FlightSession | None = None
+    mocap_report: dict | None = None
     j = first_trial
     try:
         hover, setpoints = await asyncio.to_thread(_plan, source, j, fence)
+        if mocap is not None:
+            mocap_report = await _mocap_before_arming(vehicle, mocap, emit)
         for warning in link_loss_warnings(await vehicle.read_int_params(LINK_LOSS_PARAMS)):
             emit(Status(warning, warning=True))
         navigation = navigation_source(await vehicle.read_int_params(NAV_PARAMS))
         emit(Status(navigation.text, warning=navigation.warning))
         emit(Status("waiting for a valid local position"))
         await vehicle.wait_healthy_local_position()
+        if mocap is not None:
+            assert mocap_report is not None
+            mocap_report["agreement_m"] = _mocap_agreement(vehicle, mocap, emit)
+            vehicle.add_watch("mocap", mocap.problem)
         emit(Status(fence.describe()))
         geofence = await install_geofence(vehicle, fence)
         emit(Status(geofence.text(fence.margin_m), warning=not geofence.ok))
-        session = FlightSession(url, first_trial, navigation, fence=fence, geofence=geofence)
+        session = FlightSession(
+            url, first_trial, navigation, fence=fence, geofence=geofence, mocap=mocap_report
+        )
         await asyncio.to_thread(source.record_session, session)
         check_battery(vehicle.battery_pct, settings.min_battery_pct, "taking off")
         altitude_m = -float(hover[2])
@@ -381,6 +406,13 @@ async def fly_campaign(
         await vehicle.arm_and_takeoff(altitude_m)
         emit(Status("starting offboard"))
         await vehicle.start_offboard_at_current_position()
+        if mocap is not None and mocap.settings.check_move_m > 0:
+            assert mocap_report is not None
+            mocap_report["moves"] = await _mocap_moves(vehicle, mocap, settings, emit)
+            session = replace(session, mocap=mocap_report)
+            await vehicle.hover_while(
+                asyncio.to_thread(source.record_session, session), "recording the mocap checks"
+            )
         for number, j in enumerate(range(first_trial, first_trial + iterations), start=1):
             if number > 1:
                 hover, setpoints = await vehicle.hover_while(
@@ -421,7 +453,12 @@ async def fly_campaign(
                 emit(TrialProgress(j, k, n, err_m))
 
             run = TrialRun(vehicle, setpoints, t_ilc_s, settings, progress)
+            if mocap is not None:
+                mocap.drain()  # the trial's raw file starts here
             recording = await run.fly()
+            if mocap is not None:  # y(N) needs a mocap sample on both sides
+                await asyncio.to_thread(_mocap_past_end, mocap, recording)
+            recording = _with_mocap(recording, mocap)
             run = None  # handed over below: no longer "in flight"
             emit(TrialFinished(j, recording))
             if recording.clock is not None:
@@ -437,6 +474,9 @@ async def fly_campaign(
         emit(Status("landing"))
         await vehicle.land_and_disarm()
         emit(Status("landed and disarmed"))
+        if mocap is not None and session is not None:
+            session = replace(session, mocap={**(mocap_report or {}), **mocap.describe()})
+            await asyncio.to_thread(source.record_session, session)
     except BaseException as exc:
         reason = _describe(exc)
         named = _breach_first(vehicle.breach, exc, reason)
@@ -445,6 +485,8 @@ async def fly_campaign(
         outcome = await vehicle.emergency_stop(reason)
         emit(Status(f"emergency stop: {outcome}"))
         if session is not None:
+            if mocap is not None:
+                session = replace(session, mocap={**(mocap_report or {}), **mocap.describe()})
             try:
                 await asyncio.to_thread(
                     source.record_session, replace(session, abort_reason=reason)
@@ -455,6 +497,7 @@ async def fly_campaign(
             partial = getattr(exc, "recording", None)
             if not isinstance(partial, TrialRecording):
                 partial = run.recording(reason)
+            partial = _with_mocap(partial, mocap)
             emit(TrialFinished(j, partial))
             try:
                 await asyncio.to_thread(source.record_incomplete, j, partial, reason)
@@ -464,6 +507,8 @@ async def fly_campaign(
             raise named from exc
         raise
     finally:
+        if mocap is not None:
+            mocap.detach()  # no send may run into the plugin released with the vehicle
         await vehicle.close()
 
 
@@ -477,6 +522,7 @@ def run_campaign(
     on_event: EventCallback | None = None,
     *,
     fence: Fence,
+    mocap: MocapLink | None = None,
 ) -> None:
     """Fly a campaign from synchronous code: :func:`fly_campaign` under :func:`run_guarded`.
 
@@ -502,6 +548,8 @@ def run_campaign(
         Receives the campaign events, and the notice of a repeated Ctrl-C.
     fence : Fence
         The arena and the limits watched while armed.
+    mocap : MocapLink or None
+        A started motion-capture link (see :func:`fly_campaign`).
 
     Raises
     ------
@@ -517,8 +565,9 @@ def run_campaign(
             on_event(Status(text, warning=True))
 
     campaign = fly_campaign(
-        url, source, iterations, first_trial, settings, t_ilc_s, on_event, fence=fence
-    )
+        url, source, iterations, first_trial, settings, t_ilc_s, on_event, fence=fence,
+        mocap=mocap,
+    )  # fmt: skip
     run_guarded(campaign, on_repeat)
 
 
@@ -678,10 +727,98 @@ def _breach_first(breach: str | None, exc: BaseException, reason: str) -> Vehicl
     return VehicleError(breach)
 
 
+def _with_mocap(recording: TrialRecording, mocap: MocapLink | None) -> TrialRecording:
+    """The recording with the trial's motion capture (raw samples drained, on the grid)."""
+    if mocap is None:
+        return recording
+    return replace(recording, mocap=trial_mocap(mocap.drain(), mocap.mapping, recording))
+
+
+def _mocap_past_end(mocap: MocapLink, recording: TrialRecording) -> None:
+    """Wait briefly (worker thread) for a tracked mocap sample after the trial's last grid
+    time; a stream that delivers none leaves y(N) without mocap, which learning then names."""
+    clock = recording.clock
+    if clock is None or not np.isfinite(recording.t0_vehicle_s):
+        return
+    end_local = float(clock.to_local(recording.t0_vehicle_s + recording.t_s[-1]))
+    with contextlib.suppress(MocapError):
+        mocap.client.wait_until(lambda s: s.tracked and s.t_receipt_s > end_local, 0.3)
+
+
+async def _mocap_before_arming(vehicle: Vehicle, mocap: MocapLink, emit: EventCallback) -> dict:
+    """Start forwarding, then judge EKF2's vision settings (refusals stop here)."""
+    if mocap.settings.forward:
+        mocap.attach(vehicle.mocap_plugin())
+        emit(Status(f"forwarding {mocap.source.url()} to the vehicle as {mocap.settings.message}"))
+    else:
+        emit(Status(f"reading {mocap.source.url()} (not forwarded: mocap.forward is false)"))
+    params: dict[str, float | int | None] = dict(await vehicle.read_int_params(EKF2_INT_PARAMS))
+    for name in EKF2_FLOAT_PARAMS:
+        params[name] = await vehicle.read_float_param(name)
+    findings = ekf2_findings(params, mocap.settings.forward)
+    for f in findings:
+        emit(Status(f.text, warning=f.level != "info"))
+    refused = [f.text for f in findings if f.level == "refuse"]
+    if refused:
+        raise MocapError(f"vehicle settings refused: {refused[0]}")
+    return {"ekf2": params, "findings": [f.text for f in findings[1:]]}
+
+
+def _mocap_agreement(vehicle: Vehicle, mocap: MocapLink, emit: EventCallback) -> float:
+    """Body tracked, stream healthy, and the estimate where the mocap sees the vehicle."""
+    pos = mocap.require_tracked()
+    assert vehicle.latest is not None  # a healthy local position has samples
+    est = np.asarray(vehicle.latest.pos_ned_m)
+    problem = pose_agreement_problem(est, pos, mocap.settings.agreement_m)
+    if problem is not None:
+        raise MocapError(f"pre-flight: {problem}")
+    distance = float(np.linalg.norm(pos - est))
+    emit(Status(f"mocap: rigid body tracked at {_fmt(pos)}, {distance:.3f} m from the estimate"))
+    return distance
+
+
+async def _mocap_moves(
+    vehicle: Vehicle, mocap: MocapLink, settings: FlightSettings, emit: EventCallback
+) -> list[dict]:
+    """A small move per horizontal axis, out and back: each must go the commanded way in both
+    the estimate and the mocap (a mirrored or swapped axis shows here, not in the eight)."""
+    out = []
+    fence = vehicle.fence
+    for axis, name in ((0, "north"), (1, "east")):
+        home = await vehicle.hold_position()
+        step = np.zeros(3)
+        step[axis] = mocap.settings.check_move_m
+        if fence is not None and fence.setpoint_problem(home + step) is not None:
+            step = -step  # the other way stays inside the arena
+        est0, moc0 = await _still_at(vehicle, mocap, home, settings, f"before the {name} check")
+        await vehicle.goto(home + step, settings.transit_speed_m_s)
+        est1, moc1 = await _still_at(vehicle, mocap, home + step, settings, f"the {name} check")
+        problem = move_direction_problem(step, est1 - est0, moc1 - moc0)
+        out.append(
+            {"cmd_ned_m": step.tolist(), "est_delta_ned_m": (est1 - est0).tolist(),
+             "mocap_delta_ned_m": (moc1 - moc0).tolist(), "problem": problem}
+        )  # fmt: skip
+        if problem is not None:
+            raise MocapError(f"pre-flight {name} move: {problem}")
+        emit(Status(f"mocap check: a {step[axis]:+.2f} m {name} move went the right way in "
+                    "the estimate and the mocap"))  # fmt: skip
+        await vehicle.goto(home, settings.transit_speed_m_s)
+    return out
+
+
+async def _still_at(
+    vehicle: Vehicle, mocap: MocapLink, target: np.ndarray, settings: FlightSettings, what: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Settle at ``target`` (or give up after the settle timeout), then read both positions."""
+    await vehicle.settle(target, settings.settle_tolerance_m, settings.settle_speed_m_s)
+    assert vehicle.latest is not None
+    return np.asarray(vehicle.latest.pos_ned_m), mocap.require_tracked()
+
+
 def _describe(exc: BaseException) -> str:
     """One line naming why the campaign stopped."""
     if isinstance(exc, asyncio.CancelledError | KeyboardInterrupt):
         return "interrupted (Ctrl-C or cancelled)"
-    if isinstance(exc, TrialAborted | VehicleError):
+    if isinstance(exc, TrialAborted | VehicleError | MocapError):
         return str(exc)
     return f"{type(exc).__name__}: {exc}"

@@ -39,6 +39,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -46,6 +47,9 @@ from gcs.errors import TrajectoryError, TrialAborted
 from gcs.flight.clock import ClockFit, fit_clock
 from gcs.flight.settings import FlightSettings
 from gcs.flight.vehicle import TelemetrySample, Vehicle, sleep_until
+
+if TYPE_CHECKING:
+    from gcs.flight.mocap.link import MocapTrial
 
 __all__ = [
     "TrialRecording",
@@ -110,6 +114,9 @@ class TrialRecording:
     clock : ClockFit or None
         Fit of the vehicle clock over the trial's own samples: ``clock.rate`` is the trial's
         vehicle-time / wall-time rate (None with fewer than two samples).
+    mocap : MocapTrial or None
+        The motion capture of the trial (raw samples, on the grid, the estimate's lag), when
+        the flight had one.
     """
 
     t_s: np.ndarray
@@ -128,6 +135,7 @@ class TrialRecording:
     t0_monotonic_s: float = math.nan
     t0_vehicle_s: float = math.nan
     clock: ClockFit | None = None
+    mocap: MocapTrial | None = None
 
     @property
     def n_setpoints(self) -> int:

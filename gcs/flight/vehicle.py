@@ -268,6 +268,28 @@ class Vehicle:
             self._mavsdk = None
         self.connected = False
 
+    def mocap_plugin(self) -> Any:
+        """MAVSDK's blocking Mocap plugin of the connected system (external vision out).
+
+        Blocking on purpose: :class:`gcs.flight.mocap.forward.VisionForwarder` calls it from
+        the mocap client's thread, off the event loop that streams the setpoints. It is
+        released with the vehicle (:meth:`close`): stop the forwarder first.
+
+        Returns
+        -------
+        mavsdk.plugins.mocap.Mocap
+
+        Raises
+        ------
+        VehicleError
+            Not connected.
+        """
+        from mavsdk.plugins.mocap import Mocap
+
+        if self._system is None:
+            raise VehicleError("not connected: no vehicle to forward the mocap to")
+        return Mocap(self._system._system)
+
     # ------------------------------------------------------------------ state mirror
 
     def _notify(self) -> None:

@@ -217,6 +217,8 @@ class Profile:
         Flight settings passed to the flight layer (stream rate, timeouts); may be empty.
     identification : dict
         Excitation and PBSID settings used by ``gcs identify``; may be empty.
+    mocap : dict
+        Motion-capture settings (``gcs.flight.mocap.settings``); may be empty.
     source : dict
         The parsed YAML as read, stored in run manifests.
     """
@@ -231,6 +233,7 @@ class Profile:
     arena: Box
     flight: dict = field(default_factory=dict)
     identification: dict = field(default_factory=dict)
+    mocap: dict = field(default_factory=dict)
     source: dict = field(default_factory=dict)
     max_vertical_speed_m_s: float = DEFAULT_MAX_VERTICAL_SPEED_M_S
 
@@ -397,6 +400,7 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
         arena=box,
         flight=f.mapping("flight"),
         identification=f.mapping("identification"),
+        mocap=f.mapping("mocap"),
         source=data,
     )
     f.text("description")

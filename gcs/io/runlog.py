@@ -6,7 +6,10 @@ Layout of ``logs/<run-id>/`` (documented for users in the README)::
     reference.csv          the reference on the grid, k = 0..N
     setpoints-JJJ.csv      the setpoints to fly in trial JJJ (000 = the reference)
     trial-JJJ.csv          trial JJJ as flown: reference, setpoints, measured position and
-                           velocity on the grid, send times, interpolation flags
+                           velocity on the grid, send times, interpolation flags, and with
+                           motion capture its position on the grid (mocap_* columns)
+    mocap-JJJ.csv          with motion capture: every raw sample of trial JJJ as received
+                           (``gcs.io.mocap_samples``)
     trial-JJJ.json         its status ("complete" or "incomplete" and why) and metrics
     estimate-JJJ.csv       disturbance estimate learned from trial JJJ (and K-ILC variance)
     learn-JJJ.json         profiles with ``learning.adaptive``: the record of every decision of
@@ -47,6 +50,7 @@ commands that write into a run check its kind first.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -79,6 +83,8 @@ __all__ = [
     "write_once",
     "json_safe",
     "TRIAL_COLUMNS",
+    "MOCAP_GRID_COLUMNS",
+    "MEASUREMENTS",
 ]
 
 TRIAL_COLUMNS = (
@@ -89,6 +95,9 @@ TRIAL_COLUMNS = (
     "vel_north_m_s", "vel_east_m_s", "vel_down_m_s",
     "sp_sent_s", "interpolated",
 )  # fmt: skip
+MOCAP_GRID_COLUMNS = ("mocap_north_m", "mocap_east_m", "mocap_down_m")
+"""Optional last columns of a trial CSV: the motion capture on the grid (NaN: none there)."""
+MEASUREMENTS = ("mocap", "estimate")
 SETPOINT_COLUMNS = ("k", "t_s", "sp_north_m", "sp_east_m", "sp_down_m")
 REFERENCE_COLUMNS = ("k", "t_s", "ref_north_m", "ref_east_m", "ref_down_m")
 ESTIMATE_COLUMNS = ("k", "t_s", "d_north_m", "d_east_m", "p_north_m2", "p_east_m2")
@@ -236,12 +245,14 @@ def _fmt(column: str, value: float) -> str:
     return f"{value:.9g}"
 
 
-def _read_csv(path: Path, columns: tuple[str, ...]) -> np.ndarray:
+def _read_csv(path: Path, columns: tuple[str, ...], optional: tuple[str, ...] = ()) -> np.ndarray:
     try:
         with open(path, newline="") as fh:
             rows = list(csv.reader(fh))
     except OSError as exc:
         raise RunLogError(f"{path}: cannot read ({exc.strerror})") from exc
+    if rows and optional and tuple(rows[0]) == columns + optional:
+        columns = columns + optional
     if not rows or tuple(rows[0]) != columns:
         raise RunLogError(f"{path}: header must be {','.join(columns)}")
     try:
@@ -273,6 +284,8 @@ class TrialRecord:
         Time the setpoint was first sent, from the trial start [s]; NaN for row N.
     interpolated : ndarray of bool, shape (N+1,)
         True where the position was interpolated across a telemetry gap.
+    mocap_ned_m : ndarray, shape (N+1, 3), or None
+        Motion-capture position on the grid [m, NED] (NaN where none); None without mocap.
     """
 
     t_s: np.ndarray
@@ -282,6 +295,43 @@ class TrialRecord:
     vel_ned_m_s: np.ndarray
     sp_sent_s: np.ndarray
     interpolated: np.ndarray
+    mocap_ned_m: np.ndarray | None = None
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The CSV columns of this record (the mocap ones only when it has mocap)."""
+        return TRIAL_COLUMNS + (MOCAP_GRID_COLUMNS if self.mocap_ned_m is not None else ())
+
+    def measured(self, measurement: str) -> TrialRecord:
+        """The record whose ``pos_ned_m`` is what learning and e_pos use.
+
+        Parameters
+        ----------
+        measurement : str
+            ``"mocap"`` (the motion capture when the record has it; else the estimate) or
+            ``"estimate"`` (the vehicle's own).
+
+        Returns
+        -------
+        TrialRecord
+            ``self``, or a copy with the mocap positions as ``pos_ned_m``.
+
+        Raises
+        ------
+        RunLogError
+            ``"mocap"`` with mocap columns that are NaN somewhere on the grid.
+        """
+        if measurement not in MEASUREMENTS:
+            raise RunLogError(f"measurement must be one of {', '.join(MEASUREMENTS)}")
+        if measurement == "estimate" or self.mocap_ned_m is None:
+            return self
+        bad = np.flatnonzero(~np.all(np.isfinite(self.mocap_ned_m), axis=1))
+        if bad.size:
+            raise RunLogError(
+                f"no mocap position at k = {bad[0]} ({bad.size} grid points): learn from "
+                "the estimate (mocap.measurement: estimate)"
+            )
+        return dataclasses.replace(self, pos_ned_m=self.mocap_ned_m)
 
     @property
     def n_samples(self) -> int:
@@ -291,18 +341,20 @@ class TrialRecord:
     def table(self) -> np.ndarray:
         """The record as an array with :data:`TRIAL_COLUMNS`."""
         k = np.arange(len(self.t_s), dtype=float)
+        mocap = [] if self.mocap_ned_m is None else [self.mocap_ned_m]
         return np.column_stack(
             [k, self.t_s, self.ref_ned_m, self.sp_ned_m, self.pos_ned_m, self.vel_ned_m_s,
-             self.sp_sent_s, self.interpolated.astype(float)]
+             self.sp_sent_s, self.interpolated.astype(float), *mocap]
         )  # fmt: skip
 
     @classmethod
     def from_table(cls, table: np.ndarray) -> TrialRecord:
-        """Inverse of :meth:`table`."""
+        """Inverse of :meth:`table` (16 columns, or 19 with the mocap ones)."""
         return cls(
             t_s=table[:, 1], ref_ned_m=table[:, 2:5], sp_ned_m=table[:, 5:8],
             pos_ned_m=table[:, 8:11], vel_ned_m_s=table[:, 11:14], sp_sent_s=table[:, 14],
             interpolated=table[:, 15] > 0.5,
+            mocap_ned_m=table[:, 16:19] if table.shape[1] > 16 else None,
         )  # fmt: skip
 
 
@@ -636,8 +688,10 @@ class RunDir:
         newest = self.newest_complete()
         return 0 if newest is None else newest + 1
 
-    def write_trial(self, j: int, record: TrialRecord, status: TrialStatus) -> None:
-        """Record trial j: CSV first, then its status sidecar.
+    def write_trial(
+        self, j: int, record: TrialRecord, status: TrialStatus, mocap: Any = None
+    ) -> None:
+        """Record trial j: raw mocap samples and CSV first, then its status sidecar.
 
         An earlier incomplete attempt of trial j is moved to ``aborted/``; a complete trial is
         never overwritten.
@@ -650,6 +704,8 @@ class RunDir:
             The trial on the grid.
         status : TrialStatus
             Completion and metrics.
+        mocap : MocapSeries or None
+            The trial's raw motion-capture samples (``mocap-JJJ.csv``).
         """
         csv_path, json_path = self._file("trial", j, "csv"), self._file("trial", j, "json")
         if record.n_samples != self.n_samples:
@@ -660,7 +716,11 @@ class RunDir:
             self._archive_attempt(j)
         elif csv_path.exists():  # a CSV whose sidecar was never written (interrupted write)
             self._archive_attempt(j)
-        atomic_write_text(csv_path, _csv_text(TRIAL_COLUMNS, record.table()))
+        if mocap is not None:
+            from gcs.io.mocap_samples import write_mocap_csv
+
+            write_mocap_csv(self._file("mocap", j, "csv"), mocap)
+        atomic_write_text(csv_path, _csv_text(record.columns, record.table()))
         data = {
             "trial": j,
             "status": "complete" if status.complete else "incomplete",
@@ -685,6 +745,9 @@ class RunDir:
             src = self._file("trial", j, ext)
             if src.exists():
                 os.replace(src, aborted / f"trial-{j:03d}-attempt-{attempt}.{ext}")
+        raw = self._file("mocap", j, "csv")
+        if raw.exists():
+            os.replace(raw, aborted / f"mocap-{j:03d}-attempt-{attempt}.csv")
 
     def read_trial(self, j: int) -> TrialRecord:
         """Read and validate a complete trial for learning or reporting.
@@ -711,7 +774,7 @@ class RunDir:
             )
         if not path.exists():
             raise RunLogError(f"{path}: missing, but {path.stem}.json says the trial is complete")
-        table = _read_csv(path, TRIAL_COLUMNS)
+        table = _read_csv(path, TRIAL_COLUMNS, MOCAP_GRID_COLUMNS)
         self._check_grid(path, table, self.n_samples + 1)
         values = table[:, :14]
         bad = np.argwhere(~np.isfinite(values))

@@ -1,0 +1,285 @@
+"""The motion capture of a flight: one stream read, forwarded, watched and cut into trials.
+
+:class:`MocapLink` owns the :class:`~gcs.flight.mocap.client.MocapClient` of the flight and,
+once a vehicle is connected, the :class:`~gcs.flight.mocap.forward.VisionForwarder` that feeds
+it (in the client's thread: never on the event loop). The campaign asks it:
+
+- :meth:`MocapLink.problem`: the stream's health now (stale, occluded, frozen, jump, or the
+  reader ended), the watch it adds to the vehicle (:meth:`gcs.flight.vehicle.Vehicle.add_watch`)
+  so that a bad stream aborts like a fence breach;
+- :meth:`MocapLink.latest_ned`: where the mocap sees the vehicle (pre-flight agreement and the
+  move checks);
+- :meth:`MocapLink.drain`: the raw samples since the last call (one trial's raw file).
+
+:func:`trial_mocap` puts a trial's raw samples on the trial's grid (vehicle time, through the
+trial's own clock fit) and measures how far the vehicle's estimate lags behind.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from gcs.errors import MocapError
+from gcs.flight.mocap.client import MocapClient, MocapSample
+from gcs.flight.mocap.forward import VisionForwarder
+from gcs.flight.mocap.frames import FrameMapping
+from gcs.flight.mocap.health import HealthLimits, stream_problem
+from gcs.flight.mocap.latency import estimate_lag_s
+from gcs.flight.mocap.settings import MocapSettings
+from gcs.flight.mocap.source import MocapSource
+from gcs.io.mocap_samples import MocapSeries
+
+if TYPE_CHECKING:
+    from gcs.flight.trial import TrialRecording
+
+__all__ = ["MocapLink", "MocapTrial", "trial_mocap", "HEALTH_WINDOW_S", "GRID_MAX_GAP_S"]
+
+HEALTH_WINDOW_S = 0.5
+"""The samples the health checks judge [s]."""
+GRID_MAX_GAP_S = 0.1
+"""A grid point between tracked samples further apart than this gets no mocap value [s]."""
+
+
+@dataclass(frozen=True)
+class MocapTrial:
+    """The motion capture of one trial.
+
+    Parameters
+    ----------
+    series : MocapSeries
+        Raw samples received during the trial (system axes, receipt times).
+    pos_ned_m : numpy.ndarray
+        Mocap position on the trial's grid, shape (N+1, 3) [m, NED]; NaN where no tracked
+        samples bracket the grid time within :data:`GRID_MAX_GAP_S`.
+    lag_s : float or None
+        How far the vehicle's estimate lags behind the mocap [s] (None: not measurable).
+    """
+
+    series: MocapSeries
+    pos_ned_m: np.ndarray
+    lag_s: float | None
+
+
+class MocapLink:
+    """One rigid body read, forwarded to a vehicle and watched, for one flight.
+
+    Parameters
+    ----------
+    source : MocapSource
+        System, server and rigid body.
+    mapping : FrameMapping
+        System axes to NED.
+    settings : MocapSettings
+        Forwarding and checks.
+    limits : HealthLimits or None
+        Stream health thresholds (defaults if None).
+    connect_timeout_s : float
+        How long to wait for the mocap server [s].
+    """
+
+    def __init__(
+        self,
+        source: MocapSource,
+        mapping: FrameMapping,
+        settings: MocapSettings,
+        limits: HealthLimits | None = None,
+        connect_timeout_s: float = 5.0,
+    ) -> None:
+        self.source = source
+        self.mapping = mapping
+        self.settings = settings
+        self.limits = limits or HealthLimits()
+        self.client = MocapClient(
+            source, on_sample=self._on_sample, connect_timeout_s=connect_timeout_s
+        )
+        self.forwarder: VisionForwarder | None = None
+
+    def _on_sample(self, sample: MocapSample) -> None:
+        forwarder = self.forwarder
+        if forwarder is not None:
+            forwarder.send(sample)
+
+    # lifecycle ------------------------------------------------------------------------------
+
+    def start(self) -> MocapLink:
+        """Connect to the mocap server and wait for the stream.
+
+        Returns
+        -------
+        MocapLink
+            self
+
+        Raises
+        ------
+        MocapError
+            The server did not answer, or refused.
+        """
+        self.client.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop forwarding and reading (idempotent)."""
+        self.detach()
+        self.client.stop()
+
+    def __enter__(self) -> MocapLink:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def attach(self, plugin: object) -> None:
+        """Start forwarding to a vehicle (when the settings say so).
+
+        Parameters
+        ----------
+        plugin : object
+            The vehicle's blocking MAVSDK Mocap plugin
+            (:meth:`gcs.flight.vehicle.Vehicle.mocap_plugin`).
+        """
+        if self.settings.forward:
+            self.forwarder = VisionForwarder(
+                plugin,
+                self.mapping,
+                self.settings.message,
+                self.settings.position_std_m,
+                math.radians(self.settings.angle_std_deg),
+            )
+
+    def detach(self) -> None:
+        """Stop forwarding; waits for a send in progress (before the vehicle is closed)."""
+        forwarder = self.forwarder
+        if forwarder is not None:
+            forwarder.stop()
+
+    # what the campaign asks ----------------------------------------------------------------
+
+    def problem(self) -> str | None:
+        """The stream's problem now, or None (a watch for ``Vehicle.add_watch``).
+
+        Returns
+        -------
+        str or None
+        """
+        ended = self.client.problem()
+        if ended is not None:
+            return ended
+        now = time.monotonic()
+        return stream_problem(self.client.recent(HEALTH_WINDOW_S, now), now, self.limits)
+
+    def latest_ned(self) -> np.ndarray | None:
+        """The newest tracked position in NED, or None if the newest sample is untracked.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            Shape (3,) [m].
+        """
+        sample = self.client.latest()
+        if sample is None or not sample.tracked:
+            return None
+        return self.mapping.position_to_ned(np.asarray(sample.pos_m))
+
+    def require_tracked(self) -> np.ndarray:
+        """The rigid body's NED position, refused if the stream is unhealthy.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (3,) [m].
+
+        Raises
+        ------
+        MocapError
+            Stream problem or body not tracked, naming the bodies seen.
+        """
+        problem = self.problem()
+        pos = self.latest_ned()
+        if problem is None and pos is not None:
+            return pos
+        seen = ", ".join(repr(n) for n in self.client.names_seen) or "none"
+        raise MocapError(
+            f"mocap: rigid body {self.source.rigid_body!r} not usable "
+            f"({problem or 'not tracked'}; bodies in the stream: {seen})"
+        )
+
+    def drain(self) -> MocapSeries:
+        """Raw samples since the previous call.
+
+        Returns
+        -------
+        MocapSeries
+        """
+        return self.client.drain()
+
+    def describe(self) -> dict[str, Any]:
+        """What the flight used, for the session record.
+
+        Returns
+        -------
+        dict
+        """
+        m = self.mapping
+        stats = self.forwarder.stats() if self.forwarder is not None else None
+        return {
+            "url": self.source.url(),
+            "mapping": {
+                "up_axis": m.up_axis,
+                "north_axis": m.north_axis,
+                "right_handed": m.right_handed,
+                "yaw_offset_deg": m.yaw_offset_deg,
+                "origin_m": list(m.origin_m),
+                "body_forward_axis": m.body_forward_axis,
+            },
+            "forward": self.settings.forward,
+            "message": self.settings.message if self.settings.forward else None,
+            "forwarded": None if stats is None else stats.sent,
+            "forward_failed": None if stats is None else stats.failed,
+            "forward_last_error": None if stats is None else stats.last_error,
+            "forward_send_s_p50": None if stats is None else stats.send_s_p50,
+            "samples": self.client.stats()["samples"],
+        }
+
+
+def trial_mocap(
+    series: MocapSeries, mapping: FrameMapping, recording: TrialRecording
+) -> MocapTrial:
+    """A trial's raw mocap on its grid, and the estimate's lag behind it.
+
+    Receipt times go to the trial's vehicle time through the trial's own clock fit
+    (``recording.clock``), the clock the grid and the estimate are on.
+
+    Parameters
+    ----------
+    series : MocapSeries
+        Raw samples received during the trial.
+    mapping : FrameMapping
+        System axes to NED.
+    recording : TrialRecording
+        The trial (grid, clock fit, raw estimate).
+
+    Returns
+    -------
+    MocapTrial
+    """
+    from gcs.flight.trial import align_to_grid
+
+    grid = recording.t_s
+    pos = np.full((grid.size, 3), np.nan)
+    clock = recording.clock
+    tracked = series.tracked
+    if clock is None or not np.isfinite(recording.t0_vehicle_s) or tracked.sum() < 2:
+        return MocapTrial(series, pos, None)
+    t_rel = clock.to_vehicle(series.t_receipt_s[tracked]) - recording.t0_vehicle_s
+    ned = mapping.position_to_ned(series.pos_m[tracked])
+    order = np.argsort(t_rel, kind="stable")
+    t_rel, ned = t_rel[order], ned[order]
+    pos, gap = align_to_grid(t_rel, ned, grid, GRID_MAX_GAP_S)
+    pos[gap] = np.nan
+    lag = estimate_lag_s(t_rel, ned[:, :2], recording.raw_t_s, recording.raw_pos_ned_m[:, :2])
+    return MocapTrial(series, pos, lag)

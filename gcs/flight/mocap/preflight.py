@@ -1,0 +1,127 @@
+"""Does the vehicle's EKF2 agree with what gcs will do with the motion capture? (pure)
+
+PX4 (v1.14-v1.16) fuses external vision as its parameters say:
+
+- ``EKF2_EV_CTRL`` bits: 0 horizontal position, 1 vertical position, 2 velocity, 3 yaw;
+- ``EKF2_HGT_REF``: the height reference, 0 barometer, 1 GPS, 2 range sensor, 3 vision;
+- ``EKF2_GPS_CTRL`` bits: 0 position, 1 altitude, 2 velocity, 3 heading;
+- ``EKF2_EV_DELAY``: how old a vision sample is when it arrives [ms].
+
+:func:`ekf2_findings` reads them against the plan: when gcs forwards the mocap, vision must be
+fused for the horizontal position (else the vehicle flies on something else: refused), a GPS
+height reference indoors without GPS is refused, the barometer as reference is a warning (it
+drifts indoors by decimetres), GPS fused alongside is a warning, and the delay is reported
+(gcs stamps each pose with its receipt time, so the delay should hold only the mocap's own
+latency: a few milliseconds; more than 50 ms is a warning). When a bridge other than gcs feeds
+the vehicle, vision not being fused is a warning only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["EKF2_INT_PARAMS", "EKF2_FLOAT_PARAMS", "Finding", "ekf2_findings"]
+
+EKF2_INT_PARAMS = ("EKF2_GPS_CTRL", "EKF2_HGT_REF", "EKF2_EV_CTRL")
+EKF2_FLOAT_PARAMS = ("EKF2_EV_DELAY",)
+MAX_EV_DELAY_MS = 50.0
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One line about the vehicle's settings.
+
+    Parameters
+    ----------
+    text : str
+        One line, naming the parameter, its value and the fix.
+    level : str
+        ``"info"``, ``"warning"`` or ``"refuse"`` (the flight does not take off).
+    """
+
+    text: str
+    level: str = "info"
+
+
+def ekf2_findings(params: dict[str, float | int | None], forward: bool) -> list[Finding]:
+    """Judge EKF2's vision settings for a flight on motion capture.
+
+    Parameters
+    ----------
+    params : dict
+        Values of :data:`EKF2_INT_PARAMS` and :data:`EKF2_FLOAT_PARAMS`; None where the
+        vehicle did not answer.
+    forward : bool
+        gcs forwards the mocap as external vision (else another bridge does).
+
+    Returns
+    -------
+    list of Finding
+        The report line first (``info``), then warnings and refusals.
+    """
+    ev, hgt, gps = (params.get(n) for n in ("EKF2_EV_CTRL", "EKF2_HGT_REF", "EKF2_GPS_CTRL"))
+    delay = params.get("EKF2_EV_DELAY")
+
+    def show(value: float | int | None) -> str:
+        return "unreadable" if value is None else f"{value:g}"
+
+    out = [
+        Finding(
+            f"EKF2: EV_CTRL {show(ev)}, HGT_REF {show(hgt)}, GPS_CTRL {show(gps)}, "
+            f"EV_DELAY {show(delay)} ms"
+        )
+    ]
+    missing = [n for n in EKF2_INT_PARAMS + EKF2_FLOAT_PARAMS if params.get(n) is None]
+    if missing:
+        out.append(Finding(f"could not read {', '.join(missing)}: not checked", "warning"))
+    who = "gcs forwards the mocap" if forward else "the mocap bridge feeds vision"
+    level = "refuse" if forward else "warning"
+    if ev is not None and not int(ev) & 1:
+        out.append(
+            Finding(
+                f"EKF2_EV_CTRL = {ev:g} does not fuse vision position (bit 0) but {who}: set "
+                "EKF2_EV_CTRL to 15 (position, height, velocity, yaw) or at least 1",
+                level,
+            )
+        )
+    gps_used = gps is not None and int(gps) & 0b111
+    if hgt is not None and int(hgt) == 1 and not gps_used:
+        out.append(
+            Finding(
+                f"EKF2_HGT_REF = 1 (GPS) without GPS fused (EKF2_GPS_CTRL = {show(gps)}): set "
+                "EKF2_HGT_REF to 3 (vision)",
+                "refuse",
+            )
+        )
+    elif hgt is not None and int(hgt) == 3 and ev is not None and not int(ev) & 2:
+        out.append(
+            Finding(
+                f"EKF2_HGT_REF = 3 (vision) but EKF2_EV_CTRL = {ev:g} does not fuse vision "
+                "height (bit 1): set EKF2_EV_CTRL to 15",
+                level,
+            )
+        )
+    elif hgt is not None and int(hgt) == 0:
+        out.append(
+            Finding(
+                "EKF2_HGT_REF = 0 (barometer): indoors its height drifts by decimetres; "
+                "EKF2_HGT_REF = 3 uses the mocap's",
+                "warning",
+            )
+        )
+    if gps_used:
+        out.append(
+            Finding(
+                f"EKF2_GPS_CTRL = {gps:g} fuses GPS alongside vision: indoors set it to 0",
+                "warning",
+            )
+        )
+    if delay is not None and not 0.0 <= float(delay) <= MAX_EV_DELAY_MS:
+        out.append(
+            Finding(
+                f"EKF2_EV_DELAY = {delay:g} ms: gcs stamps each pose when it arrives, so the "
+                f"delay should be the mocap's own latency (a few ms, at most {MAX_EV_DELAY_MS:g})",
+                "warning",
+            )
+        )
+    return out

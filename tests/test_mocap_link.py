@@ -1,0 +1,74 @@
+"""A trial's raw mocap on its grid (through the trial's clock fit) and the estimate's lag."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gcs.flight.clock import fit_clock
+from gcs.flight.mocap.frames import mapping_for
+from gcs.flight.mocap.link import trial_mocap
+from gcs.flight.trial import TrialRecording
+from gcs.io.mocap_samples import MocapSeries
+
+MOTIVE = mapping_for("optitrack")
+OFFSET_S = 1000.0  # local monotonic time = vehicle time + 1000 s
+
+
+def circle_ned(t: np.ndarray) -> np.ndarray:
+    return np.column_stack([np.cos(t), np.sin(t), np.full(t.size, -1.5)])
+
+
+def recording(lag_s: float) -> TrialRecording:
+    """A 4 s trial whose estimate is the circle ``lag_s`` late, at 50 Hz."""
+    n, t_ilc = 80, 0.05
+    v0 = 20.0
+    raw_v = v0 - 0.5 + np.arange(0, 5.0, 0.02)
+    clock = fit_clock(raw_v, raw_v + OFFSET_S + 0.001)
+    return TrialRecording(
+        t_s=np.arange(n + 1) * t_ilc, pos_ned_m=np.zeros((n + 1, 3)),
+        vel_ned_m_s=np.zeros((n + 1, 3)), sent_s=np.zeros(n),
+        interpolated=np.zeros(n + 1, bool), complete=True, abort_reason=None,
+        setpoints_ned_m=np.zeros((n, 3)), t_ilc_s=t_ilc, raw_t_s=raw_v - v0,
+        raw_pos_ned_m=circle_ned(raw_v - v0 - lag_s), t0_vehicle_s=v0, clock=clock,
+    )  # fmt: skip
+
+
+def mocap(gap: tuple[float, float] | None = None) -> MocapSeries:
+    """120 Hz of the circle as Motive streams it, received 1 ms after the vehicle time."""
+    v = 20.0 - 0.5 + np.arange(0, 5.0, 1 / 120)
+    tracked = np.ones(v.size, bool)
+    if gap is not None:
+        tracked &= ~((v - 20.0 >= gap[0]) & (v - 20.0 < gap[1]))
+    pos = MOTIVE.position_from_ned(circle_ned(v - 20.0))
+    pos[~tracked] = np.nan
+    quat = np.tile([1.0, 0, 0, 0], (v.size, 1))
+    quat[~tracked] = np.nan
+    n = v.size
+    return MocapSeries(np.arange(n), v + OFFSET_S + 0.001, np.full(n, math.nan), tracked, pos,
+                       quat)  # fmt: skip
+
+
+def test_the_mocap_lands_on_the_grid_in_ned_and_the_lag_is_found() -> None:
+    rec = recording(0.030)
+    result = trial_mocap(mocap(), MOTIVE, rec)
+    np.testing.assert_allclose(result.pos_ned_m, circle_ned(rec.t_s), atol=2e-4)
+    assert result.lag_s == pytest.approx(0.030, abs=0.0015)
+    assert len(result.series) == mocap().seq.size
+
+
+def test_an_occlusion_longer_than_the_grid_gap_leaves_nan_there_only() -> None:
+    result = trial_mocap(mocap(gap=(1.0, 1.5)), MOTIVE, recording(0.0))
+    t = recording(0.0).t_s
+    inside = (t > 1.0 + 1 / 120) & (t < 1.5 - 1 / 120)
+    assert np.all(np.isnan(result.pos_ned_m[inside]))
+    assert np.all(np.isfinite(result.pos_ned_m[~((t >= 1.0 - 0.01) & (t <= 1.5 + 0.01))]))
+
+
+def test_without_a_clock_fit_nothing_is_placed() -> None:
+    from dataclasses import replace
+
+    result = trial_mocap(mocap(), MOTIVE, replace(recording(0.0), clock=None))
+    assert np.all(np.isnan(result.pos_ned_m)) and result.lag_s is None
