@@ -8,8 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from gcs.core.safeguard import SafeguardSettings, safeguard
+from gcs.core.safeguard import SafeguardSettings, feasible_step, safeguard
 from gcs.core.trajectory import Box
+from gcs.core.update import SetpointLimits, reference_for_inputs
 
 ARENA = Box((-3.0, 3.0), (-2.0, 2.5), (-3.0, 0.0))
 
@@ -69,3 +70,65 @@ def test_the_anchor_never_leaves_the_arena(e: np.ndarray, data, scatter: float) 
     assert np.all((d.anchor_ne_m[:, 0] >= n_lo) & (d.anchor_ne_m[:, 0] <= n_hi))
     assert np.all((d.anchor_ne_m[:, 1] >= e_lo) & (d.anchor_ne_m[:, 1] <= e_hi))
     assert 0 <= d.anchor_trial < e.size and 0 < d.step <= 1
+
+
+LIMITS = SetpointLimits(u_min_m=-3.0, u_max_m=3.0, max_step_m=0.5, max_deviation_m=1.0)
+
+
+def violations(u: np.ndarray, yd_u: np.ndarray, lim: SetpointLimits, tol: float = 1e-7) -> int:
+    """How many of the axis's limits ``u`` breaks (box, deviation, step from u(-1) = 0)."""
+    steps = np.abs(np.diff(np.concatenate([[0.0], u])))
+    return int(
+        np.sum(u < lim.u_min_m - tol)
+        + np.sum(u > lim.u_max_m + tol)
+        + np.sum(np.abs(u - yd_u) > lim.max_deviation_m + tol)
+        + np.sum(steps > lim.max_step_m + tol)
+    )
+
+
+def test_feasible_step_keeps_the_step_asked_when_the_anchor_keeps_the_limits() -> None:
+    yd = np.linspace(0.0, 2.0, 30)
+    anchor, target = yd + 0.5, yd - 0.5
+    assert feasible_step(anchor, target, yd, LIMITS, 0.5) == 0.5
+
+
+def test_feasible_step_after_a_refresh_changed_the_delay() -> None:
+    # the best trial kept the deviation bound of a model of relative degree 8; the model in
+    # use has relative degree 2, so on the ramp the same setpoints lie 1.5 m from today's
+    # aligned reference: half a step from them would break the 1 m bound, the step found not
+    lim = SetpointLimits(u_min_m=-3.0, u_max_m=3.0, max_step_m=1.0, max_deviation_m=1.0)
+    yd = np.concatenate([0.1 * np.arange(1, 31), np.full(30, 3.0)])
+    old, new = reference_for_inputs(yd, 8), reference_for_inputs(yd, 2)
+    ramp_in = np.minimum(0.1 * np.arange(yd.size), 1.0)
+    anchor = np.minimum(old + 0.9 * ramp_in, 3.0)
+    target = np.minimum(new + 0.8 * ramp_in, 3.0)
+    assert violations(anchor, old, lim) == 0 and violations(target, new, lim) == 0
+    assert violations(anchor + 0.5 * (target - anchor), new, lim) > 0
+    s = feasible_step(anchor, target, new, lim, 0.5)
+    assert s == pytest.approx((1.5 - 1.0) / (1.5 - 0.8), abs=1e-6)  # 1.5 - 0.7 s <= 1
+    assert violations(anchor + s * (target - anchor), new, lim) == 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.integers(min_value=2, max_value=40),
+    st.floats(min_value=0.05, max_value=1.0),
+    st.integers(min_value=0, max_value=2**31 - 1),
+)
+def test_feasible_step_always_keeps_the_limits(n: int, step: float, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    yd = np.cumsum(rng.uniform(-0.3, 0.3, n))
+    # a target inside every limit: near the reference, small steps, inside the box
+    target = np.cumsum(np.clip(np.diff(np.concatenate([[0.0], yd])), -0.45, 0.45))
+    target = np.clip(target, -3.0, 3.0)
+    if violations(target, yd, LIMITS) > 0:
+        yd = target.copy()  # then the reference itself is the target's
+    anchor = target + rng.uniform(-2.0, 2.0, n)
+    s = feasible_step(anchor, target, yd, LIMITS, step)
+    assert step <= s <= 1.0
+    assert violations(anchor + s * (target - anchor), yd, LIMITS) == 0
+
+
+def test_feasible_step_refuses_arrays_of_other_shapes() -> None:
+    with pytest.raises(ValueError, match="1-D of one length"):
+        feasible_step(np.zeros(3), np.zeros(4), np.zeros(3), LIMITS, 0.5)

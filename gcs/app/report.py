@@ -453,6 +453,16 @@ def decision_lines(record: dict) -> list[str]:
             f"{1e3 * _num(guard.get('threshold_m')):.1f} mm): fell back to trial "
             f"{guard.get('anchor_trial')} with step {_num(guard.get('step')):g}"
         )
+        raised = [
+            f"{name} {_num(ax.get('step')):.2f}"
+            for name, ax in zip(("north", "east"), decision["axes"], strict=True)
+            if _num(ax.get("step", guard.get("step"))) > _num(guard.get("step")) + 1e-6
+        ]
+        if raised:
+            lines.append(
+                "safeguard: step raised to keep the limits of the model in use (a refresh "
+                "changed its delay since the best trial was learned): " + ", ".join(raised)
+            )
     refresh, accepted = [], False
     for name, ax in zip(("north", "east"), decision["axes"], strict=True):
         r = ax.get("refresh")

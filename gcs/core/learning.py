@@ -36,7 +36,7 @@ from gcs.core.floor import (
     identical_groups,
 )
 from gcs.core.metrics import epos
-from gcs.core.model import DiscreteModel, simulate
+from gcs.core.model import DiscreteModel, relative_degree, simulate
 from gcs.core.noise_model import (
     drift_scale,
     estimate_disturbance,
@@ -45,9 +45,15 @@ from gcs.core.noise_model import (
 )
 from gcs.core.refresh import RefreshResult, RefreshSettings, refresh_model
 from gcs.core.robustness import RobustnessWeight, repeat_cutoff, robustness_weight
-from gcs.core.safeguard import SafeguardDecision, SafeguardSettings, safeguard
+from gcs.core.safeguard import SafeguardDecision, SafeguardSettings, feasible_step, safeguard
 from gcs.core.trajectory import Box
-from gcs.core.update import SetpointLimits, UpdateResult, UpdateWeights, next_input
+from gcs.core.update import (
+    SetpointLimits,
+    UpdateResult,
+    UpdateWeights,
+    next_input,
+    reference_for_inputs,
+)
 
 __all__ = [
     "LearningInputs",
@@ -371,6 +377,10 @@ class AxisRecord:
         ``{"cutoff_rad_s", "lam", "order"}`` of the weight used, None when off.
     update : UpdateResult
         Solver result.
+    step : float
+        Fraction of the update taken from the anchor's setpoints: 1, or after a safeguard
+        revert its step, raised as far as the limits need
+        (:func:`gcs.core.safeguard.feasible_step`).
     """
 
     axis: str
@@ -378,12 +388,14 @@ class AxisRecord:
     refresh: RefreshResult | None
     robustness: dict | None
     update: UpdateResult
+    step: float = 1.0
 
     def as_dict(self) -> dict:
         """JSON-ready dictionary (without the setpoints)."""
         u = self.update
         return {
             "axis": self.axis,
+            "step": self.step,
             "noise": self.noise.as_dict(),
             "refresh": None if self.refresh is None else self.refresh.as_dict(),
             "robustness": self.robustness,
@@ -681,9 +693,11 @@ def _plan_axis(
     robust, robust_rec = _robustness(inputs, adaptive, model, axis, ref, sp, pos, u[0])
     limits = axis_limits(inputs.arena, start, axis, inputs.max_step_m, inputs.max_deviation_m)
     result = next_input(model, yd, d_hat, u[anchor], inputs.weights, limits, robust)
-    # after a safeguard revert: a convex combination of two feasible inputs stays feasible
+    if step < 1.0:  # after a safeguard revert: no further from the best trial than its limits allow
+        yd_u = reference_for_inputs(yd, relative_degree(model))
+        step = feasible_step(u[anchor], result.u_m, yd_u, limits, step)
     u_next = result.u_m if step >= 1.0 else u[anchor] + step * (result.u_m - u[anchor])
-    record = AxisRecord(("north", "east")[axis], noise_rec, refresh, robust_rec, result)
+    record = AxisRecord(("north", "east")[axis], noise_rec, refresh, robust_rec, result, step)
     return _AxisPlan(u_next, d_hat, p, model, state, record)
 
 

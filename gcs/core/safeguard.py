@@ -10,9 +10,12 @@ scatters by ``sqrt(2) sigma`` when nothing but the vehicle's non-repeatability s
 so with ``k = 2`` a trial is called worse by chance with probability 2.3 % (and less, since
 ``e_best`` is the minimum of several). Then the next update starts from the best trial's
 setpoints and takes only a fraction ``step`` of the QP's step from there:
-``U_next = U_best + step (U* - U_best)``. Both ends satisfy the arena and every setpoint limit
-(they are convex), so the convex combination does too; the anchor is also clipped into the
-arena box, so the decision never hands out a setpoint outside it.
+``U_next = U_best + step (U* - U_best)``. ``U*`` satisfies the arena and every setpoint
+limit of the model in use; ``U_best`` satisfied those of the model it was learned with. When a
+model refresh changed the relative degree since, the deviation bound is aligned differently
+and ``U_best`` may break today's bound: :func:`feasible_step` then takes the smallest step at
+least ``step`` that keeps every limit (the limits are linear in the step, so the feasible
+steps are an interval that contains 1, ``U*`` itself).
 """
 
 from __future__ import annotations
@@ -22,8 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from gcs.core.trajectory import Box
+from gcs.core.update import SetpointLimits
 
-__all__ = ["SafeguardSettings", "SafeguardDecision", "safeguard"]
+__all__ = ["SafeguardSettings", "SafeguardDecision", "safeguard", "feasible_step"]
 
 
 @dataclass(frozen=True)
@@ -162,3 +166,61 @@ def safeguard(
         threshold_m=threshold,
         reason=reason,
     )
+
+
+def feasible_step(
+    anchor_m: np.ndarray,
+    target_m: np.ndarray,
+    yd_u_m: np.ndarray,
+    limits: SetpointLimits,
+    step: float,
+    tol_m: float = 1e-9,
+) -> float:
+    """The smallest step ``s >= step`` for which ``anchor + s (target - anchor)`` keeps the limits.
+
+    The limits of one axis, in learning coordinates (the start point at 0): the arena box
+    ``u_min <= u(k) <= u_max``, the deviation ``|u(k) - yd_u(k)| <= max_deviation`` from the
+    reference aligned with the inputs, and the step ``|u(k) - u(k-1)| <= max_step`` with
+    ``u(-1) = 0``. Each is linear in ``s``, so the feasible steps form an interval; ``target``
+    (the QP's solution) satisfies them, so it contains 1.
+
+    Parameters
+    ----------
+    anchor_m, target_m : ndarray, shape (N,)
+        The best trial's inputs and the QP's solution [m].
+    yd_u_m : ndarray, shape (N,)
+        The reference aligned with the inputs of the model in use [m]
+        (:func:`gcs.core.update.reference_for_inputs`).
+    limits : SetpointLimits
+        The axis's limits.
+    step : float
+        The step asked for, in ``(0, 1]``.
+    tol_m : float
+        Slack of every bound [m] (the solver keeps them to about 1e-9 m).
+
+    Returns
+    -------
+    float
+        In ``[step, 1]``.
+    """
+    a, t, yd = (np.asarray(v, dtype=float) for v in (anchor_m, target_m, yd_u_m))
+    if a.ndim != 1 or a.shape != t.shape or a.shape != yd.shape:
+        raise ValueError(f"anchor, target and yd_u must be 1-D of one length: {a.shape}, "
+                         f"{t.shape}, {yd.shape}")  # fmt: skip
+    rows = [(a, t - a, limits.u_min_m, limits.u_max_m)]
+    if limits.max_deviation_m is not None:
+        dev = limits.max_deviation_m
+        rows.append((a - yd, t - a, -dev, dev))
+    if limits.max_step_m is not None:
+        da = np.diff(np.concatenate([[0.0], a]))
+        dd = np.diff(np.concatenate([[0.0], t - a]))
+        rows.append((da, dd, -limits.max_step_m, limits.max_step_m))
+    lowest = step
+    for v, w, lo, hi in rows:
+        # lo - tol <= v + s w <= hi + tol, for the rows that move with s
+        moving = np.abs(w) > 0.0
+        v, w = v[moving], w[moving]
+        bound = np.where(w > 0, lo - tol_m - v, hi + tol_m - v) / w
+        if bound.size:
+            lowest = max(lowest, float(np.max(bound)))
+    return min(lowest, 1.0)
