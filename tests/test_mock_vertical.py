@@ -179,3 +179,65 @@ def test_px4_take_off_handling_spools_up_then_ramps_the_climb_limit() -> None:
     sim.command(0.0, Target((0.0, 0.0, -2.0)))
     sim.advance_to(0.5)
     assert sim.pos[2] < -0.01
+
+
+# -- through MAVSDK ---------------------------------------------------------------------------
+
+
+@pytest.mark.e2e
+def test_an_altitude_setpoint_change_is_followed_at_the_profiles_climb_limit(
+    tmp_path: Path,
+) -> None:
+    import asyncio
+
+    from mavsdk.asyncio.plugins.action import ActionAsync
+    from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+    from test_mock_mavsdk import connect, first
+
+    from gcs.mock.process import MockProcess
+
+    profile = tmp_path / "slow-climb.yaml"
+    profile.write_text(
+        "controller: {vel_max_up_m_s: 1.0}\n"
+        "px4: {mis_takeoff_alt_m: 1.0, mpc_land_speed_m_s: 1.0, land_detect_s: 0.3,"
+        " com_disarm_land_s: 0.5}\n"
+    )
+    climb: list[tuple[float, float]] = []  # (down position, down velocity) seen
+
+    async def fly(url: str) -> None:
+        m, system = await connect(url)
+        try:
+            action, offboard, tel = (
+                ActionAsync(system),
+                OffboardAsync(system),
+                TelemetryAsync(system),
+            )
+            await first(tel.subscribe_health(), lambda h: h.is_armable, 5.0)
+            await tel.set_rate_position_velocity_ned(50.0)
+            await action.arm()
+            await action.takeoff()
+            await first(tel.subscribe_flight_mode(), lambda f: f.name == "HOLD", 10.0)
+            await offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -1.0, 0.0))
+            await offboard.start()
+            await first(tel.subscribe_flight_mode(), lambda f: f.name == "OFFBOARD", 3.0)
+            # 2.5 m up; MAVSDK repeats the setpoint at 20 Hz while the telemetry is watched
+            await offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -3.5, 0.0))
+
+            def arrived(pv: object) -> bool:
+                climb.append((pv.position.down_m, pv.velocity.down_m_s))  # type: ignore[attr-defined]
+                return abs(pv.position.down_m + 3.5) < 0.02 and abs(pv.velocity.down_m_s) < 0.05  # type: ignore[attr-defined]
+
+            await first(tel.subscribe_position_velocity_ned(), arrived, 15.0)
+            await action.land()
+            await first(tel.subscribe_armed(), lambda a: not a, 15.0)
+        finally:
+            m.destroy()
+
+    with MockProcess(profile, seed=5) as mock:
+        asyncio.run(fly(mock.url))
+    down = np.array(climb)
+    assert down[-1, 0] == pytest.approx(-3.5, abs=0.02)
+    # the climb rate reaches the profile's 1.0 m/s (PX4's 3 m/s would be reached otherwise)
+    # and keeps to it, within the PI loop's small overshoot and the telemetry noise
+    assert 0.95 <= -down[:, 1].min() <= 1.08
