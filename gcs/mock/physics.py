@@ -5,6 +5,8 @@ Model, in the local NED frame, integrated with semi-implicit Euler on a fixed gr
     r(t)      = target received at t - input_delay_s           (transport delay)
     v_sp      = Kp (r - p)            limited to the speed limits
     a_sp      = Kv (v_sp - v) + Ki int(v_sp - v) - Kd a        limited by tilt and MPC_ACC_HOR_MAX
+    thrust    = a_sp - g e_down        |thrust| <= thrust_max, vertical first (a horizontal
+                                       margin kept), upward part >= thrust_min
     da/dt     = (a_sp - a) / tilt_lag_s                        (attitude and thrust response)
     dv/dt     = a - k1 (v - w) - k2 |v - w| (v - w) + d(p) + g(t)
     dp/dt     = v
@@ -16,7 +18,9 @@ trial) and Ornstein-Uhlenbeck gusts ``g(t)`` (seeded per run). The ground is the
 state itself by default (a motion-capture vehicle), or the estimate of a
 :class:`gcs.mock.estimator.Estimator` when the profile enables one (a GPS-navigated vehicle,
 which then wanders with its estimate). :meth:`QuadPhysics.measure` reports the navigation
-state plus fast measurement noise.
+state plus fast measurement noise. With ``spoolup_s`` or ``takeoff_ramp_s`` set, a take-off
+follows PX4's take-off handling (no thrust during spool-up, then a ramp of the climb limit from
+zero thrust, the vertical integrator winding up on the ground meanwhile).
 
 The state is kept in plain floats (not NumPy) because the mock steps it at 250 Hz in real
 time; :func:`step_response` and :func:`fit_step_response` give the small-signal closed loop
