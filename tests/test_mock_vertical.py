@@ -128,6 +128,31 @@ def test_a_small_altitude_step_follows_the_linear_cascade(profile: str) -> None:
     assert y[-1] == pytest.approx(1.0, abs=0.01)
 
 
+@pytest.mark.parametrize("profile", ["mock.yaml", "mock-gps.yaml"])
+def test_on_a_climbing_circle_the_height_lags_by_the_loops_following_error(profile: str) -> None:
+    # a 3-D path (setpoints at 50 Hz, position only as MAVSDK sends them): the velocity loop's
+    # integrator follows any constant climb rate v, so the height trails the reference by the
+    # transport delay's v L plus the P loop's v / Kp_z, whatever the circle does meanwhile
+    base = load_mock_config(ROOT / "profiles" / profile)
+    cfg = replace(
+        base,
+        disturbance=replace(base.disturbance, field_amplitude_m_s2=0.0, gust_sigma_m_s2=0.0),
+        estimator=replace(base.estimator, enabled=False),
+    )
+    sim = QuadPhysics(cfg, pos_ned_m=(1.0, 0.0, -2.0))
+    v, w = 0.3, 0.5
+    lag = []
+    for k in range(1, 1501):
+        t = 0.02 * k
+        sim.command(t, Target((math.cos(w * t), math.sin(w * t), -2.0 - v * t)))
+        sim.advance_to(t)
+        if t > 20.0:
+            lag.append(sim.pos[2] - (-2.0 - v * t))
+    expected = v * (cfg.physics.input_delay_s + 1.0 / cfg.controller.pos_p_z_1_s)
+    assert np.mean(lag) == pytest.approx(expected, abs=0.003)
+    assert np.ptp(lag) < 0.003
+
+
 def test_thrust_stays_within_its_limits_and_the_vertical_comes_first() -> None:
     c = replace(QUIET.controller, vel_p_z_1_s=20.0, vel_max_up_m_s=30.0, vel_max_down_m_s=30.0)
     cfg = replace(QUIET, controller=c)
