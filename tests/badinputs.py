@@ -1147,6 +1147,18 @@ def _output_cases() -> Iterator[Case]:
         lambda ws: ["mock", "--config", str(ws.file("m.yaml", "physics: [\n"))],
         "malformed YAML",
     )
+    for text, expect in (
+        ("controller: {thrust_xy_margin: 1.0}\n", "controller.thrust_xy_margin' must be < 1"),
+        ("controller: {takeoff_ramp_s: -3}\n", "controller.takeoff_ramp_s' must be >= 0"),
+        ("physics: {thrust_min_g: 1.2}\n", "physics.thrust_min_g' must be < 1"),
+    ):
+        yield Case(
+            k,
+            "mock",
+            f"--config {text.strip()}",
+            lambda ws, t=text: ["mock", "--config", str(ws.file("m.yaml", t))],
+            expect,
+        )
     yield Case(
         k,
         "mock",

@@ -82,8 +82,8 @@ class PhysicsConfig:
     drag_lin_1_s: float = 0.10
     drag_quad_1_m: float = 0.25
     tilt_lag_s: float = 0.08
-    thrust_max_g: float = 2.0
-    thrust_min_g: float = 0.1
+    thrust_max_g: float = 2.03
+    thrust_min_g: float = 0.24
     input_delay_s: float = 0.19
 
 
@@ -106,7 +106,9 @@ class ControllerConfig:
         Velocity loop derivative gain [-] (PX4 ``MPC_XY_VEL_D_ACC``), on the measured
         acceleration.
     vel_int_max_m_s2 : float
-        Anti-windup bound of each velocity integrator's contribution [m/s^2].
+        Anti-windup bound of each horizontal velocity integrator's contribution [m/s^2].
+    vel_int_max_z_m_s2 : float
+        The same for the vertical one [m/s^2] (PX4 bounds it by g).
     vel_max_xy_m_s : float
         Horizontal speed limit [m/s] (``MPC_XY_VEL_MAX``).
     vel_max_up_m_s, vel_max_down_m_s : float
@@ -116,8 +118,19 @@ class ControllerConfig:
     tilt_max_deg : float
         Tilt limit [deg] (``MPC_TILTMAX_AIR``); bounds the horizontal acceleration by
         ``g tan(tilt)``.
+    thrust_xy_margin : float
+        Share of the maximum thrust kept for horizontal control when the vertical demand
+        saturates (``MPC_THR_XY_MARG``); beyond it the vertical thrust has priority and the
+        horizontal gets what is left of ``physics.thrust_max_g``.
     yaw_lag_s : float
         Time constant of the yaw response [s].
+    spoolup_s : float
+        Motor spool-up after arming before a take-off may start [s] (``MPC_SPOOLUP_TIME``;
+        PX4: 1).
+    takeoff_ramp_s : float
+        Time over which the climb limit ramps from zero thrust to the climb speed at take-off
+        [s] (``MPC_TKO_RAMP_T``; PX4: 3). With ``spoolup_s`` both zero (the default) the
+        vehicle leaves the ground at once, as the mock always did.
     """
 
     pos_p_x_1_s: float = 1.25
@@ -130,12 +143,16 @@ class ControllerConfig:
     vel_i_z_1_s2: float = 2.0
     vel_d_xy: float = 0.0
     vel_int_max_m_s2: float = 2.0
+    vel_int_max_z_m_s2: float = 9.81
     vel_max_xy_m_s: float = 12.0
     vel_max_up_m_s: float = 3.0
     vel_max_down_m_s: float = 1.5
     acc_max_xy_m_s2: float = 5.0
     tilt_max_deg: float = 45.0
+    thrust_xy_margin: float = 0.3
     yaw_lag_s: float = 0.3
+    spoolup_s: float = 0.0
+    takeoff_ramp_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -681,6 +698,7 @@ def _validate(cfg: MockConfig, where: str) -> None:
         ("physics.thrust_min_g", cfg.physics.thrust_min_g < 1.0, "must be < 1"),
         ("controller.tilt_max_deg", 0 < cfg.controller.tilt_max_deg < 80, "must be in (0, 80)"),
         ("controller.yaw_lag_s", cfg.controller.yaw_lag_s > 0, "must be > 0"),
+        ("controller.thrust_xy_margin", cfg.controller.thrust_xy_margin < 1.0, "must be < 1"),
         ("disturbance.gust_tau_s", cfg.disturbance.gust_tau_s > 0, "must be > 0"),
         ("estimator.vel_sigma_ned_m_s", min(cfg.estimator.vel_sigma_ned_m_s) >= 0, "must be >= 0"),
         ("estimator.vel_tau_ned_s", min(cfg.estimator.vel_tau_ned_s) > 0, "must be > 0"),

@@ -5,6 +5,8 @@ Model, in the local NED frame, integrated with semi-implicit Euler on a fixed gr
     r(t)      = target received at t - input_delay_s           (transport delay)
     v_sp      = Kp (r - p)            limited to the speed limits
     a_sp      = Kv (v_sp - v) + Ki int(v_sp - v) - Kd a        limited by tilt and MPC_ACC_HOR_MAX
+    thrust    = a_sp - g e_down        |thrust| <= thrust_max, vertical first (a horizontal
+                                       margin kept), upward part >= thrust_min
     da/dt     = (a_sp - a) / tilt_lag_s                        (attitude and thrust response)
     dv/dt     = a - k1 (v - w) - k2 |v - w| (v - w) + d(p) + g(t)
     dp/dt     = v
@@ -16,11 +18,13 @@ trial) and Ornstein-Uhlenbeck gusts ``g(t)`` (seeded per run). The ground is the
 state itself by default (a motion-capture vehicle), or the estimate of a
 :class:`gcs.mock.estimator.Estimator` when the profile enables one (a GPS-navigated vehicle,
 which then wanders with its estimate). :meth:`QuadPhysics.measure` reports the navigation
-state plus fast measurement noise.
+state plus fast measurement noise. With ``spoolup_s`` or ``takeoff_ramp_s`` set, a take-off
+follows PX4's take-off handling (no thrust during spool-up, then a ramp of the climb limit from
+zero thrust, the vertical integrator winding up on the ground meanwhile).
 
 The state is kept in plain floats (not NumPy) because the mock steps it at 250 Hz in real
 time; :func:`step_response` and :func:`fit_step_response` give the small-signal closed loop
-of each horizontal axis for the tests and the docs.
+of each axis for the tests and the docs.
 """
 
 from __future__ import annotations
@@ -42,6 +46,8 @@ from gcs.mock.estimator import (
 
 if TYPE_CHECKING:  # NumPy and SciPy are imported lazily: the real-time mock does not need them
     import numpy as np
+
+_DISARMED, _SPOOLUP, _READY, _RAMP, _FLIGHT = range(5)  # PX4's TakeoffState, in its order
 
 __all__ = [
     "Target",
@@ -171,6 +177,12 @@ class QuadPhysics:
         self.yaw_rad = 0.0
         self.yaw_rate_rad_s = 0.0
         self.armed = pos_ned_m[2] < 0
+        # PX4's take-off handling (spool-up, then a ramp of the climb limit); off when both
+        # times are zero, and then the vehicle leaves the ground at once
+        self._takeoff_handling = c.spoolup_s > 0 or c.takeoff_ramp_s > 0
+        self._tko_state = _FLIGHT if self.armed else _DISARMED
+        self._armed_t_s = 0.0
+        self._ramp_progress = 0.0
         self.wind_ne_m_s = (0.0, 0.0)
         self.target = Target((self.pos[0], self.pos[1], self.pos[2]), 0.0)
         self._queue: deque[tuple[float, Target]] = deque()
@@ -194,7 +206,8 @@ class QuadPhysics:
         self._acc_xy_max = min(
             c.acc_max_xy_m_s2, p.gravity_m_s2 * math.tan(math.radians(c.tilt_max_deg))
         )
-        self._az_min = p.gravity_m_s2 * (1.0 - p.thrust_max_g)  # strongest upward
+        self._thrust_max_m_s2 = p.gravity_m_s2 * p.thrust_max_g  # thrust per unit mass
+        self._thrust_xy_margin_m_s2 = self._thrust_max_m_s2 * c.thrust_xy_margin
         self._az_max = p.gravity_m_s2 * (1.0 - p.thrust_min_g)  # idle
 
     # -- inputs ---------------------------------------------------------------------------
@@ -237,6 +250,45 @@ class QuadPhysics:
         """
         self.armed = armed
         self.vel_int = [0.0, 0.0, 0.0]
+        if armed and self._tko_state == _DISARMED:
+            self._tko_state = _SPOOLUP
+            self._armed_t_s = self.t_s
+        elif not armed:
+            self._tko_state = _DISARMED
+
+    def _takeoff(self, grounded: bool, tgt: Target, up_max: float) -> tuple[float, bool]:
+        """PX4's take-off state machine for one step; the climb limit and whether it ramps.
+
+        Spool-up for ``spoolup_s`` after arming; then, on the ground with a target above (or a
+        climb asked), the climb limit ramps from ``-g / vel_p_z`` (zero thrust) to ``up_max``
+        over ``takeoff_ramp_s``; landing again makes the vehicle ready for the next one.
+        """
+        c = self.cfg.controller
+        state = self._tko_state
+        if state == _SPOOLUP and self.t_s - self._armed_t_s >= c.spoolup_s - 1e-9:
+            state = _READY
+        if state == _READY:
+            up = tgt.pos_ned_m[2] < self.nav_pos[2] if tgt.vz_m_s is None else tgt.vz_m_s < 0
+            if grounded and up:
+                state = _RAMP
+                self._ramp_progress = 0.0
+        limit = up_max
+        start = -self.cfg.physics.gravity_m_s2 / max(self._kv[2], 0.01)
+        if state < _RAMP:
+            limit = start
+        elif state == _RAMP:
+            if c.takeoff_ramp_s > self.dt_s:
+                self._ramp_progress += self.dt_s / c.takeoff_ramp_s
+            else:
+                self._ramp_progress = 1.0
+            if self._ramp_progress >= 1.0:
+                state = _FLIGHT
+            else:
+                limit = start + self._ramp_progress * (up_max - start)
+        elif state == _FLIGHT and grounded and self.vel[2] >= 0.0 and self.acc[2] >= 0.0:
+            state = _READY
+        self._tko_state = state
+        return min(limit, up_max), state == _RAMP
 
     @property
     def on_ground(self) -> bool:
@@ -291,18 +343,34 @@ class QuadPhysics:
             up_max = c.vel_max_up_m_s
             if tgt.vel_up_max_m_s is not None:
                 up_max = min(up_max, tgt.vel_up_max_m_s)
-            vsp[2] = min(max(vsp[2], -up_max), c.vel_max_down_m_s)
+            az_max = self._az_max
+            ramping = False
+            if self._takeoff_handling:
+                up_max, ramping = self._takeoff(grounded, tgt, up_max)
+                if self._tko_state != _FLIGHT:
+                    az_max = g  # PX4 lets the thrust ramp from zero on take-off
+            # PX4's order: the climb limit wins when the two cross (the ramp's start)
+            vsp[2] = max(min(vsp[2], c.vel_max_down_m_s), -up_max)
             # velocity -> acceleration setpoint (PID, derivative on the measured acceleration)
             asp = [0.0, 0.0, 0.0]
             for i in range(3):
                 err = vsp[i] - nav_vel[i]
-                if not grounded:
-                    lim = c.vel_int_max_m_s2 / self._ki[i] if self._ki[i] > 0 else 0.0
+                if i == 2 and ramping:  # PX4 integrates on the ground while the ramp runs,
+                    a_now = self._kv[2] * err + self._ki[2] * self.vel_int[2]
+                    if not (a_now >= az_max and err > 0):  # unless the thrust is at zero
+                        lim = c.vel_int_max_z_m_s2 / self._ki[2] if self._ki[2] > 0 else 0.0
+                        self.vel_int[2] = min(max(self.vel_int[2] + err * dt, -lim), lim)
+                elif not grounded:
+                    lim_a = c.vel_int_max_z_m_s2 if i == 2 else c.vel_int_max_m_s2
+                    lim = lim_a / self._ki[i] if self._ki[i] > 0 else 0.0
                     self.vel_int[i] = min(max(self.vel_int[i] + err * dt, -lim), lim)
                 a_i = acc[i] - (g if i == 2 else 0.0)
                 asp[i] = self._kv[i] * err + self._ki[i] * self.vel_int[i]
                 if i < 2:
                     asp[i] -= c.vel_d_xy * a_i
+            if self._takeoff_handling and self._tko_state < _RAMP:
+                asp = [0.0, 0.0, g]  # not taking off yet: no thrust, no integrator
+                self.vel_int = [0.0, 0.0, 0.0]
             if not tgt.hold_xy:  # level: no horizontal control (PX4 Descend)
                 asp[0] = asp[1] = 0.0
                 self.vel_int[0] = self.vel_int[1] = 0.0
@@ -311,7 +379,21 @@ class QuadPhysics:
                 s = self._acc_xy_max / axy
                 asp[0] *= s
                 asp[1] *= s
-            asp[2] = min(max(asp[2], self._az_min), self._az_max)
+                axy = self._acc_xy_max
+            # thrust limits, vertical first (PX4's PositionControl): the upward thrust may use
+            # what a horizontal margin leaves, the horizontal thrust what the vertical leaves
+            thr_max = self._thrust_max_m_s2
+            margin = min(axy, self._thrust_xy_margin_m_s2)
+            up_max = math.sqrt(thr_max * thr_max - margin * margin)
+            if g - asp[2] > up_max:
+                asp[2] = g - up_max
+            elif asp[2] > az_max:
+                asp[2] = az_max
+            xy_room = thr_max * thr_max - (g - asp[2]) ** 2
+            if axy * axy > xy_room:
+                s = math.sqrt(max(xy_room, 0.0)) / axy
+                asp[0] *= s
+                asp[1] *= s
             # yaw: first-order lag towards the setpoint, the short way round
             dyaw = math.remainder(tgt.yaw_rad - self.yaw_rad, 2.0 * math.pi)
             self.yaw_rate_rad_s = dyaw / c.yaw_lag_s
@@ -482,21 +564,21 @@ def step_response(
     duration_s: float = 12.0,
     t_sample_s: float = 0.05,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Small-signal step response of one horizontal axis, from the physics alone.
+    """Small-signal step response of one axis, from the physics alone.
 
     The vehicle hovers at 2 m in equilibrium; at t = 0 the position setpoint of ``axis`` steps
-    by ``amplitude_m``. The repeatable field, the gusts, the estimator error and the noise are
-    switched off; the nonlinearities (limits, drag) stay but are not reached at small
-    amplitude.
+    by ``amplitude_m`` (along down for axis 2: a negative step climbs). The repeatable field,
+    the gusts, the estimator error and the noise are switched off; the nonlinearities (limits,
+    drag) stay but are not reached at small amplitude.
 
     Parameters
     ----------
     cfg : MockConfig
         Mock configuration.
     axis : int
-        0 for north (x), 1 for east (y).
+        0 for north (x), 1 for east (y), 2 for down (z).
     amplitude_m : float
-        Step size [m].
+        Step size [m], non-zero.
     duration_s : float
         Length of the response [s].
     t_sample_s : float
@@ -517,15 +599,16 @@ def step_response(
         estimator=replace(cfg.estimator, enabled=False),
     )
     sim = QuadPhysics(quiet, seed=0, pos_ned_m=(0.0, 0.0, -2.0))
-    target = [0.0, 0.0, -2.0]
-    target[axis] = amplitude_m
+    start = (0.0, 0.0, -2.0)
+    target = list(start)
+    target[axis] += amplitude_m
     sim.command(0.0, Target((target[0], target[1], target[2]), 0.0))
     n = int(round(duration_s / t_sample_s)) + 1
     t = np.arange(n) * t_sample_s
     y = np.empty(n)
     for k, tk in enumerate(t):
         sim.advance_to(float(tk))
-        y[k] = sim.pos[axis] / amplitude_m
+        y[k] = (sim.pos[axis] - start[axis]) / amplitude_m
     return t, y
 
 
