@@ -434,7 +434,7 @@ def _trajectory_cases() -> Iterator[Case]:
         ("name", "", "name"),
         ("name", 8, "name"),
         ("name", "../up", "name"),
-        ("type", "circle", "type"),
+        ("type", "spiral", "type"),
         ("amplitude_north_m", "big", "amplitude_north_m"),
         ("amplitude_east_m", -1.0, "amplitude_east_m"),
         ("period_s", float("nan"), "period_s"),

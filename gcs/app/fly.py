@@ -32,8 +32,8 @@ from gcs.core.trajectory import (
     Reference,
     check_reference,
     points_outside,
-    sample_eight,
 )
+from gcs.core.trajectory_sources import sample_reference
 from gcs.errors import PathError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.fence import Fence
@@ -369,7 +369,7 @@ def plan_fly(
 
 def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Reference:
     if trajectory.shape is None:
-        raise TrajectoryError(f"{where}: not an eight (an identification excitation)")
+        raise TrajectoryError(f"{where}: not a trajectory to sample (an identification excitation)")
     duration = trajectory.shape.duration_s
     if not duration / profile.t_ilc_s <= MAX_SAMPLES:  # before the arrays are made
         raise TrajectoryError(
@@ -378,13 +378,40 @@ def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Refe
         )
     try:
         with np.errstate(over="raise", invalid="raise"):
-            ref = sample_eight(trajectory.shape, profile.t_ilc_s)
-        check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)
+            ref = sample_reference(trajectory.shape, profile.t_ilc_s)
+        check_within_limits(ref, profile)
     except TrajectoryError as exc:
         raise TrajectoryError(f"{where}: {exc}") from None
     except FloatingPointError as exc:
         raise TrajectoryError(f"{where}: its numbers overflow when sampled ({exc})") from None
     return ref
+
+
+def check_within_limits(ref: Reference, profile: Profile) -> None:
+    """Refuse a reference beyond the profile's vehicle limits or arena, on the flown grid.
+
+    Parameters
+    ----------
+    ref : Reference
+        The sampled reference.
+    profile : Profile
+        Its ``vehicle`` limits (horizontal and vertical) and ``arena``.
+
+    Raises
+    ------
+    TrajectoryError
+        Naming the limit and the time (:func:`gcs.core.trajectory.check_reference`).
+    """
+    check_reference(
+        ref,
+        profile.max_speed_m_s,
+        profile.max_accel_m_s2,
+        profile.arena,
+        max_jerk_m_s3=profile.max_jerk_m_s3,
+        max_vertical_speed_m_s=profile.max_vertical_speed_m_s,
+        max_vertical_accel_m_s2=profile.max_vertical_accel_m_s2,
+        max_vertical_jerk_m_s3=profile.max_vertical_jerk_m_s3,
+    )
 
 
 def _plan_resume(
@@ -415,7 +442,7 @@ def _plan_resume(
     settings = flight_settings(profile, where)
     ref = run.reference()
     try:
-        check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)
+        check_within_limits(ref, profile)
     except TrajectoryError as exc:
         raise RunLogError(f"{run.path}/reference.csv: {exc}") from None
     first = run.next_trial()
