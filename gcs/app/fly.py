@@ -354,9 +354,9 @@ def plan_fly(
         check_until_converged(profile, where)
     trajectory = load_trajectory(trajectory_path)
     algorithm = algorithm or profile.learning.algorithm
-    settings = flight_settings(profile, where)
     mocap_plan = plan_mocap(profile, where, mocap, use_mock)
     ref = _reference(profile, trajectory, str(trajectory_path))
+    settings = flown_yaw(flight_settings(profile, where), trajectory, ref, str(trajectory_path))
     check_learnable(profile, ref, algorithm, where)
     if run_path is not None:
         check_new_dir(run_path, "--run")
@@ -385,6 +385,40 @@ def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Refe
     except FloatingPointError as exc:
         raise TrajectoryError(f"{where}: its numbers overflow when sampled ({exc})") from None
     return ref
+
+
+def flown_yaw(
+    settings: FlightSettings, trajectory: TrajectorySpec, ref: Reference, where: str
+) -> FlightSettings:
+    """The flight settings with the trajectory's yaw: its constant ``yaw_deg`` if it has one.
+
+    Without ``yaw_deg`` the yaw is held at the profile's ``flight.yaw_deg``. A yaw that varies
+    along the trajectory (a samples file's ``yaw_deg`` column) is sampled and checked but not
+    flown: it is refused here rather than silently held.
+
+    Parameters
+    ----------
+    settings : FlightSettings
+        The profile's flight settings.
+    trajectory : TrajectorySpec
+        The trajectory (its ``yaw_deg`` field).
+    ref : Reference
+        Its reference on the grid (a run's ``reference.csv`` carries no yaw).
+    where : str
+        The trajectory's file, for the message.
+
+    Returns
+    -------
+    FlightSettings
+    """
+    yaw_deg = trajectory.source.get("yaw_deg")
+    if ref.yaw_rad is not None and yaw_deg is None:
+        raise TrajectoryError(
+            f"{where}: a yaw that varies along the trajectory (the samples file's yaw_deg "
+            "column) is not flown yet: leave the column out, or give a constant yaw_deg in the "
+            "trajectory file"
+        )
+    return settings if yaw_deg is None else replace(settings, yaw_deg=float(yaw_deg))
 
 
 def check_within_limits(ref: Reference, profile: Profile) -> None:
@@ -439,8 +473,10 @@ def _plan_resume(
                 )
     where = f"{run.path}/manifest.json:profile"
     profile, trajectory = run.profile(), run.trajectory()
-    settings = flight_settings(profile, where)
     ref = run.reference()
+    settings = flown_yaw(
+        flight_settings(profile, where), trajectory, ref, f"{run.path}/manifest.json:trajectory"
+    )
     try:
         check_within_limits(ref, profile)
     except TrajectoryError as exc:

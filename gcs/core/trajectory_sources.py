@@ -458,8 +458,10 @@ def sample_samples(shape: SamplesShape, t_ilc_s: float) -> Reference:
 
     The file's first sample falls at the end of the added lead-in; between samples the path
     is the piecewise-cubic Hermite interpolant of each axis (see the module's note), before
-    the first and after the last it holds them. Velocity and acceleration are the
-    interpolant's derivatives.
+    the first and after the last it holds them. Velocity and acceleration are the central
+    differences of the resampled positions (zero at both ends, in hover): a planner's samples
+    carry rounding that the interpolant's second derivative would magnify between close
+    samples, while the differences are what the vehicle is asked for on the grid.
 
     Parameters
     ----------
@@ -477,12 +479,12 @@ def sample_samples(shape: SamplesShape, t_ilc_s: float) -> Reference:
     ts = np.asarray(shape.t_s, dtype=float)
     ts = ts - ts[0] + lead_in
     t = _grid(shape.duration_s, t_ilc_s)
-    inside = (t > ts[0]) & (t < ts[-1])
     tc = np.clip(t, ts[0], ts[-1])
-    interp = PchipInterpolator(ts, np.asarray(shape.pos_ned_m, dtype=float), axis=0)
-    pos = interp(tc)
-    vel = np.where(inside[:, None], interp.derivative(1)(tc), 0.0)
-    acc = np.where(inside[:, None], interp.derivative(2)(tc), 0.0)
+    pos = PchipInterpolator(ts, np.asarray(shape.pos_ned_m, dtype=float), axis=0)(tc)
+    vel = np.zeros_like(pos)
+    acc = np.zeros_like(pos)
+    vel[1:-1] = (pos[2:] - pos[:-2]) / (2.0 * t_ilc_s)
+    acc[1:-1] = (pos[2:] - 2.0 * pos[1:-1] + pos[:-2]) / t_ilc_s**2
     yaw = None
     if shape.yaw_rad is not None:
         yaw = PchipInterpolator(ts, np.unwrap(np.asarray(shape.yaw_rad, dtype=float)))(tc)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -551,17 +551,17 @@ def _ellipse(f: _Fields, base_dir: Path | None) -> EllipseShape:
         raise f.fail(
             "plane", f"must be one of {', '.join(PLANES)} or a normal vector, got {plane!r}"
         )
-    d = EllipseShape((0.0, 0.0, 0.0), (1.0, 1.0), 1.0)
+    d = {x.name: x.default for x in fields(EllipseShape)}
     return EllipseShape(
         center_ned_m=tuple(f.numbers("center_ned_m", 3)),
         radii_m=radii,
         period_s=f.number("period_s", positive=True),
         plane=plane,
-        start_angle_deg=f.number("start_angle_deg", d.start_angle_deg),
-        loops=f.integer("loops", d.loops),
-        ramp_s=f.number("ramp_s", d.ramp_s),
-        hover_s=f.number("hover_s", d.hover_s),
-        climb_m=f.number("climb_m", d.climb_m),
+        start_angle_deg=f.number("start_angle_deg", d["start_angle_deg"]),
+        loops=f.integer("loops", d["loops"]),
+        ramp_s=f.number("ramp_s", d["ramp_s"]),
+        hover_s=f.number("hover_s", d["hover_s"]),
+        climb_m=f.number("climb_m", d["climb_m"]),
         yaw_deg=_yaw(f),
     )
 
@@ -604,11 +604,16 @@ def _samples(f: _Fields, base_dir: Path | None) -> SamplesShape | None:
     hover_s = f.number("hover_s", 1.0)
     if hover_s < 0:
         raise f.fail("hover_s", f"must be >= 0, got {hover_s:g}")
+    yaw_deg = _yaw(f)
     if base_dir is None:
         return None
     path = Path(name) if Path(name).is_absolute() else base_dir / name
     data = read_samples(path)
     yaw = None if data.yaw_deg is None else np.radians(data.yaw_deg)
+    if yaw_deg is not None:
+        if yaw is not None:
+            raise f.fail("yaw_deg", f"and the yaw_deg column of {path} both give the yaw")
+        yaw = np.full(data.t_s.size, np.radians(yaw_deg))
     return SamplesShape(data.t_s, data.pos_ned_m, yaw, hover_s, str(path))
 
 
