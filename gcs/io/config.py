@@ -595,7 +595,7 @@ def _waypoints(f: _Fields, base_dir: Path | None) -> WaypointsShape:
             yaw_deg=_yaw(f),
         )
     except TrajectoryError as exc:
-        key = "times_s" if "times_s" in str(exc) else "points_ned_m"
+        key = "times_s" if str(exc).startswith("times_s") else "points_ned_m"
         raise f.fail(key, f"is refused: {exc}") from None
 
 

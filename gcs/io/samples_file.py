@@ -131,8 +131,13 @@ def _read_csv(path: Path) -> tuple[np.ndarray, list[str], list[str]]:
 def _read_numpy(path: Path, suffix: str) -> tuple[np.ndarray, list[str], list[str]]:
     try:
         data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile) as exc:
-        raise TrajectoryError(f"{path}: not a readable NumPy file ({exc})") from None
+    except OSError as exc:
+        raise TrajectoryError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except (ValueError, EOFError, zipfile.BadZipFile):
+        raise TrajectoryError(
+            f"{path}: not a readable NumPy file (an array saved by numpy.save or numpy.savez, "
+            "no pickled objects)"
+        ) from None
     if suffix == ".npy":
         arr = np.asarray(data)
         if arr.ndim != 2 or arr.shape[1] not in (4, 5) or not np.issubdtype(arr.dtype, np.number):
