@@ -362,3 +362,46 @@ def test_a_reference_that_passes_the_check_respects_the_limits_on_its_grid(shape
     if vz > 1e-3:
         with pytest.raises(TrajectoryError, match="vertical speed"):
             check_reference(ref, 1e9, 1e9, box, max_vertical_speed_m_s=0.99 * vz)
+
+
+# ----------------------------------------------------------------------- planning a flight
+
+
+def test_a_constant_yaw_is_flown_and_a_varying_one_refused(tmp_path):
+    import yaml
+
+    from gcs.app.fly import plan_fly
+
+    profile = ROOT / "profiles" / "antx.yaml"
+    data = yaml.safe_load((ROOT / "trajectories" / "circle.yaml").read_text())
+    held = tmp_path / "held.yaml"
+    held.write_text(yaml.safe_dump(data))
+    assert plan_fly(profile, held, None, logs=tmp_path / "logs").settings.yaw_deg == 0.0
+    turned = tmp_path / "turned.yaml"
+    turned.write_text(yaml.safe_dump(dict(data, yaw_deg=90.0)))
+    plan = plan_fly(profile, turned, None, logs=tmp_path / "logs")
+    assert plan.settings.yaw_deg == 90.0 and np.all(plan.reference.yaw_rad == np.pi / 2)
+    t = np.arange(41) * 0.1
+    rows = [f"{a:.1f},{0.2 * np.sin(np.pi * a / 4) ** 2:.6f},0,-1.5,{a}" for a in t]
+    (tmp_path / "p.csv").write_text("t_s,north_m,east_m,down_m,yaw_deg\n" + "\n".join(rows))
+    samples = tmp_path / "s.yaml"
+    samples.write_text(yaml.safe_dump({"name": "s", "type": "samples", "file": "p.csv"}))
+    with pytest.raises(TrajectoryError, match="yaw that varies .* not flown yet"):
+        plan_fly(profile, samples, None, logs=tmp_path / "logs")
+    assert not (tmp_path / "logs").exists()
+
+
+def test_a_samples_run_resumes_from_its_recorded_reference(tmp_path):
+    import shutil
+
+    from gcs.app.fly import plan_fly, start_run
+
+    shutil.copy(ROOT / "trajectories" / "racetrack.yaml", tmp_path)
+    shutil.copy(ROOT / "trajectories" / "racetrack.csv", tmp_path)
+    profile = ROOT / "profiles" / "antx.yaml"
+    plan = plan_fly(profile, tmp_path / "racetrack.yaml", None, run_path=tmp_path / "run")
+    run = start_run(plan)
+    (tmp_path / "racetrack.csv").unlink()  # the run does not need the planner's file again
+    again = plan_fly(None, None, None, resume=run.path)
+    assert again.trajectory.shape is None and again.trajectory.name == "racetrack"
+    np.testing.assert_allclose(again.reference.pos_ned_m, plan.reference.pos_ned_m, atol=1e-9)
