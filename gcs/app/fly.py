@@ -369,7 +369,12 @@ def plan_fly(
 
 def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Reference:
     if trajectory.shape is None:
-        raise TrajectoryError(f"{where}: not a trajectory to sample (an identification excitation)")
+        what = (
+            "its samples file was not read (load_trajectory reads it, relative to the file)"
+            if trajectory.source.get("type") == "samples"
+            else "not a trajectory to sample (an identification excitation)"
+        )
+        raise TrajectoryError(f"{where}: {what}")
     duration = trajectory.shape.duration_s
     if not duration / profile.t_ilc_s <= MAX_SAMPLES:  # before the arrays are made
         raise TrajectoryError(
