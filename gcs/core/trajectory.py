@@ -30,6 +30,7 @@ __all__ = [
     "Reference",
     "Box",
     "sample_eight",
+    "loop_phase",
     "check_reference",
     "check_setpoints",
     "points_outside",
