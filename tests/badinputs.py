@@ -328,6 +328,9 @@ def _profile_cases() -> Iterator[Case]:
         ("vehicle.max_accel_m_s2", float("inf"), "vehicle.max_accel_m_s2"),
         ("vehicle.max_speed_m_s", -1.0, "vehicle.max_speed_m_s"),
         ("vehicle.max_vertical_speed_m_s", 0.0, "vehicle.max_vertical_speed_m_s"),
+        ("vehicle.max_vertical_accel_m_s2", -3.0, "vehicle.max_vertical_accel_m_s2"),
+        ("vehicle.max_jerk_m_s3", 0.0, "vehicle.max_jerk_m_s3"),
+        ("vehicle.max_vertical_jerk_m_s3", "high", "vehicle.max_vertical_jerk_m_s3"),
         ("model.delay_s", -0.1, "model"),
         ("learning.weights.we", 0.0, "learning.weights.we"),
         ("arena.north_m", [3.0, -3.0], "arena.north_m"),
@@ -434,7 +437,7 @@ def _trajectory_cases() -> Iterator[Case]:
         ("name", "", "name"),
         ("name", 8, "name"),
         ("name", "../up", "name"),
-        ("type", "circle", "type"),
+        ("type", "spiral", "type"),
         ("amplitude_north_m", "big", "amplitude_north_m"),
         ("amplitude_east_m", -1.0, "amplitude_east_m"),
         ("period_s", float("nan"), "period_s"),
@@ -467,6 +470,193 @@ def _trajectory_cases() -> Iterator[Case]:
             lambda ws, d=dotted, v=value: _fly(ws, traj=ws.trajectory(d, v)),
             expect,
         )
+
+
+CIRCLE = {
+    "name": "c", "type": "circle", "center_ned_m": [0.0, 0.0, -1.5], "radius_m": 1.0,
+    "period_s": 5.0,
+}  # fmt: skip
+WAYPOINTS = {
+    "name": "w", "type": "waypoints", "speed_m_s": 1.0,
+    "points_ned_m": [[0.0, 0.0, -1.5], [1.5, 0.0, -1.5], [1.5, 1.5, -2.0], [0.0, 0.0, -1.5]],
+}  # fmt: skip
+
+
+def _samples_csv(dt: float = 0.1) -> str:
+    """A planner's file: 0.5 m north and back in 40 samples of ``dt``, at 1.5 m altitude."""
+    return "t_s,north_m,east_m,down_m\n" + "".join(
+        f"{dt * i:.3f},{0.5 * (1 - np.cos(2 * np.pi * i / 40)):.6f},0.0,-1.5\n" for i in range(41)
+    )
+
+
+SAMPLES_CSV = _samples_csv()
+
+
+def _traj(ws: Workspace, base: dict, dotted: str | None = None, value: Any = None) -> Path:
+    data = base if dotted is None else _set(base, dotted, value)
+    return ws.file("trajectory.yaml", yaml.safe_dump(data))
+
+
+def _samples(ws: Workspace, text: str | bytes, name: str = "p.csv", **more: Any) -> Path:
+    ws.file(name, text)
+    return _traj(ws, {"name": "s", "type": "samples", "file": name, **more})
+
+
+def _csv_edit(line: int, cell: int, value: str) -> str:
+    lines = SAMPLES_CSV.splitlines()
+    cells = lines[line].split(",")
+    cells[cell] = value
+    lines[line] = ",".join(cells)
+    return "\n".join(lines) + "\n"
+
+
+def _source_cases() -> Iterator[Case]:
+    k = "trajectory source: circle and ellipse"
+    for dotted, value, expect in (
+        ("radius_m", DELETE, "radius_m"),
+        ("radius_m", -1.0, "radius_m"),
+        ("plane", "sideways", "plane"),
+        ("plane", [0, 0, 0], "plane"),
+        ("plane", [1, 0], "plane"),
+        ("loops", 0, "loops"),
+        ("climb_m", 2.0, "above the ceiling"),
+        ("center_ned_m", [2.5, 0.0, -1.5], "leaves the arena"),
+        ("period_s", 2.5, "exceeds the vehicle limit"),
+        ("yaw_deg", "north", "yaw_deg"),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"circle {dotted}: {value if value is not DELETE else 'missing'!r}",
+            lambda ws, d=dotted, v=value: _fly(ws, traj=_traj(ws, CIRCLE, d, v)),
+            expect,
+        )
+    ellipse = dict(CIRCLE, type="ellipse")
+    del ellipse["radius_m"]
+    yield Case(
+        k,
+        "fly",
+        "ellipse radii_m: one number",
+        lambda ws: _fly(ws, traj=_traj(ws, ellipse, "radii_m", [1.0])),
+        "radii_m",
+    )
+    k = "trajectory source: waypoints"
+    pts = WAYPOINTS["points_ned_m"]
+    for what, dotted, value, expect in (
+        ("last point not the first", "points_ned_m", pts[:-1], "last waypoint"),
+        ("a point of two numbers", "points_ned_m", [pts[0], [1.0, 0.0], pts[0]], "points_ned_m[1]"),
+        ("two points", "points_ned_m", [pts[0], pts[0]], "points_ned_m"),
+        ("repeated point", "points_ned_m", [pts[0], pts[1], pts[1], pts[0]], "the same point"),
+        ("times_s and speed_m_s", "times_s", [0.0, 2.0, 4.0, 6.0], "times_s"),
+        ("point below the floor", "points_ned_m", [pts[0], [1.0, 0.0, 0.5], pts[0]], "floor"),
+        ("too fast", "speed_m_s", 4.0, "exceeds the vehicle limit"),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"waypoints: {what}",
+            lambda ws, d=dotted, v=value: _fly(ws, traj=_traj(ws, WAYPOINTS, d, v)),
+            expect,
+        )
+    climb = dict(WAYPOINTS, speed_m_s=2.5, points_ned_m=[pts[0], [0.2, 0.0, -2.9], pts[0]])
+    yield Case(
+        k,
+        "fly",
+        "waypoints: climbing too fast",
+        lambda ws: _fly(ws, traj=_traj(ws, climb)),
+        "vertical speed",
+    )
+    timed = {key: v for key, v in WAYPOINTS.items() if key != "speed_m_s"}
+    for what, times, expect in (
+        ("times_s not increasing", [0.0, 3.0, 2.0, 6.0], "not after"),
+        ("times_s not from 0", [1.0, 3.0, 4.0, 6.0], "start at 0"),
+        ("times_s one per point missing", [0.0, 3.0, 6.0], "times_s"),
+        ("two too close in time", [0.0, 3.0, 3.02, 6.0], "less than one ILC sample"),
+    ):
+        yield Case(
+            k,
+            "fly",
+            f"waypoints: {what}",
+            lambda ws, t=times: _fly(ws, traj=_traj(ws, timed, "times_s", t)),
+            expect,
+        )
+    yield Case(
+        k,
+        "fly",
+        "waypoints: neither times_s nor speed_m_s",
+        lambda ws: _fly(ws, traj=_traj(ws, WAYPOINTS, "speed_m_s", DELETE)),
+        "speed_m_s",
+    )
+    k = "trajectory source: samples file"
+    header = "t_s,north_m,east_m,down_m\n"
+    for what, text, expect in (
+        ("a NaN", _csv_edit(5, 1, "nan"), "line 6: column 'north_m' is nan"),
+        ("a value not a number", _csv_edit(5, 2, "x"), "line 6: column 'east_m' is not a number"),
+        ("times not sorted", _csv_edit(5, 0, "0.1"), "line 6: t_s 0.1 s goes back"),
+        ("a repeated time", _csv_edit(5, 0, "0.3"), "line 6: t_s 0.3 s repeats"),
+        ("a missing column", SAMPLES_CSV.replace(",-1.5", "").replace(",down_m", ""), "down_m"),
+        ("an unknown column", SAMPLES_CSV.replace("down_m", "down_m,speed").replace(
+            "-1.5\n", "-1.5,1\n"), "column 'speed' is not a known column"),
+        ("a short line", _csv_edit(5, 3, "0\n1"), "values"),
+        ("header only", header, "at least 2"),
+        ("empty", "", "empty"),
+        ("end not at the start", SAMPLES_CSV + "4.1,1.0,0.0,-1.5\n", "where it began"),
+        ("beyond the arena", SAMPLES_CSV.replace(",0.0,", ",3.5,"), "leaves the arena"),
+        ("too fast", _samples_csv(0.01), "exceeds the vehicle limit"),
+        ("a varying yaw", SAMPLES_CSV.replace("down_m", "down_m,yaw_deg").replace(
+            "-1.5\n", "-1.5,10\n", 3).replace("-1.5\n", "-1.5,0\n"), "yaw"),
+    ):  # fmt: skip
+        yield Case(
+            k, "fly", f"samples CSV: {what}", lambda ws, x=text: _fly(ws, traj=_samples(ws, x)),
+            expect,
+        )  # fmt: skip
+    yield Case(
+        k,
+        "fly",
+        "samples file missing",
+        lambda ws: _fly(ws, traj=_traj(ws, {"name": "s", "type": "samples", "file": "no.csv"})),
+        "no.csv",
+    )
+    yield Case(
+        k,
+        "fly",
+        "samples file of another kind",
+        lambda ws: _fly(ws, traj=_samples(ws, SAMPLES_CSV, "p.txt")),
+        ".csv, .npy or .npz",
+    )
+    yield Case(
+        k,
+        "fly",
+        "samples .npy of three columns",
+        lambda ws: _fly(ws, traj=_samples(ws, _npy(np.zeros((5, 3))), "p.npy")),
+        "4 columns",
+    )
+    yield Case(
+        k,
+        "fly",
+        "samples .npy not NumPy",
+        lambda ws: _fly(ws, traj=_samples(ws, b"not numpy", "p.npy")),
+        "not a readable NumPy file",
+    )
+    yield Case(
+        k,
+        "fly",
+        "samples yaw_deg field and column",
+        lambda ws: _fly(
+            ws,
+            traj=_samples(ws, SAMPLES_CSV.replace("down_m", "down_m,yaw_deg").replace(
+                "-1.5\n", "-1.5,0\n"), yaw_deg=10.0),
+        ),
+        "yaw_deg",
+    )  # fmt: skip
+
+
+def _npy(array: np.ndarray) -> bytes:
+    import io
+
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    return buffer.getvalue()
 
 
 def _learning_run_damage() -> list[tuple[str, Callable[[Path], None], str]]:
@@ -1227,6 +1417,7 @@ def catalogue() -> list[Case]:
     return [
         *_profile_cases(),
         *_trajectory_cases(),
+        *_source_cases(),
         *_mocap_cases(),
         *_run_cases(),
         *_resume_cases(),

@@ -246,7 +246,7 @@ def test_state_space_refusals(tmp_path):
         ("center_ned_m", [0.0, 0.0], "center_ned_m"),
         ("center_ned_m", [0.0, float("nan"), -1.0], "center_ned_m"),
         ("hover", 1.0, "hover"),
-        ("type", "circle", "type"),
+        ("type", "spiral", "type"),
     ],
 )
 def test_trajectory_refusals_name_file_and_field(tmp_path, dotted, value, field):

@@ -18,7 +18,8 @@ from synthetic import ROOT
 FILES = sorted(
     p.relative_to(ROOT).as_posix()
     for folder in ("profiles", "trajectories")
-    for p in (ROOT / folder).glob("*.yaml")
+    for pattern in ("*.yaml", "*.csv")  # a samples trajectory's file beside it
+    for p in (ROOT / folder).glob(pattern)
 )
 
 

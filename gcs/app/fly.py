@@ -32,8 +32,8 @@ from gcs.core.trajectory import (
     Reference,
     check_reference,
     points_outside,
-    sample_eight,
 )
+from gcs.core.trajectory_sources import sample_reference
 from gcs.errors import PathError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.fence import Fence
@@ -354,9 +354,9 @@ def plan_fly(
         check_until_converged(profile, where)
     trajectory = load_trajectory(trajectory_path)
     algorithm = algorithm or profile.learning.algorithm
-    settings = flight_settings(profile, where)
     mocap_plan = plan_mocap(profile, where, mocap, use_mock)
     ref = _reference(profile, trajectory, str(trajectory_path))
+    settings = flown_yaw(flight_settings(profile, where), trajectory, ref, str(trajectory_path))
     check_learnable(profile, ref, algorithm, where)
     if run_path is not None:
         check_new_dir(run_path, "--run")
@@ -369,7 +369,12 @@ def plan_fly(
 
 def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Reference:
     if trajectory.shape is None:
-        raise TrajectoryError(f"{where}: not an eight (an identification excitation)")
+        what = (
+            "its samples file was not read (load_trajectory reads it, relative to the file)"
+            if trajectory.source.get("type") == "samples"
+            else "not a trajectory to sample (an identification excitation)"
+        )
+        raise TrajectoryError(f"{where}: {what}")
     duration = trajectory.shape.duration_s
     if not duration / profile.t_ilc_s <= MAX_SAMPLES:  # before the arrays are made
         raise TrajectoryError(
@@ -378,13 +383,74 @@ def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Refe
         )
     try:
         with np.errstate(over="raise", invalid="raise"):
-            ref = sample_eight(trajectory.shape, profile.t_ilc_s)
-        check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)
+            ref = sample_reference(trajectory.shape, profile.t_ilc_s)
+        check_within_limits(ref, profile)
     except TrajectoryError as exc:
         raise TrajectoryError(f"{where}: {exc}") from None
     except FloatingPointError as exc:
         raise TrajectoryError(f"{where}: its numbers overflow when sampled ({exc})") from None
     return ref
+
+
+def flown_yaw(
+    settings: FlightSettings, trajectory: TrajectorySpec, ref: Reference, where: str
+) -> FlightSettings:
+    """The flight settings with the trajectory's yaw: its constant ``yaw_deg`` if it has one.
+
+    Without ``yaw_deg`` the yaw is held at the profile's ``flight.yaw_deg``. A yaw that varies
+    along the trajectory (a samples file's ``yaw_deg`` column) is sampled and checked but not
+    flown: it is refused here rather than silently held.
+
+    Parameters
+    ----------
+    settings : FlightSettings
+        The profile's flight settings.
+    trajectory : TrajectorySpec
+        The trajectory (its ``yaw_deg`` field).
+    ref : Reference
+        Its reference on the grid (a run's ``reference.csv`` carries no yaw).
+    where : str
+        The trajectory's file, for the message.
+
+    Returns
+    -------
+    FlightSettings
+    """
+    yaw_deg = trajectory.source.get("yaw_deg")
+    if ref.yaw_rad is not None and yaw_deg is None:
+        raise TrajectoryError(
+            f"{where}: a yaw that varies along the trajectory (the samples file's yaw_deg "
+            "column) is not flown yet: leave the column out, or give a constant yaw_deg in the "
+            "trajectory file"
+        )
+    return settings if yaw_deg is None else replace(settings, yaw_deg=float(yaw_deg))
+
+
+def check_within_limits(ref: Reference, profile: Profile) -> None:
+    """Refuse a reference beyond the profile's vehicle limits or arena, on the flown grid.
+
+    Parameters
+    ----------
+    ref : Reference
+        The sampled reference.
+    profile : Profile
+        Its ``vehicle`` limits (horizontal and vertical) and ``arena``.
+
+    Raises
+    ------
+    TrajectoryError
+        Naming the limit and the time (:func:`gcs.core.trajectory.check_reference`).
+    """
+    check_reference(
+        ref,
+        profile.max_speed_m_s,
+        profile.max_accel_m_s2,
+        profile.arena,
+        max_jerk_m_s3=profile.max_jerk_m_s3,
+        max_vertical_speed_m_s=profile.max_vertical_speed_m_s,
+        max_vertical_accel_m_s2=profile.max_vertical_accel_m_s2,
+        max_vertical_jerk_m_s3=profile.max_vertical_jerk_m_s3,
+    )
 
 
 def _plan_resume(
@@ -412,10 +478,12 @@ def _plan_resume(
                 )
     where = f"{run.path}/manifest.json:profile"
     profile, trajectory = run.profile(), run.trajectory()
-    settings = flight_settings(profile, where)
     ref = run.reference()
+    settings = flown_yaw(
+        flight_settings(profile, where), trajectory, ref, f"{run.path}/manifest.json:trajectory"
+    )
     try:
-        check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)
+        check_within_limits(ref, profile)
     except TrajectoryError as exc:
         raise RunLogError(f"{run.path}/reference.csv: {exc}") from None
     first = run.next_trial()

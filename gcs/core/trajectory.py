@@ -1,5 +1,9 @@
 """Reference trajectories: the horizontal eight-shape, sampled on the ILC grid, and checks.
 
+The other sources (circle and ellipse, waypoints, samples from a file) are in
+:mod:`gcs.core.trajectory_sources`; every source gives a :class:`Reference`, checked here
+against the vehicle's limits and the arena on the grid that is flown.
+
 The eight is the Lissajous curve ``north = a sin(s)``, ``east = (b / 2) sin(2 s)`` around a
 centre point, flown at constant altitude. The phase ``s(t)`` starts at rest, accelerates with a
 quintic smooth-step of the phase rate over ``ramp_s`` seconds, flies whole loops at constant
@@ -26,6 +30,7 @@ __all__ = [
     "Reference",
     "Box",
     "sample_eight",
+    "loop_phase",
     "check_reference",
     "check_setpoints",
     "points_outside",
@@ -53,6 +58,8 @@ class EightShape:
         Duration of the acceleration and of the deceleration phase [s].
     hover_s : float
         Hover time at the start point before and after the motion [s].
+    yaw_deg : float or None
+        Constant yaw reference [deg]; None: held.
     """
 
     center_ned_m: tuple[float, float, float] = (0.0, 0.0, -1.5)
@@ -62,6 +69,7 @@ class EightShape:
     loops: int = 2
     ramp_s: float = 2.0
     hover_s: float = 1.0
+    yaw_deg: float | None = None
 
     @property
     def duration_s(self) -> float:
@@ -94,12 +102,16 @@ class Reference:
         Desired velocity [m/s].
     acc_ned_m_s2 : ndarray, shape (N+1, 3)
         Desired acceleration [m/s^2].
+    yaw_rad : ndarray, shape (N+1,), or None
+        Desired yaw (heading from north, clockwise seen from above) [rad]; None: held (the
+        vehicle keeps the heading of the profile's ``flight.yaw_deg``).
     """
 
     t_s: np.ndarray
     pos_ned_m: np.ndarray
     vel_ned_m_s: np.ndarray
     acc_ned_m_s2: np.ndarray
+    yaw_rad: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -110,6 +122,16 @@ class Reference:
     def t_ilc_s(self) -> float:
         """Sample time of the grid [s]."""
         return float(self.t_s[1] - self.t_s[0])
+
+    @property
+    def pos_ne_m(self) -> np.ndarray:
+        """The horizontal part, shape (N+1, 2): north and east [m] (the learned axes)."""
+        return self.pos_ned_m[:, :2]
+
+    @property
+    def down_m(self) -> np.ndarray:
+        """The vertical part, shape (N+1,): down [m] (flown as the reference)."""
+        return self.pos_ned_m[:, 2]
 
 
 @dataclass(frozen=True)
@@ -138,12 +160,41 @@ def _smoothstep(tau: np.ndarray) -> np.ndarray:
 
 def _phase(t: np.ndarray, shape: EightShape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Phase s(t), its rate and its second derivative (all exact, vectorised)."""
-    w = 2.0 * np.pi / shape.period_s
-    T = shape.ramp_s
-    cruise = shape.loops * shape.period_s - T  # ramps cover half their duration in phase
+    return loop_phase(t, shape.period_s, shape.loops, shape.ramp_s, shape.hover_s)
+
+
+def loop_phase(
+    t: np.ndarray, period_s: float, loops: int, ramp_s: float, hover_s: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Phase of a looped path: hover, quintic ramp up, whole loops, ramp down, hover.
+
+    The phase rate rises from 0 to ``2 pi / period_s`` with a quintic smooth-step over
+    ``ramp_s``, stays there, and falls the same way; the total phase is ``2 pi loops``.
+
+    Parameters
+    ----------
+    t : ndarray, shape (M,)
+        Times from the start of the trial [s].
+    period_s : float
+        One loop at full phase rate [s].
+    loops : int
+        Number of loops.
+    ramp_s : float
+        Duration of each ramp [s].
+    hover_s : float
+        Hover before and after the motion [s].
+
+    Returns
+    -------
+    s, s_dot, s_ddot : ndarray, shape (M,)
+        Phase [rad], its rate [rad/s] and its second derivative [rad/s^2] (exact).
+    """
+    w = 2.0 * np.pi / period_s
+    T = ramp_s
+    cruise = loops * period_s - T  # ramps cover half their duration in phase
     if cruise < 0:
         raise TrajectoryError("ramp_s is too long for the number of loops and the period")
-    tm = t - shape.hover_s
+    tm = t - hover_s
     t_end = 2.0 * T + cruise
     s = np.zeros_like(t)
     sd = np.zeros_like(t)
@@ -206,11 +257,20 @@ def sample_eight(shape: EightShape, t_ilc_s: float) -> Reference:
     acc[:, 0] = a * (np.cos(s) * sdd - np.sin(s) * sd**2)
     acc[:, 1] = b * (np.cos(2.0 * s) * sdd - 2.0 * np.sin(2.0 * s) * sd**2)
     pos += np.asarray(shape.center_ned_m, dtype=float)
-    return Reference(t_s=t, pos_ned_m=pos, vel_ned_m_s=vel, acc_ned_m_s2=acc)
+    yaw = None if shape.yaw_deg is None else np.full(n + 1, np.radians(shape.yaw_deg))
+    return Reference(t_s=t, pos_ned_m=pos, vel_ned_m_s=vel, acc_ned_m_s2=acc, yaw_rad=yaw)
 
 
 def check_reference(
-    ref: Reference, max_speed_m_s: float, max_accel_m_s2: float, arena: Box
+    ref: Reference,
+    max_speed_m_s: float,
+    max_accel_m_s2: float,
+    arena: Box,
+    *,
+    max_jerk_m_s3: float | None = None,
+    max_vertical_speed_m_s: float | None = None,
+    max_vertical_accel_m_s2: float | None = None,
+    max_vertical_jerk_m_s3: float | None = None,
 ) -> None:
     """Refuse a reference beyond the vehicle's limits or outside the arena.
 
@@ -219,6 +279,9 @@ def check_reference(
     sampled positions, ``(p(k+1) - p(k)) / dt`` and ``(p(k+1) - 2 p(k) + p(k-1)) / dt^2``. The
     vehicle receives samples, not the curve: a phase rate that jumps within one sample
     (``ramp_s: 0``) has bounded analytic derivatives but asks for the jump in one sample.
+    Horizontal limits bound the norm of the north and east components; vertical ones the
+    down component alone (up or down). Jerk is checked on the grid only, as the third
+    difference over ``dt^3``.
 
     Parameters
     ----------
@@ -229,7 +292,15 @@ def check_reference(
     max_accel_m_s2 : float
         Largest horizontal acceleration [m/s^2].
     arena : Box
-        Flight volume in local NED [m].
+        Flight volume in local NED [m] (its down interval: ceiling and floor).
+    max_jerk_m_s3 : float or None
+        Largest horizontal jerk [m/s^3]; None: not checked.
+    max_vertical_speed_m_s : float or None
+        Largest vertical speed, up or down [m/s]; None: not checked.
+    max_vertical_accel_m_s2 : float or None
+        Largest vertical acceleration [m/s^2]; None: not checked.
+    max_vertical_jerk_m_s3 : float or None
+        Largest vertical jerk [m/s^3]; None: not checked.
 
     Raises
     ------
@@ -237,27 +308,69 @@ def check_reference(
         Naming the limit, the value and the time at which it is first exceeded.
     """
     dt = ref.t_ilc_s
-    p = np.asarray(ref.pos_ned_m, dtype=float)[:, :2]
+    p = np.asarray(ref.pos_ned_m, dtype=float)
+    ne, d = p[:, :2], p[:, 2]
+    h_speed = "vehicle.max_speed_m_s"
+    h_accel = "vehicle.max_accel_m_s2"
     checks = [
-        (np.hypot(*ref.vel_ned_m_s[:, :2].T), ref.t_s, max_speed_m_s, "speed", "m/s"),
-        (np.hypot(*ref.acc_ned_m_s2[:, :2].T), ref.t_s, max_accel_m_s2, "acceleration", "m/s^2"),
-    ]
+        (np.hypot(*ref.vel_ned_m_s[:, :2].T), ref.t_s, max_speed_m_s, "speed", "m/s", h_speed),
+        (
+            np.hypot(*ref.acc_ned_m_s2[:, :2].T),
+            ref.t_s, max_accel_m_s2, "acceleration", "m/s^2", h_accel,
+        ),
+        (
+            np.abs(ref.vel_ned_m_s[:, 2]), ref.t_s, max_vertical_speed_m_s,
+            "vertical speed", "m/s", "vehicle.max_vertical_speed_m_s",
+        ),
+        (
+            np.abs(ref.acc_ned_m_s2[:, 2]), ref.t_s, max_vertical_accel_m_s2,
+            "vertical acceleration", "m/s^2", "vehicle.max_vertical_accel_m_s2",
+        ),
+    ]  # fmt: skip
     if p.shape[0] >= 3:
-        grid_speed = np.hypot(*(np.diff(p, axis=0) / dt).T)
-        grid_accel = np.hypot(*(np.diff(p, 2, axis=0) / dt**2).T)
+        flown = "on the flown grid"
         checks += [
-            (grid_speed, ref.t_s[:-1], max_speed_m_s, "speed on the flown grid", "m/s"),
-            (grid_accel, ref.t_s[1:-1], max_accel_m_s2, "acceleration on the flown grid", "m/s^2"),
-        ]
-    for values, times, limit, what, unit in checks:
+            (
+                np.hypot(*(np.diff(ne, axis=0) / dt).T), ref.t_s[:-1], max_speed_m_s,
+                f"speed {flown}", "m/s", h_speed,
+            ),
+            (
+                np.hypot(*(np.diff(ne, 2, axis=0) / dt**2).T), ref.t_s[1:-1], max_accel_m_s2,
+                f"acceleration {flown}", "m/s^2", h_accel,
+            ),
+            (
+                np.abs(np.diff(d) / dt), ref.t_s[:-1], max_vertical_speed_m_s,
+                f"vertical speed {flown}", "m/s", "vehicle.max_vertical_speed_m_s",
+            ),
+            (
+                np.abs(np.diff(d, 2) / dt**2), ref.t_s[1:-1], max_vertical_accel_m_s2,
+                f"vertical acceleration {flown}", "m/s^2", "vehicle.max_vertical_accel_m_s2",
+            ),
+        ]  # fmt: skip
+    if p.shape[0] >= 4:
+        checks += [
+            (
+                np.hypot(*(np.diff(ne, 3, axis=0) / dt**3).T), ref.t_s[1:-2], max_jerk_m_s3,
+                f"jerk {flown}", "m/s^3", "vehicle.max_jerk_m_s3",
+            ),
+            (
+                np.abs(np.diff(d, 3) / dt**3), ref.t_s[1:-2], max_vertical_jerk_m_s3,
+                f"vertical jerk {flown}", "m/s^3", "vehicle.max_vertical_jerk_m_s3",
+            ),
+        ]  # fmt: skip
+    if ref.yaw_rad is not None and not np.all(np.isfinite(ref.yaw_rad)):
+        raise TrajectoryError("yaw is not finite (NaN or inf in the reference)")
+    for values, times, limit, what, unit, field in checks:
         if not np.all(np.isfinite(values)):
             raise TrajectoryError(f"{what} is not finite (NaN or inf in the reference)")
+        if limit is None:
+            continue
         over = np.flatnonzero(values > limit + 1e-9)
         if over.size:
             k = over[0]
             raise TrajectoryError(
                 f"{what} {values.max():.2f} {unit} exceeds the vehicle limit {limit:g} {unit} "
-                f"(first at t = {times[k]:.2f} s)"
+                f"({field}; first at t = {times[k]:.2f} s)"
             )
     outside = points_outside(ref.pos_ned_m, arena)
     if outside.size:
@@ -265,8 +378,22 @@ def check_reference(
         p = ref.pos_ned_m[k]
         raise TrajectoryError(
             f"trajectory leaves the arena at t = {ref.t_s[k]:.2f} s: NED "
-            f"({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m is outside {arena}"
+            f"({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m is outside {arena}{_beyond(p, arena)}"
         )
+
+
+def _beyond(p: np.ndarray, arena: Box) -> str:
+    """The first arena interval a point is outside of, in words."""
+    b = arena.bounds()
+    for axis, key in enumerate(("north_m", "east_m", "down_m")):
+        lo, hi = b[axis]
+        if lo - 1e-9 <= p[axis] <= hi + 1e-9:
+            continue
+        side = ""
+        if key == "down_m":
+            side = "above the ceiling, " if p[axis] < lo else "below the floor, "
+        return f" ({side}arena.{key} is [{lo:g}, {hi:g}])"
+    return ""
 
 
 def check_setpoints(

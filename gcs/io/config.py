@@ -9,16 +9,20 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from gcs.core.estimators import KilcSettings, SmootherSettings
 from gcs.core.learning import NOISE_MODELS, AdaptiveSettings
 from gcs.core.model import DiscreteModel, from_state_space, from_transfer_function
 from gcs.core.trajectory import MAX_SAMPLES, Box, EightShape
+from gcs.core.trajectory_sources import PLANES, EllipseShape, SamplesShape, WaypointsShape
 from gcs.core.update import UpdateWeights
 from gcs.errors import GcsError, ProfileError, TrajectoryError
+from gcs.io.samples_file import read_samples
 from gcs.io.yamlfile import read_yaml
 
 __all__ = [
@@ -31,6 +35,8 @@ __all__ = [
     "trajectory_from_dict",
     "ALGORITHMS",
     "DEFAULT_MAX_VERTICAL_SPEED_M_S",
+    "DEFAULT_MAX_VERTICAL_ACCEL_M_S2",
+    "TRAJECTORY_TYPES",
 ]
 
 ALGORITHMS = ("smoother", "kilc")
@@ -39,6 +45,11 @@ MAX_REPEATS = 5
 #: ``vehicle.max_vertical_speed_m_s`` when a profile leaves it out [m/s]: PX4's take-off speed
 #: (``MPC_TKO_SPEED`` 1.5 m/s, v1.16); gcs itself moves at ``flight.transit_speed_m_s`` (1 m/s).
 DEFAULT_MAX_VERTICAL_SPEED_M_S = 1.5
+#: ``vehicle.max_vertical_accel_m_s2`` when a profile leaves it out [m/s^2]: the smaller of
+#: PX4's vertical acceleration limits (``MPC_ACC_DOWN_MAX`` 3, ``MPC_ACC_UP_MAX`` 4, v1.16).
+DEFAULT_MAX_VERTICAL_ACCEL_M_S2 = 3.0
+#: Trajectory sources (the ``type`` of a trajectory file).
+TRAJECTORY_TYPES = ("eight", "circle", "ellipse", "waypoints", "samples")
 #: A trajectory's name becomes part of a run directory's name.
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
@@ -211,6 +222,12 @@ class Profile:
         Vehicle's vertical speed limit, up or down [m/s] (optional in the file, default
         :data:`DEFAULT_MAX_VERTICAL_SPEED_M_S`); the live fence watches it (with
         ``max_speed_m_s``) from arming to disarming.
+    max_vertical_accel_m_s2 : float
+        Vertical acceleration a trajectory may ask for, up or down [m/s^2] (optional, default
+        :data:`DEFAULT_MAX_VERTICAL_ACCEL_M_S2`).
+    max_jerk_m_s3, max_vertical_jerk_m_s3 : float or None
+        Horizontal and vertical jerk a trajectory may ask for [m/s^3] (optional; absent: not
+        checked).
     arena : Box
         Flight volume, local NED [m].
     flight : dict
@@ -236,6 +253,9 @@ class Profile:
     mocap: dict = field(default_factory=dict)
     source: dict = field(default_factory=dict)
     max_vertical_speed_m_s: float = DEFAULT_MAX_VERTICAL_SPEED_M_S
+    max_vertical_accel_m_s2: float = DEFAULT_MAX_VERTICAL_ACCEL_M_S2
+    max_jerk_m_s3: float | None = None
+    max_vertical_jerk_m_s3: float | None = None
 
     def models(self) -> tuple[DiscreteModel, DiscreteModel]:
         """The (north, east) models."""
@@ -397,6 +417,11 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
         max_vertical_speed_m_s=vehicle.number(
             "max_vertical_speed_m_s", DEFAULT_MAX_VERTICAL_SPEED_M_S, positive=True
         ),
+        max_vertical_accel_m_s2=vehicle.number(
+            "max_vertical_accel_m_s2", DEFAULT_MAX_VERTICAL_ACCEL_M_S2, positive=True
+        ),
+        max_jerk_m_s3=vehicle.optional_number("max_jerk_m_s3"),
+        max_vertical_jerk_m_s3=vehicle.optional_number("max_vertical_jerk_m_s3"),
         arena=box,
         flight=f.mapping("flight"),
         identification=f.mapping("identification"),
@@ -425,27 +450,35 @@ def load_profile(path: str | Path) -> Profile:
     return profile_from_dict(read_yaml(Path(path), ProfileError), str(path))
 
 
+#: A trajectory source's parameters.
+Shape = EightShape | EllipseShape | WaypointsShape | SamplesShape
+
+
 @dataclass(frozen=True)
 class TrajectorySpec:
-    """A trajectory file: its name, its shape parameters and the parsed YAML.
+    """A trajectory file: its name, its source's parameters and the parsed YAML.
 
     Parameters
     ----------
     name : str
         Trajectory name.
-    shape : EightShape or None
-        Shape parameters; None for a sequence that is not an eight (identification
-        excitation), whose reference is given to :meth:`RunDir.create` directly.
+    shape : EightShape, EllipseShape, WaypointsShape, SamplesShape or None
+        The source's parameters (``gcs.core.trajectory_sources.sample_reference`` samples
+        them); None for a sequence that is not sampled from a source (identification
+        excitation), or a ``samples`` trajectory read from a run's manifest (its file is not
+        read there: the run's ``reference.csv`` holds what was sampled from it).
     source : dict
         The parsed YAML as read, stored in run manifests.
     """
 
     name: str
-    shape: EightShape | None
+    shape: Shape | None
     source: dict
 
 
-def trajectory_from_dict(data: Any, where: str = "<trajectory>") -> TrajectorySpec:
+def trajectory_from_dict(
+    data: Any, where: str = "<trajectory>", base_dir: Path | None = None
+) -> TrajectorySpec:
     """Build a :class:`TrajectorySpec` from parsed YAML.
 
     Parameters
@@ -454,16 +487,18 @@ def trajectory_from_dict(data: Any, where: str = "<trajectory>") -> TrajectorySp
         The parsed trajectory.
     where : str
         Name of the source (file path) used in error messages.
+    base_dir : Path or None
+        Directory a ``samples`` trajectory's ``file`` is relative to (the trajectory file's);
+        None: the file is not read (``shape`` is None).
 
     Returns
     -------
     TrajectorySpec
     """
     f = _Fields(data, where, "", TrajectoryError)
-    f.string("type", "eight", ("eight",))
-    defaults = EightShape()
+    kind = f.string("type", "eight", TRAJECTORY_TYPES)
     try:
-        shape = _eight(f, defaults)
+        shape = _SOURCES[kind](f, base_dir)
     except TrajectoryError as exc:
         if str(exc).startswith(where):
             raise
@@ -480,7 +515,12 @@ def trajectory_from_dict(data: Any, where: str = "<trajectory>") -> TrajectorySp
     return TrajectorySpec(name=name, shape=shape, source=data)
 
 
-def _eight(f: _Fields, defaults: EightShape) -> EightShape:
+def _yaw(f: _Fields) -> float | None:
+    return None if f.raw("yaw_deg", None) is None else f.number("yaw_deg")
+
+
+def _eight(f: _Fields, base_dir: Path | None) -> EightShape:
+    defaults = EightShape()
     return EightShape(
         center_ned_m=tuple(f.numbers("center_ned_m", 3, list(defaults.center_ned_m))),
         amplitude_north_m=f.number("amplitude_north_m", positive=True),
@@ -489,11 +529,105 @@ def _eight(f: _Fields, defaults: EightShape) -> EightShape:
         loops=f.integer("loops", defaults.loops),
         ramp_s=f.number("ramp_s", defaults.ramp_s),
         hover_s=f.number("hover_s", defaults.hover_s),
+        yaw_deg=_yaw(f),
     )
 
 
+def _ellipse(f: _Fields, base_dir: Path | None) -> EllipseShape:
+    if f.data.get("type") == "circle":
+        radius = f.number("radius_m", positive=True)
+        radii = (radius, radius)
+    else:
+        a, b = f.numbers("radii_m", 2)
+        if not (a > 0 and b > 0):
+            raise f.fail("radii_m", f"must be two numbers > 0, got [{a:g}, {b:g}]")
+        radii = (a, b)
+    plane = f.raw("plane", "horizontal")
+    if isinstance(plane, list):
+        plane = tuple(f.numbers("plane", 3))
+        if all(v == 0 for v in plane):
+            raise f.fail("plane", "must be a normal vector, not [0, 0, 0]")
+    elif plane not in PLANES:
+        raise f.fail(
+            "plane", f"must be one of {', '.join(PLANES)} or a normal vector, got {plane!r}"
+        )
+    d = {x.name: x.default for x in fields(EllipseShape)}
+    return EllipseShape(
+        center_ned_m=tuple(f.numbers("center_ned_m", 3)),
+        radii_m=radii,
+        period_s=f.number("period_s", positive=True),
+        plane=plane,
+        start_angle_deg=f.number("start_angle_deg", d["start_angle_deg"]),
+        loops=f.integer("loops", d["loops"]),
+        ramp_s=f.number("ramp_s", d["ramp_s"]),
+        hover_s=f.number("hover_s", d["hover_s"]),
+        climb_m=f.number("climb_m", d["climb_m"]),
+        yaw_deg=_yaw(f),
+    )
+
+
+def _waypoints(f: _Fields, base_dir: Path | None) -> WaypointsShape:
+    raw = f.raw("points_ned_m")
+    if not isinstance(raw, list) or len(raw) < 3:
+        raise f.fail("points_ned_m", "must be a list of at least three [north, east, down]")
+    points = []
+    for i, point in enumerate(raw):
+        ok = isinstance(point, list) and len(point) == 3
+        if ok:
+            ok = all(
+                not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+                for v in point
+            )
+        if not ok:
+            raise f.fail(f"points_ned_m[{i}]", f"must be three finite numbers, got {point!r}")
+        points.append(tuple(float(v) for v in point))
+    has_times = f.has("times_s")
+    if has_times == f.has("speed_m_s"):
+        raise f.fail("times_s", "or 'speed_m_s' must be given (one of them, not both)")
+    times = tuple(f.numbers("times_s")) if has_times else None
+    speed = None if has_times else f.number("speed_m_s", positive=True)
+    try:
+        return WaypointsShape(
+            points_ned_m=tuple(points),
+            times_s=times,
+            speed_m_s=speed,
+            hover_s=f.number("hover_s", 1.0),
+            yaw_deg=_yaw(f),
+        )
+    except TrajectoryError as exc:
+        key = "times_s" if str(exc).startswith("times_s") else "points_ned_m"
+        raise f.fail(key, f"is refused: {exc}") from None
+
+
+def _samples(f: _Fields, base_dir: Path | None) -> SamplesShape | None:
+    name = f.string("file")
+    hover_s = f.number("hover_s", 1.0)
+    if hover_s < 0:
+        raise f.fail("hover_s", f"must be >= 0, got {hover_s:g}")
+    yaw_deg = _yaw(f)
+    if base_dir is None:
+        return None
+    path = Path(name) if Path(name).is_absolute() else base_dir / name
+    data = read_samples(path)
+    yaw = None if data.yaw_deg is None else np.radians(data.yaw_deg)
+    if yaw_deg is not None:
+        if yaw is not None:
+            raise f.fail("yaw_deg", f"and the yaw_deg column of {path} both give the yaw")
+        yaw = np.full(data.t_s.size, np.radians(yaw_deg))
+    return SamplesShape(data.t_s, data.pos_ned_m, yaw, hover_s, str(path))
+
+
+_SOURCES = {
+    "eight": _eight,
+    "circle": _ellipse,
+    "ellipse": _ellipse,
+    "waypoints": _waypoints,
+    "samples": _samples,
+}
+
+
 def load_trajectory(path: str | Path) -> TrajectorySpec:
-    """Read and validate a trajectory YAML file.
+    """Read and validate a trajectory YAML file (and a ``samples`` trajectory's file).
 
     Parameters
     ----------
@@ -504,4 +638,5 @@ def load_trajectory(path: str | Path) -> TrajectorySpec:
     -------
     TrajectorySpec
     """
-    return trajectory_from_dict(read_yaml(Path(path), TrajectoryError), str(path))
+    path = Path(path)
+    return trajectory_from_dict(read_yaml(path, TrajectoryError), str(path), path.parent)

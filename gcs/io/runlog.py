@@ -68,7 +68,8 @@ import numpy as np
 
 from gcs import __version__
 from gcs.core.model import DiscreteModel
-from gcs.core.trajectory import Reference, sample_eight
+from gcs.core.trajectory import Reference
+from gcs.core.trajectory_sources import sample_reference
 from gcs.errors import PathError, RunLogError
 from gcs.io.config import Profile, TrajectorySpec, profile_from_dict, trajectory_from_dict
 from gcs.io.paths import check_writable_dir
@@ -431,7 +432,7 @@ class RunDir:
         run_id : str, optional
             Directory name; default ``<UTC time>-<trajectory>-<algorithm>``.
         reference : Reference, optional
-            The reference to record; default: the trajectory's eight sampled at ``t_ilc_s``
+            The reference to record; default: the trajectory sampled at ``t_ilc_s``
             (identification runs pass their excitation here).
 
         Returns
@@ -442,7 +443,9 @@ class RunDir:
             raise RunLogError(f"algorithm must be one of {', '.join(RUN_KINDS)}, got {algorithm!r}")
         root = Path(root)
         ref = (
-            reference if reference is not None else sample_eight(trajectory.shape, profile.t_ilc_s)
+            reference
+            if reference is not None
+            else sample_reference(trajectory.shape, profile.t_ilc_s)
         )
         if abs(ref.t_ilc_s - profile.t_ilc_s) > 1e-9:
             raise RunLogError(
