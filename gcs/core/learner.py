@@ -160,6 +160,8 @@ class Learner:
                 "learning with adaptive options is defined on north and east (e_pos, floor, "
                 f"safeguard); got axes {tuple(settings.axes)}"
             )
+        if adaptive is not None and settings.arena is None:
+            raise ValueError("learning with adaptive options needs settings.arena")
         if int(repeats) != repeats or repeats < 0:
             raise ValueError(f"repeats must be an integer >= 0, got {repeats}")
         self.settings = settings

@@ -16,7 +16,7 @@ setpoints flown, ``Y = y(1..N)`` the measured positions and ``Yd = yd(1..N)`` th
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -86,15 +86,16 @@ class LearnerSettings:
         One closed-loop model "setpoint -> position" per learned axis, in the order of
         ``axes``.
     algorithm : str
-        ``"smoother"`` or ``"kilc"``.
+        ``"smoother"`` (Algorithm 1, default) or ``"kilc"``.
     weights : UpdateWeights
-        Weights of eq. (8).
+        Weights of eq. (8) (default We = 1, Wdu = 0.01, Wu = 0).
     smoother : SmootherSettings
-        Algorithm 1 settings.
+        Algorithm 1 settings (default Table I).
     kilc : KilcSettings
-        K-ILC settings.
-    arena : Box
-        Flight volume, local NED [m]; the new setpoints stay inside it.
+        K-ILC settings (default Table I).
+    arena : Box or None
+        Flight volume, local NED [m]; the new setpoints stay inside it. None: no bounds
+        (the options beyond the paper need one).
     max_step_m : float or None
         Bound on the setpoint change per sample [m].
     max_deviation_m : float or None
@@ -105,11 +106,11 @@ class LearnerSettings:
     """
 
     models: tuple[DiscreteModel, ...]
-    algorithm: str
-    weights: UpdateWeights
-    smoother: SmootherSettings
-    kilc: KilcSettings
-    arena: Box
+    algorithm: str = "smoother"
+    weights: UpdateWeights = field(default_factory=UpdateWeights)
+    smoother: SmootherSettings = field(default_factory=SmootherSettings)
+    kilc: KilcSettings = field(default_factory=KilcSettings)
+    arena: Box | None = None
     max_step_m: float | None = None
     max_deviation_m: float | None = None
     axes: tuple[int, ...] = (0, 1)
@@ -126,7 +127,7 @@ class LearnerSettings:
 
 
 def axis_limits(
-    arena: Box,
+    arena: Box | None,
     start_ne_m: np.ndarray,
     axis: int,
     max_step_m: float | None,
@@ -136,8 +137,8 @@ def axis_limits(
 
     Parameters
     ----------
-    arena : Box
-        Flight volume, local NED [m].
+    arena : Box or None
+        Flight volume, local NED [m]; None for no bounds.
     start_ne_m : float or ndarray
         Start point of this axis [m] (a scalar), the origin of the learning coordinates; an
         array of the NED start point is indexed by ``axis``.
@@ -150,11 +151,11 @@ def axis_limits(
     -------
     SetpointLimits
     """
-    lo, hi = arena.bounds()[axis]
+    lo, hi = (None, None) if arena is None else arena.bounds()[axis]
     start = start_ne_m[axis] if np.ndim(start_ne_m) else start_ne_m
     return SetpointLimits(
-        u_min_m=lo - start,
-        u_max_m=hi - start,
+        u_min_m=None if lo is None else lo - start,
+        u_max_m=None if hi is None else hi - start,
         max_step_m=max_step_m,
         max_deviation_m=max_deviation_m,
     )
