@@ -400,7 +400,7 @@ def models_in_use(
 
 
 def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
-    """A repeat of trial 0, or a step of :func:`plan_next_trial` on trials 0..j, recorded."""
+    """A repeat of trial 0, or a step of the learner on trials 0..j, recorded."""
     repeats = profile.learning.repeats
     records = _history(run, j, run_measurement(profile))
     ref = run.reference()
