@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gcs.errors import ProfileError
-from gcs.flight.mocap.frames import SYSTEM_FRAMES
+from gcs.core.frames import SYSTEM_FRAMES
 from gcs.flight.mocap.settings import mocap_settings
 from gcs.flight.mocap.source import parse_mocap_url
 

@@ -252,7 +252,7 @@ def plan_mocap(profile: Profile, where: str, mocap: str | None, use_mock: bool) 
         return None
     try:
         settings.mapping(source)
-    except ProfileError as exc:
+    except ValueError as exc:
         raise ProfileError(f"{where}: field 'mocap': {exc}") from None
     return MocapPlan(settings, source)
 

@@ -9,7 +9,7 @@ and calls ``on_sample`` for each frame (in that thread: hand work to the asyncio
 setpoint loop can poll :meth:`MocapClient.latest` without ever waiting for the mocap.
 
 Samples are in the mocap system's axes; map them with
-:class:`gcs.flight.mocap.frames.FrameMapping`.
+:class:`gcs.core.frames.FrameMapping`.
 """
 
 from __future__ import annotations

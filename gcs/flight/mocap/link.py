@@ -27,7 +27,7 @@ import numpy as np
 from gcs.errors import MocapError
 from gcs.flight.mocap.client import MocapClient, MocapSample
 from gcs.flight.mocap.forward import VisionForwarder
-from gcs.flight.mocap.frames import FrameMapping
+from gcs.core.frames import FrameMapping
 from gcs.flight.mocap.health import HealthLimits, stream_problem
 from gcs.flight.mocap.latency import estimate_lag_s
 from gcs.flight.mocap.settings import MocapSettings

@@ -1,7 +1,7 @@
 """The ``mocap:`` section of a profile: which frame mapping, what is forwarded, what is learned.
 
 Every field is optional; with no section at all, ``--mocap URL`` uses the defaults of the URL's
-system (:data:`gcs.flight.mocap.frames.SYSTEM_FRAMES`)::
+system (:data:`gcs.core.frames.SYSTEM_FRAMES`)::
 
     mocap:
       url: optitrack://192.168.1.10/drone?interface=192.168.1.20   # --mocap overrides it
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from gcs.errors import ProfileError
-from gcs.flight.mocap.frames import SYSTEM_FRAMES, FrameMapping, mapping_for
+from gcs.core.frames import SYSTEM_FRAMES, FrameMapping, mapping_for
 from gcs.flight.mocap.source import MocapSource, parse_mocap_url
 
 __all__ = ["MESSAGES", "MEASUREMENTS", "MocapSettings", "mocap_settings"]
@@ -225,6 +225,6 @@ def mocap_settings(section: Any, where: str) -> MocapSettings:
         system = parse_mocap_url(url).system if url is not None else "optitrack"
         base = mapping_for(settings.frame or system)
         dataclasses.replace(base, **overrides)
-    except ProfileError as exc:
+    except ValueError as exc:
         raise ProfileError(f"{where}: field 'mocap': {exc}") from None
     return settings

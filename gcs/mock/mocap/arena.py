@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs.flight.mocap.frames import mapping_for
+from gcs.core.frames import mapping_for
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import in_room
 from gcs.mock.mocap.server import FAULT_KINDS, FaultWindow, NatNetServer
@@ -69,7 +69,7 @@ class ArenaOptions:
     noise_m : float
         Marker noise, standard deviation per coordinate [m].
     room : str
-        Named convention of the room's axes (:data:`gcs.flight.mocap.frames.SYSTEM_FRAMES`).
+        Named convention of the room's axes (:data:`gcs.core.frames.SYSTEM_FRAMES`).
     yaw_offset_deg : float
         Heading in NED of the room's north axis [deg].
     body : str

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from gcs.flight.mocap.frames import SYSTEM_FRAMES, mapping_for
+from gcs.core.frames import SYSTEM_FRAMES, mapping_for
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
 from gcs.mock.mocap.server import FaultWindow, NatNetServer

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gcs.flight.mocap.frames import matrix_to_quat, quat_to_matrix
+from gcs.core.frames import matrix_to_quat, quat_to_matrix
 from gcs.mock.mocap import natnet
 
 __all__ = [
