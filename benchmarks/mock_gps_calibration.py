@@ -470,7 +470,7 @@ def mock_summary(cfg: MockConfig, seeds: list[int], settings: FlightSettings) ->
 
 def run_trials(run_dir: Path) -> list[Flight]:
     """The complete trials of a live repeat run directory (at least two)."""
-    from gcs.io.runlog import RunDir
+    from gcs.io.rundir import RunDir
 
     done = RunDir.open(run_dir).complete_trials()
     if len(done) < 2:

@@ -34,7 +34,8 @@ from typer.testing import CliRunner
 from gcs.cli import app
 from gcs.core.model import from_transfer_function, simulate
 from gcs.io.config import profile_from_dict
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
 
 UNREACHABLE = "udpout://127.0.0.1:9"  # the discard port: nothing answers there
 DELETE = object()

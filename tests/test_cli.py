@@ -11,7 +11,7 @@ from synthetic import fly_synthetic, make_run
 from typer.testing import CliRunner
 
 from gcs.cli import app
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
 runner = CliRunner()
 

@@ -15,6 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from px4_data import capture_armed, shared
 
+from gcs.core.frames import global_to_ned
 from gcs.flight.fence import (
     DRIFT_WINDOW_S,
     MAX_ACCEL_M_S2,
@@ -22,7 +23,6 @@ from gcs.flight.fence import (
     Fence,
     fence_polygon,
 )
-from gcs.core.frames import global_to_ned
 from gcs.flight.geofence import GF_ACTION, GeofenceState, vertical_limit_m
 from gcs.flight.settings import FlightSettings
 

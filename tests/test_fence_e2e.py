@@ -34,7 +34,7 @@ from gcs.flight.campaign import Status, fly_campaign
 from gcs.flight.fence import EstimateMonitor, Fence, global_to_ned
 from gcs.flight.geofence import GF_ACTION, vertical_limit_m
 from gcs.flight.settings import FlightSettings
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 from gcs.mock.config import Faults
 from gcs.mock.process import MockProcess
 

@@ -13,7 +13,7 @@ from gcs.core.model import simulate
 from gcs.errors import ProfileError, TrajectoryError
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import profile_from_dict
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
 
 def recording(run: RunDir, setpoints: np.ndarray, complete: bool = True) -> TrialRecording:

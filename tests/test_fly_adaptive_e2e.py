@@ -21,7 +21,7 @@ from gcs.flight.campaign import FlightSession, Status, TrialStarted, fly_campaig
 from gcs.flight.fence import Fence
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 from gcs.mock.process import MockProcess
 
 pytestmark = pytest.mark.e2e

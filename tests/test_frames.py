@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from gcs.core.frames import (
     SYSTEM_FRAMES,
-    global_to_ned,
     FrameMapping,
+    global_to_ned,
     mapping_for,
     matrix_to_quat,
     ned_to_global,

@@ -26,7 +26,8 @@ from gcs.core.model import from_transfer_function, markov_parameters, simulate
 from gcs.core.pbsid import continuous_poles
 from gcs.errors import ProfileError, TrajectoryError
 from gcs.io.config import load_profile, profile_from_dict
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
 
 runner = CliRunner()
 DT = 0.05

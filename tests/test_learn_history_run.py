@@ -34,7 +34,7 @@ from gcs.core.learning import learning_step, plan_next_trial
 from gcs.errors import ProfileError, RunLogError, TrajectoryError
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import load_profile, profile_from_dict, trajectory_from_dict
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
 
 def files(path: Path) -> dict[str, bytes]:

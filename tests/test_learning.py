@@ -16,7 +16,8 @@ from gcs.core.model import lifted_matrix, relative_degree, simulate
 from gcs.core.trajectory import sample_eight
 from gcs.errors import RunLogError
 from gcs.io.config import profile_from_dict, trajectory_from_dict
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
 
 
 def fly_perfect(run: RunDir, j: int, disturbance: bool = False) -> TrialRecord:

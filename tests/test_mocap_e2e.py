@@ -19,7 +19,8 @@ from synthetic import CI_FLIGHT, SHORT
 
 from gcs.flight.settings import FlightSettings
 from gcs.io.mocap_samples import read_mocap_csv
-from gcs.io.runlog import MOCAP_GRID_COLUMNS, RunDir
+from gcs.io.records import MOCAP_GRID_COLUMNS
+from gcs.io.rundir import RunDir
 from gcs.mock.mocap.arena import ArenaFault, ArenaOptions
 from gcs.mock.process import MockProcess
 

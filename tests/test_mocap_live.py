@@ -14,10 +14,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from gcs.core.frames import FrameMapping, mapping_for, quat_angle_rad
 from gcs.errors import MocapError
 from gcs.flight.mocap.checks import move_direction_problem
 from gcs.flight.mocap.client import MocapClient, MocapSample
-from gcs.core.frames import FrameMapping, mapping_for, quat_angle_rad
 from gcs.flight.mocap.health import (
     HealthLimits,
     frozen_problem,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gcs.errors import ProfileError
 from gcs.core.frames import SYSTEM_FRAMES
+from gcs.errors import ProfileError
 from gcs.flight.mocap.settings import mocap_settings
 from gcs.flight.mocap.source import parse_mocap_url
 

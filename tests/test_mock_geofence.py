@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from gcs.core.frames import ned_to_global as _ned_to_global
 from gcs.mock.geofence import (
     ACCEPTED,
     ERROR,
@@ -19,8 +20,6 @@ from gcs.mock.geofence import (
     Geofence,
     breach_kinds,
 )
-
-from gcs.core.frames import ned_to_global as _ned_to_global
 
 GCS = (245, 190)
 ORIGIN = (47.3977431, 8.5455947, 489.244)

@@ -14,7 +14,8 @@ from gcs.app.report import mocap_lines, run_metrics
 from gcs.errors import RunLogError
 from gcs.io.config import trajectory_from_dict
 from gcs.io.mocap_samples import MocapSeries, read_mocap_csv
-from gcs.io.runlog import MOCAP_GRID_COLUMNS, TRIAL_COLUMNS, RunDir, TrialStatus
+from gcs.io.records import MOCAP_GRID_COLUMNS, TRIAL_COLUMNS, TrialStatus
+from gcs.io.rundir import RunDir
 
 
 def raw(n: int = 5) -> MocapSeries:

@@ -44,7 +44,8 @@ from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec, load_profile, load_trajectory
 from gcs.io.paths import check_new_dir, check_output_dir
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
 
 __all__ = [
     "MOCK_MOCAP",
@@ -824,7 +825,7 @@ def converged_reason(record: dict | None) -> str | None:
     Parameters
     ----------
     record : dict or None
-        A ``learn-JJJ.json`` record (:meth:`gcs.io.runlog.RunDir.read_learn_record`).
+        A ``learn-JJJ.json`` record (:meth:`gcs.io.rundir.RunDir.read_learn_record`).
 
     Returns
     -------

@@ -26,7 +26,7 @@ from gcs.core.metrics import IterationMetrics
 from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
 from gcs.flight.mocap.link import MocapLink
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
 __all__ = ["fly_with_display", "live_progress", "vehicle_url", "learning_lines"]
 

@@ -59,8 +59,10 @@ from gcs.flight.campaign import run_campaign
 from gcs.flight.mocap.link import MocapLink
 from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
+from gcs.io.atomic import atomic_write_text
 from gcs.io.config import Profile, TrajectorySpec, _Fields, profile_from_dict
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus, atomic_write_text
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
 
 __all__ = [
     "AXES",

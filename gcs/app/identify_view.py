@@ -23,9 +23,10 @@ from gcs.app.identify import (
     write_identified_profile,
 )
 from gcs.errors import PathError, RunLogError
+from gcs.io.atomic import write_once
 from gcs.io.config import Profile, load_profile
 from gcs.io.paths import check_new_dir, check_output_dir, check_output_file
-from gcs.io.runlog import RunDir, write_once
+from gcs.io.rundir import RunDir
 
 __all__ = ["results_table", "model_lines", "identify_with_display"]
 

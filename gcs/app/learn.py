@@ -34,7 +34,8 @@ from gcs.core.model import DiscreteModel, relative_degree
 from gcs.core.trajectory import Reference, check_setpoints
 from gcs.errors import GcsError, ProfileError, RunLogError, TrajectoryError
 from gcs.io.config import Profile, load_profile
-from gcs.io.runlog import RunDir, TrialRecord
+from gcs.io.records import TrialRecord
+from gcs.io.rundir import RunDir
 
 __all__ = [
     "LearnOutcome",

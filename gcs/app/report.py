@@ -38,7 +38,9 @@ from gcs.core.floor import Floor, FloorVerdict, floor_from_flights, floor_verdic
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.model import relative_degree
 from gcs.errors import ProfileError, RunLogError
-from gcs.io.runlog import RunDir, TrialRecord, atomic_write_text
+from gcs.io.atomic import atomic_write_text
+from gcs.io.records import TrialRecord
+from gcs.io.rundir import RunDir
 
 __all__ = [
     "TrialEntry",

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from gcs.errors import RunLogError
-from gcs.io.runlog import atomic_write_text
+from gcs.io.atomic import atomic_write_text
 
 __all__ = ["MOCAP_COLUMNS", "MocapSeries", "write_mocap_csv", "read_mocap_csv"]
 

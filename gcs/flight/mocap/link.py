@@ -24,10 +24,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gcs.core.frames import FrameMapping
 from gcs.errors import MocapError
 from gcs.flight.mocap.client import MocapClient, MocapSample
 from gcs.flight.mocap.forward import VisionForwarder
-from gcs.core.frames import FrameMapping
 from gcs.flight.mocap.health import HealthLimits, stream_problem
 from gcs.flight.mocap.latency import estimate_lag_s
 from gcs.flight.mocap.settings import MocapSettings

@@ -32,8 +32,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from gcs.errors import ProfileError
 from gcs.core.frames import SYSTEM_FRAMES, FrameMapping, mapping_for
+from gcs.errors import ProfileError
 from gcs.flight.mocap.source import MocapSource, parse_mocap_url
 
 __all__ = ["MESSAGES", "MEASUREMENTS", "MocapSettings", "mocap_settings"]
