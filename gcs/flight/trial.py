@@ -39,7 +39,6 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -47,9 +46,7 @@ from gcs.errors import TrajectoryError, TrialAborted
 from gcs.flight.clock import ClockFit, fit_clock
 from gcs.flight.settings import FlightSettings
 from gcs.flight.vehicle import TelemetrySample, Vehicle, sleep_until
-
-if TYPE_CHECKING:
-    from gcs.flight.mocap.link import MocapTrial
+from gcs.io.mocap_samples import MocapTrial
 
 __all__ = [
     "TrialRecording",
