@@ -29,7 +29,6 @@ from mock_learning_offline import fly, learn
 
 from gcs.app.identify import (
     frequency_response,
-    identification_settings,
     plan_experiments,
 )
 from gcs.core.pbsid import identify, natural_frequency_damping, simulate_free, vaf
@@ -76,7 +75,7 @@ def learn_pct(profile: Profile, cfg: MockConfig, seed: int) -> list[float]:
 
 
 def identified_profile(level_m: float, id_seed: int) -> tuple[Profile, list[dict]]:
-    settings = replace(identification_settings(PROFILE), amplitude_m=level_m)
+    settings = replace(PROFILE.identification, amplitude_m=level_m)
     exps = plan_experiments(settings, PROFILE.t_ilc_s, "both", PROFILE.arena)
     flown = [
         fly(MOCK, sp, exps.center_ned_m, PROFILE.t_ilc_s, seed=id_seed + e)[:-1]

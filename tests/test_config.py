@@ -12,6 +12,7 @@ import yaml
 from gcs.core.model import from_transfer_function, markov_parameters
 from gcs.errors import ProfileError, TrajectoryError
 from gcs.io.config import DEFAULT_MAX_VERTICAL_SPEED_M_S, load_profile, load_trajectory
+from gcs.io.settings import FlightSettings, IdentifySettings, MocapSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 ANTX = ROOT / "profiles" / "antx.yaml"
@@ -65,10 +66,13 @@ def test_antx_profile_loads_with_eq11_model_and_table_one_settings():
     assert (p.max_speed_m_s, p.max_accel_m_s2) == (3.0, 5.0)
     assert p.max_vertical_speed_m_s == DEFAULT_MAX_VERTICAL_SPEED_M_S == 1.5  # optional: default
     assert p.arena.north_m == (-3.0, 3.0) and p.arena.down_m == (-3.0, 0.0)
-    assert p.flight == antx_data()["flight"]
-    ratio = p.flight["stream_rate_hz"] * p.t_ilc_s  # documented: integer multiple of 1/t_ilc
+    assert p.flight == FlightSettings(**antx_data()["flight"])  # the rest: defaults
+    ratio = p.flight.stream_rate_hz * p.t_ilc_s  # documented: integer multiple of 1/t_ilc
     assert ratio == pytest.approx(round(ratio)) and round(ratio) >= 1
-    assert p.identification["excitation"] == "prbs"
+    ident = antx_data()["identification"]
+    ident["center_ned_m"] = tuple(ident["center_ned_m"])
+    assert p.identification == IdentifySettings(**ident)
+    assert p.mocap == MocapSettings()  # no section: every default
     assert p.source == antx_data()
 
 

@@ -24,7 +24,7 @@ from gcs.flight.fence import (
     fence_polygon,
 )
 from gcs.flight.geofence import GF_ACTION, GeofenceState, vertical_limit_m
-from gcs.flight.settings import FlightSettings
+from gcs.io.settings import FlightSettings
 
 SETTINGS = FlightSettings()
 ARENA = [[-3.0, 3.0], [-3.0, 3.0], [-3.0, 0.0]]

@@ -33,8 +33,8 @@ from gcs.errors import TrialAborted, VehicleError
 from gcs.flight.campaign import Status, fly_campaign
 from gcs.flight.fence import EstimateMonitor, Fence, global_to_ned
 from gcs.flight.geofence import GF_ACTION, vertical_limit_m
-from gcs.flight.settings import FlightSettings
 from gcs.io.rundir import RunDir
+from gcs.io.settings import FlightSettings
 from gcs.mock.config import Faults
 from gcs.mock.process import MockProcess
 

@@ -15,7 +15,6 @@ import pytest
 
 from gcs.errors import ProfileError, TrajectoryError, TrialAborted
 from gcs.flight.clock import VehicleClock
-from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import (
     TrialRun,
     align_to_grid,
@@ -24,6 +23,7 @@ from gcs.flight.trial import (
     send_schedule,
 )
 from gcs.flight.vehicle import TelemetrySample, min_jerk
+from gcs.io.settings import FlightSettings
 
 # ---------------------------------------------------------------- settings
 

@@ -26,8 +26,8 @@ from gcs.flight.mocap.health import (
     stale_problem,
     stream_problem,
 )
-from gcs.flight.mocap.source import MocapSource, parse_mocap_url
 from gcs.io.mocap_samples import MocapSeries
+from gcs.io.mocap_source import MocapSource, parse_mocap_url
 from gcs.mock.mocap.process import MocapServerProcess
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
 from gcs.mock.mocap.server import FaultWindow, NatNetServer

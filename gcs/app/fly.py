@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -38,14 +38,13 @@ from gcs.errors import PathError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.fence import Fence
 from gcs.flight.mocap.link import MocapLink
-from gcs.flight.mocap.settings import MocapSettings, mocap_settings
-from gcs.flight.mocap.source import MocapSource
-from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec, load_profile, load_trajectory
+from gcs.io.mocap_source import MocapSource
 from gcs.io.paths import check_new_dir, check_output_dir
 from gcs.io.records import TrialRecord, TrialStatus
 from gcs.io.rundir import RunDir
+from gcs.io.settings import FlightSettings, MocapSettings
 
 __all__ = [
     "MOCK_MOCAP",
@@ -59,7 +58,6 @@ __all__ = [
     "RunSource",
     "SessionRecorder",
     "flyable_setpoints",
-    "flight_settings",
     "flight_fence",
     "prepare_run",
     "to_record",
@@ -71,38 +69,6 @@ __all__ = [
     "check_until_converged",
     "raw_mocap",
 ]
-
-
-def flight_settings(profile: Profile, where: str | None = None) -> FlightSettings:
-    """The profile's ``flight`` section as :class:`FlightSettings` (unknown keys refused).
-
-    Parameters
-    ----------
-    profile : Profile
-        The profile.
-    where : str, optional
-        The profile's file for messages (default: ``profile '<name>'``).
-
-    Returns
-    -------
-    FlightSettings
-    """
-    where = where or f"profile '{profile.name}'"
-    known = {f.name for f in fields(FlightSettings)}
-    for key, value in profile.flight.items():
-        if key not in known:
-            raise ProfileError(f"{where}: field 'flight.{key}' is not known")
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ProfileError(f"{where}: field 'flight.{key}' must be a number, got {value!r}")
-    try:
-        settings = FlightSettings(**{k: float(v) for k, v in profile.flight.items()})
-        settings.sends_per_sample(profile.t_ilc_s)
-    except ValueError as exc:  # FlightSettings' own messages start with the field's name
-        text = str(exc)
-        field = text.split(":", 1)[0] if text.startswith("flight.") else "flight.stream_rate_hz"
-        detail = text.split(":", 1)[1].strip() if text.startswith("flight.") else text
-        raise ProfileError(f"{where}: field '{field}': {detail}") from None
-    return settings
 
 
 def flight_fence(profile: Profile, settings: FlightSettings) -> Fence:
@@ -206,7 +172,7 @@ class MocapPlan:
         -------
         MocapLink
         """
-        from gcs.flight.mocap.source import parse_mocap_url
+        from gcs.io.mocap_source import parse_mocap_url
 
         source = self.source or parse_mocap_url(mock_url or "")
         return MocapLink(source, self.settings.mapping(source), self.settings)
@@ -230,7 +196,7 @@ def plan_mocap(profile: Profile, where: str, mocap: str | None, use_mock: bool) 
     Parameters
     ----------
     profile : Profile
-        The profile (its ``mocap`` section is checked even when no mocap is used).
+        The profile (its ``mocap`` section checked when it was loaded).
     where : str
         The profile's file, for messages.
     mocap : str or None
@@ -242,7 +208,7 @@ def plan_mocap(profile: Profile, where: str, mocap: str | None, use_mock: bool) 
     -------
     MocapPlan or None
     """
-    settings = mocap_settings(profile.mocap, where)
+    settings = profile.mocap
     if mocap == MOCK_MOCAP:
         if not use_mock:
             raise PathError("--mocap mock: the mock's arena needs --mock (a real arena: its URL)")
@@ -355,7 +321,7 @@ def plan_fly(
         check_until_converged(profile, where)
     trajectory = load_trajectory(trajectory_path)
     algorithm = algorithm or profile.learning.algorithm
-    settings = flight_settings(profile, where)
+    settings = profile.flight
     mocap_plan = plan_mocap(profile, where, mocap, use_mock)
     ref = _reference(profile, trajectory, str(trajectory_path))
     check_learnable(profile, ref, algorithm, where)
@@ -411,9 +377,8 @@ def _plan_resume(
                     f"'{field}'); a resumed run keeps its own {key}: leave out --{key}, or "
                     "start a new run"
                 )
-    where = f"{run.path}/manifest.json:profile"
     profile, trajectory = run.profile(), run.trajectory()
-    settings = flight_settings(profile, where)
+    settings = profile.flight
     ref = run.reference()
     try:
         check_reference(ref, profile.max_speed_m_s, profile.max_accel_m_s2, profile.arena)

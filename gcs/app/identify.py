@@ -3,8 +3,8 @@
 The numerics are in :mod:`gcs.core.pbsid` and :mod:`gcs.core.excitation`; this module is the
 glue between them, the profile, the run directory and the flight layer:
 
-1. :func:`identification_settings` reads and validates the profile's ``identification``
-   section (:class:`IdentifySettings`).
+1. The profile's ``identification`` section arrives checked
+   (:class:`gcs.io.settings.IdentifySettings`, built by :func:`gcs.io.config.profile_from_dict`).
 2. :func:`plan_experiments` builds the setpoints of the two experiments, the hover point plus a
    PRBS (or multisine) on every excited horizontal axis, independent seeds per axis and per
    experiment, and refuses them if any setpoint leaves the arena.
@@ -53,22 +53,18 @@ from gcs.core.pbsid import (
     to_continuous_tf,
     vaf,
 )
-from gcs.core.trajectory import MAX_SAMPLES, Reference, points_outside
+from gcs.core.trajectory import Reference, points_outside
 from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import run_campaign
 from gcs.flight.mocap.link import MocapLink
-from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.io.atomic import atomic_write_text
-from gcs.io.config import Profile, TrajectorySpec, _Fields, profile_from_dict
+from gcs.io.config import Profile, TrajectorySpec, profile_from_dict
 from gcs.io.records import TrialRecord, TrialStatus
 from gcs.io.rundir import RunDir
+from gcs.io.settings import AXES, FlightSettings, IdentifySettings
 
 __all__ = [
-    "AXES",
-    "EXCITATIONS",
-    "IdentifySettings",
-    "identification_settings",
     "Experiments",
     "plan_experiments",
     "create_identification_run",
@@ -84,9 +80,6 @@ __all__ = [
     "write_identification_plots",
 ]
 
-#: Horizontal axes: name -> column in the NED arrays.
-AXES = {"x": 0, "y": 1}
-EXCITATIONS = ("prbs", "multisine")
 #: Run-directory algorithm name and trajectory type of identification runs.
 ALGORITHM = "identify"
 TRAJECTORY_TYPE = "excitation"
@@ -95,154 +88,6 @@ _SAMPLES_PER_PARAMETER = 4
 
 
 # ------------------------------------------------------------------------------- settings
-
-
-@dataclass(frozen=True)
-class IdentifySettings:
-    """The profile's ``identification`` section (defaults in brackets).
-
-    Parameters
-    ----------
-    excitation : str
-        ``"prbs"`` [default] or ``"multisine"``.
-    amplitude_m : float
-        Excitation level per axis [m] [0.3]: the PRBS level, or the multisine's peak.
-    bandwidth_hz : float or None
-        PRBS band [Hz] [1.0] (clock ``2.5 x bandwidth``); PRBS only.
-    f_min_hz, f_max_hz : float or None
-        Multisine band [Hz] (required for, and only for, ``multisine``).
-    duration_s : float
-        Length of each of the two experiments [s] [60].
-    past, future : int
-        PBSID windows [samples] [20, 10].
-    order : int or None
-        Model order; None chooses it from the singular values [None].
-    max_delay : int
-        Longest input delay searched [samples] [10].
-    seed : int
-        Base seed of the excitation [1]: experiment e, axis a (x = 0, y = 1) uses
-        ``seed + 2 e + a``.
-    center_ned_m : tuple of float
-        Hover point the excitation is added to, local NED [m] [(0, 0, -1.5)].
-    """
-
-    excitation: str = "prbs"
-    amplitude_m: float = 0.3
-    bandwidth_hz: float | None = 1.0
-    f_min_hz: float | None = None
-    f_max_hz: float | None = None
-    duration_s: float = 60.0
-    past: int = 20
-    future: int = 10
-    order: int | None = None
-    max_delay: int = 10
-    seed: int = 1
-    center_ned_m: tuple[float, float, float] = (0.0, 0.0, -1.5)
-
-    def n_samples(self, t_ilc_s: float) -> int:
-        """Setpoints per experiment, ``round(duration_s / t_ilc_s)``.
-
-        Parameters
-        ----------
-        t_ilc_s : float
-            Sample time [s].
-
-        Returns
-        -------
-        int
-        """
-        return int(round(self.duration_s / t_ilc_s))
-
-    def seed_for(self, experiment: int, axis: str) -> int:
-        """Excitation seed of one axis in one experiment (0 = fit, 1 = validation).
-
-        Parameters
-        ----------
-        experiment : int
-            0 (fitting) or 1 (validation).
-        axis : str
-            ``"x"`` or ``"y"``.
-
-        Returns
-        -------
-        int
-        """
-        return self.seed + 2 * experiment + AXES[axis]
-
-
-def identification_settings(
-    profile: Profile, where: str = "<profile>", seed: int | None = None
-) -> IdentifySettings:
-    """Read and validate ``profile.identification``; refusals name the field.
-
-    Parameters
-    ----------
-    profile : Profile
-        The profile (its ``identification`` dict may be empty: all defaults).
-    where : str
-        Name of the profile (file path) used in error messages.
-    seed : int or None
-        Overrides ``identification.seed`` (the ``--seed`` option).
-
-    Returns
-    -------
-    IdentifySettings
-
-    Raises
-    ------
-    ProfileError
-        Unknown field, wrong type or range, or a field of the other excitation.
-    """
-    d = IdentifySettings()
-    f = _Fields(profile.identification, where, "identification", ProfileError)
-    excitation = f.string("excitation", d.excitation, EXCITATIONS)
-    amplitude = f.number("amplitude_m", d.amplitude_m, positive=True)
-    nyquist = 0.5 / profile.t_ilc_s
-    other = ("f_min_hz", "f_max_hz") if excitation == "prbs" else ("bandwidth_hz",)
-    for key in other:
-        if f.has(key):
-            raise f.fail(key, f"does not apply to excitation {excitation}")
-    bandwidth = f_min = f_max = None
-    if excitation == "prbs":
-        bandwidth = f.number("bandwidth_hz", d.bandwidth_hz, positive=True)
-        if bandwidth > nyquist:
-            raise f.fail("bandwidth_hz", f"must be <= Nyquist {nyquist:g} Hz, got {bandwidth:g}")
-    else:
-        f_min = f.number("f_min_hz")
-        f_max = f.number("f_max_hz", positive=True)
-        if not 0 <= f_min < f_max:
-            raise f.fail("f_min_hz", f"must be in [0, f_max_hz = {f_max:g}), got {f_min:g}")
-        if f_max >= nyquist:
-            raise f.fail("f_max_hz", f"must be below Nyquist {nyquist:g} Hz, got {f_max:g}")
-    duration = f.number("duration_s", d.duration_s, positive=True)
-    if duration / profile.t_ilc_s > MAX_SAMPLES:
-        raise f.fail(
-            "duration_s", f"gives more than {MAX_SAMPLES} samples of {profile.t_ilc_s:g} s"
-        )
-    past = f.integer("past", d.past)
-    if past < 1:
-        raise f.fail("past", f"must be >= 1, got {past}")
-    future = f.integer("future", d.future)
-    if not 2 <= future <= past:
-        raise f.fail("future", f"must be in [2, past = {past}], got {future}")
-    order = f.raw("order", None)
-    if order is not None:
-        order = f.integer("order")
-        if not 1 <= order < future:
-            raise f.fail("order", f"must be in [1, future - 1 = {future - 1}], got {order}")
-    max_delay = f.integer("max_delay", d.max_delay)
-    if max_delay < 0:
-        raise f.fail("max_delay", f"must be >= 0, got {max_delay}")
-    base_seed = f.integer("seed", d.seed)
-    center = tuple(f.numbers("center_ned_m", 3, list(d.center_ned_m)))
-    f.done()
-    settings = IdentifySettings(
-        excitation=excitation, amplitude_m=amplitude, bandwidth_hz=bandwidth, f_min_hz=f_min,
-        f_max_hz=f_max, duration_s=duration, past=past, future=future, order=order,
-        max_delay=max_delay, seed=base_seed if seed is None else int(seed),
-        center_ned_m=center,
-    )  # fmt: skip
-    return settings
 
 
 # ----------------------------------------------------------------------------- experiments

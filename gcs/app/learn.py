@@ -206,9 +206,7 @@ def run_measurement(profile: Profile) -> str:
     str
         ``"mocap"`` or ``"estimate"``.
     """
-    from gcs.flight.mocap.settings import mocap_settings
-
-    return mocap_settings(profile.mocap, f"profile '{profile.name}'").measurement
+    return profile.mocap.measurement
 
 
 def measured_trial(run: RunDir, j: int, measurement: str) -> TrialRecord:

@@ -94,9 +94,7 @@ class UpdateWeights:
             try:
                 v = float(value)
             except (TypeError, ValueError):
-                raise ValueError(
-                    f"UpdateWeights.{name} must be a number, got {value!r}"
-                ) from None
+                raise ValueError(f"UpdateWeights.{name} must be a number, got {value!r}") from None
             if not math.isfinite(v) or v < 0 or (v == 0 and not lower_ok):
                 bound = ">= 0" if lower_ok else "> 0"
                 raise ValueError(f"UpdateWeights.{name} must be finite and {bound}, got {value}")

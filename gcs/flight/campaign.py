@@ -58,9 +58,9 @@ from gcs.flight.preflight import (
     link_loss_warnings,
     navigation_source,
 )
-from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording, TrialRun, check_setpoints
 from gcs.flight.vehicle import TelemetrySample, Vehicle, sample_arrays
+from gcs.io.settings import FlightSettings
 
 __all__ = [
     "TrialSource",

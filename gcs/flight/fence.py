@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from gcs.core.frames import ned_to_global
-from gcs.flight.settings import FlightSettings
+from gcs.io.settings import FlightSettings
 
 __all__ = [
     "Fence",

@@ -44,9 +44,9 @@ import numpy as np
 
 from gcs.errors import TrajectoryError, TrialAborted
 from gcs.flight.clock import ClockFit, fit_clock
-from gcs.flight.settings import FlightSettings
 from gcs.flight.vehicle import TelemetrySample, Vehicle, sleep_until
 from gcs.io.mocap_samples import MocapTrial
+from gcs.io.settings import FlightSettings
 
 __all__ = [
     "TrialRecording",

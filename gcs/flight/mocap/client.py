@@ -32,8 +32,8 @@ import numpy as np
 
 from gcs.errors import MocapError
 from gcs.flight.mocap.reader import HEADER, SAMPLE
-from gcs.flight.mocap.source import MocapSource
 from gcs.io.mocap_samples import MocapSeries
+from gcs.io.mocap_source import MocapSource
 
 __all__ = ["MocapSample", "MocapClient", "series_of"]
 

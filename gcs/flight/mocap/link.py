@@ -29,10 +29,10 @@ from gcs.flight.mocap.client import MocapClient, MocapSample
 from gcs.flight.mocap.forward import VisionForwarder
 from gcs.flight.mocap.health import HealthLimits, stream_problem
 from gcs.flight.mocap.latency import estimate_lag_s
-from gcs.flight.mocap.settings import MocapSettings
-from gcs.flight.mocap.source import MocapSource
 from gcs.flight.trial import TrialRecording, align_to_grid
 from gcs.io.mocap_samples import MocapSeries, MocapTrial
+from gcs.io.mocap_source import MocapSource
+from gcs.io.settings import MocapSettings
 
 __all__ = ["MocapLink", "trial_mocap", "HEALTH_WINDOW_S", "GRID_MAX_GAP_S"]
 
