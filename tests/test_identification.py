@@ -15,12 +15,11 @@ from typer.testing import CliRunner
 
 from gcs.app.identify import (
     create_identification_run,
-    frequency_response,
     identify_run,
     plan_experiments,
 )
 from gcs.cli import app
-from gcs.core.model import from_transfer_function, markov_parameters, simulate
+from gcs.core.model import frequency_response, from_transfer_function, markov_parameters, simulate
 from gcs.core.pbsid import continuous_poles
 from gcs.errors import ProfileError, TrajectoryError
 from gcs.io.config import load_profile, profile_from_dict
@@ -143,8 +142,8 @@ def test_validation_vaf_and_table_figures(run: RunDir) -> None:
         assert r.vaf_profile_pct < r.vaf_pct
         assert np.abs(r.y_sim_m - r.y_val_m).max() < 0.05
     f = np.array([0.05, 0.3, 1.0])
-    h = frequency_response(results[0].model, f)
-    h_true = frequency_response(TRUTH["x"], f)
+    h = frequency_response(results[0].model, 2 * np.pi * f)
+    h_true = frequency_response(TRUTH["x"], 2 * np.pi * f)
     assert np.allclose(np.abs(h), np.abs(h_true), rtol=0.03)
 
 

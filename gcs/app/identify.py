@@ -43,7 +43,7 @@ from gcs.app.fly import (
 )
 from gcs.app.report import save_figure
 from gcs.core.excitation import multisine, prbs
-from gcs.core.model import DiscreteModel
+from gcs.core.model import DiscreteModel, frequency_response
 from gcs.core.pbsid import (
     IdentificationResult,
     identify,
@@ -73,10 +73,8 @@ __all__ = [
     "AxisResult",
     "run_axes",
     "identify_run",
-    "model_to_dict",
     "identified_profile_text",
     "write_identified_profile",
-    "frequency_response",
     "write_identification_plots",
 ]
 
@@ -555,29 +553,6 @@ def identify_run(
 # --------------------------------------------------------------------------- the profile
 
 
-def model_to_dict(model: DiscreteModel) -> dict:
-    """A discrete model as the profile's state-space form (floats round-trip exactly).
-
-    Parameters
-    ----------
-    model : DiscreteModel
-        The model.
-
-    Returns
-    -------
-    dict
-        ``{A, B, C, D, dt_s, delay_samples}`` with ``D = [[0.0]]``.
-    """
-    return {
-        "A": [[float(v) for v in row] for row in model.A],
-        "B": [[float(v) for v in row] for row in model.B],
-        "C": [[float(v) for v in row] for row in model.C],
-        "D": [[0.0]],
-        "dt_s": float(model.dt_s),
-        "delay_samples": int(model.delay_samples),
-    }
-
-
 def identified_profile_text(
     profile: Profile,
     results: Sequence[AxisResult],
@@ -614,8 +589,8 @@ def identified_profile_text(
     old_x = copy.deepcopy(data["model"])
     old_y = copy.deepcopy(data.get("model_y", data["model"]))
     by_axis = {r.axis: r for r in results}
-    data["model"] = model_to_dict(by_axis["x"].model) if "x" in by_axis else old_x
-    data["model_y"] = model_to_dict(by_axis["y"].model) if "y" in by_axis else old_y
+    data["model"] = by_axis["x"].model.as_dict() if "x" in by_axis else old_x
+    data["model_y"] = by_axis["y"].model.as_dict() if "y" in by_axis else old_y
     name = str(data.get("name", profile.name))
     summary = ", ".join(
         f"{r.axis}: order {r.result.order}, delay {r.result.delay_samples}, VAF {r.vaf_pct:.1f} %"
@@ -664,29 +639,6 @@ def write_identified_profile(path: Path, text: str) -> Path:
 
 
 # ---------------------------------------------------------------------------- figures
-
-
-def frequency_response(model: DiscreteModel, f_hz: np.ndarray) -> np.ndarray:
-    """Frequency response ``C (zI - A)^-1 B z^-d`` at ``z = exp(j 2 pi f dt)``.
-
-    Parameters
-    ----------
-    model : DiscreteModel
-        The model.
-    f_hz : ndarray, shape (M,)
-        Frequencies [Hz], below Nyquist.
-
-    Returns
-    -------
-    ndarray, shape (M,), complex
-    """
-    f_hz = np.asarray(f_hz, dtype=float)
-    z = np.exp(2j * math.pi * f_hz * model.dt_s)
-    eye = np.eye(model.order)
-    out = np.empty(f_hz.size, dtype=complex)
-    for i, zi in enumerate(z):
-        out[i] = (model.C @ np.linalg.solve(zi * eye - model.A, model.B))[0, 0]
-    return out * z ** (-model.delay_samples)
 
 
 def write_identification_plots(
@@ -743,7 +695,7 @@ def write_identification_plots(
     if not (np.array_equal(px.A, py.A) and np.array_equal(px.B, py.B)):
         curves.append((f"profile '{profile.name}' y", py, "k:"))
     for label, model, style in curves:
-        h = frequency_response(model, f)
+        h = frequency_response(model, 2 * math.pi * f)
         ax_m.semilogx(f, 20 * np.log10(np.abs(h)), style, label=label)
         ax_p.semilogx(f, np.degrees(np.unwrap(np.angle(h))), style, label=label)
     ax_m.set_ylabel("|G| [dB]")

@@ -582,7 +582,6 @@ def _refreshed_profile(
 
     import yaml
 
-    from gcs.app.identify import model_to_dict
     from gcs.io.config import profile_from_dict
 
     data = copy.deepcopy(profile.source)
@@ -593,7 +592,7 @@ def _refreshed_profile(
         f"run created {run.manifest.get('created_utc')} (trajectory "
         f"'{run.manifest['trajectory'].get('name')}')."
     )
-    data["model"], data["model_y"] = model_to_dict(models[0]), model_to_dict(models[1])
+    data["model"], data["model_y"] = models[0].as_dict(), models[1].as_dict()
     ordered = {k: data[k] for k in ("name", "description", "t_ilc_s", "model", "model_y")}
     ordered.update({k: v for k, v in data.items() if k not in ordered})
     header = (
