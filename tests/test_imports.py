@@ -48,17 +48,9 @@ NOT_FOR_CORE = {
     "TrialAborted",
     "MocapError",
 }
-#: Cycles being removed on other branches, each with who removes it; emptied when they land.
-#: Key: the sorted modules of the cycle.
-ALLOWED_CYCLES: dict[tuple[str, ...], str] = {
-    (
-        "gcs.app.fly",
-        "gcs.app.identify",
-        "gcs.app.learn",
-        "gcs.app.report",
-    ): "the public learning API moves the trial arithmetic of gcs.app.learn into gcs.core and "
-    "the report split gives save_figure a figures room",
-}
+#: Cycles allowed while another branch removes them, each with who removes it (the sorted
+#: modules of the cycle -> why). Empty: there are none.
+ALLOWED_CYCLES: dict[tuple[str, ...], str] = {}
 
 
 def _modules() -> dict[str, Path]:

@@ -23,7 +23,6 @@ from gcs.app.learn import (
     differing_field,
     learn_run,
     models_in_use,
-    run_measurement,
     trial_errors,
 )
 from gcs.core.metrics import IterationMetrics, iteration_table
@@ -740,7 +739,7 @@ class RunSource(SessionRecorder):
         """
         record = to_record(self.run, recording)
         extra = trial_extra(recording, self.session)
-        measured = record.measured(run_measurement(self.run.profile()))
+        measured = record.measured(self.run.profile().mocap.measurement)
         e, m = trial_errors(measured)
         if record.mocap_ned_m is not None:
             extra["epos_estimate_m"] = trial_errors(record)[0]

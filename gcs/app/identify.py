@@ -459,11 +459,9 @@ def run_axes(run: RunDir, axis: str | None = None) -> tuple[str, ...]:
 
 def _trial(run: RunDir, j: int, what: str) -> TrialRecord:
     """Experiment j as identification measures it (``mocap.measurement`` of the run)."""
-    from gcs.app.learn import measured_trial, run_measurement
-
     if not (run.path / f"trial-{j:03d}.json").exists():
         raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
-    return measured_trial(run, j, run_measurement(run.profile()))
+    return run.measured_trial(j)
 
 
 def identify_run(

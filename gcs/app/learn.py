@@ -50,8 +50,6 @@ __all__ = [
     "check_learned",
     "check_learnable",
     "differing_field",
-    "run_measurement",
-    "measured_trial",
 ]
 
 
@@ -188,48 +186,6 @@ def trial_errors(record: TrialRecord) -> tuple[float, float]:
     """
     ref, pos = record.ref_ned_m[1:, :2], record.pos_ned_m[1:, :2]
     return epos(ref, pos), max_error(ref, pos)
-
-
-def run_measurement(profile: Profile) -> str:
-    """What learning and e_pos use: the profile's ``mocap.measurement`` (default ``mocap``).
-
-    ``mocap`` takes a trial's motion-capture columns where it has them and the estimate in
-    trials without (flown without mocap); ``estimate`` always takes the vehicle's estimate.
-
-    Parameters
-    ----------
-    profile : Profile
-        The run's profile.
-
-    Returns
-    -------
-    str
-        ``"mocap"`` or ``"estimate"``.
-    """
-    return profile.mocap.measurement
-
-
-def measured_trial(run: RunDir, j: int, measurement: str) -> TrialRecord:
-    """Trial j as learning and e_pos see it: its mocap or its estimate (:func:`run_measurement`).
-
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    j : int
-        A complete trial.
-    measurement : str
-        ``"mocap"`` or ``"estimate"``.
-
-    Returns
-    -------
-    TrialRecord
-        With ``pos_ned_m`` the chosen measurement [m, NED].
-    """
-    try:
-        return run.read_trial(j).measured(measurement)
-    except RunLogError as exc:
-        raise RunLogError(f"{run.path}/trial-{j:03d}.csv: {exc}") from None
 
 
 def differing_field(given: Any, recorded: Any, prefix: str = "") -> str | None:
@@ -386,7 +342,7 @@ def learn_run(
         raise RunLogError(f"{run.path}: no complete trial to learn from")
     if profile.learning.history:
         return _learn_history(run, profile, j)
-    record = measured_trial(run, j, run_measurement(profile))
+    record = run.measured_trial(j, profile.mocap.measurement)
     ref = run.reference()
     if np.max(np.abs(record.ref_ned_m - ref.pos_ned_m)) > 1e-6:
         raise RunLogError(f"{run.path}/trial-{j:03d}.csv: reference columns differ from the run's")
@@ -437,7 +393,7 @@ def _history(run: RunDir, j: int, measurement: str) -> list[TrialRecord]:
             f"every trial 0..{j} (trial-{missing[0]:03d}.json)"
         )
     ref = run.reference().pos_ned_m
-    records = [measured_trial(run, t, measurement) for t in range(j + 1)]
+    records = [run.measured_trial(t, measurement) for t in range(j + 1)]
     for t, record in enumerate(records):
         if np.max(np.abs(record.ref_ned_m - ref)) > 1e-6:
             raise RunLogError(
@@ -459,7 +415,7 @@ def check_history(run: RunDir, profile: Profile, j: int) -> None:
     j : int
         The newest complete trial.
     """
-    _history(run, j, run_measurement(profile))
+    _history(run, j, profile.mocap.measurement)
     for k in range(profile.learning.repeats, j + 1):
         if run.read_learn_record(k)["model_file"] is not None:
             run.read_model(k)
@@ -499,7 +455,7 @@ def models_in_use(
 def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
     """A repeat of trial 0, or a step of :func:`plan_next_trial` on trials 0..j, recorded."""
     repeats = profile.learning.repeats
-    records = _history(run, j, run_measurement(profile))
+    records = _history(run, j, profile.mocap.measurement)
     if j < repeats:
         path = run.write_repeat(j + 1)
         return LearnOutcome(j, j + 1, path, ("-", "-"), 0, 0, repeat_of=0)

@@ -453,6 +453,35 @@ class RunDir(LearnLog):
         if raw.exists():
             os.replace(raw, aborted / f"mocap-{j:03d}-attempt-{attempt}.csv")
 
+    def measured_trial(self, j: int, measurement: str | None = None) -> TrialRecord:
+        """Trial j as learning and e_pos see it: its motion capture or its estimate.
+
+        Parameters
+        ----------
+        j : int
+            A complete trial.
+        measurement : str or None
+            ``"mocap"`` (the trial's mocap columns where it has them, else the estimate) or
+            ``"estimate"``; None: the run's own profile's ``mocap.measurement``.
+
+        Returns
+        -------
+        TrialRecord
+            With ``pos_ned_m`` the chosen measurement [m, NED].
+
+        Raises
+        ------
+        RunLogError
+            As :meth:`read_trial`, or mocap columns without a position on the grid.
+        """
+        if measurement is None:
+            measurement = self.profile().mocap.measurement
+        record = self.read_trial(j)
+        try:
+            return record.measured(measurement)
+        except RunLogError as exc:
+            raise RunLogError(f"{self._file('trial', j, 'csv')}: {exc}") from None
+
     def read_trial(self, j: int) -> TrialRecord:
         """Read and validate a complete trial for learning or reporting.
 
