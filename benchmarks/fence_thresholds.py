@@ -42,7 +42,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from mock_gps_calibration import parse_seeds  # noqa: E402
 from px4_data import capture_armed, shared  # noqa: E402
 
-from gcs.app.fly import flight_fence  # noqa: E402
+from gcs.app.session import flight_fence  # noqa: E402
 from gcs.flight.fence import DRIFT_WINDOW_S, EstimateMonitor, Fence  # noqa: E402
 from gcs.io.config import load_profile  # noqa: E402
 from gcs.mock.config import load_mock_config  # noqa: E402

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from synthetic import make_run, true_plants
 
-from gcs.app.fly import RunSource, prepare_run, to_record
+from gcs.app.fly import RunSource, prepare_run
+from gcs.app.session import to_record
 from gcs.core.model import simulate
 from gcs.errors import ProfileError, TrajectoryError
 from gcs.flight.trial import TrialRecording

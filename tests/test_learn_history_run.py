@@ -26,10 +26,10 @@ from gcs.app.fly import (
     RunSource,
     check_until_converged,
     converged_reason,
-    flyable_setpoints,
     plan_fly,
 )
 from gcs.app.learn import learn_run, learning_inputs, models_in_use
+from gcs.app.session import flyable_setpoints
 from gcs.core.learning import learning_step, plan_next_trial
 from gcs.errors import ProfileError, RunLogError, TrajectoryError
 from gcs.flight.trial import TrialRecording

@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gcs.app.fly import (
+from gcs.app.report import save_figure
+from gcs.app.session import (
     SessionRecorder,
     flight_fence,
     flyable_setpoints,
@@ -41,7 +42,6 @@ from gcs.app.fly import (
     to_record,
     trial_extra,
 )
-from gcs.app.report import save_figure
 from gcs.core.excitation import multisine, prbs
 from gcs.core.model import DiscreteModel, frequency_response
 from gcs.core.pbsid import (

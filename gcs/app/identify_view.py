@@ -198,8 +198,8 @@ def identify_with_display(
             console.print(f"checked: {run.path}, profile '{profile.name}'; nothing identified")
             return None
     else:
-        from gcs.app.fly import check_mock_config, check_url, plan_mocap
-        from gcs.app.fly_view import live_progress, vehicle_url
+        from gcs.app.fly_view import live_progress, say
+        from gcs.app.session import check_mock_config, check_url, plan_mocap, vehicle_url
 
         path = profile_path or default_profile
         profile, where = load_profile(path), str(path)
@@ -245,7 +245,9 @@ def identify_with_display(
         mock_seed = settings.seed if seed is None else seed
         try:
             with (
-                vehicle_url(connect, use_mock, mock_config, mock_seed, console, mocap_plan) as (
+                vehicle_url(
+                    connect, use_mock, mock_config, mock_seed, say(console), mocap_plan
+                ) as (
                     url,
                     link,
                 ),
