@@ -26,7 +26,7 @@ import numpy as np
 from gcs.core.frames import mapping_for
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import in_room
-from gcs.mock.mocap.server import FAULT_KINDS, FaultWindow, NatNetServer
+from gcs.mock.mocap.server import FaultWindow, NatNetServer, parse_fault_window
 
 __all__ = ["ArenaFault", "ArenaOptions", "Arena", "quat_from_euler", "parse_arena_fault"]
 
@@ -256,15 +256,5 @@ def parse_arena_fault(kind: str, text: str) -> ArenaFault:
     ValueError
         Not that form, or a bad window.
     """
-    if kind not in FAULT_KINDS:
-        raise ValueError(f"unknown mocap fault {kind!r}")
-    count = 5 if kind == "jump" else 2
-    try:
-        values = [float(v) for v in text.split(":")]
-    except ValueError:
-        values = []
-    if len(values) != count:
-        form = "START:DURATION:DX:DY:DZ" if kind == "jump" else "START:DURATION"
-        raise ValueError(f"--mocap-{kind} must be {form}, got {text!r}")
-    offset = tuple(values[2:]) if kind == "jump" else (0.0, 0.0, 0.0)
-    return ArenaFault(kind, values[0], values[1], offset)  # type: ignore[arg-type]
+    window = parse_fault_window(kind, text, f"--mocap-{kind}")
+    return ArenaFault(kind, window.start_s, window.duration_s, window.offset_m)
