@@ -32,8 +32,6 @@ from gcs.io.mocap_source import MocapSource
 from gcs.io.records import TrialRecord
 from gcs.io.rundir import RunDir
 from gcs.io.settings import FlightSettings, MocapSettings
-from gcs.mock.mocap.arena import ArenaOptions
-from gcs.mock.process import MockProcess
 
 __all__ = [
     "MOCK_MOCAP",
@@ -242,6 +240,9 @@ def vehicle_url(
     with contextlib.ExitStack() as stack:
         url, mocap_url = connect, None
         if use_mock:
+            from gcs.mock.mocap.arena import ArenaOptions  # pymavlink only for the mock
+            from gcs.mock.process import MockProcess
+
             arena = None
             if mocap is not None and mocap.source is None:
                 s = mocap.settings
