@@ -42,7 +42,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from mock_gps_calibration import parse_seeds  # noqa: E402
 from px4_data import capture_armed, shared  # noqa: E402
 
-from gcs.app.fly import flight_fence, flight_settings  # noqa: E402
+from gcs.app.session import flight_fence  # noqa: E402
 from gcs.flight.fence import DRIFT_WINDOW_S, EstimateMonitor, Fence  # noqa: E402
 from gcs.io.config import load_profile  # noqa: E402
 from gcs.mock.config import load_mock_config  # noqa: E402
@@ -261,7 +261,7 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     args = parser.parse_args()
     profile = load_profile(ROOT / "profiles" / "antx.yaml")
-    fence = flight_fence(profile, flight_settings(profile))
+    fence = flight_fence(profile, profile.flight)
     sources = {
         "PX4 SITL, GPS": shared_runs(fence, vision=False),
         "PX4 SITL, vision": shared_runs(fence, vision=True),

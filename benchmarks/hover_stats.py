@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from px4_data import capture_hovers, sitl_hovers  # noqa: E402
 
 from gcs.flight.hover import hover_stats, judge_hover  # noqa: E402
-from gcs.flight.settings import FlightSettings  # noqa: E402
+from gcs.io.settings import FlightSettings  # noqa: E402
 from gcs.mock.config import MockConfig  # noqa: E402
 from gcs.mock.physics import QuadPhysics, Target  # noqa: E402
 

@@ -28,10 +28,9 @@ import numpy as np
 from mock_learning_offline import fly, learn
 
 from gcs.app.identify import (
-    frequency_response,
-    identification_settings,
     plan_experiments,
 )
+from gcs.core.model import frequency_response
 from gcs.core.pbsid import identify, natural_frequency_damping, simulate_free, vaf
 from gcs.core.trajectory import sample_eight
 from gcs.errors import ModelError
@@ -76,7 +75,7 @@ def learn_pct(profile: Profile, cfg: MockConfig, seed: int) -> list[float]:
 
 
 def identified_profile(level_m: float, id_seed: int) -> tuple[Profile, list[dict]]:
-    settings = replace(identification_settings(PROFILE), amplitude_m=level_m)
+    settings = replace(PROFILE.identification, amplitude_m=level_m)
     exps = plan_experiments(settings, PROFILE.t_ilc_s, "both", PROFILE.arena)
     flown = [
         fly(MOCK, sp, exps.center_ned_m, PROFILE.t_ilc_s, seed=id_seed + e)[:-1]
@@ -95,7 +94,7 @@ def identified_profile(level_m: float, id_seed: int) -> tuple[Profile, list[dict
             wn, zeta = natural_frequency_damping(res.model)
         except ModelError:  # a first-order model has no pole pair
             wn = zeta = float("nan")
-        h = frequency_response(res.model, np.array([W_RAD_S[axis] / (2 * np.pi)]))[0]
+        h = frequency_response(res.model, np.array([W_RAD_S[axis]]))[0]
         rows.append(
             {
                 "order": res.order,
@@ -131,7 +130,7 @@ def main() -> None:
             row = {"mock": "eight", "axis": "xy"[axis], "scale": scale}
             print(json.dumps(row | phasor(eight_response(QUIET, scale, axis))))
     for axis in (0, 1):
-        h = frequency_response(PROFILE.models()[axis], np.array([W_RAD_S[axis] / (2 * np.pi)]))[0]
+        h = frequency_response(PROFILE.models()[axis], np.array([W_RAD_S[axis]]))[0]
         print(json.dumps({"model": "eq. (11)", "axis": "xy"[axis]} | phasor(h)))
     print(json.dumps({"model": "eq. (11)", "learning": learning_row(PROFILE)}))
     for level in args.levels_m:

@@ -58,7 +58,7 @@ def flights_needed(method: str, iterations: int) -> int:
 
 def fly(out: Path, which: str, method: str, seed: int, iterations: int, extra: list[str]) -> None:
     """Fly (or complete) one run; each ``gcs fly`` holds the live lock for its flight only."""
-    from gcs.io.runlog import RunDir
+    from gcs.io.rundir import RunDir
 
     path = run_path(out, which, method, seed)
     want = flights_needed(method, iterations)
@@ -85,7 +85,7 @@ def fly(out: Path, which: str, method: str, seed: int, iterations: int, extra: l
 def summarise(path: Path) -> dict:
     """e_pos, setpoint RMS, iterations, floor and decisions of a run directory."""
     from gcs.app.report import run_learning, run_metrics
-    from gcs.io.runlog import RunDir
+    from gcs.io.rundir import RunDir
 
     run = RunDir.open(path)
     rows = run_metrics(run)

@@ -42,7 +42,7 @@ from synthetic import CI_FLIGHT  # noqa: E402
 
 from gcs.core.trials import trial_errors  # noqa: E402
 from gcs.errors import RunLogError  # noqa: E402
-from gcs.io.runlog import RunDir  # noqa: E402
+from gcs.io.rundir import RunDir  # noqa: E402
 from gcs.mock.mocap.arena import ArenaOptions  # noqa: E402
 from gcs.mock.process import MockProcess  # noqa: E402
 

@@ -31,9 +31,9 @@ import time
 
 import numpy as np
 
+from gcs.core.frames import mapping_for
 from gcs.flight.mocap.client import MocapClient, MocapSample
-from gcs.flight.mocap.frames import mapping_for
-from gcs.flight.mocap.source import parse_mocap_url
+from gcs.io.mocap_source import parse_mocap_url
 from gcs.mock.mocap.scripted import Circle, in_room
 from gcs.mock.mocap.server import NatNetServer
 

@@ -56,8 +56,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 from px4_data import shared  # noqa: E402
 
 from gcs.flight.hover import hover_stats, is_settled, judge_hover  # noqa: E402
-from gcs.flight.settings import FlightSettings  # noqa: E402
 from gcs.io.config import load_profile  # noqa: E402
+from gcs.io.settings import FlightSettings  # noqa: E402
 from gcs.mock.config import MockConfig, load_mock_config  # noqa: E402
 from gcs.mock.physics import QuadPhysics, Target, fit_step_response  # noqa: E402
 
@@ -470,7 +470,7 @@ def mock_summary(cfg: MockConfig, seeds: list[int], settings: FlightSettings) ->
 
 def run_trials(run_dir: Path) -> list[Flight]:
     """The complete trials of a live repeat run directory (at least two)."""
-    from gcs.io.runlog import RunDir
+    from gcs.io.rundir import RunDir
 
     done = RunDir.open(run_dir).complete_trials()
     if len(done) < 2:
@@ -613,7 +613,7 @@ def main() -> None:
 
     cfg = load_mock_config(args.mock_config)
     profile = load_profile(args.profile)
-    settings = FlightSettings(**{k: float(v) for k, v in profile.flight.items()})
+    settings = profile.flight
     if args.fit:
         print_fit(cfg, settings, parse_seeds(args.seeds))
         return

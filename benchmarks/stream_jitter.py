@@ -22,8 +22,8 @@ import numpy as np
 
 from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.fence import Fence
-from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
+from gcs.io.settings import FlightSettings
 from gcs.mock.config import Faults
 from gcs.mock.process import MockProcess
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from gcs import Learner
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
 
 def replay(path: Path) -> float:

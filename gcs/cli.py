@@ -373,7 +373,7 @@ def learn(
     interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
     from gcs.app.learn import learn_run
-    from gcs.io.runlog import RunDir
+    from gcs.io.rundir import RunDir
 
     _check_algorithm(algorithm)
     run = RunDir.open(run_dir)
@@ -487,7 +487,7 @@ def report(
         write_plots,
     )
     from gcs.io.paths import check_output_dir, check_output_file
-    from gcs.io.runlog import RunDir
+    from gcs.io.rundir import RunDir
 
     run = RunDir.open(run_dir)
     run.profile()  # a damaged manifest is a damaged run, even where the table needs no profile
@@ -501,7 +501,7 @@ def report(
         check_output_file(html, "--html")
     learning = run_learning(run) if run.kind == "learning" else None
     if as_json:
-        from gcs.io.runlog import json_safe
+        from gcs.io.records import json_safe
 
         out = metrics_json(rows, rates, entries, learning)
         typer.echo(json.dumps(json_safe(out), indent=2, allow_nan=False))
@@ -717,8 +717,8 @@ def montecarlo(
 
     from gcs.app.study import run_montecarlo, study_document, study_settings
     from gcs.app.study_view import comparison_lines, study_tables
+    from gcs.io.atomic import atomic_write_text
     from gcs.io.paths import check_output_file
-    from gcs.io.runlog import atomic_write_text
 
     try:
         settings = study_settings(

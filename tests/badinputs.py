@@ -34,7 +34,8 @@ from typer.testing import CliRunner
 from gcs.cli import app
 from gcs.core.model import from_transfer_function, simulate
 from gcs.io.config import profile_from_dict
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
 
 UNREACHABLE = "udpout://127.0.0.1:9"  # the discard port: nothing answers there
 DELETE = object()
@@ -60,14 +61,13 @@ def _identification_run(root: Path) -> Path:
     """A synthetic identification run (two 30 s PRBS experiments of a known loop)."""
     from gcs.app.identify import (
         create_identification_run,
-        identification_settings,
         plan_experiments,
     )
 
     data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
     data["identification"]["duration_s"] = 30.0
     profile = profile_from_dict(data, "antx")
-    settings = identification_settings(profile)
+    settings = profile.identification
     exps = plan_experiments(settings, profile.t_ilc_s, "both", profile.arena)
     run = create_identification_run(root, profile, settings, exps, run_id="ident")
     truth = from_transfer_function([2.56], [1.0, 1.76, 2.56], 0.25, profile.t_ilc_s)

@@ -31,7 +31,8 @@ from synthetic import (
 
 from gcs.core.metrics import epos, max_error
 from gcs.io.config import load_profile, trajectory_from_dict
-from gcs.io.runlog import RunDir, TrialStatus
+from gcs.io.records import TrialStatus
+from gcs.io.rundir import RunDir
 
 ROOT = Path(__file__).resolve().parent
 RECORD = ROOT / "data" / "learning-regression.npz"

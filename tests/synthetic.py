@@ -9,7 +9,8 @@ import numpy as np
 from gcs.core.model import DiscreteModel, from_transfer_function, simulate
 from gcs.core.trials import trial_errors
 from gcs.io.config import Profile, load_profile, load_trajectory, trajectory_from_dict
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = {

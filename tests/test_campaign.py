@@ -13,8 +13,8 @@ from gcs.errors import VehicleError
 from gcs.flight.campaign import FlightSession, _measure_hover, _settle, check_battery
 from gcs.flight.clock import VehicleClock
 from gcs.flight.preflight import navigation_source
-from gcs.flight.settings import FlightSettings
 from gcs.flight.vehicle import TelemetrySample
+from gcs.io.settings import FlightSettings
 
 
 def test_enough_charge_an_unreported_level_or_no_limit_pass() -> None:

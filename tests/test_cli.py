@@ -11,7 +11,7 @@ from synthetic import fly_synthetic, make_run
 from typer.testing import CliRunner
 
 from gcs.cli import app
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
 runner = CliRunner()
 
@@ -120,6 +120,7 @@ def test_learn_refuses_mismatching_profile_and_algorithm(tmp_path: Path) -> None
     run = make_run(tmp_path, trials=1)
     other = tmp_path / "other.yaml"
     text = (Path(__file__).parents[1] / "profiles" / "antx.yaml").read_text()
+    text = text.replace("stream_rate_hz: 60", "stream_rate_hz: 50")  # 2 sends per 0.04 s
     other.write_text(text.replace("t_ilc_s: 0.05", "t_ilc_s: 0.04"))
     result = invoke("learn", run.path, "--profile", other)
     assert result.exit_code == 2 and "does not match" in result.output

@@ -11,7 +11,13 @@ import yaml
 
 from gcs.core.model import from_transfer_function, markov_parameters
 from gcs.errors import ProfileError, TrajectoryError
-from gcs.io.config import DEFAULT_MAX_VERTICAL_SPEED_M_S, load_profile, load_trajectory
+from gcs.io.config import (
+    DEFAULT_MAX_VERTICAL_SPEED_M_S,
+    load_profile,
+    load_trajectory,
+    profile_from_dict,
+)
+from gcs.io.settings import FlightSettings, IdentifySettings, MocapSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 ANTX = ROOT / "profiles" / "antx.yaml"
@@ -65,10 +71,13 @@ def test_antx_profile_loads_with_eq11_model_and_table_one_settings():
     assert (p.max_speed_m_s, p.max_accel_m_s2) == (3.0, 5.0)
     assert p.max_vertical_speed_m_s == DEFAULT_MAX_VERTICAL_SPEED_M_S == 1.5  # optional: default
     assert p.arena.north_m == (-3.0, 3.0) and p.arena.down_m == (-3.0, 0.0)
-    assert p.flight == antx_data()["flight"]
-    ratio = p.flight["stream_rate_hz"] * p.t_ilc_s  # documented: integer multiple of 1/t_ilc
+    assert p.flight == FlightSettings(**antx_data()["flight"])  # the rest: defaults
+    ratio = p.flight.stream_rate_hz * p.t_ilc_s  # documented: integer multiple of 1/t_ilc
     assert ratio == pytest.approx(round(ratio)) and round(ratio) >= 1
-    assert p.identification["excitation"] == "prbs"
+    ident = antx_data()["identification"]
+    ident["center_ned_m"] = tuple(ident["center_ned_m"])
+    assert p.identification == IdentifySettings(**ident)
+    assert p.mocap == MocapSettings()  # no section: every default
     assert p.source == antx_data()
 
 
@@ -259,3 +268,20 @@ def test_trajectory_shape_refusals_name_file(tmp_path, dotted, value):
     data = yaml.safe_load(EIGHT.read_text())
     msg = refused(tmp_path, _set(data, dotted, value), TrajectoryError, None, "traj.yaml")
     assert dotted in msg
+
+
+def test_every_section_is_typed_and_checked_when_the_profile_loads():
+    data = antx_data()
+    data["mocap"] = {"measurement": "estimate", "origin_m": [1, 2, 3], "north_axis": "+z"}
+    data["flight"] = {"stream_rate_hz": 100, "min_battery_pct": 0}
+    p = profile_from_dict(data, "p.yaml")
+    assert p.mocap.measurement == "estimate" and p.mocap.origin_m == (1.0, 2.0, 3.0)
+    assert p.mocap.overrides == {"north_axis": "+z"}
+    assert p.flight.sends_per_sample(p.t_ilc_s) == 5 and p.flight.min_battery_pct == 0.0
+    for section, value, field in (
+        ("mocap", {"measurement": "truth"}, "mocap.measurement"),
+        ("flight", {"yaw_deg": "north"}, "flight.yaw_deg"),
+        ("identification", {"past": 0}, "identification.past"),
+    ):
+        with pytest.raises(ProfileError, match=rf"^p\.yaml: field '{field}'"):
+            profile_from_dict({**antx_data(), section: value}, "p.yaml")

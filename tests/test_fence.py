@@ -15,17 +15,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from px4_data import capture_armed, shared
 
+from gcs.core.frames import global_to_ned
 from gcs.flight.fence import (
     DRIFT_WINDOW_S,
     MAX_ACCEL_M_S2,
     EstimateMonitor,
     Fence,
     fence_polygon,
-    global_to_ned,
-    ned_to_global,
 )
 from gcs.flight.geofence import GF_ACTION, GeofenceState, vertical_limit_m
-from gcs.flight.settings import FlightSettings
+from gcs.io.settings import FlightSettings
 
 SETTINGS = FlightSettings()
 ARENA = [[-3.0, 3.0], [-3.0, 3.0], [-3.0, 0.0]]
@@ -189,21 +188,6 @@ def test_the_thresholds_do_not_fire_on_the_shared_px4_data() -> None:
     assert peaks["drift_m"] < 0.5 * FENCE.drift_m and monitor.peaks["drift_m"] < 0.5 * FENCE.drift_m
     assert peaks["jump_m"] < 0.1 * FENCE.jump_m
     assert DRIFT_WINDOW_S == 1.0
-
-
-def test_ned_to_global_is_pxs_projection_and_inverts() -> None:
-    lat0, lon0 = 47.3977431, 8.5455947
-    lat, lon = ned_to_global(lat0, lon0, 1000.0, 0.0)
-    assert lat - lat0 == pytest.approx(math.degrees(1000.0 / 6_371_000.0), rel=1e-9)
-    assert lon == pytest.approx(lon0, abs=1e-12)
-    lat, lon = ned_to_global(lat0, lon0, 0.0, 100.0)
-    # east: along the great circle, within a hair of the local parallel's scale
-    assert lon - lon0 == pytest.approx(
-        math.degrees(100.0 / (6_371_000.0 * math.cos(math.radians(lat0)))), rel=1e-6
-    )
-    for n, e in ((3.0, -4.5), (-4.5, 4.5), (0.0, 0.0), (250.0, -120.0)):
-        back = global_to_ned(lat0, lon0, *ned_to_global(lat0, lon0, n, e))
-        np.testing.assert_allclose(back, (n, e), atol=1e-6)
 
 
 def test_the_geofence_polygon_is_the_arena_plus_margin_around_the_origin() -> None:

@@ -29,12 +29,13 @@ import yaml
 from synthetic import SHORT, ci_profile
 from test_flight_e2e import CircleSource
 
+from gcs.core.frames import global_to_ned
 from gcs.errors import TrialAborted, VehicleError
 from gcs.flight.campaign import Status, fly_campaign
-from gcs.flight.fence import EstimateMonitor, Fence, global_to_ned
+from gcs.flight.fence import EstimateMonitor, Fence
 from gcs.flight.geofence import GF_ACTION, vertical_limit_m
-from gcs.flight.settings import FlightSettings
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
+from gcs.io.settings import FlightSettings
 from gcs.mock.config import Faults
 from gcs.mock.process import MockProcess
 

@@ -26,9 +26,9 @@ from gcs.flight.campaign import (
 )
 from gcs.flight.fence import Fence
 from gcs.flight.hover import SPEED_SPAN_S
-from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
 from gcs.flight.vehicle import Vehicle
+from gcs.io.settings import FlightSettings
 from gcs.mock.config import Faults
 from gcs.mock.process import MockProcess
 

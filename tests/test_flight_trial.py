@@ -13,17 +13,16 @@ import time
 import numpy as np
 import pytest
 
-from gcs.errors import ProfileError, TrajectoryError, TrialAborted
+from gcs.errors import ProfileError, TrialAborted
 from gcs.flight.clock import VehicleClock
-from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import (
     TrialRun,
     align_to_grid,
-    check_setpoints,
     fly_trial,
     send_schedule,
 )
 from gcs.flight.vehicle import TelemetrySample, min_jerk
+from gcs.io.settings import FlightSettings
 
 # ---------------------------------------------------------------- settings
 
@@ -75,16 +74,6 @@ def test_settings_hold_before_trial_may_be_zero_and_covers_the_loop() -> None:
     # default hold (with the settle window) covers the 2 % settling time of eq. (11)'s loop
     wn, zeta = 1.418, 0.618
     assert s.settle_time_s + s.hover_before_trial_s >= 4.0 / (zeta * wn)
-
-
-def test_check_setpoints() -> None:
-    assert check_setpoints([[0, 0, -1]]).shape == (1, 3)
-    with pytest.raises(TrajectoryError):
-        check_setpoints(np.zeros((4, 2)))
-    with pytest.raises(TrajectoryError):
-        check_setpoints(np.zeros((0, 3)))
-    with pytest.raises(TrajectoryError):
-        check_setpoints([[0, np.nan, -1]])
 
 
 # ---------------------------------------------------------------- schedule

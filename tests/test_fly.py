@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 from synthetic import make_run, true_plants
 
-from gcs.app.fly import RunSource, flight_settings, prepare_run, to_record
+from gcs.app.fly import RunSource, prepare_run
+from gcs.app.session import to_record
 from gcs.core.model import simulate
 from gcs.errors import ProfileError, TrajectoryError
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import profile_from_dict
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
 
 def recording(run: RunDir, setpoints: np.ndarray, complete: bool = True) -> TrialRecording:
@@ -104,10 +105,12 @@ def test_flight_settings_from_the_profile() -> None:
     from synthetic import profile
 
     base = profile()
-    assert flight_settings(base).sends_per_sample(base.t_ilc_s) == 3
+    assert base.flight.sends_per_sample(base.t_ilc_s) == 3
+    fast = profile_from_dict(dict(base.source, flight={"stream_rate_hz": 100}))
+    assert fast.flight.stream_rate_hz == 100.0 and fast.flight.sends_per_sample(0.05) == 5
     bad = dict(base.source, flight={"stream_rate_hz": 50})
     with pytest.raises(ProfileError, match="stream_rate_hz"):
-        flight_settings(profile_from_dict(bad))
+        profile_from_dict(bad)
     typo = dict(base.source, flight={"stream_rate": 60})
     with pytest.raises(ProfileError, match="flight.stream_rate"):
-        flight_settings(profile_from_dict(typo))
+        profile_from_dict(typo)

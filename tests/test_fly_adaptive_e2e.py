@@ -19,9 +19,9 @@ from test_fly_e2e import finish, gcs
 
 from gcs.flight.campaign import FlightSession, Status, TrialStarted, fly_campaign
 from gcs.flight.fence import Fence
-from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
+from gcs.io.settings import FlightSettings
 from gcs.mock.process import MockProcess
 
 pytestmark = pytest.mark.e2e

@@ -14,7 +14,7 @@ import pytest
 import yaml
 from synthetic import CI_FLIGHT, SHORT, ci_profile
 
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 from gcs.mock.config import Faults
 from gcs.mock.process import MockProcess
 

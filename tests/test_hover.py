@@ -15,7 +15,7 @@ from gcs.flight.hover import (
     speeds,
     widened,
 )
-from gcs.flight.settings import FlightSettings
+from gcs.io.settings import FlightSettings
 from gcs.mock.config import MockConfig
 from gcs.mock.physics import QuadPhysics, Target
 

@@ -14,19 +14,18 @@ from synthetic import ROOT
 from typer.testing import CliRunner
 
 from gcs.app.identify import (
-    IdentifySettings,
     create_identification_run,
-    frequency_response,
-    identification_settings,
     identify_run,
     plan_experiments,
 )
 from gcs.cli import app
-from gcs.core.model import from_transfer_function, markov_parameters, simulate
+from gcs.core.model import frequency_response, from_transfer_function, markov_parameters, simulate
 from gcs.core.pbsid import continuous_poles
 from gcs.errors import ProfileError, TrajectoryError
 from gcs.io.config import load_profile, profile_from_dict
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
+from gcs.io.settings import IdentifySettings
 
 runner = CliRunner()
 DT = 0.05
@@ -132,7 +131,7 @@ def test_from_log_recovers_the_closed_loop_and_writes_a_usable_profile(
 
 def test_validation_vaf_and_table_figures(run: RunDir) -> None:
     profile = run.profile()
-    settings = identification_settings(profile, "manifest")
+    settings = profile.identification
     results = identify_run(run, settings, profile)
     assert [r.axis for r in results] == ["x", "y"]
     for r in results:
@@ -143,8 +142,8 @@ def test_validation_vaf_and_table_figures(run: RunDir) -> None:
         assert r.vaf_profile_pct < r.vaf_pct
         assert np.abs(r.y_sim_m - r.y_val_m).max() < 0.05
     f = np.array([0.05, 0.3, 1.0])
-    h = frequency_response(results[0].model, f)
-    h_true = frequency_response(TRUTH["x"], f)
+    h = frequency_response(results[0].model, 2 * np.pi * f)
+    h_true = frequency_response(TRUTH["x"], 2 * np.pi * f)
     assert np.allclose(np.abs(h), np.abs(h_true), rtol=0.03)
 
 
@@ -255,25 +254,24 @@ def test_a_learning_run_is_not_an_identification_run(tmp_path: Path) -> None:
     ],
 )
 def test_profile_identification_section_is_validated(change: dict, field: str) -> None:
-    profile = profile_from_dict(antx_data(**change), "p.yaml")
     with pytest.raises(ProfileError, match=f"p.yaml: field '{field}'"):
-        identification_settings(profile, "p.yaml")
+        profile_from_dict(antx_data(**change), "p.yaml")
 
 
 def test_multisine_needs_its_band() -> None:
     data = antx_data()
     ident = {"excitation": "multisine", "f_min_hz": 0.02, "f_max_hz": 9.0}
     data["identification"] = {**{k: data["identification"][k] for k in ("past", "future")}, **ident}
-    settings = identification_settings(profile_from_dict(data, "p"), "p")
+    settings = profile_from_dict(data, "p").identification
     assert (settings.f_min_hz, settings.f_max_hz, settings.bandwidth_hz) == (0.02, 9.0, None)
     del data["identification"]["f_max_hz"]
     with pytest.raises(ProfileError, match="identification.f_max_hz' is missing"):
-        identification_settings(profile_from_dict(data, "p"), "p")
+        profile_from_dict(data, "p")
 
 
 def test_excitation_is_independent_per_axis_and_experiment() -> None:
     profile = profile_from_dict(antx_data(), "antx")
-    settings = identification_settings(profile, "antx")
+    settings = profile.identification
     exps = plan_experiments(settings, DT, "both", profile.arena)
     fit, val = exps.setpoints_ned_m
     assert fit.shape == (1200, 3)
@@ -292,7 +290,7 @@ def test_excitation_is_independent_per_axis_and_experiment() -> None:
 
 def test_too_short_experiments_are_refused_before_flying() -> None:
     profile = profile_from_dict(antx_data(duration_s=5.0), "p.yaml")
-    settings = identification_settings(profile, "p.yaml")
+    settings = profile.identification
     with pytest.raises(ProfileError, match="p.yaml: field 'identification.duration_s' is too sh"):
         plan_experiments(settings, DT, "both", profile.arena, "p.yaml")
 
@@ -311,7 +309,7 @@ def test_excitation_leaving_the_arena_is_refused_before_flying(tmp_path: Path) -
     assert not (tmp_path / "logs").exists() and not (tmp_path / "o.yaml").exists()
     profile = profile_from_dict(data, "edge")
     with pytest.raises(TrajectoryError, match="experiment 0: setpoint k = "):
-        plan_experiments(identification_settings(profile, "edge"), DT, "x", profile.arena)
+        plan_experiments(profile.identification, DT, "x", profile.arena)
 
 
 def test_mode_options_are_exclusive(tmp_path: Path) -> None:
@@ -333,7 +331,7 @@ def test_identified_profile_round_trips_exactly(run: RunDir, tmp_path: Path) -> 
     out = tmp_path / "p.yaml"
     assert invoke("identify", "--from-log", run.path, "--out", out).exit_code == 0
     profile = run.profile()
-    settings = identification_settings(profile, "m")
+    settings = profile.identification
     results = identify_run(run, settings, profile)
     loaded = load_profile(out)
     for r, m in zip(results, loaded.models(), strict=True):

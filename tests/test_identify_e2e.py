@@ -15,7 +15,7 @@ from synthetic import CI_FLIGHT
 from gcs.core.model import dc_gain, simulate
 from gcs.core.pbsid import natural_frequency_damping
 from gcs.io.config import load_profile
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 from gcs.mock.config import load_mock_config
 from gcs.mock.physics import measure_axes, step_response
 

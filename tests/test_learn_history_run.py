@@ -27,15 +27,15 @@ from gcs.app.fly import (
     RunSource,
     check_until_converged,
     converged_reason,
-    flyable_setpoints,
     plan_fly,
 )
 from gcs.app.learn import learn_run, models_in_use
+from gcs.app.session import flyable_setpoints
 from gcs.core.learner import Trial
 from gcs.errors import ProfileError, RunLogError, TrajectoryError
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import load_profile, profile_from_dict, trajectory_from_dict
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
 
 def files(path: Path) -> dict[str, bytes]:

@@ -17,7 +17,8 @@ from gcs.core.trajectory import sample_eight
 from gcs.core.trials import trial_errors
 from gcs.errors import RunLogError
 from gcs.io.config import profile_from_dict, trajectory_from_dict
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
 
 
 def fly_perfect(run: RunDir, j: int, disturbance: bool = False) -> TrialRecord:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gcs.core.frames import FrameMapping, mapping_for
 from gcs.flight.mocap.checks import move_direction_problem, pose_agreement_problem
-from gcs.flight.mocap.frames import FrameMapping, mapping_for
 
 EAST = np.array([0.0, 0.3, 0.0])
 

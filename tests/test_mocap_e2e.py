@@ -17,9 +17,10 @@ import pytest
 import yaml
 from synthetic import CI_FLIGHT, SHORT
 
-from gcs.flight.settings import FlightSettings
 from gcs.io.mocap_samples import read_mocap_csv
-from gcs.io.runlog import MOCAP_GRID_COLUMNS, RunDir
+from gcs.io.records import MOCAP_GRID_COLUMNS
+from gcs.io.rundir import RunDir
+from gcs.io.settings import FlightSettings
 from gcs.mock.mocap.arena import ArenaFault, ArenaOptions
 from gcs.mock.process import MockProcess
 

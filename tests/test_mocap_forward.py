@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from gcs.core.frames import mapping_for
 from gcs.flight.mocap.client import MocapSample
 from gcs.flight.mocap.forward import VisionForwarder, pose_covariance, vision_pose
-from gcs.flight.mocap.frames import mapping_for
 
 MOTIVE = mapping_for("optitrack")
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from gcs.core.frames import mapping_for
 from gcs.flight.clock import fit_clock
-from gcs.flight.mocap.frames import mapping_for
 from gcs.flight.mocap.link import trial_mocap
 from gcs.flight.trial import TrialRecording
 from gcs.io.mocap_samples import MocapSeries

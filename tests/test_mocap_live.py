@@ -14,10 +14,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from gcs.core.frames import FrameMapping, mapping_for, quat_angle_rad
 from gcs.errors import MocapError
 from gcs.flight.mocap.checks import move_direction_problem
 from gcs.flight.mocap.client import MocapClient, MocapSample
-from gcs.flight.mocap.frames import FrameMapping, mapping_for, quat_angle_rad
 from gcs.flight.mocap.health import (
     HealthLimits,
     frozen_problem,
@@ -26,8 +26,8 @@ from gcs.flight.mocap.health import (
     stale_problem,
     stream_problem,
 )
-from gcs.flight.mocap.source import MocapSource, parse_mocap_url
 from gcs.io.mocap_samples import MocapSeries
+from gcs.io.mocap_source import MocapSource, parse_mocap_url
 from gcs.mock.mocap.process import MocapServerProcess
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
 from gcs.mock.mocap.server import FaultWindow, NatNetServer

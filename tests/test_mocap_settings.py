@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gcs.core.frames import SYSTEM_FRAMES
 from gcs.errors import ProfileError
-from gcs.flight.mocap.frames import SYSTEM_FRAMES
-from gcs.flight.mocap.settings import mocap_settings
-from gcs.flight.mocap.source import parse_mocap_url
+from gcs.io.config import mocap_settings
+from gcs.io.mocap_source import parse_mocap_url
 
 
 def test_defaults_follow_the_urls_system() -> None:

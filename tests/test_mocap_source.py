@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from gcs.errors import ProfileError
-from gcs.flight.mocap.source import MocapSource, parse_mocap_url
+from gcs.io.mocap_source import MocapSource, parse_mocap_url
 
 
 def test_optitrack_url_with_defaults_and_interface() -> None:

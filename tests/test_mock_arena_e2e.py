@@ -31,9 +31,9 @@ from mavsdk.plugins.mocap.mocap import (
 from pymavlink.dialects.v20 import common as mavlink2
 from test_mock_mavsdk import connect, first
 
+from gcs.core.frames import FrameMapping, mapping_for
 from gcs.flight.mocap.client import MocapClient, MocapSample
-from gcs.flight.mocap.frames import FrameMapping, mapping_for
-from gcs.flight.mocap.source import parse_mocap_url
+from gcs.io.mocap_source import parse_mocap_url
 from gcs.mock.estimator import EV_MAX_INTERVAL_S, NO_AID_TIMEOUT_S
 from gcs.mock.mocap.arena import ArenaFault, ArenaOptions
 from gcs.mock.process import MockProcess

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from gcs.core.frames import ned_to_global as _ned_to_global
 from gcs.mock.geofence import (
     ACCEPTED,
     ERROR,
@@ -18,12 +19,17 @@ from gcs.mock.geofence import (
     FenceTransfer,
     Geofence,
     breach_kinds,
-    ned_to_global,
 )
 
 GCS = (245, 190)
 ORIGIN = (47.3977431, 8.5455947, 489.244)
 FENCE = MAV_MISSION_TYPE_FENCE
+
+
+def ned_to_global(origin, pos_ned_m):
+    """Latitude, longitude [deg] and altitude AMSL [m] of a local point, as the mock's GPS."""
+    lat, lon = _ned_to_global(origin[0], origin[1], pos_ned_m[0], pos_ned_m[1])
+    return lat, lon, origin[2] - pos_ned_m[2]
 
 
 def square(half_m: float, command: int = 5001, frame: int = 5) -> tuple[FenceItem, ...]:

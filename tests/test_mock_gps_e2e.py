@@ -17,8 +17,8 @@ import yaml
 from synthetic import CI_FLIGHT
 from test_fly_e2e import finish, gcs
 
-from gcs.flight.settings import FlightSettings
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
+from gcs.io.settings import FlightSettings
 from gcs.mock.process import MockProcess
 
 pytestmark = pytest.mark.e2e

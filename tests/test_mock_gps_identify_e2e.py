@@ -13,7 +13,7 @@ from synthetic import CI_FLIGHT
 
 from gcs.core.model import dc_gain
 from gcs.io.config import load_profile
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
 pytestmark = pytest.mark.e2e
 ROOT = Path(__file__).resolve().parents[1]

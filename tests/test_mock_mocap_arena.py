@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 import typer
 
+from gcs.core.frames import mapping_for, quat_angle_rad, quat_to_matrix
 from gcs.errors import MocapError
 from gcs.flight.mocap.client import MocapClient
-from gcs.flight.mocap.frames import mapping_for, quat_angle_rad, quat_to_matrix
-from gcs.flight.mocap.source import parse_mocap_url
+from gcs.io.mocap_source import parse_mocap_url
 from gcs.mock.cli import arena_options
 from gcs.mock.mocap.arena import (
     Arena,

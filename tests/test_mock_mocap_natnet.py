@@ -7,7 +7,7 @@ import struct
 import numpy as np
 import pytest
 
-from gcs.flight.mocap.frames import matrix_to_quat, quat_angle_rad, quat_to_matrix
+from gcs.core.frames import matrix_to_quat, quat_angle_rad, quat_to_matrix
 from gcs.mock.mocap import natnet
 from gcs.mock.mocap.server import DEFAULT_MARKERS_M, solve_rigid_body
 

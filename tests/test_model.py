@@ -12,6 +12,7 @@ from gcs.core.model import (
     DiscreteModel,
     controllable_slices,
     dc_gain,
+    frequency_response,
     from_state_space,
     from_transfer_function,
     lifted_matrix,
@@ -316,3 +317,30 @@ def test_discrete_model_is_frozen_and_stability_flag():
     with pytest.raises(AttributeError):
         model.dt_s = 0.1  # type: ignore[misc]
     assert not DiscreteModel([[1.0]], [1.0], [1.0], 0.1).is_stable()
+
+
+def test_as_dict_round_trips_exactly_through_yaml_and_json():
+    import json
+
+    import yaml
+
+    model = from_transfer_function([0.09, 2.2], [1.0, 1.6, 2.3], 0.27, 0.05)
+    data = model.as_dict()
+    assert set(data) == {"A", "B", "C", "D", "dt_s", "delay_samples"} and data["D"] == [[0.0]]
+    for text in (yaml.safe_dump(data), json.dumps(data)):
+        back = yaml.safe_load(text)
+        again = from_state_space(back["A"], back["B"], back["C"], back["D"], back["dt_s"],
+                                 back["delay_samples"])  # fmt: skip
+        for name in ("A", "B", "C"):
+            assert np.array_equal(getattr(again, name), getattr(model, name))
+        assert (again.dt_s, again.delay_samples) == (model.dt_s, model.delay_samples)
+
+
+def test_frequency_response_is_the_transfer_function_on_the_unit_circle():
+    dt = 0.05
+    model = from_transfer_function([2.56], [1.0, 1.76, 2.56], 0.1, dt)
+    w = np.array([0.0, 1.0, 5.0, 20.0])
+    system = scipy.signal.cont2discrete(([2.56], [1.0, 1.76, 2.56]), dt, method="zoh")
+    _, h = scipy.signal.freqz(np.ravel(system[0]), system[1], worN=w * dt)
+    expected = h * np.exp(-1j * w * dt * 2)  # the whole-sample delay of 0.1 s
+    np.testing.assert_allclose(frequency_response(model, w), expected, rtol=1e-9, atol=1e-12)

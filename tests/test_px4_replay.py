@@ -25,8 +25,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from gcs.flight.clock import fit_clock
 from gcs.flight.hover import hover_stats
 from gcs.flight.preflight import LINK_LOSS_PARAMS, NAV_PARAMS, navigation_source
-from gcs.flight.settings import FlightSettings
 from gcs.flight.vehicle import Vehicle, sample_arrays
+from gcs.io.settings import FlightSettings
 
 pytestmark = pytest.mark.e2e
 WINDOW_S = (44.5, 54.5)  # seconds after the capture's first message

@@ -180,7 +180,7 @@ def test_iterations_must_be_complete_trials(tmp_path: Path) -> None:
 def test_a_trial_flown_again_says_so(tmp_path: Path) -> None:
     from synthetic import fly_synthetic
 
-    from gcs.io.runlog import TrialStatus
+    from gcs.io.records import TrialStatus
 
     run = make_run(tmp_path, trials=2)
     from gcs.app.learn import learn_run

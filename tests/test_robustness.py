@@ -8,12 +8,11 @@ import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs.core.model import from_transfer_function, lifted_matrix
+from gcs.core.model import frequency_response, from_transfer_function, lifted_matrix
 from gcs.core.robustness import (
     RobustnessWeight,
     crossover_frequency,
     difference_matrix,
-    frequency_response,
     q_filter_response,
     repeat_cutoff,
     robustness_weight,

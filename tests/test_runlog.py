@@ -1,4 +1,5 @@
-"""Tests of gcs.io.runlog: the run directory, its atomic files and every refusal."""
+"""Tests of the run directory (gcs.io.rundir, .learnlog, .records, .atomic): its atomic files
+and every refusal."""
 
 from __future__ import annotations
 
@@ -14,15 +15,10 @@ from synthetic import SHORT, profile
 
 from gcs.core.trajectory import sample_eight
 from gcs.errors import RunLogError
+from gcs.io.atomic import atomic_write_text
 from gcs.io.config import trajectory_from_dict
-from gcs.io.runlog import (
-    TRIAL_COLUMNS,
-    RunDir,
-    TrialRecord,
-    TrialStatus,
-    atomic_write_text,
-    json_safe,
-)
+from gcs.io.records import TRIAL_COLUMNS, TrialRecord, TrialStatus, json_safe
+from gcs.io.rundir import RunDir
 
 
 def new_run(tmp_path: Path, algorithm: str = "smoother") -> RunDir:
@@ -366,7 +362,7 @@ def test_json_safe() -> None:
 
 
 def test_write_once_writes_new_files_keeps_identical_ones_and_refuses_others(tmp_path):
-    from gcs.io.runlog import write_once
+    from gcs.io.atomic import write_once
 
     target = tmp_path / "setpoints-001.csv"
     assert write_once(target, "a\n") is True
@@ -394,23 +390,23 @@ def test_setpoints_and_estimates_are_never_rewritten_with_other_values(tmp_path)
 
 
 def test_creation_is_staged_and_leaves_nothing_when_interrupted(tmp_path, monkeypatch):
-    import gcs.io.runlog as runlog
+    import gcs.io.rundir as rundir
 
     (tmp_path / "old").mkdir()
     (tmp_path / "latest").symlink_to("old")
-    real = runlog.atomic_write_text
+    real = rundir.atomic_write_text
 
     def failing(path, text):
         if Path(path).name == "reference.csv":
             raise KeyboardInterrupt  # Ctrl-C between two files of a new run
         real(path, text)
 
-    monkeypatch.setattr(runlog, "atomic_write_text", failing)
+    monkeypatch.setattr(rundir, "atomic_write_text", failing)
     with pytest.raises(KeyboardInterrupt):
         new_run(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["latest", "old"]  # no half-made run
     assert (tmp_path / "latest").readlink() == Path("old")  # and latest did not move
-    monkeypatch.setattr(runlog, "atomic_write_text", real)
+    monkeypatch.setattr(rundir, "atomic_write_text", real)
     run = new_run(tmp_path)
     assert sorted(p.name for p in run.path.iterdir()) == [
         "manifest.json", "reference.csv", "setpoints-000.csv"
@@ -588,17 +584,17 @@ def write_plan(run: RunDir, j: int, model_file: str | None = None, value: float 
 def test_a_learning_step_is_written_model_floor_estimate_record_and_setpoints_last(
     tmp_path, monkeypatch
 ):
-    import gcs.io.runlog as runlog
+    import gcs.io.learnlog as learnlog
 
     run = new_run(tmp_path)
     order: list[str] = []
-    real = runlog.write_once
+    real = learnlog.write_once
 
     def spy(path: Path, text: str) -> bool:
         order.append(Path(path).name)
         return real(path, text)
 
-    monkeypatch.setattr(runlog, "write_once", spy)
+    monkeypatch.setattr(learnlog, "write_once", spy)
     assert write_plan(run, 1, "model-001.yaml").name == "setpoints-002.csv"
     assert order == [
         "model-001.yaml", "floor.json", "estimate-001.csv", "learn-001.json", "setpoints-002.csv"
@@ -616,11 +612,11 @@ def test_a_learning_step_is_written_model_floor_estimate_record_and_setpoints_la
             raise OSError(28, "No space left on device", str(path))
         return real(path, text)
 
-    monkeypatch.setattr(runlog, "write_once", fail)
+    monkeypatch.setattr(learnlog, "write_once", fail)
     with pytest.raises(OSError):
         write_plan(run, 1, "model-001.yaml")
     assert not (run.path / "setpoints-002.csv").exists()  # the next trial cannot be flown
-    monkeypatch.setattr(runlog, "write_once", real)
+    monkeypatch.setattr(learnlog, "write_once", real)
     write_plan(run, 1, "model-001.yaml")
     assert (run.path / "setpoints-002.csv").exists() and not tmp_files(run.path)
 

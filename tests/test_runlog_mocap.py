@@ -15,7 +15,8 @@ from gcs.core.trials import trial_errors
 from gcs.errors import RunLogError
 from gcs.io.config import trajectory_from_dict
 from gcs.io.mocap_samples import MocapSeries, read_mocap_csv
-from gcs.io.runlog import MOCAP_GRID_COLUMNS, TRIAL_COLUMNS, RunDir, TrialStatus
+from gcs.io.records import MOCAP_GRID_COLUMNS, TRIAL_COLUMNS, TrialStatus
+from gcs.io.rundir import RunDir
 
 
 def raw(n: int = 5) -> MocapSeries:
@@ -92,3 +93,22 @@ def test_a_retried_trial_keeps_the_aborted_attempts_raw_samples(run: RunDir) -> 
     run.write_trial(0, record, TrialStatus(0, True, epos_m=0.1, max_err_m=0.2), raw(4))
     assert len(read_mocap_csv(run.path / "aborted" / "mocap-000-attempt-1.csv")) == 3
     assert len(read_mocap_csv(run.path / "mocap-000.csv")) == 4
+
+
+def test_the_run_directory_measures_a_trial_as_its_profile_says(run: RunDir) -> None:
+    with_mocap(run, 0, 0.03)
+    record = run.read_trial(0)
+    assert run.profile().mocap.measurement == "mocap"  # the default of the section
+    np.testing.assert_array_equal(run.measured_trial(0).pos_ned_m, record.mocap_ned_m)
+    np.testing.assert_array_equal(run.measured_trial(0, "estimate").pos_ned_m, record.pos_ned_m)
+    csv = run.path / "trial-000.csv"
+    rows = csv.read_text().splitlines()
+    cells = rows[11].split(",")
+    cells[-3:] = ["nan", "nan", "nan"]  # no mocap at k = 10
+    rows[11] = ",".join(cells)
+    csv.write_text("\n".join(rows) + "\n")
+    with pytest.raises(RunLogError) as info:
+        run.measured_trial(0)
+    assert str(info.value).startswith(f"{csv}: no mocap position at k = 10")
+    assert str(info.value).count(str(csv)) == 1  # the file named once
+    assert run.measured_trial(0, "estimate").n_samples == record.n_samples

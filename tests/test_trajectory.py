@@ -294,3 +294,20 @@ def test_check_setpoints_accepts_the_aligned_reference_and_names_each_limit():
         check_setpoints(bumped, ref, WIDE)
     with pytest.raises(TrajectoryError, match="shape"):
         check_setpoints(aligned[:-1], ref, WIDE)
+
+
+def test_setpoint_array_is_a_finite_n_by_3_copy_or_a_refusal():
+    from gcs.core.trajectory import setpoint_array
+
+    given = [[0, 0, -1]]
+    sp = setpoint_array(given)
+    assert sp.dtype == float and sp.shape == (1, 3) and sp.base is None
+    assert setpoint_array(np.zeros((4, 3)), 4).shape == (4, 3)
+    for bad, n, match in (
+        (np.zeros((4, 2)), None, r"shape \(4, 2\), expected \(N, 3\)"),
+        (np.zeros((0, 3)), None, "N >= 1"),
+        (np.zeros((4, 3)), 5, r"expected \(5, 3\)"),
+        ([[0, 0, -1], [0, np.nan, -1]], None, "k = 1 is NaN"),
+    ):
+        with pytest.raises(TrajectoryError, match=match):
+            setpoint_array(bad, n)

@@ -17,7 +17,7 @@ from synthetic import ci_profile
 from test_fly_e2e import finish, fly_two_trials, gcs
 
 from gcs.core.trajectory_sources import SamplesShape, sample_samples
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 from gcs.io.samples_file import read_samples
 from gcs.mock.process import MockProcess
 

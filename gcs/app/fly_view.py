@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 from rich.console import Console
@@ -11,9 +10,6 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from gcs.app.fly import (
-    MocapPlan,
-    check_mock_config,
-    check_url,
     converged_reason,
     fly_run,
     newest_record,
@@ -22,73 +18,14 @@ from gcs.app.fly import (
 )
 from gcs.app.learn import LearnOutcome
 from gcs.app.report import decision_lines, metrics_table
+from gcs.app.session import check_mock_config, check_url, vehicle_url
 from gcs.core.metrics import IterationMetrics
 from gcs.core.trials import iteration_of, repeat_of
 from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
-from gcs.flight.mocap.link import MocapLink
-from gcs.io.runlog import RunDir
+from gcs.io.rundir import RunDir
 
-__all__ = ["fly_with_display", "live_progress", "vehicle_url", "learning_lines"]
-
-
-@contextlib.contextmanager
-def vehicle_url(
-    connect: str | None,
-    use_mock: bool,
-    mock_config: Path | None,
-    seed: int,
-    console: Console,
-    mocap: MocapPlan | None = None,
-) -> Iterator[tuple[str, MocapLink | None]]:
-    """Yield the MAVSDK URL to fly and the started mocap link (None without mocap).
-
-    A real vehicle's URL, or a mock drone started for the flight (with its arena's mock
-    Motive when ``mocap`` reads the mock's arena). The mocap link is started here and
-    stopped after the flight (the stream keeps feeding the vehicle while it lands).
-
-    Parameters
-    ----------
-    connect : str or None
-        URL of a real vehicle (used when ``use_mock`` is False).
-    use_mock : bool
-        Start the mock drone as a subprocess on a free loopback port and stop it afterwards.
-    mock_config : Path or None
-        Mock drone settings (YAML).
-    seed : int
-        Seed of the mock drone.
-    console : Console
-        Where to print the mock's URL.
-    mocap : MocapPlan or None
-        The flight's motion capture.
-
-    Yields
-    ------
-    tuple of (str, MocapLink or None)
-    """
-    with contextlib.ExitStack() as stack:
-        url, mocap_url = connect, None
-        if use_mock:
-            from gcs.mock.mocap.arena import ArenaOptions
-            from gcs.mock.process import MockProcess
-
-            arena = None
-            if mocap is not None and mocap.source is None:
-                s = mocap.settings
-                arena = ArenaOptions(
-                    room=s.frame or "optitrack", yaw_offset_deg=s.yaw_offset_deg, seed=seed
-                )
-            mock = stack.enter_context(MockProcess(config_path=mock_config, seed=seed, arena=arena))
-            url, mocap_url = mock.url, mock.mocap_url or None
-            console.print(f"[dim]mock drone at {mock.url}[/]")
-            if mocap_url:
-                console.print(f"[dim]mock motion capture at {mocap_url}[/]")
-        link = None
-        if mocap is not None:
-            link = stack.enter_context(mocap.link(mocap_url))
-            console.print(f"[dim]mocap: {link.source.url()} streaming[/]")
-        assert url is not None
-        yield url, link
+__all__ = ["fly_with_display", "live_progress", "learning_lines", "say"]
 
 
 def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]:
@@ -317,7 +254,10 @@ def fly_with_display(
 
     try:
         with (
-            vehicle_url(connect, use_mock, mock_config, seed, console, plan.mocap) as (url, link),
+            vehicle_url(connect, use_mock, mock_config, seed, say(console), plan.mocap) as (
+                url,
+                link,
+            ),
             progress,
         ):
             fly_run(
@@ -346,3 +286,19 @@ def fly_with_display(
     learning = run_learning(run)
     console.print(metrics_table(run_metrics(run), title, trial_clock_rates(run), learning))
     return run
+
+
+def say(console: Console) -> Callable[[str], None]:
+    """A printer of the flight session's set-up lines (dimmed), for :func:`vehicle_url`.
+
+    Parameters
+    ----------
+    console : Console
+        Terminal output.
+
+    Returns
+    -------
+    callable
+        Takes one line of text.
+    """
+    return lambda text: console.print(f"[dim]{escape(text)}[/]")

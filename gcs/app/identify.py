@@ -3,8 +3,8 @@
 The numerics are in :mod:`gcs.core.pbsid` and :mod:`gcs.core.excitation`; this module is the
 glue between them, the profile, the run directory and the flight layer:
 
-1. :func:`identification_settings` reads and validates the profile's ``identification``
-   section (:class:`IdentifySettings`).
+1. The profile's ``identification`` section arrives checked
+   (:class:`gcs.io.settings.IdentifySettings`, built by :func:`gcs.io.config.profile_from_dict`).
 2. :func:`plan_experiments` builds the setpoints of the two experiments, the hover point plus a
    PRBS (or multisine) on every excited horizontal axis, independent seeds per axis and per
    experiment, and refuses them if any setpoint leaves the arena.
@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gcs.app.fly import (
+from gcs.app.report import save_figure
+from gcs.app.session import (
     SessionRecorder,
     flight_fence,
     flyable_setpoints,
@@ -41,9 +42,8 @@ from gcs.app.fly import (
     to_record,
     trial_extra,
 )
-from gcs.app.report import save_figure
 from gcs.core.excitation import multisine, prbs
-from gcs.core.model import DiscreteModel
+from gcs.core.model import DiscreteModel, frequency_response
 from gcs.core.pbsid import (
     IdentificationResult,
     identify,
@@ -53,20 +53,18 @@ from gcs.core.pbsid import (
     to_continuous_tf,
     vaf,
 )
-from gcs.core.trajectory import MAX_SAMPLES, Reference, points_outside
+from gcs.core.trajectory import Reference, points_outside
 from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import run_campaign
 from gcs.flight.mocap.link import MocapLink
-from gcs.flight.settings import FlightSettings
 from gcs.flight.trial import TrialRecording
-from gcs.io.config import Profile, TrajectorySpec, _Fields, profile_from_dict
-from gcs.io.runlog import RunDir, TrialRecord, TrialStatus, atomic_write_text
+from gcs.io.atomic import atomic_write_text
+from gcs.io.config import Profile, TrajectorySpec, profile_from_dict
+from gcs.io.records import TrialRecord, TrialStatus
+from gcs.io.rundir import RunDir
+from gcs.io.settings import AXES, FlightSettings, IdentifySettings
 
 __all__ = [
-    "AXES",
-    "EXCITATIONS",
-    "IdentifySettings",
-    "identification_settings",
     "Experiments",
     "plan_experiments",
     "create_identification_run",
@@ -75,16 +73,11 @@ __all__ = [
     "AxisResult",
     "run_axes",
     "identify_run",
-    "model_to_dict",
     "identified_profile_text",
     "write_identified_profile",
-    "frequency_response",
     "write_identification_plots",
 ]
 
-#: Horizontal axes: name -> column in the NED arrays.
-AXES = {"x": 0, "y": 1}
-EXCITATIONS = ("prbs", "multisine")
 #: Run-directory algorithm name and trajectory type of identification runs.
 ALGORITHM = "identify"
 TRAJECTORY_TYPE = "excitation"
@@ -93,154 +86,6 @@ _SAMPLES_PER_PARAMETER = 4
 
 
 # ------------------------------------------------------------------------------- settings
-
-
-@dataclass(frozen=True)
-class IdentifySettings:
-    """The profile's ``identification`` section (defaults in brackets).
-
-    Parameters
-    ----------
-    excitation : str
-        ``"prbs"`` [default] or ``"multisine"``.
-    amplitude_m : float
-        Excitation level per axis [m] [0.3]: the PRBS level, or the multisine's peak.
-    bandwidth_hz : float or None
-        PRBS band [Hz] [1.0] (clock ``2.5 x bandwidth``); PRBS only.
-    f_min_hz, f_max_hz : float or None
-        Multisine band [Hz] (required for, and only for, ``multisine``).
-    duration_s : float
-        Length of each of the two experiments [s] [60].
-    past, future : int
-        PBSID windows [samples] [20, 10].
-    order : int or None
-        Model order; None chooses it from the singular values [None].
-    max_delay : int
-        Longest input delay searched [samples] [10].
-    seed : int
-        Base seed of the excitation [1]: experiment e, axis a (x = 0, y = 1) uses
-        ``seed + 2 e + a``.
-    center_ned_m : tuple of float
-        Hover point the excitation is added to, local NED [m] [(0, 0, -1.5)].
-    """
-
-    excitation: str = "prbs"
-    amplitude_m: float = 0.3
-    bandwidth_hz: float | None = 1.0
-    f_min_hz: float | None = None
-    f_max_hz: float | None = None
-    duration_s: float = 60.0
-    past: int = 20
-    future: int = 10
-    order: int | None = None
-    max_delay: int = 10
-    seed: int = 1
-    center_ned_m: tuple[float, float, float] = (0.0, 0.0, -1.5)
-
-    def n_samples(self, t_ilc_s: float) -> int:
-        """Setpoints per experiment, ``round(duration_s / t_ilc_s)``.
-
-        Parameters
-        ----------
-        t_ilc_s : float
-            Sample time [s].
-
-        Returns
-        -------
-        int
-        """
-        return int(round(self.duration_s / t_ilc_s))
-
-    def seed_for(self, experiment: int, axis: str) -> int:
-        """Excitation seed of one axis in one experiment (0 = fit, 1 = validation).
-
-        Parameters
-        ----------
-        experiment : int
-            0 (fitting) or 1 (validation).
-        axis : str
-            ``"x"`` or ``"y"``.
-
-        Returns
-        -------
-        int
-        """
-        return self.seed + 2 * experiment + AXES[axis]
-
-
-def identification_settings(
-    profile: Profile, where: str = "<profile>", seed: int | None = None
-) -> IdentifySettings:
-    """Read and validate ``profile.identification``; refusals name the field.
-
-    Parameters
-    ----------
-    profile : Profile
-        The profile (its ``identification`` dict may be empty: all defaults).
-    where : str
-        Name of the profile (file path) used in error messages.
-    seed : int or None
-        Overrides ``identification.seed`` (the ``--seed`` option).
-
-    Returns
-    -------
-    IdentifySettings
-
-    Raises
-    ------
-    ProfileError
-        Unknown field, wrong type or range, or a field of the other excitation.
-    """
-    d = IdentifySettings()
-    f = _Fields(profile.identification, where, "identification", ProfileError)
-    excitation = f.string("excitation", d.excitation, EXCITATIONS)
-    amplitude = f.number("amplitude_m", d.amplitude_m, positive=True)
-    nyquist = 0.5 / profile.t_ilc_s
-    other = ("f_min_hz", "f_max_hz") if excitation == "prbs" else ("bandwidth_hz",)
-    for key in other:
-        if f.has(key):
-            raise f.fail(key, f"does not apply to excitation {excitation}")
-    bandwidth = f_min = f_max = None
-    if excitation == "prbs":
-        bandwidth = f.number("bandwidth_hz", d.bandwidth_hz, positive=True)
-        if bandwidth > nyquist:
-            raise f.fail("bandwidth_hz", f"must be <= Nyquist {nyquist:g} Hz, got {bandwidth:g}")
-    else:
-        f_min = f.number("f_min_hz")
-        f_max = f.number("f_max_hz", positive=True)
-        if not 0 <= f_min < f_max:
-            raise f.fail("f_min_hz", f"must be in [0, f_max_hz = {f_max:g}), got {f_min:g}")
-        if f_max >= nyquist:
-            raise f.fail("f_max_hz", f"must be below Nyquist {nyquist:g} Hz, got {f_max:g}")
-    duration = f.number("duration_s", d.duration_s, positive=True)
-    if duration / profile.t_ilc_s > MAX_SAMPLES:
-        raise f.fail(
-            "duration_s", f"gives more than {MAX_SAMPLES} samples of {profile.t_ilc_s:g} s"
-        )
-    past = f.integer("past", d.past)
-    if past < 1:
-        raise f.fail("past", f"must be >= 1, got {past}")
-    future = f.integer("future", d.future)
-    if not 2 <= future <= past:
-        raise f.fail("future", f"must be in [2, past = {past}], got {future}")
-    order = f.raw("order", None)
-    if order is not None:
-        order = f.integer("order")
-        if not 1 <= order < future:
-            raise f.fail("order", f"must be in [1, future - 1 = {future - 1}], got {order}")
-    max_delay = f.integer("max_delay", d.max_delay)
-    if max_delay < 0:
-        raise f.fail("max_delay", f"must be >= 0, got {max_delay}")
-    base_seed = f.integer("seed", d.seed)
-    center = tuple(f.numbers("center_ned_m", 3, list(d.center_ned_m)))
-    f.done()
-    settings = IdentifySettings(
-        excitation=excitation, amplitude_m=amplitude, bandwidth_hz=bandwidth, f_min_hz=f_min,
-        f_max_hz=f_max, duration_s=duration, past=past, future=future, order=order,
-        max_delay=max_delay, seed=base_seed if seed is None else int(seed),
-        center_ned_m=center,
-    )  # fmt: skip
-    return settings
 
 
 # ----------------------------------------------------------------------------- experiments
@@ -614,11 +459,9 @@ def run_axes(run: RunDir, axis: str | None = None) -> tuple[str, ...]:
 
 def _trial(run: RunDir, j: int, what: str) -> TrialRecord:
     """Experiment j as identification measures it (``mocap.measurement`` of the run)."""
-    from gcs.app.learn import measured_trial, run_measurement
-
     if not (run.path / f"trial-{j:03d}.json").exists():
         raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
-    return measured_trial(run, j, run_measurement(run.profile()))
+    return run.measured_trial(j)
 
 
 def identify_run(
@@ -708,29 +551,6 @@ def identify_run(
 # --------------------------------------------------------------------------- the profile
 
 
-def model_to_dict(model: DiscreteModel) -> dict:
-    """A discrete model as the profile's state-space form (floats round-trip exactly).
-
-    Parameters
-    ----------
-    model : DiscreteModel
-        The model.
-
-    Returns
-    -------
-    dict
-        ``{A, B, C, D, dt_s, delay_samples}`` with ``D = [[0.0]]``.
-    """
-    return {
-        "A": [[float(v) for v in row] for row in model.A],
-        "B": [[float(v) for v in row] for row in model.B],
-        "C": [[float(v) for v in row] for row in model.C],
-        "D": [[0.0]],
-        "dt_s": float(model.dt_s),
-        "delay_samples": int(model.delay_samples),
-    }
-
-
 def identified_profile_text(
     profile: Profile,
     results: Sequence[AxisResult],
@@ -767,8 +587,8 @@ def identified_profile_text(
     old_x = copy.deepcopy(data["model"])
     old_y = copy.deepcopy(data.get("model_y", data["model"]))
     by_axis = {r.axis: r for r in results}
-    data["model"] = model_to_dict(by_axis["x"].model) if "x" in by_axis else old_x
-    data["model_y"] = model_to_dict(by_axis["y"].model) if "y" in by_axis else old_y
+    data["model"] = by_axis["x"].model.as_dict() if "x" in by_axis else old_x
+    data["model_y"] = by_axis["y"].model.as_dict() if "y" in by_axis else old_y
     name = str(data.get("name", profile.name))
     summary = ", ".join(
         f"{r.axis}: order {r.result.order}, delay {r.result.delay_samples}, VAF {r.vaf_pct:.1f} %"
@@ -817,29 +637,6 @@ def write_identified_profile(path: Path, text: str) -> Path:
 
 
 # ---------------------------------------------------------------------------- figures
-
-
-def frequency_response(model: DiscreteModel, f_hz: np.ndarray) -> np.ndarray:
-    """Frequency response ``C (zI - A)^-1 B z^-d`` at ``z = exp(j 2 pi f dt)``.
-
-    Parameters
-    ----------
-    model : DiscreteModel
-        The model.
-    f_hz : ndarray, shape (M,)
-        Frequencies [Hz], below Nyquist.
-
-    Returns
-    -------
-    ndarray, shape (M,), complex
-    """
-    f_hz = np.asarray(f_hz, dtype=float)
-    z = np.exp(2j * math.pi * f_hz * model.dt_s)
-    eye = np.eye(model.order)
-    out = np.empty(f_hz.size, dtype=complex)
-    for i, zi in enumerate(z):
-        out[i] = (model.C @ np.linalg.solve(zi * eye - model.A, model.B))[0, 0]
-    return out * z ** (-model.delay_samples)
 
 
 def write_identification_plots(
@@ -896,7 +693,7 @@ def write_identification_plots(
     if not (np.array_equal(px.A, py.A) and np.array_equal(px.B, py.B)):
         curves.append((f"profile '{profile.name}' y", py, "k:"))
     for label, model, style in curves:
-        h = frequency_response(model, f)
+        h = frequency_response(model, 2 * math.pi * f)
         ax_m.semilogx(f, 20 * np.log10(np.abs(h)), style, label=label)
         ax_p.semilogx(f, np.degrees(np.unwrap(np.angle(h))), style, label=label)
     ax_m.set_ylabel("|G| [dB]")

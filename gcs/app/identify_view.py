@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,6 @@ from gcs.app.identify import (
     AxisResult,
     create_identification_run,
     fly_identification,
-    identification_settings,
     identified_profile_text,
     identify_run,
     plan_experiments,
@@ -23,9 +23,10 @@ from gcs.app.identify import (
     write_identified_profile,
 )
 from gcs.errors import PathError, RunLogError
+from gcs.io.atomic import write_once
 from gcs.io.config import Profile, load_profile
 from gcs.io.paths import check_new_dir, check_output_dir, check_output_file
-from gcs.io.runlog import RunDir, write_once
+from gcs.io.rundir import RunDir
 
 __all__ = ["results_table", "model_lines", "identify_with_display"]
 
@@ -186,7 +187,7 @@ def identify_with_display(
             where = f"{run.path}/manifest.json:profile"
         else:
             profile, where = load_profile(profile_path), str(profile_path)
-        settings = identification_settings(profile, where)
+        settings = profile.identification
         run_axes(run, axis)
         for j, what in ((0, "fitting"), (1, "validation")):
             if not (run.path / f"trial-{j:03d}.json").exists():
@@ -197,13 +198,15 @@ def identify_with_display(
             console.print(f"checked: {run.path}, profile '{profile.name}'; nothing identified")
             return None
     else:
-        from gcs.app.fly import check_mock_config, check_url, flight_settings, plan_mocap
-        from gcs.app.fly_view import live_progress, vehicle_url
+        from gcs.app.fly_view import live_progress, say
+        from gcs.app.session import check_mock_config, check_url, plan_mocap, vehicle_url
 
         path = profile_path or default_profile
         profile, where = load_profile(path), str(path)
-        settings = identification_settings(profile, where, seed)
-        flight = flight_settings(profile, where)
+        settings = profile.identification
+        if seed is not None:
+            settings = replace(settings, seed=int(seed))
+        flight = profile.flight
         mocap_plan = plan_mocap(profile, where, mocap, use_mock)
         if use_mock and mock_config is None and mocap_plan is not None and not mocap_plan.source:
             from gcs.io.paths import resolve_named
@@ -242,7 +245,9 @@ def identify_with_display(
         mock_seed = settings.seed if seed is None else seed
         try:
             with (
-                vehicle_url(connect, use_mock, mock_config, mock_seed, console, mocap_plan) as (
+                vehicle_url(
+                    connect, use_mock, mock_config, mock_seed, say(console), mocap_plan
+                ) as (
                     url,
                     link,
                 ),

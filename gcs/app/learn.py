@@ -36,7 +36,8 @@ from gcs.core.trajectory import Reference, check_setpoints
 from gcs.core.trials import iteration_of, setpoint_deviation
 from gcs.errors import GcsError, ProfileError, RunLogError, TrajectoryError
 from gcs.io.config import Profile, load_profile
-from gcs.io.runlog import RunDir, TrialRecord
+from gcs.io.records import TrialRecord
+from gcs.io.rundir import RunDir
 
 __all__ = [
     "LearnOutcome",
@@ -46,8 +47,6 @@ __all__ = [
     "check_learned",
     "check_learnable",
     "differing_field",
-    "run_measurement",
-    "measured_trial",
 ]
 
 
@@ -84,50 +83,6 @@ class LearnOutcome:
     next_iteration: int
     repeat_of: int | None = None
     record: dict | None = None
-
-
-def run_measurement(profile: Profile) -> str:
-    """What learning and e_pos use: the profile's ``mocap.measurement`` (default ``mocap``).
-
-    ``mocap`` takes a trial's motion-capture columns where it has them and the estimate in
-    trials without (flown without mocap); ``estimate`` always takes the vehicle's estimate.
-
-    Parameters
-    ----------
-    profile : Profile
-        The run's profile.
-
-    Returns
-    -------
-    str
-        ``"mocap"`` or ``"estimate"``.
-    """
-    from gcs.flight.mocap.settings import mocap_settings
-
-    return mocap_settings(profile.mocap, f"profile '{profile.name}'").measurement
-
-
-def measured_trial(run: RunDir, j: int, measurement: str) -> TrialRecord:
-    """Trial j as learning and e_pos see it: its mocap or its estimate (:func:`run_measurement`).
-
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    j : int
-        A complete trial.
-    measurement : str
-        ``"mocap"`` or ``"estimate"``.
-
-    Returns
-    -------
-    TrialRecord
-        With ``pos_ned_m`` the chosen measurement [m, NED].
-    """
-    try:
-        return run.read_trial(j).measured(measurement)
-    except RunLogError as exc:
-        raise RunLogError(f"{run.path}/trial-{j:03d}.csv: {exc}") from None
 
 
 def differing_field(given: Any, recorded: Any, prefix: str = "") -> str | None:
@@ -283,7 +238,7 @@ def learn_run(
         raise RunLogError(f"{run.path}: no complete trial to learn from")
     if profile.learning.history:
         return _learn_history(run, profile, j)
-    record = measured_trial(run, j, run_measurement(profile))
+    record = run.measured_trial(j, profile.mocap.measurement)
     ref = run.reference()
     if np.max(np.abs(record.ref_ned_m - ref.pos_ned_m)) > 1e-6:
         raise RunLogError(f"{run.path}/trial-{j:03d}.csv: reference columns differ from the run's")
@@ -346,7 +301,7 @@ def _history(run: RunDir, j: int, measurement: str) -> list[TrialRecord]:
             f"every trial 0..{j} (trial-{missing[0]:03d}.json)"
         )
     ref = run.reference().pos_ned_m
-    records = [measured_trial(run, t, measurement) for t in range(j + 1)]
+    records = [run.measured_trial(t, measurement) for t in range(j + 1)]
     for t, record in enumerate(records):
         if np.max(np.abs(record.ref_ned_m - ref)) > 1e-6:
             raise RunLogError(
@@ -368,7 +323,7 @@ def check_history(run: RunDir, profile: Profile, j: int) -> None:
     j : int
         The newest complete trial.
     """
-    _history(run, j, run_measurement(profile))
+    _history(run, j, profile.mocap.measurement)
     for k in range(profile.learning.repeats, j + 1):
         if run.read_learn_record(k)["model_file"] is not None:
             run.read_model(k)
@@ -408,7 +363,7 @@ def models_in_use(
 def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
     """A repeat of trial 0, or a step of the learner on trials 0..j, recorded."""
     repeats = profile.learning.repeats
-    records = _history(run, j, run_measurement(profile))
+    records = _history(run, j, profile.mocap.measurement)
     ref = run.reference()
     models, source = models_in_use(run, profile, j)
     with _failure(f"{run.path}: the learning update from trials 0..{j} failed"):
@@ -476,7 +431,6 @@ def _refreshed_profile(
 
     import yaml
 
-    from gcs.app.identify import model_to_dict
     from gcs.io.config import profile_from_dict
 
     data = copy.deepcopy(profile.source)
@@ -487,7 +441,7 @@ def _refreshed_profile(
         f"run created {run.manifest.get('created_utc')} (trajectory "
         f"'{run.manifest['trajectory'].get('name')}')."
     )
-    data["model"], data["model_y"] = model_to_dict(models[0]), model_to_dict(models[1])
+    data["model"], data["model_y"] = models[0].as_dict(), models[1].as_dict()
     ordered = {k: data[k] for k in ("name", "description", "t_ilc_s", "model", "model_y")}
     ordered.update({k: v for k, v in data.items() if k not in ordered})
     header = (

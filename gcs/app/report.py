@@ -26,13 +26,14 @@ import numpy as np
 from rich.markup import escape
 from rich.table import Table
 
-from gcs.app.learn import measured_trial, run_measurement
 from gcs.core.floor import Floor, FloorVerdict, floor_from_flights, floor_verdicts, identical_groups
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.model import relative_degree
 from gcs.core.trials import iteration_of, repeat_of, setpoint_deviation, trial_errors
 from gcs.errors import ProfileError, RunLogError
-from gcs.io.runlog import RunDir, TrialRecord, atomic_write_text
+from gcs.io.atomic import atomic_write_text
+from gcs.io.records import TrialRecord
+from gcs.io.rundir import RunDir
 
 __all__ = [
     "TrialEntry",
@@ -179,8 +180,8 @@ def complete_records(run: RunDir, measurement: str | None = None) -> dict[int, T
     -------
     dict of int to TrialRecord
     """
-    measurement = measurement or run_measurement(run.profile())
-    return {j: measured_trial(run, j, measurement) for j in run.complete_trials()}
+    measurement = measurement or run.profile().mocap.measurement
+    return {j: run.measured_trial(j, measurement) for j in run.complete_trials()}
 
 
 def mocap_lines(run: RunDir) -> list[str]:
@@ -217,7 +218,7 @@ def mocap_lines(run: RunDir) -> list[str]:
             f"trial {j}: e_pos by mocap {e_moc}, by the estimate {e_est:.4f} m; {lag_text}"
         )
     if lines:
-        lines.insert(0, f"measurement: {run_measurement(run.profile())} (mocap.measurement)")
+        lines.insert(0, f"measurement: {run.profile().mocap.measurement} (mocap.measurement)")
     return lines
 
 
@@ -1003,10 +1004,10 @@ def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
     rows = run_metrics(run)
     ref = run.reference()
     try:
-        measurement = run_measurement(run.profile())
+        measurement = run.profile().mocap.measurement
     except ProfileError as exc:
         raise RunLogError(f"{run.path}/manifest.json: {exc}") from None
-    records = {j: measured_trial(run, j, measurement) for j in iterations}  # what learning saw
+    records = {j: run.measured_trial(j, measurement) for j in iterations}  # what learning saw
     learning = run_learning(run) if run.kind == "learning" else None
     names = {j: f"j = {j}" for j in iterations}
     if learning is not None and learning.history:

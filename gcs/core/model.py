@@ -35,6 +35,7 @@ __all__ = [
     "relative_degree",
     "controllable_slices",
     "dc_gain",
+    "frequency_response",
 ]
 
 
@@ -88,6 +89,48 @@ class DiscreteModel:
     def is_stable(self) -> bool:
         """True when all eigenvalues of ``A`` lie strictly inside the unit circle."""
         return bool(np.all(np.abs(np.linalg.eigvals(self.A)) < 1.0))
+
+    def as_dict(self) -> dict:
+        """The model as the profile's state-space form, plain floats (YAML and JSON ready).
+
+        Returns
+        -------
+        dict
+            ``{A, B, C, D, dt_s, delay_samples}`` with ``D = [[0.0]]`` (no feedthrough); the
+            floats round-trip exactly through :func:`from_state_space`.
+        """
+        return {
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "D": [[0.0]],
+            "dt_s": float(self.dt_s),
+            "delay_samples": int(self.delay_samples),
+        }
+
+
+def frequency_response(model: DiscreteModel, omega_rad_s: np.ndarray) -> np.ndarray:
+    """Frequency response ``F(e^{j w T})`` of a model, its delay included.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+        The model (sample time ``T = model.dt_s``).
+    omega_rad_s : ndarray, shape (K,)
+        Frequencies [rad/s], ``0 <= w <= pi / T``.
+
+    Returns
+    -------
+    ndarray of complex, shape (K,)
+        ``C (zI - A)^-1 B z^-delay`` at ``z = e^{j w T}`` [m/m].
+    """
+    w = np.atleast_1d(np.asarray(omega_rad_s, dtype=float))
+    z = np.exp(1j * w * model.dt_s)
+    n = model.order
+    out = np.empty(w.shape, dtype=complex)
+    for i, zi in enumerate(z):
+        out[i] = (model.C @ np.linalg.solve(zi * np.eye(n) - model.A, model.B))[0, 0]
+    return out * z ** (-model.delay_samples)
 
 
 def from_transfer_function(

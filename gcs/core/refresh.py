@@ -140,14 +140,7 @@ class RefreshResult:
             "cv_loss_candidate_m2": self.cv_loss_candidate_m2,
             "pairs": self.pairs,
             "snr": self.snr,
-            "model": {
-                "A": self.model.A.tolist(),
-                "B": self.model.B.tolist(),
-                "C": self.model.C.tolist(),
-                "D": [[0.0]],
-                "dt_s": self.model.dt_s,
-                "delay_samples": self.model.delay_samples,
-            },
+            "model": self.model.as_dict(),
         }
 
 

@@ -30,12 +30,11 @@ from math import comb
 import numpy as np
 import scipy.sparse as sp
 
-from gcs.core.model import DiscreteModel
+from gcs.core.model import DiscreteModel, frequency_response
 
 __all__ = [
     "RobustnessWeight",
     "difference_matrix",
-    "frequency_response",
     "robustness_weight",
     "q_filter_response",
     "crossover_frequency",
@@ -97,30 +96,6 @@ def difference_matrix(n: int, order: int) -> sp.csr_matrix:
     """
     diags = [(-1) ** i * comb(order, i) * np.ones(n - i) for i in range(min(order, n - 1) + 1)]
     return sp.diags(diags, [-i for i in range(len(diags))], shape=(n, n), format="csr")
-
-
-def frequency_response(model: DiscreteModel, omega_rad_s: np.ndarray) -> np.ndarray:
-    """Frequency response ``F(e^{j w T})`` of a model, its delay included.
-
-    Parameters
-    ----------
-    model : DiscreteModel
-        The model (sample time ``T = model.dt_s``).
-    omega_rad_s : ndarray, shape (K,)
-        Frequencies [rad/s], ``0 <= w <= pi / T``.
-
-    Returns
-    -------
-    ndarray of complex, shape (K,)
-        ``C (zI - A)^-1 B z^-delay`` at ``z = e^{j w T}`` [m/m].
-    """
-    w = np.atleast_1d(np.asarray(omega_rad_s, dtype=float))
-    z = np.exp(1j * w * model.dt_s)
-    n = model.order
-    out = np.empty(w.shape, dtype=complex)
-    for i, zi in enumerate(z):
-        out[i] = (model.C @ np.linalg.solve(zi * np.eye(n) - model.A, model.B))[0, 0]
-    return out * z ** (-model.delay_samples)
 
 
 def _difference_gain2(omega_rad_s: np.ndarray, dt_s: float, order: int) -> np.ndarray:

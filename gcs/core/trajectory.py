@@ -33,6 +33,7 @@ __all__ = [
     "loop_phase",
     "check_reference",
     "check_setpoints",
+    "setpoint_array",
     "points_outside",
 ]
 
@@ -396,6 +397,36 @@ def _beyond(p: np.ndarray, arena: Box) -> str:
     return ""
 
 
+def setpoint_array(sp_ned_m: object, n: int | None = None) -> np.ndarray:
+    """A setpoint sequence as a finite float array of shape (N, 3), or a refusal.
+
+    Parameters
+    ----------
+    sp_ned_m : array_like, shape (N, 3)
+        Setpoints ``u(0) .. u(N-1)``, local NED [m], N >= 1.
+    n : int or None
+        The N it must have (the reference's); None: any N >= 1.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        A float64 copy.
+
+    Raises
+    ------
+    TrajectoryError
+        Wrong shape, empty, or a NaN or infinite value (naming its sample).
+    """
+    sp = np.array(sp_ned_m, dtype=float)
+    if sp.ndim != 2 or sp.shape[1] != 3 or sp.shape[0] < 1 or n not in (None, sp.shape[0]):
+        need = "(N, 3) with N >= 1" if n is None else f"({n}, 3)"
+        raise TrajectoryError(f"setpoints have shape {sp.shape}, expected {need}")
+    bad = np.argwhere(~np.isfinite(sp))
+    if bad.size:
+        raise TrajectoryError(f"setpoint k = {bad[0][0]} is NaN or inf")
+    return sp
+
+
 def check_setpoints(
     sp_ned_m: np.ndarray,
     ref: Reference,
@@ -435,13 +466,7 @@ def check_setpoints(
     TrajectoryError
         Naming the limit, the sample, the axis and the value.
     """
-    sp = np.asarray(sp_ned_m, dtype=float)
-    n = ref.n_samples
-    if sp.shape != (n, 3):
-        raise TrajectoryError(f"setpoints have shape {sp.shape}, the reference needs ({n}, 3)")
-    bad = np.argwhere(~np.isfinite(sp))
-    if bad.size:
-        raise TrajectoryError(f"setpoint k = {bad[0][0]} is NaN or inf")
+    sp = setpoint_array(sp_ned_m, ref.n_samples)
     outside = points_outside(sp, arena, tol_m)
     if outside.size:
         k = int(outside[0])

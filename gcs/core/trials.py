@@ -19,7 +19,7 @@ __all__ = ["iteration_of", "repeat_of", "setpoint_deviation", "trial_errors", "G
 
 
 class GridTrial(Protocol):
-    """A trial on the learning grid (e.g. :class:`gcs.io.runlog.TrialRecord`)."""
+    """A trial on the learning grid (e.g. :class:`gcs.io.records.TrialRecord`)."""
 
     @property
     def ref_ned_m(self) -> np.ndarray:

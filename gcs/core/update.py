@@ -47,7 +47,7 @@ from gcs.core.model import (
     relative_degree,
 )
 from gcs.core.robustness import RobustnessWeight, difference_matrix
-from gcs.errors import ProfileError, RunLogError, TrajectoryError, UpdateInfeasible
+from gcs.errors import TrajectoryError, UpdateInfeasible
 
 __all__ = [
     "UpdateWeights",
@@ -95,12 +95,10 @@ class UpdateWeights:
             try:
                 v = float(value)
             except (TypeError, ValueError):
-                raise ProfileError(
-                    f"UpdateWeights.{name} must be a number, got {value!r}"
-                ) from None
+                raise ValueError(f"UpdateWeights.{name} must be a number, got {value!r}") from None
             if not math.isfinite(v) or v < 0 or (v == 0 and not lower_ok):
                 bound = ">= 0" if lower_ok else "> 0"
-                raise ProfileError(f"UpdateWeights.{name} must be finite and {bound}, got {value}")
+                raise ValueError(f"UpdateWeights.{name} must be finite and {bound}, got {value}")
             object.__setattr__(self, name, v)
 
 
@@ -136,13 +134,13 @@ class SetpointLimits:
             try:
                 v = float(value)
             except (TypeError, ValueError):
-                raise ProfileError(
+                raise ValueError(
                     f"SetpointLimits.{name} must be a number or None, got {value!r}"
                 ) from None
             if math.isnan(v):
-                raise ProfileError(f"SetpointLimits.{name} is NaN")
+                raise ValueError(f"SetpointLimits.{name} is NaN")
             if name in ("max_step_m", "max_deviation_m") and not v >= 0:
-                raise ProfileError(f"SetpointLimits.{name} must be >= 0, got {value}")
+                raise ValueError(f"SetpointLimits.{name} must be >= 0, got {value}")
             object.__setattr__(self, name, v)
         if self.u_min_m is not None and self.u_max_m is not None and self.u_min_m > self.u_max_m:
             raise UpdateInfeasible(
@@ -281,8 +279,8 @@ class _Structure:
     ) -> _Problem:
         """The QP of one trial: the fixed structure and this trial's linear term."""
         N, m, weights = self.n, self.m, self.weights
-        dh = _check_vector("d_hat_m", d_hat_m, N, RunLogError)
-        up = _check_vector("u_prev_m", u_prev_m, N, RunLogError)
+        dh = _check_vector("d_hat_m", d_hat_m, N, ValueError)
+        up = _check_vector("u_prev_m", u_prev_m, N, ValueError)
         w = self.yd - dh
         C = self.model.C
         qX = (-2.0 * weights.we * (self.mask * w[self.d : N]))[:, None] * C[0][None, :]
@@ -325,7 +323,7 @@ def _robust_terms(
     The pinned tail (``u = y_final``) is a constant of ``D u`` and moves to the offset.
     """
     if robust.anchor_m.shape != (n,):
-        raise RunLogError(
+        raise ValueError(
             f"robustness anchor_m must have {n} samples, got shape {robust.anchor_m.shape}"
         )
     D = difference_matrix(n, robust.order)
@@ -715,8 +713,10 @@ def next_input(
     ------
     UpdateInfeasible
         The limits admit no input sequence (the message names the limit).
-    TrajectoryError, RunLogError
-        ``yd_m`` (resp. ``d_hat_m``, ``u_prev_m``) has a bad shape or NaN/inf.
+    TrajectoryError
+        ``yd_m`` has a bad shape or NaN/inf.
+    ValueError
+        ``d_hat_m`` or ``u_prev_m`` has a bad shape or NaN/inf.
     ModelError
         The trial is shorter than the model's relative degree.
     RuntimeError

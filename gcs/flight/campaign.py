@@ -42,6 +42,7 @@ from typing import Protocol
 
 import numpy as np
 
+from gcs.core.trajectory import setpoint_array
 from gcs.errors import MocapError, TrajectoryError, TrialAborted, VehicleError
 from gcs.flight.clock import rate_warning
 from gcs.flight.fence import Fence
@@ -58,9 +59,9 @@ from gcs.flight.preflight import (
     link_loss_warnings,
     navigation_source,
 )
-from gcs.flight.settings import FlightSettings
-from gcs.flight.trial import TrialRecording, TrialRun, check_setpoints
+from gcs.flight.trial import TrialRecording, TrialRun
 from gcs.flight.vehicle import TelemetrySample, Vehicle, sample_arrays
+from gcs.io.settings import FlightSettings
 
 __all__ = [
     "TrialSource",
@@ -683,7 +684,7 @@ def _fmt(ned_m: np.ndarray) -> str:
 
 def _plan(source: TrialSource, j: int, fence: Fence) -> tuple[np.ndarray, np.ndarray]:
     """Trial j's hover point and setpoints, checked against the arena (worker thread)."""
-    setpoints = check_setpoints(source.setpoints_for(j))
+    setpoints = setpoint_array(source.setpoints_for(j))
     hover = np.asarray(source.hover_point_for(j), dtype=float).reshape(3)
     problem = fence.setpoint_problem(hover)
     if problem is not None:

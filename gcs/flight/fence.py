@@ -24,9 +24,8 @@ data (GPS and vision) and the mock-gps profile, so that a vehicle that is merely
 stopped; ``benchmarks/fence_thresholds.py`` prints the evidence and docs/flight.md ("Fence")
 the figures.
 
-Local NED to latitude/longitude (:func:`ned_to_global`) is PX4's own map projection (azimuthal
-equidistant about the reference, ``lib/geo``), for the arena uploaded to the autopilot as its
-geofence (:func:`fence_polygon`).
+The arena is uploaded to the autopilot as its geofence (:func:`fence_polygon`) through PX4's
+own map projection (:func:`gcs.core.frames.ned_to_global`).
 """
 
 from __future__ import annotations
@@ -38,23 +37,19 @@ from typing import Any
 
 import numpy as np
 
-from gcs.flight.settings import FlightSettings
+from gcs.core.frames import ned_to_global
+from gcs.io.settings import FlightSettings
 
 __all__ = [
     "Fence",
     "EstimateMonitor",
-    "ned_to_global",
-    "global_to_ned",
     "fence_polygon",
-    "EARTH_RADIUS_M",
     "MAX_ACCEL_M_S2",
     "DRIFT_WINDOW_S",
     "DRIFT_MAX_STEP_S",
     "SETPOINT_TOLERANCE_M",
 ]
 
-EARTH_RADIUS_M = 6_371_000.0
-"""PX4's ``CONSTANTS_RADIUS_OF_EARTH`` [m]."""
 MAX_ACCEL_M_S2 = 20.0
 """Largest acceleration a multirotor can have [m/s^2] (about 2 g of thrust): what physics lets
 the position move beyond its velocity over a telemetry gap, ``MAX_ACCEL_M_S2 dt^2 / 2``."""
@@ -381,63 +376,6 @@ class EstimateMonitor:
                 "contradicts itself"
             )
         return None
-
-
-def ned_to_global(
-    lat0_deg: float, lon0_deg: float, north_m: float, east_m: float
-) -> tuple[float, float]:
-    """Latitude and longitude of a local point: PX4's map projection (azimuthal equidistant).
-
-    Parameters
-    ----------
-    lat0_deg, lon0_deg : float
-        The local frame's origin [deg, WGS84].
-    north_m, east_m : float
-        The point [m].
-
-    Returns
-    -------
-    tuple of float
-        Latitude and longitude [deg].
-    """
-    lat0, lon0 = math.radians(lat0_deg), math.radians(lon0_deg)
-    x, y = north_m / EARTH_RADIUS_M, east_m / EARTH_RADIUS_M
-    c = math.hypot(x, y)
-    if c == 0.0:
-        return lat0_deg, lon0_deg
-    sin_c, cos_c = math.sin(c), math.cos(c)
-    lat = math.asin(cos_c * math.sin(lat0) + x * sin_c * math.cos(lat0) / c)
-    lon = lon0 + math.atan2(y * sin_c, c * math.cos(lat0) * cos_c - x * math.sin(lat0) * sin_c)
-    return math.degrees(lat), math.degrees(lon)
-
-
-def global_to_ned(
-    lat0_deg: float, lon0_deg: float, lat_deg: float, lon_deg: float
-) -> tuple[float, float]:
-    """Inverse of :func:`ned_to_global`.
-
-    Parameters
-    ----------
-    lat0_deg, lon0_deg : float
-        The local frame's origin [deg].
-    lat_deg, lon_deg : float
-        The point [deg].
-
-    Returns
-    -------
-    tuple of float
-        North and east [m].
-    """
-    lat0, lon0 = math.radians(lat0_deg), math.radians(lon0_deg)
-    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
-    cos_d = math.cos(lon - lon0)
-    arg = math.sin(lat0) * math.sin(lat) + math.cos(lat0) * math.cos(lat) * cos_d
-    arg = min(max(arg, -1.0), 1.0)
-    c = math.acos(arg)
-    k = c / math.sin(c) if c > 0.0 else 1.0
-    north = k * (math.cos(lat0) * math.sin(lat) - math.sin(lat0) * math.cos(lat) * cos_d)
-    east = k * math.cos(lat) * math.sin(lon - lon0)
-    return north * EARTH_RADIUS_M, east * EARTH_RADIUS_M
 
 
 def fence_polygon(fence: Fence, lat0_deg: float, lon0_deg: float) -> list[tuple[float, float]]:

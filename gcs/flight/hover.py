@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.flight.settings import FlightSettings
+from gcs.io.settings import FlightSettings
 
 __all__ = [
     "HoverStats",

@@ -39,17 +39,15 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gcs.errors import TrajectoryError, TrialAborted
+from gcs.core.trajectory import setpoint_array
+from gcs.errors import TrialAborted
 from gcs.flight.clock import ClockFit, fit_clock
-from gcs.flight.settings import FlightSettings
 from gcs.flight.vehicle import TelemetrySample, Vehicle, sleep_until
-
-if TYPE_CHECKING:
-    from gcs.flight.mocap.link import MocapTrial
+from gcs.io.mocap_samples import MocapTrial
+from gcs.io.settings import FlightSettings
 
 __all__ = [
     "TrialRecording",
@@ -58,7 +56,6 @@ __all__ = [
     "fly_trial",
     "send_schedule",
     "align_to_grid",
-    "check_setpoints",
 ]
 
 ProgressCallback = Callable[[int, int, float], None]
@@ -146,32 +143,6 @@ class TrialRecording:
     def interpolated_share(self) -> float:
         """Share of the N+1 grid points interpolated across a telemetry gap (0..1)."""
         return float(np.mean(self.interpolated)) if self.interpolated.size else 0.0
-
-
-def check_setpoints(setpoints_ned_m: object) -> np.ndarray:
-    """Validate a setpoint sequence and return it as a float array.
-
-    Parameters
-    ----------
-    setpoints_ned_m : array_like, shape (N, 3)
-        Absolute local NED setpoints [m], N >= 1.
-
-    Returns
-    -------
-    ndarray, shape (N, 3)
-        A float64 copy.
-
-    Raises
-    ------
-    TrajectoryError
-        Wrong shape, empty, or not finite.
-    """
-    sp = np.array(setpoints_ned_m, dtype=float)
-    if sp.ndim != 2 or sp.shape[1] != 3 or sp.shape[0] < 1:
-        raise TrajectoryError(f"setpoints_ned_m: expected shape (N, 3) with N >= 1, got {sp.shape}")
-    if not np.all(np.isfinite(sp)):
-        raise TrajectoryError("setpoints_ned_m: contains NaN or infinite values")
-    return sp
 
 
 def send_schedule(
@@ -277,7 +248,7 @@ class TrialRun:
         on_progress: ProgressCallback | None = None,
     ) -> None:
         self.vehicle = vehicle
-        self.setpoints_ned_m = check_setpoints(setpoints_ned_m)
+        self.setpoints_ned_m = setpoint_array(setpoints_ned_m)
         self.t_ilc_s = float(t_ilc_s)
         self.settings = settings
         self.sends_per_sample = settings.sends_per_sample(self.t_ilc_s)

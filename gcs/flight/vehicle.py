@@ -58,7 +58,7 @@ from gcs.errors import VehicleError
 from gcs.flight.clock import ClockFit, VehicleClock
 from gcs.flight.fence import EstimateMonitor, Fence
 from gcs.flight.hover import SPEED_SPAN_S, is_settled
-from gcs.flight.settings import FlightSettings
+from gcs.io.settings import FlightSettings
 
 __all__ = ["TelemetrySample", "Vehicle", "sample_arrays", "sleep_until", "min_jerk"]
 

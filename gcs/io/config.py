@@ -1,5 +1,9 @@
 """Profiles and trajectory files (YAML) -> frozen configuration objects.
 
+Every section is parsed here, once: the learning settings into the numerics' own classes, and
+``flight``, ``identification`` and ``mocap`` into :mod:`gcs.io.settings`. Nothing below this
+module reads a YAML mapping again.
+
 Every refusal is one line naming the file and the field, raised as :class:`ProfileError` or
 :class:`TrajectoryError` (both ``ValueError``). Unknown fields are refused too: a typo in a
 safety limit must not silently fall back to a default.
@@ -7,6 +11,7 @@ safety limit must not silently fall back to a default.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass, field, fields
@@ -16,13 +21,24 @@ from typing import Any
 import numpy as np
 
 from gcs.core.estimators import KilcSettings, SmootherSettings
+from gcs.core.frames import SYSTEM_FRAMES, mapping_for
 from gcs.core.learning import NOISE_MODELS, AdaptiveSettings
 from gcs.core.model import DiscreteModel, from_state_space, from_transfer_function
 from gcs.core.trajectory import MAX_SAMPLES, Box, EightShape
 from gcs.core.trajectory_sources import PLANES, EllipseShape, SamplesShape, WaypointsShape
 from gcs.core.update import UpdateWeights
 from gcs.errors import GcsError, ProfileError, TrajectoryError
+from gcs.io.mocap_source import parse_mocap_url
+from gcs.io.records import MEASUREMENTS
 from gcs.io.samples_file import read_samples
+from gcs.io.settings import (
+    EXCITATIONS,
+    MAPPING_AXES,
+    MESSAGES,
+    FlightSettings,
+    IdentifySettings,
+    MocapSettings,
+)
 from gcs.io.yamlfile import read_yaml
 
 __all__ = [
@@ -32,6 +48,7 @@ __all__ = [
     "load_profile",
     "load_trajectory",
     "profile_from_dict",
+    "mocap_settings",
     "trajectory_from_dict",
     "ALGORITHMS",
     "DEFAULT_MAX_VERTICAL_SPEED_M_S",
@@ -230,12 +247,12 @@ class Profile:
         checked).
     arena : Box
         Flight volume, local NED [m].
-    flight : dict
-        Flight settings passed to the flight layer (stream rate, timeouts); may be empty.
-    identification : dict
-        Excitation and PBSID settings used by ``gcs identify``; may be empty.
-    mocap : dict
-        Motion-capture settings (``gcs.flight.mocap.settings``); may be empty.
+    flight : FlightSettings
+        The ``flight`` section: stream rate, timeouts, hover and fence limits.
+    identification : IdentifySettings
+        The ``identification`` section: excitation and PBSID settings of ``gcs identify``.
+    mocap : MocapSettings
+        The ``mocap`` section: frame mapping, forwarding, what learning measures.
     source : dict
         The parsed YAML as read, stored in run manifests.
     """
@@ -248,9 +265,9 @@ class Profile:
     max_speed_m_s: float
     max_accel_m_s2: float
     arena: Box
-    flight: dict = field(default_factory=dict)
-    identification: dict = field(default_factory=dict)
-    mocap: dict = field(default_factory=dict)
+    flight: FlightSettings = field(default_factory=FlightSettings)
+    identification: IdentifySettings = field(default_factory=IdentifySettings)
+    mocap: MocapSettings = field(default_factory=MocapSettings)
     source: dict = field(default_factory=dict)
     max_vertical_speed_m_s: float = DEFAULT_MAX_VERTICAL_SPEED_M_S
     max_vertical_accel_m_s2: float = DEFAULT_MAX_VERTICAL_ACCEL_M_S2
@@ -309,9 +326,13 @@ def _interval(f: _Fields, key: str) -> tuple[float, float]:
 
 def _learning(f: _Fields) -> LearningConfig:
     w = f.sub("weights", {})
-    weights = UpdateWeights(
-        we=w.number("we", 1.0, positive=True), wdu=w.number("wdu", 0.01), wu=w.number("wu", 0.0)
-    )
+    values = {"we": w.number("we", 1.0, positive=True)}
+    values |= {"wdu": w.number("wdu", 0.01), "wu": w.number("wu", 0.0)}
+    try:
+        weights = UpdateWeights(**values)
+    except ValueError as exc:  # the numerics' own message names the weight
+        name = next((k for k in values if f".{k} " in str(exc)), "")
+        raise w.fail(name, str(exc).split(" ", 1)[1]) from None
     w.done()
     settings = {}
     for key, cls in (("smoother", SmootherSettings), ("kilc", KilcSettings)):
@@ -423,9 +444,11 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
         max_jerk_m_s3=vehicle.optional_number("max_jerk_m_s3"),
         max_vertical_jerk_m_s3=vehicle.optional_number("max_vertical_jerk_m_s3"),
         arena=box,
-        flight=f.mapping("flight"),
-        identification=f.mapping("identification"),
-        mocap=f.mapping("mocap"),
+        flight=_flight(f.mapping("flight"), where, t_ilc_s),
+        identification=_identification(
+            _Fields(f.mapping("identification"), where, "identification", ProfileError), t_ilc_s
+        ),
+        mocap=mocap_settings(f.mapping("mocap"), where),
         source=data,
     )
     f.text("description")
@@ -640,3 +663,184 @@ def load_trajectory(path: str | Path) -> TrajectorySpec:
     """
     path = Path(path)
     return trajectory_from_dict(read_yaml(path, TrajectoryError), str(path), path.parent)
+
+
+def _flight(section: dict, where: str, t_ilc_s: float) -> FlightSettings:
+    """The ``flight`` section as :class:`FlightSettings` (unknown keys refused)."""
+    known = {f.name for f in fields(FlightSettings)}
+    for key, value in section.items():
+        if key not in known:
+            raise ProfileError(f"{where}: field 'flight.{key}' is not known")
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ProfileError(f"{where}: field 'flight.{key}' must be a number, got {value!r}")
+    try:
+        settings = FlightSettings(**{k: float(v) for k, v in section.items()})
+        settings.sends_per_sample(t_ilc_s)
+    except ValueError as exc:  # FlightSettings' own messages start with the field's name
+        text = str(exc)
+        name = text.split(":", 1)[0] if text.startswith("flight.") else "flight.stream_rate_hz"
+        detail = text.split(":", 1)[1].strip() if text.startswith("flight.") else text
+        raise ProfileError(f"{where}: field '{name}': {detail}") from None
+    return settings
+
+
+def _identification(f: _Fields, t_ilc_s: float) -> IdentifySettings:
+    """The ``identification`` section: excitation and PBSID settings of ``gcs identify``
+    (unknown fields, types and ranges refused, and the fields of the other excitation)."""
+    d = IdentifySettings()
+    excitation = f.string("excitation", d.excitation, EXCITATIONS)
+    amplitude = f.number("amplitude_m", d.amplitude_m, positive=True)
+    nyquist = 0.5 / t_ilc_s
+    other = ("f_min_hz", "f_max_hz") if excitation == "prbs" else ("bandwidth_hz",)
+    for key in other:
+        if f.has(key):
+            raise f.fail(key, f"does not apply to excitation {excitation}")
+    bandwidth = f_min = f_max = None
+    if excitation == "prbs":
+        bandwidth = f.number("bandwidth_hz", d.bandwidth_hz, positive=True)
+        if bandwidth > nyquist:
+            raise f.fail("bandwidth_hz", f"must be <= Nyquist {nyquist:g} Hz, got {bandwidth:g}")
+    else:
+        f_min = f.number("f_min_hz")
+        f_max = f.number("f_max_hz", positive=True)
+        if not 0 <= f_min < f_max:
+            raise f.fail("f_min_hz", f"must be in [0, f_max_hz = {f_max:g}), got {f_min:g}")
+        if f_max >= nyquist:
+            raise f.fail("f_max_hz", f"must be below Nyquist {nyquist:g} Hz, got {f_max:g}")
+    duration = f.number("duration_s", d.duration_s, positive=True)
+    if duration / t_ilc_s > MAX_SAMPLES:
+        raise f.fail("duration_s", f"gives more than {MAX_SAMPLES} samples of {t_ilc_s:g} s")
+    past = f.integer("past", d.past)
+    if past < 1:
+        raise f.fail("past", f"must be >= 1, got {past}")
+    future = f.integer("future", d.future)
+    if not 2 <= future <= past:
+        raise f.fail("future", f"must be in [2, past = {past}], got {future}")
+    order = f.raw("order", None)
+    if order is not None:
+        order = f.integer("order")
+        if not 1 <= order < future:
+            raise f.fail("order", f"must be in [1, future - 1 = {future - 1}], got {order}")
+    max_delay = f.integer("max_delay", d.max_delay)
+    if max_delay < 0:
+        raise f.fail("max_delay", f"must be >= 0, got {max_delay}")
+    base_seed = f.integer("seed", d.seed)
+    center = tuple(f.numbers("center_ned_m", 3, list(d.center_ned_m)))
+    f.done()
+    settings = IdentifySettings(
+        excitation=excitation, amplitude_m=amplitude, bandwidth_hz=bandwidth, f_min_hz=f_min,
+        f_max_hz=f_max, duration_s=duration, past=past, future=future, order=order,
+        max_delay=max_delay, seed=base_seed, center_ned_m=center,
+    )  # fmt: skip
+    return settings
+
+
+def mocap_settings(section: Any, where: str) -> MocapSettings:
+    """Check a profile's ``mocap`` section (unknown keys, types, ranges, mirrored mapping).
+
+    Parameters
+    ----------
+    section : dict
+        The parsed section (empty: defaults).
+    where : str
+        The profile's file, for messages.
+
+    Returns
+    -------
+    MocapSettings
+
+    Raises
+    ------
+    ProfileError
+        One line naming the field.
+    """
+    if not isinstance(section, dict):
+        raise ProfileError(f"{where}: field 'mocap' must be a mapping")
+    d = MocapSettings()
+    known = {f.name for f in dataclasses.fields(MocapSettings)} - {"overrides"}
+    known |= set(MAPPING_AXES) | {"right_handed"}
+    for key in section:
+        if key not in known:
+            raise ProfileError(f"{where}: field 'mocap.{key}' is not known")
+
+    def fail(key: str, message: str) -> ProfileError:
+        return ProfileError(f"{where}: field 'mocap.{key}' {message}")
+
+    def number(key: str, default: float, minimum: float = -math.inf) -> float:
+        value = section.get(key, default)
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        if not ok or not math.isfinite(value) or value < minimum:
+            raise fail(key, f"must be a finite number >= {minimum:g}, got {value!r}")
+        return float(value)
+
+    def positive(key: str, default: float) -> float:
+        value = number(key, default, 0.0)
+        if value <= 0:
+            raise fail(key, f"must be > 0, got {value!r}")
+        return value
+
+    def choice(key: str, default: str, choices: tuple[str, ...]) -> str:
+        value = section.get(key, default)
+        if value not in choices:
+            raise fail(key, f"must be one of {', '.join(choices)}, got {value!r}")
+        return value
+
+    def flag(key: str, default: bool) -> bool:
+        value = section.get(key, default)
+        if not isinstance(value, bool):
+            raise fail(key, f"must be true or false, got {value!r}")
+        return value
+
+    url = section.get("url")
+    if url is not None:
+        if not isinstance(url, str):
+            raise fail("url", f"must be a string, got {url!r}")
+        try:
+            parse_mocap_url(url)
+        except ProfileError as exc:
+            raise fail("url", f"is not usable: {exc}") from None
+    frame = section.get("frame")
+    if frame is not None and (not isinstance(frame, str) or frame.lower() not in SYSTEM_FRAMES):
+        raise fail("frame", f"must be one of {', '.join(SYSTEM_FRAMES)}, got {frame!r}")
+    if not flag("right_handed", True):
+        raise fail(
+            "right_handed",
+            "is false: a left-handed mapping mirrors an axis of the room (OptiTrack, Vicon, "
+            "Qualisys and VRPN all stream right-handed axes) and the vehicle would fly the "
+            "wrong way on it; set up_axis and north_axis instead",
+        )
+    overrides = {}
+    for key in MAPPING_AXES:
+        if key in section:
+            if not isinstance(section[key], str):
+                raise fail(key, f"must be one of +x -x +y -y +z -z, got {section[key]!r}")
+            overrides[key] = section[key]
+    origin = section.get("origin_m", [0.0, 0.0, 0.0])
+    if (
+        not isinstance(origin, list)
+        or len(origin) != 3
+        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in origin)
+        or not all(math.isfinite(v) for v in origin)
+    ):
+        raise fail("origin_m", f"must be 3 finite numbers, got {origin!r}")
+    settings = MocapSettings(
+        url=url,
+        frame=None if frame is None else frame.lower(),
+        overrides=overrides,
+        yaw_offset_deg=number("yaw_offset_deg", d.yaw_offset_deg),
+        origin_m=(float(origin[0]), float(origin[1]), float(origin[2])),
+        forward=flag("forward", d.forward),
+        message=choice("message", d.message, MESSAGES),
+        position_std_m=positive("position_std_m", d.position_std_m),
+        angle_std_deg=positive("angle_std_deg", d.angle_std_deg),
+        measurement=choice("measurement", d.measurement, MEASUREMENTS),
+        agreement_m=positive("agreement_m", d.agreement_m),
+        check_move_m=number("check_move_m", d.check_move_m, 0.0),
+    )
+    try:  # the axes: each a signed axis, north and forward horizontal
+        system = parse_mocap_url(url).system if url is not None else "optitrack"
+        base = mapping_for(settings.frame or system)
+        dataclasses.replace(base, **overrides)
+    except ValueError as exc:
+        raise ProfileError(f"{where}: field 'mocap': {exc}") from None
+    return settings

@@ -1,4 +1,5 @@
-"""Raw motion-capture samples of a trial: the record and its CSV file.
+"""Raw motion-capture samples of a trial: the record, its CSV file, and the trial's mocap on
+its grid (:class:`MocapTrial`).
 
 One row per frame the mocap client delivered, as received, before any frame mapping::
 
@@ -29,9 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from gcs.errors import RunLogError
-from gcs.io.runlog import atomic_write_text
+from gcs.io.atomic import atomic_write_text
 
-__all__ = ["MOCAP_COLUMNS", "MocapSeries", "write_mocap_csv", "read_mocap_csv"]
+__all__ = ["MOCAP_COLUMNS", "MocapSeries", "MocapTrial", "write_mocap_csv", "read_mocap_csv"]
 
 MOCAP_COLUMNS = (
     "seq", "t_receipt_s", "t_mocap_s", "tracked",
@@ -146,6 +147,26 @@ def _row(series: MocapSeries, i: int) -> str:
         *(num(v, ".9g") for v in pose),
     ]
     return ",".join(fields)
+
+
+@dataclass(frozen=True)
+class MocapTrial:
+    """The motion capture of one trial.
+
+    Parameters
+    ----------
+    series : MocapSeries
+        Raw samples received during the trial (system axes, receipt times).
+    pos_ned_m : numpy.ndarray
+        Mocap position on the trial's grid, shape (N+1, 3) [m, NED]; NaN where no tracked
+        samples bracket the grid time within :data:`gcs.flight.mocap.link.GRID_MAX_GAP_S`.
+    lag_s : float or None
+        How far the vehicle's estimate lags behind the mocap [s] (None: not measurable).
+    """
+
+    series: MocapSeries
+    pos_ned_m: np.ndarray
+    lag_s: float | None
 
 
 def write_mocap_csv(path: Path, series: MocapSeries) -> None:

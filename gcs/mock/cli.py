@@ -179,7 +179,10 @@ def run_mock(
     arena : ArenaOptions or None
         Serve the vehicle's true pose over NatNet (a mock OptiTrack Motive).
     """
-    from gcs.mock.server import MockServer, write_json_atomic
+    import json
+
+    from gcs.io.atomic import atomic_write_text
+    from gcs.mock.server import MockServer
 
     cfg = load_mock_config(config)
     server = MockServer(cfg, faults, seed=seed, port=port, gcs_port=gcs_port, arena=arena)
@@ -205,7 +208,7 @@ def run_mock(
         server.run()
     finally:
         if stats_out is not None:
-            write_json_atomic(stats_out, server.stats())
+            atomic_write_text(stats_out, json.dumps(server.stats()))
 
 
 def mock_command(

@@ -33,13 +33,14 @@ import math
 import zlib
 from dataclasses import dataclass
 
+from gcs.core.frames import EARTH_RADIUS_M
+
 __all__ = [
     "FenceItem",
     "FenceTransfer",
     "Geofence",
     "Reply",
     "breach_kinds",
-    "ned_to_global",
     "MAV_MISSION_TYPE_FENCE",
     "MAX_FENCE_ITEMS",
     "RETRY_S",
@@ -47,7 +48,6 @@ __all__ = [
     "CHECK_PERIOD_S",
 ]
 
-EARTH_RADIUS_M = 6_371_000.0
 MAV_MISSION_TYPE_FENCE = 1
 MAX_FENCE_ITEMS = 64
 """Largest fence PX4 SITL stores (its dataman's fence slots) [items]."""
@@ -71,28 +71,6 @@ _GLOBAL_FRAMES = (0, 3, 5, 6)  # GLOBAL, GLOBAL_RELATIVE_ALT, GLOBAL_INT, GLOBAL
 # MAV_MISSION_RESULT values
 ACCEPTED, ERROR, UNSUPPORTED_FRAME, UNSUPPORTED, NO_SPACE = 0, 1, 2, 3, 4
 OPERATION_CANCELLED = 15
-
-
-def ned_to_global(
-    origin: tuple[float, float, float], pos_ned_m: tuple[float, float, float] | list[float]
-) -> tuple[float, float, float]:
-    """Latitude [deg], longitude [deg] and altitude AMSL [m] of a local point.
-
-    Parameters
-    ----------
-    origin : tuple of float
-        The local frame's origin: latitude, longitude [deg], altitude AMSL [m].
-    pos_ned_m : sequence of float
-        The point, local NED [m].
-
-    Returns
-    -------
-    tuple of float
-    """
-    lat0, lon0, alt0 = origin
-    lat = lat0 + math.degrees(pos_ned_m[0] / EARTH_RADIUS_M)
-    lon = lon0 + math.degrees(pos_ned_m[1] / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
-    return lat, lon, alt0 - pos_ned_m[2]
 
 
 def _distance_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:

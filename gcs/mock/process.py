@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
-import subprocess
 import sys
 import tempfile
-import threading
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any
+from typing import Any
 
 from gcs.errors import VehicleError
+from gcs.mock.child import ChildNotReady, ChildProgram
 from gcs.mock.cli import faults_cli_args
 from gcs.mock.config import Faults
 from gcs.mock.mocap.arena import ArenaOptions
@@ -24,9 +22,9 @@ __all__ = ["MockProcess"]
 class MockProcess:
     """Context manager around ``python -m gcs.mock``.
 
-    On entry it starts the mock, waits for its ``READY <url>`` line (an event set by a reader
-    thread, no polling) and exposes :attr:`url`. On exit it sends SIGTERM, waits, kills as a
-    fallback, and loads the statistics file into :attr:`stats`.
+    On entry it starts the mock (:class:`gcs.mock.child.ChildProgram`: its own session, its
+    ``READY <url>`` line awaited) and exposes :attr:`url`. On exit it sends SIGTERM, waits,
+    kills as a fallback, and loads the statistics file into :attr:`stats`.
 
     Parameters
     ----------
@@ -92,10 +90,7 @@ class MockProcess:
         self.port = 0
         self.pid = 0
         self.stats: dict[str, Any] | None = None
-        self._proc: subprocess.Popen[str] | None = None
-        self._ready = threading.Event()
-        self._stderr: IO[str] | None = None
-        self._reader: threading.Thread | None = None
+        self._child: ChildProgram | None = None
 
     def argv(self) -> list[str]:
         """Command line of the mock.
@@ -120,26 +115,16 @@ class MockProcess:
         if self._own_stats:
             self._tmpdir = tempfile.TemporaryDirectory(prefix="gcs-mock-")
             self.stats_path = Path(self._tmpdir.name) / "stats.json"
-        self._stderr = tempfile.TemporaryFile("w+")
-        self._proc = subprocess.Popen(
-            self.argv(),
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
-            stderr=self._stderr,
-            text=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            # own session: a Ctrl-C in the terminal reaches gcs, which lands the mock, and not
-            # the mock itself (which would die before it could be landed)
-            start_new_session=True,
+        self._child = ChildProgram(
+            self.argv(), self.ready_timeout_s, self.stop_timeout_s, self._read_line
         )
-        self.pid = self._proc.pid
-        self._reader = threading.Thread(target=self._read_stdout, daemon=True)
-        self._reader.start()
-        if not self._ready.wait(self.ready_timeout_s) or not self.url:
-            why = self._failure()
-            self._terminate()
+        try:
+            self.url = self._child.start()
+        except ChildNotReady as exc:
             self._cleanup()
-            raise VehicleError(f"mock drone did not start: {why}")
+            raise VehicleError(f"mock drone did not start: {exc}") from None
+        self.pid = self._child.pid
+        self.port = int(self.url.rsplit(":", 1)[1])
         return self
 
     def __exit__(
@@ -148,7 +133,8 @@ class MockProcess:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self._terminate()
+        if self._child is not None:
+            self._child.stop()
         try:
             if self.stats_path is not None and self.stats_path.exists():
                 self.stats = json.loads(self.stats_path.read_text())
@@ -161,58 +147,16 @@ class MockProcess:
         Lets a test time the loss on an event it saw (e.g. gcs printed that a trial started)
         instead of guessing from the clock how long take-off and settling will take.
         """
-        assert self._proc is not None, "the mock is not running"
-        self._proc.send_signal(signal.SIGUSR1)
+        if self._child is None:
+            raise RuntimeError("the mock is not running")
+        self._child.send_signal(signal.SIGUSR1)
 
     # -- internals ------------------------------------------------------------------------
-    def _read_stdout(self) -> None:
-        assert self._proc is not None and self._proc.stdout is not None
-        for line in self._proc.stdout:
-            if line.startswith("MOCAP ") and not self.mocap_url:
-                self.mocap_url = line.split(None, 1)[1].strip()
-            if line.startswith("READY ") and not self.url:
-                self.url = line.split(None, 1)[1].strip()
-                self.port = int(self.url.rsplit(":", 1)[1])
-                self._ready.set()
-        self._ready.set()  # EOF: the process ended (before READY if url is empty)
-
-    def _failure(self) -> str:
-        assert self._proc is not None
-        code = self._proc.poll()
-        if code is None and self._ready.is_set():
-            # stdout reached EOF: the process is exiting, but may not have been reaped yet
-            try:
-                code = self._proc.wait(self.stop_timeout_s)
-            except subprocess.TimeoutExpired:
-                code = None
-        tail = ""
-        if self._stderr is not None:
-            self._stderr.seek(0)
-            lines = [ln.strip() for ln in self._stderr.read().splitlines() if ln.strip()]
-            tail = lines[-1] if lines else ""
-        if code is None:
-            return f"no READY line within {self.ready_timeout_s:g} s"
-        return f"exited with code {code}" + (f" ({tail})" if tail else "")
-
-    def _terminate(self) -> None:
-        proc = self._proc
-        if proc is None or proc.poll() is not None:
-            return
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(self.stop_timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    def _read_line(self, line: str) -> None:
+        if line.startswith("MOCAP ") and not self.mocap_url:
+            self.mocap_url = line.split(None, 1)[1].strip()
 
     def _cleanup(self) -> None:
-        if self._reader is not None:
-            self._reader.join(1.0)
-        if self._proc is not None and self._proc.stdout is not None:
-            self._proc.stdout.close()
-        if self._stderr is not None:
-            self._stderr.close()
-            self._stderr = None
         if self._tmpdir is not None:
             self._tmpdir.cleanup()
             self._tmpdir = None

@@ -35,15 +35,11 @@ from __future__ import annotations
 
 import dataclasses
 import heapq
-import json
 import math
-import os
 import random
 import select
 import socket
-import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -54,7 +50,7 @@ from gcs.mock.geofence import FenceItem, FenceTransfer, Reply
 from gcs.mock.mocap.arena import Arena, ArenaOptions, quat_from_euler
 from gcs.mock.vehicle import MODE_FROM_CUSTOM, MavResult, Vehicle, encode_param
 
-__all__ = ["MockServer", "STREAMS", "TRUTH_PERIOD_S", "write_json_atomic"]
+__all__ = ["MockServer", "STREAMS", "TRUTH_PERIOD_S"]
 
 # stream name -> MAVLink message id (rates in RatesConfig are named <stream>_hz)
 STREAMS = {
@@ -102,27 +98,6 @@ _TRUTH_KEYS = (
 )  # fmt: skip
 _MISSION_PLANNER = 190  # MAV_COMP_ID_MISSIONPLANNER, also addressed by mission messages
 _FORCE_MAGIC = 21196
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON through a temporary file in the same directory and ``os.replace``.
-
-    Parameters
-    ----------
-    path : Path
-        Destination.
-    data : Any
-        JSON-serialisable object.
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 class _Writer:

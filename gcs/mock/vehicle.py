@@ -58,9 +58,10 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from gcs.core.frames import ned_to_global
 from gcs.mock.config import MockConfig
 from gcs.mock.estimator import InjectedFault
-from gcs.mock.geofence import CHECK_PERIOD_S, FenceItem, Geofence, breach_kinds, ned_to_global
+from gcs.mock.geofence import CHECK_PERIOD_S, FenceItem, Geofence, breach_kinds
 from gcs.mock.physics import QuadPhysics, Target
 
 __all__ = [
@@ -434,7 +435,8 @@ class Vehicle:
         tuple of float
         """
         p = self.cfg.px4
-        return ned_to_global((p.home_lat_deg, p.home_lon_deg, p.home_alt_m), pos_ned_m)
+        lat, lon = ned_to_global(p.home_lat_deg, p.home_lon_deg, pos_ned_m[0], pos_ned_m[1])
+        return lat, lon, p.home_alt_m - pos_ned_m[2]
 
     def fence_stored(self, items: tuple[FenceItem, ...]) -> None:
         """A fence transfer ended: put its items in force as PX4's navigator does.

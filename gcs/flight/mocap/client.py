@@ -9,7 +9,7 @@ and calls ``on_sample`` for each frame (in that thread: hand work to the asyncio
 setpoint loop can poll :meth:`MocapClient.latest` without ever waiting for the mocap.
 
 Samples are in the mocap system's axes; map them with
-:class:`gcs.flight.mocap.frames.FrameMapping`.
+:class:`gcs.core.frames.FrameMapping`.
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ import numpy as np
 
 from gcs.errors import MocapError
 from gcs.flight.mocap.reader import HEADER, SAMPLE
-from gcs.flight.mocap.source import MocapSource
 from gcs.io.mocap_samples import MocapSeries
+from gcs.io.mocap_source import MocapSource
 
 __all__ = ["MocapSample", "MocapClient", "series_of"]
 

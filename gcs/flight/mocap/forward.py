@@ -34,8 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gcs.core.frames import FrameMapping, quat_to_matrix
 from gcs.flight.mocap.client import MocapSample
-from gcs.flight.mocap.frames import FrameMapping, quat_to_matrix
 
 __all__ = ["VisionPose", "vision_pose", "pose_covariance", "VisionForwarder", "ForwardStats"]
 

@@ -31,8 +31,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from gcs.core.frames import quat_angle_rad
 from gcs.errors import ProfileError
-from gcs.flight.mocap.frames import quat_angle_rad
 from gcs.io.mocap_samples import MocapSeries
 
 __all__ = [

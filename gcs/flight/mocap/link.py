@@ -19,50 +19,27 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from gcs.core.frames import FrameMapping
 from gcs.errors import MocapError
 from gcs.flight.mocap.client import MocapClient, MocapSample
 from gcs.flight.mocap.forward import VisionForwarder
-from gcs.flight.mocap.frames import FrameMapping
 from gcs.flight.mocap.health import HealthLimits, stream_problem
 from gcs.flight.mocap.latency import estimate_lag_s
-from gcs.flight.mocap.settings import MocapSettings
-from gcs.flight.mocap.source import MocapSource
-from gcs.io.mocap_samples import MocapSeries
+from gcs.flight.trial import TrialRecording, align_to_grid
+from gcs.io.mocap_samples import MocapSeries, MocapTrial
+from gcs.io.mocap_source import MocapSource
+from gcs.io.settings import MocapSettings
 
-if TYPE_CHECKING:
-    from gcs.flight.trial import TrialRecording
-
-__all__ = ["MocapLink", "MocapTrial", "trial_mocap", "HEALTH_WINDOW_S", "GRID_MAX_GAP_S"]
+__all__ = ["MocapLink", "trial_mocap", "HEALTH_WINDOW_S", "GRID_MAX_GAP_S"]
 
 HEALTH_WINDOW_S = 0.5
 """The samples the health checks judge [s]."""
 GRID_MAX_GAP_S = 0.1
 """A grid point between tracked samples further apart than this gets no mocap value [s]."""
-
-
-@dataclass(frozen=True)
-class MocapTrial:
-    """The motion capture of one trial.
-
-    Parameters
-    ----------
-    series : MocapSeries
-        Raw samples received during the trial (system axes, receipt times).
-    pos_ned_m : numpy.ndarray
-        Mocap position on the trial's grid, shape (N+1, 3) [m, NED]; NaN where no tracked
-        samples bracket the grid time within :data:`GRID_MAX_GAP_S`.
-    lag_s : float or None
-        How far the vehicle's estimate lags behind the mocap [s] (None: not measurable).
-    """
-
-    series: MocapSeries
-    pos_ned_m: np.ndarray
-    lag_s: float | None
 
 
 class MocapLink:
@@ -267,8 +244,6 @@ def trial_mocap(
     -------
     MocapTrial
     """
-    from gcs.flight.trial import align_to_grid
-
     grid = recording.t_s
     pos = np.full((grid.size, 3), np.nan)
     clock = recording.clock

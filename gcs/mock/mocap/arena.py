@@ -23,10 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from gcs.flight.mocap.frames import mapping_for
+from gcs.core.frames import mapping_for
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import in_room
-from gcs.mock.mocap.server import FAULT_KINDS, FaultWindow, NatNetServer
+from gcs.mock.mocap.server import FaultWindow, NatNetServer, parse_fault_window
 
 __all__ = ["ArenaFault", "ArenaOptions", "Arena", "quat_from_euler", "parse_arena_fault"]
 
@@ -69,7 +69,7 @@ class ArenaOptions:
     noise_m : float
         Marker noise, standard deviation per coordinate [m].
     room : str
-        Named convention of the room's axes (:data:`gcs.flight.mocap.frames.SYSTEM_FRAMES`).
+        Named convention of the room's axes (:data:`gcs.core.frames.SYSTEM_FRAMES`).
     yaw_offset_deg : float
         Heading in NED of the room's north axis [deg].
     body : str
@@ -256,15 +256,5 @@ def parse_arena_fault(kind: str, text: str) -> ArenaFault:
     ValueError
         Not that form, or a bad window.
     """
-    if kind not in FAULT_KINDS:
-        raise ValueError(f"unknown mocap fault {kind!r}")
-    count = 5 if kind == "jump" else 2
-    try:
-        values = [float(v) for v in text.split(":")]
-    except ValueError:
-        values = []
-    if len(values) != count:
-        form = "START:DURATION:DX:DY:DZ" if kind == "jump" else "START:DURATION"
-        raise ValueError(f"--mocap-{kind} must be {form}, got {text!r}")
-    offset = tuple(values[2:]) if kind == "jump" else (0.0, 0.0, 0.0)
-    return ArenaFault(kind, values[0], values[1], offset)  # type: ignore[arg-type]
+    window = parse_fault_window(kind, text, f"--mocap-{kind}")
+    return ArenaFault(kind, window.start_s, window.duration_s, window.offset_m)

@@ -9,10 +9,10 @@ from typing import Annotated
 
 import typer
 
-from gcs.flight.mocap.frames import SYSTEM_FRAMES, mapping_for
+from gcs.core.frames import SYSTEM_FRAMES, mapping_for
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
-from gcs.mock.mocap.server import FaultWindow, NatNetServer
+from gcs.mock.mocap.server import FaultWindow, NatNetServer, parse_fault_window
 
 __all__ = ["mocap_command", "parse_window", "parse_version"]
 
@@ -31,16 +31,8 @@ def parse_window(kind: str, text: str) -> FaultWindow:
     -------
     FaultWindow
     """
-    count = 5 if kind == "jump" else 2
     try:
-        values = [float(v) for v in text.split(":")]
-    except ValueError:
-        values = []
-    if len(values) != count:
-        fmt = "START:DURATION:DX:DY:DZ" if kind == "jump" else "START:DURATION"
-        raise typer.BadParameter(f"--{kind} must be {fmt}, got {text!r}")
-    try:
-        return FaultWindow(kind, values[0], values[1], tuple(values[2:]) or (0.0, 0.0, 0.0))
+        return parse_fault_window(kind, text, f"--{kind}")
     except ValueError as exc:
         raise typer.BadParameter(str(exc)) from exc
 

@@ -2,15 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
 import sys
-import tempfile
-import threading
 from types import TracebackType
 
 from gcs.errors import MocapError
+from gcs.mock.child import ChildNotReady, ChildProgram
 
 __all__ = ["MocapServerProcess"]
 
@@ -18,8 +14,9 @@ __all__ = ["MocapServerProcess"]
 class MocapServerProcess:
     """Context manager around ``python -m gcs.mock.mocap``.
 
-    On entry it starts the program, waits for its ``READY <url>`` line (an event set by a
-    reader thread) and exposes :attr:`url`; on exit it sends SIGTERM and waits.
+    On entry it starts the program (:class:`gcs.mock.child.ChildProgram`: its own session,
+    its ``READY <url>`` line awaited) and exposes :attr:`url`; on exit it sends SIGTERM,
+    waits, and kills as a fallback.
 
     Parameters
     ----------
@@ -44,33 +41,17 @@ class MocapServerProcess:
         self.url = ""
         self.pid = 0
         self.stderr_text = ""
-        self._proc: subprocess.Popen[str] | None = None
-        self._ready = threading.Event()
-        self._stderr = tempfile.TemporaryFile("w+")  # noqa: SIM115 (closed in __exit__)
-
-    def _read_stdout(self) -> None:
-        assert self._proc is not None and self._proc.stdout is not None
-        for line in self._proc.stdout:
-            if line.startswith("READY ") and not self.url:
-                self.url = line.split(maxsplit=1)[1].strip()
-                self._ready.set()
-        self._ready.set()  # ended without READY
+        self._child = ChildProgram(
+            [sys.executable, "-m", "gcs.mock.mocap", *self.args], ready_timeout_s
+        )
 
     def __enter__(self) -> MocapServerProcess:
-        self._proc = subprocess.Popen(
-            [sys.executable, "-m", "gcs.mock.mocap", *self.args],
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
-            stderr=self._stderr,
-            text=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            start_new_session=True,
-        )
-        self.pid = self._proc.pid
-        threading.Thread(target=self._read_stdout, daemon=True).start()
-        if not self._ready.wait(self.ready_timeout_s) or not self.url:
-            self.__exit__(None, None, None)
-            raise MocapError(f"mock motion capture did not start: {self.stderr_text.strip()}")
+        try:
+            self.url = self._child.start()
+        except ChildNotReady as exc:
+            self.stderr_text = self._child.stderr_text
+            raise MocapError(f"mock motion capture did not start: {exc}") from None
+        self.pid = self._child.pid
         return self
 
     def __exit__(
@@ -79,14 +60,5 @@ class MocapServerProcess:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        proc = self._proc
-        if proc is not None and proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        self._stderr.seek(0)
-        self.stderr_text = self._stderr.read()
-        self._stderr.close()
+        self._child.stop()
+        self.stderr_text = self._child.stderr_text

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.flight.mocap.frames import FrameMapping, matrix_to_quat
+from gcs.core.frames import FrameMapping, matrix_to_quat
 
 __all__ = ["NedPose", "Circle", "Hover", "in_room"]
 

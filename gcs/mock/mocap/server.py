@@ -42,10 +42,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gcs.flight.mocap.frames import matrix_to_quat, quat_to_matrix
+from gcs.core.frames import matrix_to_quat, quat_to_matrix
 from gcs.mock.mocap import natnet
 
 __all__ = [
+    "parse_fault_window",
     "CLOCK_HZ",
     "DEFAULT_MARKERS_M",
     "FAULT_KINDS",
@@ -112,6 +113,41 @@ class FaultWindow:
         bool
         """
         return self.start_s <= t_s < self.start_s + self.duration_s
+
+
+def parse_fault_window(kind: str, text: str, option: str) -> FaultWindow:
+    """Parse a fault option ``START:DURATION`` (``START:DURATION:DX:DY:DZ`` for a jump).
+
+    Parameters
+    ----------
+    kind : str
+        Fault kind (:data:`FAULT_KINDS`).
+    text : str
+        Option value [s, s, m, m, m].
+    option : str
+        The option's name, for the message (``--jump``, ``--mocap-jump``).
+
+    Returns
+    -------
+    FaultWindow
+
+    Raises
+    ------
+    ValueError
+        An unknown kind, not that form, or a bad window.
+    """
+    if kind not in FAULT_KINDS:
+        raise ValueError(f"unknown mocap fault {kind!r}")
+    count = 5 if kind == "jump" else 2
+    try:
+        values = [float(v) for v in text.split(":")]
+    except ValueError:
+        values = []
+    if len(values) != count:
+        form = "START:DURATION:DX:DY:DZ" if kind == "jump" else "START:DURATION"
+        raise ValueError(f"{option} must be {form}, got {text!r}")
+    offset = (values[2], values[3], values[4]) if kind == "jump" else (0.0, 0.0, 0.0)
+    return FaultWindow(kind, values[0], values[1], offset)
 
 
 @dataclass(frozen=True)

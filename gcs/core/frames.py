@@ -31,6 +31,12 @@ left-handed system ``A`` and ``B`` are reflections; ``M R B^T`` is still a prope
 
 Quaternions are ``w, x, y, z`` (scalar first, as MAVSDK's ``Quaternion``), Hamilton, active:
 they rotate body vectors into the world frame.
+
+Local NED and latitude/longitude (:func:`ned_to_global`, :func:`global_to_ned`) are PX4's own
+map projection (azimuthal equidistant about the reference, ``lib/geo``): the arena uploaded to
+the autopilot as its geofence, and the mock's GPS.
+
+Bad arguments raise ``ValueError`` (the caller that read them from a file names the file).
 """
 
 from __future__ import annotations
@@ -41,8 +47,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.errors import ProfileError
-
 __all__ = [
     "FrameMapping",
     "SYSTEM_FRAMES",
@@ -50,7 +54,13 @@ __all__ = [
     "quat_to_matrix",
     "matrix_to_quat",
     "quat_angle_rad",
+    "ned_to_global",
+    "global_to_ned",
+    "EARTH_RADIUS_M",
 ]
+
+#: Earth's radius of PX4's map projection (``CONSTANTS_RADIUS_OF_EARTH``) [m].
+EARTH_RADIUS_M = 6_371_000.0
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -58,7 +68,7 @@ _AXES = {"x": 0, "y": 1, "z": 2}
 def _unit(axis: str, field: str) -> np.ndarray:
     text = axis.strip().lower()
     if len(text) != 2 or text[0] not in "+-" or text[1] not in _AXES:
-        raise ProfileError(f"mocap frame: {field} must be one of +x -x +y -y +z -z, got {axis!r}")
+        raise ValueError(f"mocap frame: {field} must be one of +x -x +y -y +z -z, got {axis!r}")
     v = np.zeros(3)
     v[_AXES[text[1]]] = 1.0 if text[0] == "+" else -1.0
     return v
@@ -96,15 +106,15 @@ class FrameMapping:
         for field in ("north_axis", "body_forward_axis"):
             axis = getattr(self, field)
             if axis is not None and abs(float(up @ _unit(axis, field))) > 0.5:
-                raise ProfileError(
+                raise ValueError(
                     f"mocap frame: {field} {axis} must be horizontal, not along up_axis "
                     f"{self.up_axis}"
                 )
         origin = tuple(float(v) for v in self.origin_m)
         if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
-            raise ProfileError(f"mocap frame: origin_m must be 3 finite numbers, got {origin}")
+            raise ValueError(f"mocap frame: origin_m must be 3 finite numbers, got {origin}")
         if not math.isfinite(self.yaw_offset_deg):
-            raise ProfileError("mocap frame: yaw_offset_deg must be finite")
+            raise ValueError("mocap frame: yaw_offset_deg must be finite")
         object.__setattr__(self, "origin_m", origin)
 
     def _frame(self, forward_axis: str) -> np.ndarray:
@@ -253,7 +263,7 @@ def mapping_for(
         base = SYSTEM_FRAMES[convention.lower()]
     except KeyError:
         known = ", ".join(SYSTEM_FRAMES)
-        raise ProfileError(f"mocap frame: unknown convention {convention!r} ({known})") from None
+        raise ValueError(f"mocap frame: unknown convention {convention!r} ({known})") from None
     return dataclasses.replace(base, yaw_offset_deg=yaw_offset_deg, origin_m=origin_m)
 
 
@@ -371,3 +381,60 @@ def _map_quats(quat_wxyz: np.ndarray, fn) -> np.ndarray:
     if r.ndim == 2:
         return matrix_to_quat(fn(r))
     return matrix_to_quat(np.stack([fn(m) for m in r]))
+
+
+def ned_to_global(
+    lat0_deg: float, lon0_deg: float, north_m: float, east_m: float
+) -> tuple[float, float]:
+    """Latitude and longitude of a local point: PX4's map projection (azimuthal equidistant).
+
+    Parameters
+    ----------
+    lat0_deg, lon0_deg : float
+        The local frame's origin [deg, WGS84].
+    north_m, east_m : float
+        The point [m].
+
+    Returns
+    -------
+    tuple of float
+        Latitude and longitude [deg].
+    """
+    lat0, lon0 = math.radians(lat0_deg), math.radians(lon0_deg)
+    x, y = north_m / EARTH_RADIUS_M, east_m / EARTH_RADIUS_M
+    c = math.hypot(x, y)
+    if c == 0.0:
+        return lat0_deg, lon0_deg
+    sin_c, cos_c = math.sin(c), math.cos(c)
+    lat = math.asin(cos_c * math.sin(lat0) + x * sin_c * math.cos(lat0) / c)
+    lon = lon0 + math.atan2(y * sin_c, c * math.cos(lat0) * cos_c - x * math.sin(lat0) * sin_c)
+    return math.degrees(lat), math.degrees(lon)
+
+
+def global_to_ned(
+    lat0_deg: float, lon0_deg: float, lat_deg: float, lon_deg: float
+) -> tuple[float, float]:
+    """Inverse of :func:`ned_to_global`.
+
+    Parameters
+    ----------
+    lat0_deg, lon0_deg : float
+        The local frame's origin [deg].
+    lat_deg, lon_deg : float
+        The point [deg].
+
+    Returns
+    -------
+    tuple of float
+        North and east [m].
+    """
+    lat0, lon0 = math.radians(lat0_deg), math.radians(lon0_deg)
+    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+    cos_d = math.cos(lon - lon0)
+    arg = math.sin(lat0) * math.sin(lat) + math.cos(lat0) * math.cos(lat) * cos_d
+    arg = min(max(arg, -1.0), 1.0)
+    c = math.acos(arg)
+    k = c / math.sin(c) if c > 0.0 else 1.0
+    north = k * (math.cos(lat0) * math.sin(lat) - math.sin(lat0) * math.cos(lat) * cos_d)
+    east = k * math.cos(lat) * math.sin(lon - lon0)
+    return north * EARTH_RADIUS_M, east * EARTH_RADIUS_M

@@ -1,13 +1,58 @@
-"""Settings of the flight layer: stream rates, timeouts, settling and watchdog limits."""
+"""The typed sections of a profile: ``flight``, ``identification`` and ``mocap``.
+
+Frozen dataclasses, built and validated once by :func:`gcs.io.config.profile_from_dict` (the
+refusals name the file and the field) and handed down as ``Profile.flight``,
+``Profile.identification`` and ``Profile.mocap``: no layer below parses YAML again. They live in
+the io layer so that the flight layer, the mock and the commands can all take them.
+
+Every field of the ``mocap`` section is optional; with no section at all, ``--mocap URL`` uses
+the defaults of the URL's system (:data:`gcs.core.frames.SYSTEM_FRAMES`)::
+
+    mocap:
+      url: optitrack://192.168.1.10/drone?interface=192.168.1.20   # --mocap overrides it
+      frame: optitrack        # a named convention; default: the URL's system
+      yaw_offset_deg: 0.0     # heading in NED of the convention's north axis
+      origin_m: [0, 0, 0]     # system coordinates of the NED origin
+      up_axis: +y             # overrides of the convention (rarely needed)
+      north_axis: +x
+      body_forward_axis: +x
+      right_handed: true      # false is refused: it mirrors an axis (see below)
+      forward: true           # send the pose to PX4 as external vision (false: a bridge does)
+      message: odometry       # odometry | vision_position_estimate
+      position_std_m: 0.005   # standard deviation sent with the pose (covariance)
+      angle_std_deg: 1.0
+      measurement: mocap      # mocap | estimate: what learning and e_pos use
+      agreement_m: 0.15       # pre-flight: estimate and mocap this close
+      check_move_m: 0.3       # after take-off: one move per horizontal axis (0: none)
+
+A left-handed mapping is refused: OptiTrack, Vicon, Qualisys and VRPN servers all stream
+right-handed axes, so ``right_handed: false`` mirrors one axis of a real system, and a vehicle
+that navigates on mirrored vision flies away from every setpoint on that axis.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, fields
 
+from gcs.core.frames import FrameMapping, mapping_for
 from gcs.errors import ProfileError
+from gcs.io.mocap_source import MocapSource, parse_mocap_url
 
-__all__ = ["FlightSettings"]
+__all__ = [
+    "FlightSettings",
+    "IdentifySettings",
+    "MocapSettings",
+    "AXES",
+    "EXCITATIONS",
+    "MESSAGES",
+]
+
+#: Horizontal axes: name -> column in the NED arrays.
+AXES = {"x": 0, "y": 1}
+#: Excitations of ``identification.excitation``.
+EXCITATIONS = ("prbs", "multisine")
 
 #: Fields not required to be positive (checked on their own).
 _SIGNED = ("yaw_deg", "hover_before_trial_s", "min_battery_pct")  # zero allowed
@@ -208,3 +253,157 @@ class FlightSettings:
                 f"of 1/t_ilc_s = {1.0 / t_ilc_s:g} Hz"
             )
         return m
+
+
+@dataclass(frozen=True)
+class IdentifySettings:
+    """The profile's ``identification`` section (defaults in brackets).
+
+    Parameters
+    ----------
+    excitation : str
+        ``"prbs"`` [default] or ``"multisine"``.
+    amplitude_m : float
+        Excitation level per axis [m] [0.3]: the PRBS level, or the multisine's peak.
+    bandwidth_hz : float or None
+        PRBS band [Hz] [1.0] (clock ``2.5 x bandwidth``); PRBS only.
+    f_min_hz, f_max_hz : float or None
+        Multisine band [Hz] (required for, and only for, ``multisine``).
+    duration_s : float
+        Length of each of the two experiments [s] [60].
+    past, future : int
+        PBSID windows [samples] [20, 10].
+    order : int or None
+        Model order; None chooses it from the singular values [None].
+    max_delay : int
+        Longest input delay searched [samples] [10].
+    seed : int
+        Base seed of the excitation [1]: experiment e, axis a (x = 0, y = 1) uses
+        ``seed + 2 e + a``.
+    center_ned_m : tuple of float
+        Hover point the excitation is added to, local NED [m] [(0, 0, -1.5)].
+    """
+
+    excitation: str = "prbs"
+    amplitude_m: float = 0.3
+    bandwidth_hz: float | None = 1.0
+    f_min_hz: float | None = None
+    f_max_hz: float | None = None
+    duration_s: float = 60.0
+    past: int = 20
+    future: int = 10
+    order: int | None = None
+    max_delay: int = 10
+    seed: int = 1
+    center_ned_m: tuple[float, float, float] = (0.0, 0.0, -1.5)
+
+    def n_samples(self, t_ilc_s: float) -> int:
+        """Setpoints per experiment, ``round(duration_s / t_ilc_s)``.
+
+        Parameters
+        ----------
+        t_ilc_s : float
+            Sample time [s].
+
+        Returns
+        -------
+        int
+        """
+        return int(round(self.duration_s / t_ilc_s))
+
+    def seed_for(self, experiment: int, axis: str) -> int:
+        """Excitation seed of one axis in one experiment (0 = fit, 1 = validation).
+
+        Parameters
+        ----------
+        experiment : int
+            0 (fitting) or 1 (validation).
+        axis : str
+            ``"x"`` or ``"y"``.
+
+        Returns
+        -------
+        int
+        """
+        return self.seed + 2 * experiment + AXES[axis]
+
+
+MESSAGES = ("odometry", "vision_position_estimate")
+#: Axes of a mapping a ``mocap`` section may set explicitly.
+MAPPING_AXES = ("up_axis", "north_axis", "body_forward_axis")
+
+
+@dataclass(frozen=True)
+class MocapSettings:
+    """A profile's ``mocap`` section, checked.
+
+    Parameters
+    ----------
+    url : str or None
+        Default source (``--mocap`` overrides it).
+    frame : str or None
+        Named convention; None: the source's system.
+    overrides : dict
+        ``up_axis``, ``north_axis``, ``body_forward_axis`` given explicitly.
+    yaw_offset_deg : float
+        Heading in NED of the convention's north axis [deg].
+    origin_m : tuple of float
+        System coordinates of the NED origin [m].
+    forward : bool
+        Send the pose to PX4 as external vision.
+    message : str
+        ``odometry`` or ``vision_position_estimate``.
+    position_std_m : float
+        Position standard deviation sent with each pose [m].
+    angle_std_deg : float
+        Attitude standard deviation sent with each pose [deg].
+    measurement : str
+        ``mocap`` or ``estimate``: what learning and e_pos use when a trial has both.
+    agreement_m : float
+        Pre-flight: largest distance between estimate and mocap [m].
+    check_move_m : float
+        Length of the pre-flight move per horizontal axis [m]; 0 skips it.
+    """
+
+    url: str | None = None
+    frame: str | None = None
+    overrides: dict = dataclasses.field(default_factory=dict)
+    yaw_offset_deg: float = 0.0
+    origin_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    forward: bool = True
+    message: str = "odometry"
+    position_std_m: float = 0.005
+    angle_std_deg: float = 1.0
+    measurement: str = "mocap"
+    agreement_m: float = 0.15
+    check_move_m: float = 0.3
+
+    def mapping(self, source: MocapSource) -> FrameMapping:
+        """The frame mapping for ``source`` (its system's convention unless ``frame`` is set).
+
+        Parameters
+        ----------
+        source : MocapSource
+            Where the poses come from.
+
+        Returns
+        -------
+        FrameMapping
+        """
+        base = mapping_for(self.frame or source.system, self.yaw_offset_deg, self.origin_m)
+        return dataclasses.replace(base, **self.overrides)
+
+    def source(self, url: str | None) -> MocapSource | None:
+        """The source to read: ``url`` (``--mocap``), else the section's own, else None.
+
+        Parameters
+        ----------
+        url : str or None
+            The command line's ``--mocap`` (not ``mock``).
+
+        Returns
+        -------
+        MocapSource or None
+        """
+        chosen = url or self.url
+        return None if chosen is None else parse_mocap_url(chosen)

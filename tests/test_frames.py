@@ -1,5 +1,5 @@
-"""Frame mapping from each mocap convention to NED: one test per convention, quaternions,
-and the invariants (inverse, isometry) as properties."""
+"""Frame maths: each mocap convention to NED (one test per convention), quaternions, the
+invariants (inverse, isometry) as properties, and PX4's map projection."""
 
 from __future__ import annotations
 
@@ -10,12 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs.errors import ProfileError
-from gcs.flight.mocap.frames import (
+from gcs.core.frames import (
     SYSTEM_FRAMES,
     FrameMapping,
+    global_to_ned,
     mapping_for,
     matrix_to_quat,
+    ned_to_global,
     quat_angle_rad,
     quat_to_matrix,
 )
@@ -112,12 +113,12 @@ def test_left_handed_mapping_is_a_mirror() -> None:
     ],
 )
 def test_bad_mapping_is_refused_naming_the_field(kwargs: dict, field: str) -> None:
-    with pytest.raises(ProfileError, match=field):
+    with pytest.raises(ValueError, match=field):
         FrameMapping(**kwargs)
 
 
 def test_unknown_convention_lists_the_known_ones() -> None:
-    with pytest.raises(ProfileError, match="optitrack"):
+    with pytest.raises(ValueError, match="optitrack"):
         mapping_for("motive-yup")
 
 
@@ -197,3 +198,18 @@ def test_vectorised_attitudes_match_single_ones() -> None:
     together = mapping.attitude_to_ned(qs)
     for q, got in zip(qs, together, strict=True):
         np.testing.assert_allclose(got, mapping.attitude_to_ned(q), atol=1e-12)
+
+
+def test_ned_to_global_is_pxs_projection_and_inverts() -> None:
+    lat0, lon0 = 47.3977431, 8.5455947
+    lat, lon = ned_to_global(lat0, lon0, 1000.0, 0.0)
+    assert lat - lat0 == pytest.approx(math.degrees(1000.0 / 6_371_000.0), rel=1e-9)
+    assert lon == pytest.approx(lon0, abs=1e-12)
+    lat, lon = ned_to_global(lat0, lon0, 0.0, 100.0)
+    # east: along the great circle, within a hair of the local parallel's scale
+    assert lon - lon0 == pytest.approx(
+        math.degrees(100.0 / (6_371_000.0 * math.cos(math.radians(lat0)))), rel=1e-6
+    )
+    for n, e in ((3.0, -4.5), (-4.5, 4.5), (0.0, 0.0), (250.0, -120.0)):
+        back = global_to_ned(lat0, lon0, *ned_to_global(lat0, lon0, n, e))
+        np.testing.assert_allclose(back, (n, e), atol=1e-6)
