@@ -391,7 +391,7 @@ def learn(
         f"{outcome.active_constraints} active limits)[/]"
     )
     if outcome.record is not None:
-        from gcs.app.report import decision_lines
+        from gcs.app.report_view import decision_lines
 
         for line in decision_lines(outcome.record):
             console.print(f"  {escape(line)}", highlight=False)
@@ -469,57 +469,9 @@ def report(
     Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
     interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
-    from gcs.app.report import (
-        aborted_attempts,
-        choose_iterations,
-        learning_notes,
-        metrics_json,
-        metrics_table,
-        mocap_lines,
-        parse_iterations,
-        run_learning,
-        run_metrics,
-        session_lines,
-        trial_clock_rates,
-        trial_notes,
-        trial_overview,
-        write_html,
-        write_plots,
-    )
-    from gcs.io.paths import check_output_dir, check_output_file
-    from gcs.io.runlog import RunDir
+    from gcs.app.report_view import show_report
 
-    run = RunDir.open(run_dir)
-    run.profile()  # a damaged manifest is a damaged run, even where the table needs no profile
-    rows = run_metrics(run)
-    entries = trial_overview(run)
-    rates = trial_clock_rates(run)
-    chosen = choose_iterations(run, None if iterations is None else parse_iterations(iterations))
-    if plot is not None:
-        check_output_dir(plot, "--plot")
-    if html is not None:
-        check_output_file(html, "--html")
-    learning = run_learning(run) if run.kind == "learning" else None
-    if as_json:
-        from gcs.io.runlog import json_safe
-
-        out = metrics_json(rows, rates, entries, learning)
-        typer.echo(json.dumps(json_safe(out), indent=2, allow_nan=False))
-    else:
-        console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})", rates, learning))
-        notes = learning_notes(learning) if learning is not None else []
-        for line in (
-            notes
-            + trial_notes(entries, aborted_attempts(run))
-            + session_lines(run)
-            + mocap_lines(run)
-        ):
-            console.print(escape(line), highlight=False)
-    if plot is not None:
-        for path in write_plots(run, plot, chosen):
-            err_console.print(f"wrote {path}")
-    if html is not None:
-        err_console.print(f"wrote {write_html(run, html, chosen)}")
+    show_report(console, err_console, run_dir, as_json, plot, html, iterations)
 
 
 def run() -> None:  # pragma: no cover - console-script entry point alias

@@ -42,10 +42,11 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     fly_synthetic(run, 1)
     result = invoke("report", run.path, "--json")
     assert result.exit_code == 0, result.output
-    rows = json.loads(result.output)
+    rows = json.loads(result.output)["rows"]
     assert [r["iteration"] for r in rows] == [0, 1]
     assert set(rows[0]) == {
-        "iteration", "status", "reason", "epos_m", "epos_pct", "delta_pct", "max_err_m",
+        "iteration", "status", "reason", "epos_m", "epos_pct", "delta_pct", "change_pct",
+        "max_err_m",
         "vehicle_time_rate", "trial", "repeat_of", "sp_rms_m", "sp_max_m",
     }  # fmt: skip
     # the paper's method flies no repeat: trial and iteration are one; no floor keys
@@ -61,6 +62,9 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     assert rows[1]["epos_m"] < 0.5 * rows[0]["epos_m"]  # learning helped
     expected_delta = 100 * abs(rows[1]["epos_m"] - rows[0]["epos_m"]) / rows[0]["epos_m"]
     assert rows[1]["delta_pct"] == pytest.approx(expected_delta)
+    # the signed change: negative is better (Table IV's |change| cannot tell)
+    expected_change = 100 * (rows[1]["epos_m"] - rows[0]["epos_m"]) / rows[0]["epos_m"]
+    assert rows[1]["change_pct"] == pytest.approx(expected_change) and expected_change < 0
 
 
 def test_report_table_and_plots(tmp_path: Path) -> None:

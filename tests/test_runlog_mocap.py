@@ -10,7 +10,8 @@ import pytest
 from synthetic import SHORT, fly_synthetic, profile
 
 from gcs.app.learn import learn_run, trial_errors
-from gcs.app.report import mocap_lines, run_metrics
+from gcs.app.report import run_metrics
+from gcs.app.report_view import mocap_lines
 from gcs.errors import RunLogError
 from gcs.io.config import trajectory_from_dict
 from gcs.io.mocap_samples import MocapSeries, read_mocap_csv

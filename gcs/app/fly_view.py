@@ -21,7 +21,7 @@ from gcs.app.fly import (
     start_run,
 )
 from gcs.app.learn import LearnOutcome, iteration_of, repeat_of
-from gcs.app.report import decision_lines, metrics_table
+from gcs.app.report_view import decision_lines, metrics_table
 from gcs.core.metrics import IterationMetrics
 from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
@@ -329,6 +329,7 @@ def fly_with_display(
                 on_learn,
                 until_converged,
                 mocap=link,
+                mock_seed=seed if use_mock else None,
             )
     except KeyboardInterrupt:
         console.print(
@@ -339,9 +340,10 @@ def fly_with_display(
     except GcsError as exc:
         console.print(f"[dim]completed trials are in {run.path}[/]")
         raise exc
-    from gcs.app.report import run_learning, run_metrics, trial_clock_rates
+    from gcs.app.report import run_facts, run_learning, run_metrics, trial_clock_rates
 
-    title = f"{run.path.name} ({run.algorithm})"
+    title = run_facts(run).title()
     learning = run_learning(run)
-    console.print(metrics_table(run_metrics(run), title, trial_clock_rates(run), learning))
+    rates = trial_clock_rates(run)
+    console.print(metrics_table(run_metrics(run), title, rates, learning, console.width))
     return run

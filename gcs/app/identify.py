@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from gcs.app.figures import save_figure
 from gcs.app.fly import (
     SessionRecorder,
     flight_fence,
@@ -41,7 +42,6 @@ from gcs.app.fly import (
     to_record,
     trial_extra,
 )
-from gcs.app.report import save_figure
 from gcs.core.excitation import multisine, prbs
 from gcs.core.model import DiscreteModel
 from gcs.core.pbsid import (
