@@ -298,3 +298,41 @@ def test_an_internal_error_is_one_line_with_exit_code_1(
     monkeypatch.setenv("GCS_DEBUG", "1")
     result = invoke("learn", run.path)
     assert isinstance(result.exception, KeyError)  # with its traceback
+
+
+def test_help_is_a_manual_short_prose_grouped_options_flags_as_flags() -> None:
+    import re
+
+    for command in ("fly", "identify", "learn", "report"):
+        text = invoke(command, "--help").output
+        head = text.split("╭─", 1)[0]  # the prose before the first panel of options
+        assert len([line for line in head.splitlines() if line.strip()]) <= 10, command
+        assert "Example: gcs " + command in " ".join(head.split()), command
+        assert "<bool>" not in text, command  # a flag takes no value
+    fly = invoke("fly", "--help").output
+    panels = re.findall(r"╭─ (\w+) ─", fly)
+    assert panels == ["Options", "Vehicle", "Learning", "Output", "Safety"], panels
+    flat = " ".join(fly.split())
+    assert "Fly a simulated drone" in flat and "Dry run" not in flat.split("--check")[0]
+    from gcs.io.paths import packaged_names
+
+    for name in (*packaged_names("profile"), *packaged_names("trajectory")):
+        assert name in flat, name  # --profile, --trajectory and --mock-config list them
+    mock_config = flat.split("--mock-config", 1)[1].split("--seed", 1)[0]
+    assert "mock-gps" in mock_config and "antx" not in mock_config
+    # a flag given a value stays a usage error, in one line
+    result = invoke("fly", "--mock", "true", "--check")
+    assert result.exit_code == 2 and len(result.output.strip().splitlines()) == 1
+
+
+def test_shared_options_are_declared_once() -> None:
+    import inspect
+    import re
+
+    import gcs.cli
+
+    source = inspect.getsource(gcs.cli)
+    for option in ("--mock", "--connect", "--mock-config", "--check", "--run", "--logs",
+                   "--algorithm"):  # fmt: skip
+        declared = re.findall(r'Option\(\s*"' + re.escape(option) + '"', source)
+        assert len(declared) == 1, option
