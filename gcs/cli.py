@@ -196,9 +196,9 @@ Check = Annotated[
     typer.Option(
         "--check",
         help="Dry run: validate everything (profile, trajectory or excitation, run, paths, "
-        "URL) and say what would be flown; create and fly nothing. With --connect or --mock "
-        "it also reads the vehicle's parameters against the checklist of "
-        "docs/real-vehicle.md.",
+        "URL) and say what would be flown; create and fly nothing. 'gcs fly --check' also "
+        "reads the vehicle's parameters and judges them against the checklist of "
+        "docs/real-vehicle.md (ok, warn, refuse; --offline skips it).",
         rich_help_panel=SAFETY,
     ),
 ]
@@ -361,6 +361,14 @@ def fly(
     ] = None,
     logs: Logs = DEFAULT_LOGS,
     check: Check = False,
+    offline: Annotated[
+        bool,
+        typer.Option(
+            "--offline",
+            help="With --check: check the files and options only; connect to no vehicle.",
+            rich_help_panel=SAFETY,
+        ),
+    ] = False,
 ) -> None:
     """Fly N learning trials: take off, fly, learn, fly again, land.
 
@@ -395,6 +403,7 @@ def fly(
         check_only=check,
         until_converged=until_converged,
         mocap=mocap,
+        offline=offline,
     )
 
 

@@ -252,7 +252,7 @@ def test_resume_accepts_the_runs_own_files_and_refuses_others(tmp_path: Path) ->
     profile.write_text((Path(__file__).parents[1] / "profiles" / "antx.yaml").read_text())
     result = invoke(
         "fly", "--connect", "udpout://127.0.0.1:9", "--resume", run.path, "--profile", profile,
-        "--check",
+        "--check", "--offline",
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     assert "checked: profile 'antx', trajectory 'tiny'" in result.output

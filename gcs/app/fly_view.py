@@ -11,6 +11,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from gcs.app.fly import (
+    FlyPlan,
     MocapPlan,
     check_mock_config,
     check_url,
@@ -28,7 +29,7 @@ from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStart
 from gcs.flight.mocap.link import MocapLink
 from gcs.io.runlog import RunDir
 
-__all__ = ["fly_with_display", "live_progress", "vehicle_url", "learning_lines"]
+__all__ = ["fly_with_display", "check_vehicle", "live_progress", "vehicle_url", "learning_lines"]
 
 
 @contextlib.contextmanager
@@ -193,6 +194,58 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
     return lines
 
 
+def check_vehicle(
+    console: Console,
+    plan: FlyPlan,
+    connect: str | None,
+    use_mock: bool,
+    mock_config: Path | None,
+    seed: int,
+) -> None:
+    """Read the vehicle's parameters and print the real-vehicle checklist's verdicts.
+
+    Connects (or starts the mock drone), reads every parameter, sends nothing, and judges
+    them for the flight's navigation: motion capture when the plan has one, else GPS
+    (:mod:`gcs.flight.checklist`, docs/real-vehicle.md).
+
+    Parameters
+    ----------
+    console : Console
+        Where the checklist goes.
+    plan : FlyPlan
+        The checked flight.
+    connect : str or None
+        URL of a real vehicle.
+    use_mock : bool
+        Start the mock drone instead.
+    mock_config : Path or None
+        Mock settings.
+    seed : int
+        Mock seed.
+
+    Raises
+    ------
+    VehicleError
+        A parameter is refused (the line names it and the fix), or the vehicle is unreachable.
+    """
+    import asyncio
+
+    from gcs.errors import VehicleError
+    from gcs.flight.checklist import checklist_lines, judge, read_params, refusal
+
+    navigation = "mocap" if plan.mocap is not None else "gps"
+    with vehicle_url(connect, use_mock, mock_config, seed, console) as (url, _):
+        params = asyncio.run(read_params(url, plan.settings))
+    verdicts = judge(params, navigation)
+    console.print(f"checklist for {navigation} (docs/real-vehicle.md), vehicle at {url}:")
+    colour = {"ok": "green", "warn": "yellow", "refuse": "bold red"}
+    for v, line in zip(verdicts, checklist_lines(verdicts), strict=True):
+        console.print(f"[{colour[v.level]}]{escape(line)}[/]", highlight=False)
+    reason = refusal(verdicts)
+    if reason is not None:
+        raise VehicleError(reason)
+
+
 def fly_with_display(
     *,
     console: Console,
@@ -210,6 +263,7 @@ def fly_with_display(
     check_only: bool = False,
     until_converged: bool = False,
     mocap: str | None = None,
+    offline: bool = False,
 ) -> RunDir | None:
     """Validate everything, then set up (or resume) a run and fly it with a live display.
 
@@ -250,6 +304,9 @@ def fly_with_display(
     mocap : str or None
         ``--mocap``: a URL, ``mock`` (the mock's arena), or None (the profile's
         ``mocap.url``, if any).
+    offline : bool
+        With ``check_only``: connect to no vehicle (else its parameters are read and judged
+        against the checklist, :func:`check_vehicle`).
 
     Returns
     -------
@@ -284,6 +341,8 @@ def fly_with_display(
         )
         if plan.mocap is not None:
             console.print(f"checked: {plan.mocap.describe()}")
+        if not offline:
+            check_vehicle(console, plan, connect, use_mock, mock_config, seed)
         return None
     run = start_run(plan)
     settings = plan.settings
