@@ -193,7 +193,7 @@ def test_identify_interrupted_exits_130_and_writes_no_profile(
 
 
 def test_learn_refuses_an_identification_run_and_keeps_its_setpoints(tmp_path: Path) -> None:
-    """The issue's case: `gcs learn` on an interrupted identification run (logs/latest after
+    """A case once seen: `gcs learn` on an interrupted identification run (logs/latest after
     `gcs identify`) overwrote the validation experiment's setpoints."""
     from badinputs import Templates
 

@@ -220,7 +220,7 @@ def learning_step(
 
 
 # =============================================================================================
-# Learning from the whole history of complete trials (issue P5): the floor, a noise model from
+# Learning from the whole history of complete trials: the floor, a noise model from
 # the data, robustness, a safeguard and model refresh. With AdaptiveSettings() (the default:
 # noise "table1", everything else off) plan_next_trial is learning_step on the newest trial,
 # bit for bit.
