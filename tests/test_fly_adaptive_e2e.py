@@ -85,6 +85,7 @@ def test_fly_adaptive_repeats_records_refreshes_resumes_and_stops_when_converged
 
     code, out = finish(gcs("report", run_path, "--json"))
     assert code == 0, out
+    assert json.loads(out)["run"]["seeds"] == [3, 4]  # the mock's seed of each session
     rows = json.loads(out)["rows"]
     assert [(r["trial"], r["iteration"], r["repeat_of"]) for r in rows[:3]] == [
         (0, 0, None), (1, 0, 0), (2, 1, None)

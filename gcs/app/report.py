@@ -77,8 +77,9 @@ class RunFacts:
         ``smoother``, ``kilc`` or ``identify``.
     profile, trajectory : str
         Names of the profile and the trajectory recorded in the manifest.
-    seed : int or None
-        The mock drone's seed of the flights (None on a real vehicle, or not recorded).
+    seeds : tuple of int
+        The mock drone's seed of each flight session, in order (empty on a real vehicle, or
+        where it was not recorded).
     gcs_version : str
         The gcs that created the run.
     created_utc : str
@@ -94,7 +95,7 @@ class RunFacts:
     algorithm: str
     profile: str
     trajectory: str
-    seed: int | None
+    seeds: tuple[int, ...]
     gcs_version: str
     created_utc: str
     n_samples: int
@@ -107,11 +108,22 @@ class RunFacts:
         -------
         str
         """
-        seed = "-" if self.seed is None else str(self.seed)
         return (
             f"{self.run_id} ({self.algorithm}) · profile {self.profile} · trajectory "
-            f"{self.trajectory} · seed {seed} · gcs {self.gcs_version}"
+            f"{self.trajectory} · {self.seed_text()} · gcs {self.gcs_version}"
         )
+
+    def seed_text(self) -> str:
+        """``"seed 3"``, ``"seeds 3, 4"`` (one per session) or ``"seed -"`` (none recorded).
+
+        Returns
+        -------
+        str
+        """
+        if not self.seeds:
+            return "seed -"
+        unique = list(dict.fromkeys(self.seeds))
+        return ("seed " if len(unique) == 1 else "seeds ") + ", ".join(map(str, unique))
 
 
 def run_facts(run: RunDir) -> RunFacts:
@@ -127,14 +139,18 @@ def run_facts(run: RunDir) -> RunFacts:
     RunFacts
     """
     m = run.manifest
-    seeds = {s.get("mock_seed") for s in run.sessions()} - {None}
+    seeds = tuple(
+        s["mock_seed"]
+        for s in run.sessions()
+        if isinstance(s.get("mock_seed"), int) and not isinstance(s.get("mock_seed"), bool)
+    )
     return RunFacts(
         run_id=run.path.resolve().name,
         path=str(run.path),
         algorithm=run.algorithm,
         profile=str(m["profile"].get("name")),
         trajectory=str(m["trajectory"].get("name")),
-        seed=seeds.pop() if len(seeds) == 1 else None,
+        seeds=seeds,
         gcs_version=str(m.get("gcs_version")),
         created_utc=str(m.get("created_utc")),
         n_samples=run.n_samples,

@@ -43,10 +43,9 @@ def run_label(facts: RunFacts) -> str:
     str
         Two lines: the run id and algorithm, then profile, trajectory, seed and gcs version.
     """
-    seed = "-" if facts.seed is None else str(facts.seed)
     return (
         f"{facts.run_id} ({facts.algorithm})\nprofile {facts.profile} · trajectory "
-        f"{facts.trajectory} · seed {seed} · gcs {facts.gcs_version}"
+        f"{facts.trajectory} · {facts.seed_text()} · gcs {facts.gcs_version}"
     )
 
 

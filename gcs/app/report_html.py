@@ -56,12 +56,12 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
     chosen = choose_iterations(run, iterations)
     figures = {name: figure_png(fig) for name, fig in report_figures(run, chosen).items()}
     run_info = run_facts(run)
-    seed = "-" if run_info.seed is None else str(run_info.seed)
     e = html.escape
     facts = [
         ("run", run_info.run_id), ("directory", run_info.path),
         ("algorithm", run_info.algorithm), ("profile", run_info.profile),
-        ("trajectory", run_info.trajectory), ("seed", seed),
+        ("trajectory", run_info.trajectory),
+        ("mock seed", run_info.seed_text().split(" ", 1)[1]),
         ("samples", f"{run_info.n_samples} at {run_info.t_ilc_s:g} s"),
         ("created (UTC)", run_info.created_utc), ("gcs", run_info.gcs_version),
         ("iterations drawn", ", ".join(map(str, chosen))),
