@@ -90,7 +90,7 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
     for name, png in figures.items():
         data = base64.b64encode(png).decode("ascii")
         parts.append(
-            f'<figure><img alt="{name}" src="data:image/png;base64,{data}">'
+            f'<figure id="{name}"><img alt="{name}" src="data:image/png;base64,{data}">'
             f"<figcaption>{e(CAPTIONS[name])}</figcaption></figure>"
         )
     parts.append("</body></html>\n")
