@@ -117,7 +117,10 @@ def test_figures_draw_the_chosen_iterations_for_both_axes(tmp_path: Path) -> Non
         levels = {line.get_ydata()[0] for line in dotted if len(line.get_ydata())}
         assert set(arena[axis]) <= levels  # the arena's edges are drawn
     # estimates exist for trials 0..2 only (learned from them)
-    assert _labels(figures["disturbance"]) == {"from trial 0", "±2σ"}
+    labels = _labels(figures["disturbance"])
+    assert "from trial 0" in labels and len(labels) == 2
+    two_sigma = 1e3 * float(np.median(2 * np.sqrt(run.read_estimate(0)[1])))
+    assert f"±2σ (median {two_sigma:.2g} mm)" in labels
     epos = figures["epos"]
     assert epos.axes[0].get_yscale() == "log"
     right = epos.axes[0].child_axes  # the percentage axis
@@ -406,7 +409,9 @@ def test_xy_marks_the_start_and_the_direction_and_d_has_its_2_sigma_band(tmp_pat
     assert {"start", "direction of flight"} <= _labels(figures["xy"])
     ax = figures["xy"].axes[0]
     arrows = [c for c in ax.get_children() if type(c).__name__ == "Annotation"]
-    assert len(arrows) == 4
+    assert 2 <= len(arrows) <= 4
+    heads = [np.array(a.xy) for a in arrows]  # one arrow per part of the path, none on another
+    assert all(np.hypot(*(h - g)) > 0 for i, h in enumerate(heads) for g in heads[:i])
     ref = run.reference().pos_ned_m
     start = [line for line in ax.get_lines() if line.get_label() == "start"][0]
     assert (start.get_xdata()[0], start.get_ydata()[0]) == (ref[0, 1], ref[0, 0])

@@ -72,15 +72,21 @@ def _fig_xy(
     north, east = ref.pos_ned_m[:, 0], ref.pos_ned_m[:, 1]
     ax.plot(east, north, "k--", lw=1.6, label="reference")
     ax.plot(east[0], north[0], "o", ms=9, mfc="white", mec="k", mew=1.6, zorder=5, label="start")
-    # arrows along the reference, at equal shares of its length: the direction of flight
+    # arrows along the reference at shares of its length, one per part of the path (an eight
+    # flown twice passes each place twice: a second arrow there would say nothing new)
     length = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(north), np.diff(east)))])
-    for share in (0.06, 0.31, 0.56, 0.81):
-        k = int(np.searchsorted(length, share * length[-1]))
-        k = min(max(k, 0), len(north) - 3)
-        ax.annotate(
-            "", xy=(east[k + 2], north[k + 2]), xytext=(east[k], north[k]), zorder=5,
-            arrowprops={"arrowstyle": "-|>", "color": "k", "lw": 1.4, "mutation_scale": 16},
-        )  # fmt: skip
+    size = max(np.ptp(north), np.ptp(east), 1e-9)
+    placed: list[int] = []
+    for share in np.arange(1, 16) / 16:
+        k = min(int(np.searchsorted(length, share * length[-1])), len(north) - 3)
+        apart = all(np.hypot(north[k] - north[i], east[k] - east[i]) > size / 4 for i in placed)
+        moving = np.hypot(north[k + 2] - north[k], east[k + 2] - east[k]) > 1e-6
+        if apart and moving and len(placed) < 4:
+            placed.append(k)
+            ax.annotate(
+                "", xy=(east[k + 2], north[k + 2]), xytext=(east[k], north[k]), zorder=5,
+                arrowprops={"arrowstyle": "-|>", "color": "k", "lw": 1.4, "mutation_scale": 16},
+            )  # fmt: skip
     ax.plot([], [], marker=r"$\rightarrow$", ls="none", color="k", ms=12,
             label="direction of flight")  # fmt: skip
     for j in iterations:
@@ -252,12 +258,15 @@ def _fig_disturbance(plt: Any, run: RunDir, iterations: list[int], label: str) -
         plt, "Learned repetitive disturbance D (learning coordinates), ±2σ shaded", label
     )
     t = np.arange(1, run.n_samples + 1) * run.t_ilc_s
+    # the band is often millimetres on a scale of decimetres: its size is said in the legend
+    two_sigma = 2 * np.sqrt(np.maximum(np.concatenate([p for _, p in estimates.values()]), 0.0))
+    band = f"±2σ (median {1e3 * float(np.median(two_sigma)):.2g} mm)"
     for ax, (name, c) in zip(axs, AXES, strict=True):
         for i, (j, (d, p)) in enumerate(estimates.items()):
             ax.plot(t, d[:, c], lw=1.0, color=colors[j], label=f"from trial {j}")
             sigma = np.sqrt(np.maximum(p[:, c], 0.0))  # the estimate's variance per sample
             ax.fill_between(t, d[:, c] - 2 * sigma, d[:, c] + 2 * sigma, color=colors[j],
-                            alpha=0.18, lw=0, label="±2σ" if i == 0 else None)  # fmt: skip
+                            alpha=0.25, lw=0, label=band if i == 0 else None)  # fmt: skip
         ax.set_ylabel(f"d {name} [m]")
     axs[0].legend(fontsize=8, ncol=len(estimates) + 1, loc="lower left")
     return fig

@@ -26,7 +26,7 @@ _CSS = (
     "body{font-family:sans-serif;max-width:960px;margin:2em auto;color:#222}"
     "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;"
     "text-align:right}th{background:#eee}figure{margin:1.5em 0}img{max-width:100%}"
-    "figcaption{font-size:90%;color:#444}.meta td{text-align:left}"
+    "figcaption{font-size:90%;color:#444}.meta td,td.words,th.words{text-align:left}"
 )
 
 
@@ -68,6 +68,8 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
     ]  # fmt: skip
     learning = run_learning(run) if run.kind == "learning" else None
     headers, cells = table_cells(rows, rates, learning)
+    # words read from the left, numbers from the right
+    words = [' class="words"' if h in ("verdict", "learning step") else "" for h in headers]
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -77,9 +79,9 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
         + "".join(f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in facts)
         + "</table>",
         "<h2>Learning table (paper Table IV)</h2><table><tr>"
-        + "".join(f"<th>{e(h)}</th>" for h in headers)
+        + "".join(f"<th{words[i]}>{e(h)}</th>" for i, h in enumerate(headers))
         + "</tr>",
-        *("<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>"
+        *("<tr>" + "".join(f"<td{words[i]}>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>"
           for row in cells),
         "</table>",
     ]  # fmt: skip
