@@ -4,9 +4,9 @@ Runs :class:`gcs.flight.fence.EstimateMonitor` (the code that watches every flig
 default thresholds (``FlightSettings``, profile ``antx.yaml``'s arena and vehicle limits) over:
 
 - **PX4 SITL, GPS** and **PX4 SITL, vision**: every trial of the shared run directories
-  (``shared/data/px4-sitl``: PX4 v1.16, SIH quadrotor, EKF2 on GPS or on a perfect external
+  (the recorded PX4 v1.16 SITL runs: PX4 v1.16, SIH quadrotor, EKF2 on GPS or on a perfect external
   vision feed), reported position and velocity on the 0.05 s grid;
-- **PX4 capture**: the shared MAVLink capture (``shared/data/px4-sih-offboard.tlog``), every
+- **PX4 capture**: the recorded PX4 SITL MAVLink capture, every
   LOCAL_POSITION_NED PX4 sent while armed (30 Hz: take-off, eights, steps, hovers, landing);
 - **mock-gps**: ``profiles/mock-gps.yaml`` flown offline (its physics and estimator, no
   network) as a flight session: take-off at ``MPC_TKO_SPEED``, the 4 s hold and 10 s hover

@@ -1,4 +1,4 @@
-"""How often a trial with nothing repeatable left meets the P5 targets, offline on the mock.
+"""How often a trial with nothing repeatable left meets the floor-ratio targets (offline, mock).
 
 Flies one setpoint sequence ``--flights`` times through ``gcs.mock.physics.QuadPhysics`` (no
 network; each flight with its own gust seed, the vehicle settled at the start first, as
@@ -10,14 +10,14 @@ learning can do. Against that:
 
 * the scatter of such a trial's e_pos, and of the floor measured from one pair of flights
   (what ``gcs fly`` does with one repeat of trial 0);
-* the chance that such perfect trials meet the targets of issue P5 when compared with a
+* the chance that such perfect trials meet the floor-ratio targets when compared with a
   floor measured from one pair: median of three within 1.15 floors, and none of six above
   1.3 floors (random draws of disjoint flights);
 * the e_pos of the sequence itself (mean over the flights) against the floor, and its
   repeatable part (the e_pos of the mean flight), e.g. for the setpoints a live run learned
   (``--setpoints run/setpoints-008.csv``).
 
-Nothing is asserted; the figures go to the README as they come out.
+Nothing is asserted; the figures go to docs/results.md as they come out.
 
     .venv/bin/python benchmarks/floor_targets.py                        # indoor, the reference
     .venv/bin/python benchmarks/floor_targets.py --mock-config profiles/mock-gps.yaml

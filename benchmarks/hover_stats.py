@@ -1,10 +1,10 @@
 """Hover statistics and verdicts of ``gcs.flight.hover`` on recorded and simulated hovers.
 
-Prints one JSON line per hover: the first second of every PX4 SITL trial of
-``shared/data/px4-sitl`` that starts in hover (GPS and vision), the hovers of 6-9 s in the PX4
-capture ``shared/data/px4-sih-offboard.tlog`` (GPS), the indoor mock's physics hovering 10 s
+Prints one JSON line per hover: the first second of every trial of the recorded PX4 v1.16
+SITL runs that starts in hover (GPS and vision), the hovers of 6-9 s in the recorded PX4 SITL
+MAVLink capture (GPS), the indoor mock's physics hovering 10 s
 (seeds 0-2), and synthetic drifting and oscillating vehicles; then the ranges per group. Needs
-the shared directory beside the checkout (or /work/shared). Same data as tests/test_hover.py.
+the recorded PX4 data (tests/px4_data.py finds it). Same data as tests/test_hover.py.
 
 Usage: ``.venv/bin/python benchmarks/hover_stats.py``
 """

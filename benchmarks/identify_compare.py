@@ -5,7 +5,7 @@ Install it in a separate environment::
 
     python3 -m venv /tmp/bench-venv
     /tmp/bench-venv/bin/pip install sippy_unipi numpy scipy
-    /tmp/bench-venv/bin/pip install -e /work/main --no-deps
+    /tmp/bench-venv/bin/pip install -e . --no-deps      # from the checkout
     /tmp/bench-venv/bin/python benchmarks/identify_compare.py
 
 Without SIPPY the script says so and exits 0. Every case is seeded; the plants are the

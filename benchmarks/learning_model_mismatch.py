@@ -1,6 +1,6 @@
-"""How fast learning the eight can converge when eq. (11) is off by the issue's "roughly 10 %".
+"""How fast learning the eight can converge when eq. (11) is off by "roughly 10 %".
 
-Issue #3 asks that eq. (11) describe the mock's x and y loops with natural frequency, damping
+The requirement was that eq. (11) describe the mock's x and y loops with natural frequency, damping
 and gain off by roughly 10 %, and that learning reach e_pos,2 / e_pos,0 < 5 % and
 e_pos,3 / e_pos,0 < 2 %. This script separates the two: the vehicle is an exact linear loop
 (no noise, gusts, drag, field or limits of the airframe), eq. (11) is the learning model, and

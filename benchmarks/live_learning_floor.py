@@ -2,7 +2,7 @@
 
 Flies ``gcs fly --mock`` (the real command: MAVSDK, MAVLink over UDP, the mock drone in its
 own process), one flight at a time, each under ``flock /tmp/gcs-live.lock``, and builds the
-tables of README "Learning that knows its floor" from the run directories:
+tables of docs/results.md, "Learning that knows its floor", from the run directories:
 
 * ``--set indoor``: the default mock, ``--seeds 0,1,2,3``;
 * ``--set no-gusts``: ``profiles/mock-no-gusts.yaml`` (gusts off, the rest as the default);

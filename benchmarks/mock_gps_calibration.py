@@ -1,6 +1,6 @@
 """The mock-gps profile against the shared PX4 v1.16 SITL data (GPS + EKF2), side by side.
 
-Computes the same statistics on the shared run directories (``shared/data/px4-sitl``, read
+Computes the same statistics on the shared run directories (the recorded PX4 v1.16 SITL runs, read
 only) and on the mock drone's physics flown offline (no network, ``gcs.mock.physics``), and,
 with ``--run DIR``, on a live run directory of the repeat experiment flown on the mock:
 
@@ -19,12 +19,12 @@ with ``--run DIR``, on a live run directory of the repeat experiment flown on th
   60 s PRBS experiments of ``identify/`` (the mock flies the same setpoints): per axis, the
   residual of a least-squares FIR model (3 s of taps plus a constant), its RMS and the share
   of its power below 0.1 Hz, 0.1-0.5 Hz and above 0.5 Hz;
-- **steps**: eight steps of +-1 m on x, 12 s each from hover, as in the shared README
-  (its figures: wn about 1.0 rad/s, zeta 0.5-0.85, gain 0.91, no measurable dead time); the
+- **steps**: eight steps of +-1 m on x, 12 s each from hover, as in the notes of the recorded PX4
+  data (its figures: wn about 1.0 rad/s, zeta 0.5-0.85, gain 0.91, no measurable dead time); the
   mock's mean response of the eight fitted with ``gcs.mock.physics.fit_step_response``, per
   seed: median (range over the seeds);
 - **truth** (mock only): the estimator error against the true position during the trials
-  (the shared README: 0.1-0.2 m RMS horizontally, up to 0.6 m).
+  (the notes of the recorded PX4 data: 0.1-0.2 m RMS horizontally, up to 0.6 m).
 
 The mock offline follows the campaign of ``gcs fly`` as it matters here: take-off hover at the
 start point, hold 4 s, measure 10 s (tolerances from ``gcs.flight.hover.judge_hover`` with the
@@ -236,7 +236,7 @@ def shared_summary(vision: bool = False) -> dict:
 
 FIT_LAGS_S = (0.5, 8.0)  # lags of the autocovariance fit [s]: above the manoeuvre's artefacts
 GUST_GRID = {"gust_sigma_m_s2": (0.2, 0.25, 0.3, 0.35, 0.4), "gust_tau_s": (0.1, 0.2, 0.3, 0.5)}
-TRUTH_RMS_M = 0.15  # the middle of the shared README's 0.1-0.2 m (estimate - truth, horizontal)
+TRUTH_RMS_M = 0.15  # the middle of the recorded PX4 data's 0.1-0.2 m (estimate - truth, horizontal)
 
 
 def disagreement_autocovariance(flights: list[Flight], max_lag: int = 200) -> np.ndarray:

@@ -59,6 +59,7 @@ class OneLineGroup(TyperGroup):
         from typer._click import exceptions as click_exc
         from typer.exceptions import Abort
 
+        _flags_take_no_value(self)
         try:
             rv = super().main(*args, standalone_mode=False, **kwargs)
         except click_exc.NoArgsIsHelpError:  # the help was printed already
@@ -74,6 +75,19 @@ class OneLineGroup(TyperGroup):
         if standalone_mode:
             sys.exit(code)
         return code
+
+
+def _flags_take_no_value(group: TyperGroup) -> None:
+    """Show a boolean flag as ``--mock``, not ``--mock <bool>``: Typer's help prints the
+    type of every option, flags too, although a flag takes no value."""
+    from types import SimpleNamespace
+
+    for command in (group, *group.commands.values()):
+        # --help itself is made on first use and kept: make it now, with the names in use
+        names = SimpleNamespace(help_option_names=["--help"])
+        for param in [*command.params, command.get_help_option(names)]:  # type: ignore[arg-type]
+            if getattr(param, "is_flag", False):
+                param.metavar = ""
 
 
 app = typer.Typer(
@@ -97,6 +111,19 @@ DEFAULT_TRAJECTORY = "eight"
 DEFAULT_LOGS = Path("logs")
 NAMED = "A packaged name ({names}; found from any directory) or a path to a YAML file."
 
+#: The panels of every command's options in --help.
+VEHICLE, LEARNING, OUTPUT, SAFETY = "Vehicle", "Learning", "Output", "Safety"
+
+
+def _names(kind: str, prefix: str = "") -> str:
+    from gcs.io.paths import packaged_names
+
+    return ", ".join(n for n in packaged_names(kind) if n.startswith(prefix)) or "none"
+
+
+# ------------------------------------------------------------ options shared by commands
+# Declared once; a command that needs another wording declares its own.
+
 Algorithm = Annotated[
     str | None,
     typer.Option(
@@ -104,8 +131,89 @@ Algorithm = Annotated[
         "-a",
         help="Disturbance estimator: 'smoother' (the paper's RTS smoother) or 'kilc' "
         "(iteration-domain Kalman filter baseline). Default: the profile's or the run's.",
+        rich_help_panel=LEARNING,
     ),
 ]
+Mock = Annotated[
+    bool,
+    typer.Option(
+        "--mock",
+        help="Fly a simulated drone: start gcs's mock drone (its own process, real MAVLink) "
+        "on a free loopback port. For a dry run that flies nothing, see --check.",
+        rich_help_panel=VEHICLE,
+    ),
+]
+Connect = Annotated[
+    str | None,
+    typer.Option(
+        "--connect",
+        help="MAVSDK connection URL of a real vehicle or PX4 SITL, e.g. udpin://0.0.0.0:14540.",
+        rich_help_panel=VEHICLE,
+    ),
+]
+MockConfig = Annotated[
+    str | None,
+    typer.Option(
+        "--mock-config",
+        help="Mock drone settings with --mock: "
+        + NAMED.format(names=_names("profile", "mock"))
+        + " Default: mock (indoor, gusts).",
+        rich_help_panel=VEHICLE,
+        show_default=False,
+    ),
+]
+Mocap = Annotated[
+    str | None,
+    typer.Option(
+        "--mocap",
+        help="Motion capture: SYSTEM://HOST[:PORT]/RIGID_BODY[?interface=IP] (optitrack, "
+        "vicon, qualisys, vrpn), or 'mock' with --mock (the mock drone's indoor arena, "
+        "vision only). Default: the profile's mocap.url, if any.",
+        rich_help_panel=VEHICLE,
+    ),
+]
+Profile = Annotated[
+    str | None,
+    typer.Option(
+        "--profile",
+        help="Vehicle profile: "
+        + NAMED.format(names=_names("profile"))
+        + f" Default: {DEFAULT_PROFILE}; the run's own where a run is continued or read.",
+        rich_help_panel=LEARNING,
+        show_default=False,
+    ),
+]
+RunPath = Annotated[
+    Path | None,
+    typer.Option("--run", help="Create the new run exactly here.", rich_help_panel=OUTPUT),
+]
+Logs = Annotated[
+    Path,
+    typer.Option("--logs", help="Parent directory of new runs.", rich_help_panel=OUTPUT),
+]
+Check = Annotated[
+    bool,
+    typer.Option(
+        "--check",
+        help="Dry run: validate everything (profile, trajectory or excitation, run, paths, "
+        "URL) and say what would be flown; create and fly nothing. 'gcs fly --check' also "
+        "reads the vehicle's parameters and judges them against the checklist of "
+        "docs/real-vehicle.md (ok, warn, refuse; --offline skips it).",
+        rich_help_panel=SAFETY,
+    ),
+]
+RunArgument = Annotated[Path, typer.Argument(help="Run directory, e.g. logs/latest.")]
+
+EXIT_CODES = (
+    "Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130 "
+    "interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback)."
+)
+FLIGHT_EXIT_CODES = (
+    "Exit codes: 0 done; 2 bad input, named on one line (a file, field or option), or the "
+    "vehicle was unreachable, refused a command, lost the link or aborted a {what} (it was "
+    "landed first); 130 interrupted (Ctrl-C or SIGTERM; the vehicle was landed first{extra}); "
+    "1 an internal error (a bug; GCS_DEBUG=1 shows the traceback)."
+)
 
 
 def one_line_errors(func: Callable[..., Any]) -> Callable[..., Any]:
@@ -146,12 +254,6 @@ def _named(value: str | Path | None, kind: str, option: str) -> Path | None:
     return None if value is None else resolve_named(value, kind, option)
 
 
-def _names(kind: str) -> str:
-    from gcs.io.paths import packaged_names
-
-    return ", ".join(packaged_names(kind)) or "none"
-
-
 def _check_algorithm(algorithm: str | None) -> None:
     from gcs.io.config import ALGORITHMS
 
@@ -173,140 +275,108 @@ def main(
         raise typer.Exit()
 
 
-@app.command()
+FLY_DETAILS = """Before anything is created or connected, everything is checked: the profile (every
+section), the trajectory on the grid that is flown (speed and acceleration as finite
+differences of the samples, the arena), a first learning update (models and setpoint limits
+admit one), the run directory (--run must be new; --resume: a writable learning run whose
+files agree and whose next setpoints keep the arena and the learning's limits), the
+connection URL or the mock's settings. A failure is one line and nothing is written.
+
+Connects through MAVSDK, says what the vehicle navigates on (GPS, vision: PX4's EKF2
+parameters), waits for a healthy local position, arms, takes off to the trajectory's altitude
+and flies to the start point. There it measures the hover (flight.hover_measure_s, 10 s): a
+vehicle that drifts or oscillates is refused; any other sets how close and how still the
+vehicle must be before each trial (the settle), kept in the run's session-SSS.json. Each trial
+streams its setpoints on the vehicle's own clock, records the measured position on the sample
+grid, learns the next trial's setpoints while hovering (the same step as 'gcs learn') and
+prints the new row of the e_pos table. After the last trial it lands and disarms.
+
+With a profile that has learning.adaptive (antx-adaptive): trial 0 is flown again with
+identical setpoints to measure the floor, one flight's non-repeatable error; then every trial
+learns from all the trials so far, and the live table says what each learning step decided
+(learn-JJJ.json, model-JJJ.yaml). --iter counts flights, the repeat included: --iter 7 flies
+j = 0..5.
+
+Safety: Ctrl-C, a lost link, an offboard rejection or any error mid-trial stops streaming,
+holds, lands and disarms; completed trials stay on disk, the interrupted one is marked
+incomplete, and --resume continues from the last complete trial. Setpoints outside the
+profile's arena are never sent. Before a real vehicle's first flight: docs/real-vehicle.md.
+
+Motion capture (--mocap, the profile's mocap section): the rigid body's pose is mapped to NED
+and forwarded to PX4 as external vision; before arming EKF2's parameters are judged, the body
+must be tracked and the estimate agree with the mocap; after take-off one small move per
+horizontal axis must go the right way. A stale, occluded, frozen or jumping stream aborts like
+a lost link (docs/mocap.md).
+
+More examples: gcs fly --mock --profile antx-adaptive --iter 10 --until-converged; gcs fly
+--mock --mocap mock --iter 3; gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --check.
+
+""" + FLIGHT_EXIT_CODES.format(what="trial", extra="")
+
+
+@app.command(epilog=FLY_DETAILS)
 @one_line_errors
 def fly(
-    iterations: Annotated[int, typer.Option("--iter", "-n", min=1, help="Trials to fly.")] = 3,
-    mock: Annotated[
-        bool,
-        typer.Option(
-            "--mock",
-            help="Dry run: start the mock drone on a free loopback port and fly it.",
-        ),
-    ] = False,
-    connect: Annotated[
-        str | None,
-        typer.Option(
-            help="MAVSDK connection URL of a real vehicle or PX4 SITL, e.g. udpin://0.0.0.0:14540.",
-        ),
-    ] = None,
-    profile: Annotated[
-        str | None,
-        typer.Option(
-            help="Vehicle profile. "
-            + NAMED.format(names=_names("profile"))
-            + f" Default: {DEFAULT_PROFILE}; with --resume, the run's own (a different one "
-            "is refused).",
-            show_default=False,
-        ),
-    ] = None,
+    mock: Mock = False,
+    connect: Connect = None,
+    mocap: Mocap = None,
+    mock_config: MockConfig = None,
+    seed: Annotated[
+        int,
+        typer.Option(help="Seed of the mock drone's random gusts.", rich_help_panel=VEHICLE),
+    ] = 0,
+    iterations: Annotated[
+        int, typer.Option("--iter", "-n", min=1, help="Trials to fly.", rich_help_panel=LEARNING)
+    ] = 3,
+    profile: Profile = None,
     trajectory: Annotated[
         str | None,
         typer.Option(
-            help="Trajectory to learn. "
+            help="Trajectory to learn: "
             + NAMED.format(names=_names("trajectory"))
             + f" Default: {DEFAULT_TRAJECTORY}; with --resume, the run's own (a different "
             "one is refused).",
             show_default=False,
+            rich_help_panel=LEARNING,
         ),
     ] = None,
     algorithm: Algorithm = None,
-    run_dir: Annotated[
-        Path | None, typer.Option("--run", help="Create the new run exactly here.")
-    ] = None,
-    resume: Annotated[
-        Path | None,
-        typer.Option(help="Continue this run from its last complete trial."),
-    ] = None,
-    logs: Annotated[Path, typer.Option(help="Parent directory of new runs.")] = DEFAULT_LOGS,
-    mock_config: Annotated[
-        Path | None, typer.Option(help="Mock drone settings (YAML) for --mock.")
-    ] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the mock drone's random gusts.")] = 0,
-    check: Annotated[
-        bool,
-        typer.Option(
-            "--check",
-            help="Validate everything (profile, trajectory, run, paths, URL) and say what "
-            "would be flown; create, connect and fly nothing.",
-        ),
-    ] = False,
     until_converged: Annotated[
         bool,
         typer.Option(
             "--until-converged",
             help="Land as soon as learning has converged: two trials in a row at the floor "
-            "(the repeat of trial 0 measures it) and their mean within one trial's scatter of "
-            "it, so that no further trial could show an improvement. --iter stays the most "
-            "trials flown. Needs a profile with learning.adaptive and a repeat "
+            "(the repeat of trial 0 measures it), their mean within one trial's scatter of "
+            "it. --iter stays the most trials flown. Needs a profile with learning.adaptive "
             "(antx-adaptive).",
+            rich_help_panel=LEARNING,
         ),
     ] = False,
-    mocap: Annotated[
-        str | None,
+    run_dir: RunPath = None,
+    resume: Annotated[
+        Path | None,
         typer.Option(
-            "--mocap",
-            help="Motion capture: SYSTEM://HOST[:PORT]/RIGID_BODY[?interface=IP] (optitrack, "
-            "vicon, qualisys, vrpn), or 'mock' with --mock (the mock drone's indoor arena, "
-            "vision only). Default: the profile's mocap.url, if any.",
+            help="Continue this run from its last complete trial.", rich_help_panel=OUTPUT
         ),
     ] = None,
+    logs: Logs = DEFAULT_LOGS,
+    check: Check = False,
+    offline: Annotated[
+        bool,
+        typer.Option(
+            "--offline",
+            help="With --check: check the files and options only; connect to no vehicle.",
+            rich_help_panel=SAFETY,
+        ),
+    ] = False,
 ) -> None:
     """Fly N learning trials: take off, fly, learn, fly again, land.
 
-    Before anything is created or connected, everything is checked: the profile (every
-    section), the trajectory on the grid that is flown (speed and acceleration as finite
-    differences of the samples, the arena), a first learning update (models and setpoint
-    limits admit one), the run directory (--run must be new; --resume: a writable learning
-    run whose files agree and whose next setpoints keep the arena and the learning's limits),
-    the connection URL or the mock's settings. A failure is one line and nothing is written.
+    Give the vehicle with --connect (a real PX4 or PX4 SITL) or fly the mock drone with
+    --mock; every trial learns from the ones before and prints its row of the e_pos table.
+    Everything is checked before anything is created or flown (--check stops there).
 
-    Connects through MAVSDK, says what the vehicle navigates on (GPS, vision: PX4's EKF2
-    parameters), waits for a healthy local position, arms, takes off to the trajectory's
-    altitude and flies to the start point. There it measures the hover (flight.hover_measure_s,
-    10 s): a vehicle that drifts or oscillates is refused; any other sets how close and how
-    still the vehicle must be before each trial (the settle), printed and kept in the run's
-    session-SSS.json. Each trial streams its setpoints on the vehicle's own clock (PX4's time
-    stamps: a simulator slower than real time still flies the trajectory as designed),
-    records the measured position on the sample grid, learns the next trial's setpoints while
-    hovering (the same step as 'gcs learn') and prints the new row of the e_pos table and the
-    vehicle's clock rate. After the last trial it lands and disarms.
-
-    With a profile that has learning.adaptive (antx-adaptive): trial 0 is flown again with
-    identical setpoints (learning.adaptive.repeats, 1: a repeat, iteration j = 0 still) to
-    measure the floor, one flight's non-repeatable error; then every trial learns from all the
-    trials so far, and the live table says what each learning step decided (a safeguard's fall
-    back to the best trial, a refreshed model and how far it moved, a trial at the floor,
-    converged), as learn-JJJ.json and model-JJJ.yaml in the run record it. --iter counts
-    flights, the repeat included: --iter 7 flies j = 0..5.
-
-    Safety: Ctrl-C, a lost link, an offboard rejection or any error mid-trial stops streaming,
-    holds, lands and disarms; completed trials stay on disk, the interrupted one is marked
-    incomplete, and --resume continues from the last complete trial. A second Ctrl-C while
-    the vehicle lands is ignored. Setpoints outside the profile's arena are never sent.
-
-    Motion capture (--mocap, the profile's mocap section): the rigid body's pose is mapped to
-    NED (mocap.frame, yaw_offset_deg, origin_m; a mirrored mapping is refused) and forwarded
-    to PX4 as external vision from its own thread (mocap.forward). Before arming: EKF2's
-    EV_CTRL, HGT_REF, GPS_CTRL and EV_DELAY are read and judged, the body must be tracked and
-    the estimate agree with the mocap; after take-off one small move per horizontal axis must
-    go the right way in both. A stale, occluded, frozen or jumping stream aborts like a lost
-    link. Every trial keeps its raw samples (mocap-JJJ.csv) and the mocap on its grid;
-    learning and e_pos use the mocap (mocap.measurement).
-
-    Examples:
-
-        gcs fly --mock --iter 3
-
-        gcs fly --mock --profile antx-adaptive --iter 10 --until-converged
-        gcs fly --mock --mocap mock --iter 3
-
-        gcs fly --connect udpin://0.0.0.0:14540 --iter 5 --algorithm kilc --check
-
-    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option), or the
-    vehicle was unreachable, refused a command, lost the link or aborted a trial (it was
-    landed first); 130 interrupted (Ctrl-C or SIGTERM; the vehicle was landed first); 1 an
-    internal error (a bug; GCS_DEBUG=1 shows the traceback).
+    Example: gcs fly --mock --iter 3
     """
     from gcs.app.fly_view import fly_with_display
 
@@ -333,44 +403,52 @@ def fly(
         check_only=check,
         until_converged=until_converged,
         mocap=mocap,
+        offline=offline,
     )
 
 
-@app.command()
+LEARN_DETAILS = (
+    """Estimates the repetitive disturbance D of the newest complete trial (RTS
+smoother or K-ILC), solves the input update of eq. (8) with the run's limits, and writes
+`setpoints-<j+1>.csv` and `estimate-<j>.csv`. Deterministic and idempotent: learning again
+from the same trial writes nothing new, and a file that exists with other content is never
+replaced (refused). A log with NaNs, a wrong length or time grid, files that disagree with
+their names, an identification run, a read-only run directory or a mismatching profile is
+refused and nothing is written. The learned setpoints are checked on their grid against the
+arena, max_step_m and max_deviation_m before they are written.
+
+A run whose profile has learning.adaptive (antx-adaptive) learns from every complete trial
+instead (docs/learning-floor.md): after trial 0 it writes the setpoints of its repeat (trial
+0's, to measure the floor), after that it starts from the models of the previous step and also
+writes `learn-<j>.json` (every decision: noise model and weights, model refresh and how far it
+moved, safeguard, floor verdicts), `model-<j>.yaml` when a model was refreshed (a profile: fly
+it with --profile) and `floor.json`. Every trial 0..j must be complete, and every earlier
+record and model must agree with its name.
+
+"""
+    + EXIT_CODES
+)
+
+
+@app.command(epilog=LEARN_DETAILS)
 @one_line_errors
 def learn(
-    run_dir: Annotated[Path, typer.Argument(help="Run directory, e.g. logs/latest.")],
+    run_dir: RunArgument,
     algorithm: Algorithm = None,
     profile: Annotated[
         str | None,
         typer.Option(
-            help="Profile (name or path) that must match the one recorded in the run's manifest."
+            help="Profile (name or path) that must match the one recorded in the run's manifest.",
+            rich_help_panel=LEARNING,
         ),
     ] = None,
 ) -> None:
     """Learn from the newest complete trial and write the next trial's setpoints.
 
-    Estimates the repetitive disturbance D of the newest complete trial (RTS smoother or
-    K-ILC), solves the input update of eq. (8) with the run's limits, and writes
-    `setpoints-<j+1>.csv` and `estimate-<j>.csv`. Deterministic and idempotent: learning again
-    from the same trial writes nothing new, and a file that exists with other content is never
-    replaced (refused). A log with NaNs, a wrong length or time grid, files that disagree with
-    their names, an identification run, a read-only run directory or a mismatching profile is
-    refused and nothing is written. The learned setpoints are checked on their grid against
-    the arena, max_step_m and max_deviation_m before they are written.
-
-    A run whose profile has learning.adaptive (antx-adaptive) learns from every complete
-    trial instead (docs/learning-floor.md): after trial 0 it writes the setpoints of its
-    repeat (trial 0's, to measure the floor), after that it starts from the models of the
-    previous step and also writes `learn-<j>.json` (every decision: noise model and weights,
-    model refresh and how far it moved, safeguard, floor verdicts), `model-<j>.yaml` when a
-    model was refreshed (a profile: fly it with --profile) and `floor.json`. Every trial
-    0..j must be complete, and every earlier record and model must agree with its name.
+    The offline half of 'gcs fly': what a flight does between two trials, on a run directory
+    (a trial flown by another tool, or again after a change).
 
     Example: gcs learn logs/latest
-
-    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
-    interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
     from gcs.app.learn import learn_run
     from gcs.io.rundir import RunDir
@@ -391,135 +469,85 @@ def learn(
         f"{outcome.active_constraints} active limits)[/]"
     )
     if outcome.record is not None:
-        from gcs.app.report import decision_lines
+        from gcs.app.report_view import decision_lines
 
         for line in decision_lines(outcome.record):
             console.print(f"  {escape(line)}", highlight=False)
 
 
-@app.command()
+REPORT_DETAILS = (
+    """Columns as the paper's Table IV: e_pos,j (eq. 10), e_pos,j / e_pos,0
+(always relative to trial 0: a run without a complete trial 0, or with e_pos,0 = 0, is
+refused), the signed change from the previous trial ('-' after a gap; negative is better),
+and the largest horizontal error; then the vehicle's clock rate against the wall clock. Below
+the table: every missing or incomplete trial, and one line per flight session. Every learning
+run adds the setpoints' RMS distance from the reference per trial; a run whose profile has
+learning.adaptive adds the trial number beside the paper's iteration j, e_pos / floor, the
+verdicts 'at floor' and 'converged', and each learning step's decisions. Every column and
+JSON key is defined in docs/report.md.
+
+The table's title, the JSON's run object, the HTML page and every figure name the run (its
+own id, also for logs/latest), the profile, the trajectory, the mock's seed and the gcs
+version.
+
+Figures (--plot, --html), for both axes: the horizontal path per iteration with its start and
+direction (paper Fig. 4), north and east against time (Fig. 5), the setpoints flown against
+the reference, the max_deviation_m band and the arena, the error against time, e_pos per
+iteration with a percentage axis (Fig. 2), and the learned disturbance with its ±2σ band.
+
+More examples: gcs report logs/latest --html report.html --iterations 0,2,5; gcs report
+logs/latest --json
+
+"""
+    + EXIT_CODES
+)
+
+
+@app.command(epilog=REPORT_DETAILS)
 @one_line_errors
 def report(
-    run_dir: Annotated[Path, typer.Argument(help="Run directory, e.g. logs/latest.")],
+    run_dir: RunArgument,
     as_json: Annotated[
         bool,
         typer.Option(
             "--json",
-            help="Print a JSON list of {iteration, epos_m, epos_pct, delta_pct, max_err_m, "
-            "vehicle_time_rate, trial, repeat_of, sp_rms_m, sp_max_m} per trial; with "
-            "learning.adaptive also the floor (floor_m, floor_scatter_m, floor_ratio, floor_z, "
-            "at_floor, converged) and the learning step's record (learning). 'iteration' is "
-            "the paper's j (a repeat is j = 0), 'trial' the order of flight.",
+            help="Print one JSON document instead of the table: format, version, the run's "
+            "facts and one row per trial (schema: docs/report.md).",
+            rich_help_panel=OUTPUT,
         ),
     ] = False,
     plot: Annotated[
         Path | None,
         typer.Option(
             help="Write the figures here as PNG (created if missing): xy, position, setpoints, "
-            "error, epos, disturbance."
+            "error, epos, disturbance.",
+            rich_help_panel=OUTPUT,
         ),
     ] = None,
     html: Annotated[
         Path | None,
         typer.Option(
             help="Write one self-contained HTML report here (table and figures embedded): "
-            "a single file to mail."
+            "a single file to mail.",
+            rich_help_panel=OUTPUT,
         ),
     ] = None,
     iterations: Annotated[
         str | None,
         typer.Option(
             help="Trials to draw in the figures, e.g. 0,2,5 (each a complete trial). "
-            "Default: 0, 1, 2 and the last."
+            "Default: 0, 1, 2 and the last.",
+            rich_help_panel=OUTPUT,
         ),
     ] = None,
 ) -> None:
     """Show the learning table of a run: one row per complete trial, then what is missing.
 
-    Columns as the paper's Table IV: e_pos,j (eq. 10), e_pos,j / e_pos,0 (always relative to
-    trial 0: a run without a complete trial 0, or with e_pos,0 = 0, is refused), the relative
-    change from the previous trial ('-' after a gap), and the largest horizontal error; then
-    the rate at which the vehicle's clock ran against the wall clock in that trial (1.000 for a
-    real vehicle; a simulator under load runs slower). Below the table: every missing or
-    incomplete trial, and one line per flight session (navigation source, the hover measured
-    before its first trial, the settle tolerance derived from it). --json lists every trial,
-    with its status. Every learning run adds the setpoints' RMS distance from the reference
-    per trial ('sp RMS [m]': what learning adds to the reference).
-
-    A run whose profile has learning.adaptive adds: the trial number beside the paper's
-    iteration j (the repeat of trial 0 is a flight of j = 0); e_pos / floor, the floor being
-    one flight's non-repeatable error measured from the repeat, and the verdict 'at floor'
-    (z = (e_pos - floor) / scatter <= learning.adaptive.floor_z, 2) or 'converged' (two
-    trials in a row at the floor, their mean within one trial's scatter of it: no further
-    trial can show a gain); the learning step's decisions (a safeguard's fall back 'from K,
-    step 0.5', a refreshed model and how far it moved 'model N 26 %'); and below the table the
-    floor and every step's decisions in words. The e_pos figure draws the floor and its band.
-
-    Figures (--plot, --html), for both axes: the horizontal path per iteration (paper Fig. 4),
-    north and east against time (Fig. 5), the setpoints flown against the reference, the
-    max_deviation_m band and the arena, the error against time, e_pos per iteration with a
-    percentage axis (Fig. 2), and the learned disturbance.
-
-    Examples:
-
-        gcs report logs/latest --plot plots/
-
-        gcs report logs/latest --html report.html --iterations 0,2,5
-
-    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
-    interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
+    Example: gcs report logs/latest --plot plots/
     """
-    from gcs.app.report import (
-        aborted_attempts,
-        choose_iterations,
-        learning_notes,
-        metrics_json,
-        metrics_table,
-        mocap_lines,
-        parse_iterations,
-        run_learning,
-        run_metrics,
-        session_lines,
-        trial_clock_rates,
-        trial_notes,
-        trial_overview,
-        write_html,
-        write_plots,
-    )
-    from gcs.io.paths import check_output_dir, check_output_file
-    from gcs.io.rundir import RunDir
+    from gcs.app.report_view import show_report
 
-    run = RunDir.open(run_dir)
-    run.profile()  # a damaged manifest is a damaged run, even where the table needs no profile
-    rows = run_metrics(run)
-    entries = trial_overview(run)
-    rates = trial_clock_rates(run)
-    chosen = choose_iterations(run, None if iterations is None else parse_iterations(iterations))
-    if plot is not None:
-        check_output_dir(plot, "--plot")
-    if html is not None:
-        check_output_file(html, "--html")
-    learning = run_learning(run) if run.kind == "learning" else None
-    if as_json:
-        from gcs.io.records import json_safe
-
-        out = metrics_json(rows, rates, entries, learning)
-        typer.echo(json.dumps(json_safe(out), indent=2, allow_nan=False))
-    else:
-        console.print(metrics_table(rows, f"{run.path.name} ({run.algorithm})", rates, learning))
-        notes = learning_notes(learning) if learning is not None else []
-        for line in (
-            notes
-            + trial_notes(entries, aborted_attempts(run))
-            + session_lines(run)
-            + mocap_lines(run)
-        ):
-            console.print(escape(line), highlight=False)
-    if plot is not None:
-        for path in write_plots(run, plot, chosen):
-            err_console.print(f"wrote {path}")
-    if html is not None:
-        err_console.print(f"wrote {write_html(run, html, chosen)}")
+    show_report(console, err_console, run_dir, as_json, plot, html, iterations)
 
 
 def run() -> None:  # pragma: no cover - console-script entry point alias
@@ -527,17 +555,52 @@ def run() -> None:  # pragma: no cover - console-script entry point alias
     app()
 
 
-@app.command()
+IDENTIFY_DETAILS = """Flies two experiments from hover (take off, settle at
+identification.center_ned_m, fly, settle again, fly, land): trial 0 to fit the model and trial
+1, with other seeds, to validate it. Each adds a PRBS (or multisine) of
+identification.amplitude_m to the hover setpoint on the chosen axes for
+identification.duration_s; setpoints that would leave the arena are refused before take-off.
+The run directory (algorithm 'identify') keeps both trials, so --from-log can identify again
+offline.
+
+Per axis, PBSID-opt (docs/identify.md) fits an innovation model on trial 0 with the profile's
+past/future windows, chooses the order and the input delay, and simulates it free-running on
+trial 1. The table shows order, delay, poles, wn and zeta (Tustin), the continuous transfer
+function, and the validation VAF and fit beside the VAF of the profile's own model. The output
+profile is the input profile with model (x) and model_y (y) replaced by the identified
+discrete state spaces; 'gcs fly --profile' uses it as is.
+
+Too little data, a constant or non-exciting input, NaNs or an incomplete trial are refused
+with one line and exit code 2; no profile is written then. The profile, the excitation
+against the arena, the run and the output paths (--out, --plot) are checked before anything
+is flown or identified. The run's own identified.yaml is written once: identifying the run
+again gives the same bytes, or is refused.
+
+More examples: gcs identify --from-log logs/latest --axis x --out x-only.yaml
+
+""" + FLIGHT_EXIT_CODES.format(what="experiment", extra=", no profile written")
+
+
+@app.command(epilog=IDENTIFY_DETAILS)
 @one_line_errors
 def identify(
-    mock: Annotated[
-        bool,
-        typer.Option("--mock", help="Fly the experiments on the mock drone (free loopback port)."),
-    ] = False,
-    connect: Annotated[
+    mock: Mock = False,
+    connect: Connect = None,
+    mocap: Annotated[
         str | None,
         typer.Option(
-            help="MAVSDK connection URL of a real vehicle or PX4 SITL, e.g. udpin://0.0.0.0:14540.",
+            "--mocap",
+            help="Motion capture (as for gcs fly): a URL or 'mock' with --mock; the experiments "
+            "are then measured by it (mocap.measurement).",
+            rich_help_panel=VEHICLE,
+        ),
+    ] = None,
+    mock_config: MockConfig = None,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            help="Excitation seed (overrides identification.seed); also seeds the mock's gusts.",
+            rich_help_panel=VEHICLE,
         ),
     ] = None,
     from_log: Annotated[
@@ -545,95 +608,43 @@ def identify(
         typer.Option(
             "--from-log",
             help="Identify offline from this identification run directory (nothing is flown).",
+            rich_help_panel=LEARNING,
         ),
     ] = None,
-    profile: Annotated[
-        str | None,
-        typer.Option(
-            help="Input profile (a packaged name or a path): its 'identification' section "
-            "sets the experiments and PBSID, and the output is a copy of it with new models. "
-            f"Default: {DEFAULT_PROFILE} when flying, the run's own profile with --from-log.",
-        ),
-    ] = None,
+    profile: Profile = None,
     axis: Annotated[
         str | None,
         typer.Option(
             help="x (north), y (east) or both (excited at once, independent seeds). Default: "
             "both when flying, the axes the run excited with --from-log.",
+            rich_help_panel=LEARNING,
         ),
     ] = None,
     out: Annotated[
         Path | None,
-        typer.Option(help="Write the identified profile here (default: RUN_DIR/identified.yaml)."),
+        typer.Option(
+            help="Write the identified profile here (default: RUN_DIR/identified.yaml).",
+            rich_help_panel=OUTPUT,
+        ),
     ] = None,
     plot: Annotated[
         Path | None,
         typer.Option(
-            help="Write identify_validation.png (measured vs simulated) and identify_bode.png."
+            help="Write identify_validation.png (measured vs simulated) and identify_bode.png.",
+            rich_help_panel=OUTPUT,
         ),
     ] = None,
-    seed: Annotated[
-        int | None,
-        typer.Option(
-            help="Excitation seed (overrides identification.seed); also seeds the mock's gusts."
-        ),
-    ] = None,
-    run_dir: Annotated[
-        Path | None, typer.Option("--run", help="Create the identification run exactly here.")
-    ] = None,
-    logs: Annotated[Path, typer.Option(help="Parent directory of new runs.")] = DEFAULT_LOGS,
-    mock_config: Annotated[
-        Path | None, typer.Option(help="Mock drone settings (YAML) for --mock.")
-    ] = None,
-    check: Annotated[
-        bool,
-        typer.Option(
-            "--check",
-            help="Validate everything (profile, excitation, run, paths, URL) and stop: create, "
-            "connect, fly and write nothing.",
-        ),
-    ] = False,
-    mocap: Annotated[
-        str | None,
-        typer.Option(
-            "--mocap",
-            help="Motion capture (as for gcs fly): a URL or 'mock' with --mock; the experiments "
-            "are then measured by it (mocap.measurement).",
-        ),
-    ] = None,
+    run_dir: RunPath = None,
+    logs: Logs = DEFAULT_LOGS,
+    check: Check = False,
 ) -> None:
     """Identify the closed loop "position setpoint -> position" with PBSID and write a profile.
 
-    Flies two experiments from hover (take off, settle at identification.center_ned_m, fly,
-    settle again, fly, land): trial 0 to fit the model and trial 1, with other seeds, to
-    validate it. Each adds a PRBS (or multisine) of identification.amplitude_m to the hover
-    setpoint on the chosen axes for identification.duration_s; setpoints that would leave the
-    arena are refused before take-off. The run directory (algorithm 'identify') keeps both
-    trials, so --from-log can identify again offline.
+    Flies two small excitation experiments from hover (or reads them back with --from-log),
+    fits a model per horizontal axis and writes the profile with the identified models: the
+    first thing to do on a new vehicle, before learning (docs/real-vehicle.md).
 
-    Per axis, PBSID-opt (docs/identify.md) fits an innovation model on trial 0 with the
-    profile's past/future windows, chooses the order and the input delay, and simulates it
-    free-running on trial 1. The table shows order, delay, poles, wn and zeta (Tustin), the
-    continuous transfer function, and the validation VAF and fit beside the VAF of the
-    profile's own model. The output profile is the input profile with model (x) and model_y
-    (y) replaced by the identified discrete state spaces; 'gcs fly --profile' uses it as is.
-
-    Too little data, a constant or non-exciting input, NaNs or an incomplete trial are
-    refused with one line and exit code 2; no profile is written then. The profile, the
-    excitation against the arena, the run and the output paths (--out, --plot) are checked
-    before anything is flown or identified. The run's own identified.yaml is written once:
-    identifying the run again gives the same bytes, or is refused.
-
-    Examples:
-
-        gcs identify --mock --out profiles/mock-identified.yaml --plot plots/
-
-        gcs identify --from-log logs/latest --axis x --out x-only.yaml
-
-    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option), or the
-    vehicle was unreachable, refused a command, lost the link or aborted an experiment (it
-    was landed first); 130 interrupted (Ctrl-C or SIGTERM; the vehicle was landed first, no
-    profile written); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
+    Example: gcs identify --mock --out profiles/mock-identified.yaml --plot plots/
     """
     from gcs.app.identify_view import identify_with_display
 

@@ -42,10 +42,11 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     fly_synthetic(run, 1)
     result = invoke("report", run.path, "--json")
     assert result.exit_code == 0, result.output
-    rows = json.loads(result.output)
+    rows = json.loads(result.output)["rows"]
     assert [r["iteration"] for r in rows] == [0, 1]
     assert set(rows[0]) == {
-        "iteration", "status", "reason", "epos_m", "epos_pct", "delta_pct", "max_err_m",
+        "iteration", "status", "reason", "epos_m", "epos_pct", "delta_pct", "change_pct",
+        "max_err_m",
         "vehicle_time_rate", "trial", "repeat_of", "sp_rms_m", "sp_max_m",
     }  # fmt: skip
     # the paper's method flies no repeat: trial and iteration are one; no floor keys
@@ -61,6 +62,9 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     assert rows[1]["epos_m"] < 0.5 * rows[0]["epos_m"]  # learning helped
     expected_delta = 100 * abs(rows[1]["epos_m"] - rows[0]["epos_m"]) / rows[0]["epos_m"]
     assert rows[1]["delta_pct"] == pytest.approx(expected_delta)
+    # the signed change: negative is better (Table IV's |change| cannot tell)
+    expected_change = 100 * (rows[1]["epos_m"] - rows[0]["epos_m"]) / rows[0]["epos_m"]
+    assert rows[1]["change_pct"] == pytest.approx(expected_change) and expected_change < 0
 
 
 def test_report_table_and_plots(tmp_path: Path) -> None:
@@ -190,7 +194,7 @@ def test_identify_interrupted_exits_130_and_writes_no_profile(
 
 
 def test_learn_refuses_an_identification_run_and_keeps_its_setpoints(tmp_path: Path) -> None:
-    """The issue's case: `gcs learn` on an interrupted identification run (logs/latest after
+    """A case once seen: `gcs learn` on an interrupted identification run (logs/latest after
     `gcs identify`) overwrote the validation experiment's setpoints."""
     from badinputs import Templates
 
@@ -249,7 +253,7 @@ def test_resume_accepts_the_runs_own_files_and_refuses_others(tmp_path: Path) ->
     profile.write_text((Path(__file__).parents[1] / "profiles" / "antx.yaml").read_text())
     result = invoke(
         "fly", "--connect", "udpout://127.0.0.1:9", "--resume", run.path, "--profile", profile,
-        "--check",
+        "--check", "--offline",
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     assert "checked: profile 'antx', trajectory 'tiny'" in result.output
@@ -295,3 +299,41 @@ def test_an_internal_error_is_one_line_with_exit_code_1(
     monkeypatch.setenv("GCS_DEBUG", "1")
     result = invoke("learn", run.path)
     assert isinstance(result.exception, KeyError)  # with its traceback
+
+
+def test_help_is_a_manual_short_prose_grouped_options_flags_as_flags() -> None:
+    import re
+
+    for command in ("fly", "identify", "learn", "report"):
+        text = invoke(command, "--help").output
+        head = text.split("╭─", 1)[0]  # the prose before the first panel of options
+        assert len([line for line in head.splitlines() if line.strip()]) <= 10, command
+        assert "Example: gcs " + command in " ".join(head.split()), command
+        assert "<bool>" not in text, command  # a flag takes no value
+    fly = invoke("fly", "--help").output
+    panels = re.findall(r"╭─ (\w+) ─", fly)
+    assert panels == ["Options", "Vehicle", "Learning", "Output", "Safety"], panels
+    flat = " ".join(fly.split())
+    assert "Fly a simulated drone" in flat and "Dry run" not in flat.split("--check")[0]
+    from gcs.io.paths import packaged_names
+
+    for name in (*packaged_names("profile"), *packaged_names("trajectory")):
+        assert name in flat, name  # --profile, --trajectory and --mock-config list them
+    mock_config = flat.split("--mock-config", 1)[1].split("--seed", 1)[0]
+    assert "mock-gps" in mock_config and "antx" not in mock_config
+    # a flag given a value stays a usage error, in one line
+    result = invoke("fly", "--mock", "true", "--check")
+    assert result.exit_code == 2 and len(result.output.strip().splitlines()) == 1
+
+
+def test_shared_options_are_declared_once() -> None:
+    import inspect
+    import re
+
+    import gcs.cli
+
+    source = inspect.getsource(gcs.cli)
+    for option in ("--mock", "--connect", "--mock-config", "--check", "--run", "--logs",
+                   "--algorithm"):  # fmt: skip
+        declared = re.findall(r'Option\(\s*"' + re.escape(option) + '"', source)
+        assert len(declared) == 1, option

@@ -201,8 +201,9 @@ def test_a_divergence_in_hover_aborts_within_a_second(tmp_path: Path) -> None:
 def test_the_incident_a_divergence_during_take_off_is_caught_before_anything_is_streamed(
     tmp_path: Path,
 ) -> None:
-    # issue P7: EKF2's height diverged during take-off; gcs took off, started offboard at the
-    # diverged position and streamed a transit from far outside the arena for ten minutes
+    # as once on PX4 SITL: EKF2's height diverged during take-off; gcs took off, started
+    # offboard at the diverged position and streamed a transit from far outside the arena for
+    # ten minutes
     trajectory = tmp_path / "tiny.yaml"
     trajectory.write_text(yaml.safe_dump(SHORT))
     run_path, stats_path = tmp_path / "run", tmp_path / "stats.json"

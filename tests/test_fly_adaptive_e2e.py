@@ -85,11 +85,12 @@ def test_fly_adaptive_repeats_records_refreshes_resumes_and_stops_when_converged
 
     code, out = finish(gcs("report", run_path, "--json"))
     assert code == 0, out
-    rows = json.loads(out)
+    assert json.loads(out)["run"]["seeds"] == [3, 4]  # the mock's seed of each session
+    rows = json.loads(out)["rows"]
     assert [(r["trial"], r["iteration"], r["repeat_of"]) for r in rows[:3]] == [
         (0, 0, None), (1, 0, 0), (2, 1, None)
     ]  # fmt: skip
-    assert all(r["floor_m"] == floor["epos_m"] for r in rows)
+    assert all(r["floor_m"] == pytest.approx(floor["epos_m"], rel=1e-8) for r in rows)  # 9 digits
     assert rows[2]["sp_rms_m"] > 0.3 and rows[2]["epos_m"] < 0.5 * rows[0]["epos_m"]
 
 

@@ -151,7 +151,7 @@ def test_fly_on_a_slow_simulator_streams_records_and_learns_on_the_vehicle_clock
     assert (run_path / "setpoints-002.csv").exists() and (run_path / "estimate-001.csv").exists()
     code, out = finish(gcs("report", run_path, "--json"))
     assert code == 0, out
-    rows = json.loads(out)
+    rows = json.loads(out)["rows"]
     assert [r["iteration"] for r in rows] == [0, 1]
     assert rows[1]["epos_m"] < 0.6 * rows[0]["epos_m"], rows
     assert rows[1]["vehicle_time_rate"] == pytest.approx(0.9, abs=0.002)

@@ -102,7 +102,7 @@ def test_fuzzed_profiles_are_flown_checked_or_refused_in_one_line(path, action, 
         (ws / "p.yaml").write_text(_dump(_mutate(PROFILE, path, action, value)))
         before = snapshot(ws)
         argv = ["fly", "--connect", UNREACHABLE, "--profile", "p.yaml", "--trajectory",
-                "eight-short", "--check"]  # fmt: skip
+                "eight-short", "--check", "--offline"]  # fmt: skip
         _one_line_or_success(_invoke(ws, argv), "checked: profile")
         assert snapshot(ws) == before
 
@@ -118,7 +118,7 @@ def test_fuzzed_trajectories_are_checked_or_refused_in_one_line(path, action, va
         ws = Path(tmp)
         (ws / "t.yaml").write_text(_dump(_mutate(TRAJECTORY, path, action, value)))
         before = snapshot(ws)
-        argv = ["fly", "--mock", "--trajectory", "t.yaml", "--check"]
+        argv = ["fly", "--mock", "--trajectory", "t.yaml", "--check", "--offline"]
         _one_line_or_success(_invoke(ws, argv), "checked: profile")
         assert snapshot(ws) == before
 
@@ -136,7 +136,7 @@ def test_truncated_yaml_files_are_checked_or_refused_in_one_line(kind, cut, junk
         ws = Path(tmp)
         (ws / "f.yaml").write_text(text[: int(len(text) * cut)] + junk)
         before = snapshot(ws)
-        argv = ["fly", "--mock", f"--{kind}", "f.yaml", "--check"]
+        argv = ["fly", "--mock", f"--{kind}", "f.yaml", "--check", "--offline"]
         _one_line_or_success(_invoke(ws, argv), "checked: profile")
         assert snapshot(ws) == before
 
@@ -240,7 +240,8 @@ def test_damaged_run_directories_are_reported_learned_resumed_or_refused(
         result = _invoke(ws, ["report", "run", "--json"])
         _one_line_or_success(result, '"iteration": 0')
         assert snapshot(ws) == before
-        result = _invoke(ws, ["fly", "--connect", UNREACHABLE, "--resume", "run", "--check"])
+        argv = ["fly", "--connect", UNREACHABLE, "--resume", "run", "--check", "--offline"]
+        result = _invoke(ws, argv)
         _one_line_or_success(result, "checked: profile")
         assert snapshot(ws) == before
         result = _invoke(ws, ["learn", "run"])

@@ -323,7 +323,7 @@ def test_mode_options_are_exclusive(tmp_path: Path) -> None:
 
 def test_help_reads_like_a_manual() -> None:
     text = invoke("identify", "--help").output
-    for word in ("PBSID", "validation", "--from-log", "Examples", "exit code 2"):
+    for word in ("PBSID", "validation", "--from-log", "Example:", "exit code 2"):
         assert word in text
 
 

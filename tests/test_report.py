@@ -12,7 +12,9 @@ import pytest
 from synthetic import make_run
 from typer.testing import CliRunner
 
-from gcs.app.report import report_figures, run_metrics, write_html
+from gcs.app.report import rounded, run_metrics
+from gcs.app.report_figures import report_figures
+from gcs.app.report_html import write_html
 from gcs.cli import app
 from gcs.core.trials import trial_errors
 from gcs.errors import RunLogError
@@ -38,12 +40,12 @@ def test_missing_and_incomplete_trials_are_listed_not_dropped(tmp_path: Path) ->
     assert "trial 1: missing (no trial-001.json), not in the table" in result.output
     assert "trial 3: incomplete (link lost), not in the table" in result.output
     assert "trial 2: incomplete (trial-002.csv without its .json)" in result.output
-    rows = json.loads(invoke("report", run.path, "--json").output)
+    rows = json.loads(invoke("report", run.path, "--json").output)["rows"]
     assert [(r["iteration"], r["status"]) for r in rows] == [
         (0, "complete"), (1, "missing"), (2, "incomplete"), (3, "incomplete")
     ]  # fmt: skip
     (run.path / "x").rename(run.path / "trial-002.json")
-    rows = json.loads(invoke("report", run.path, "--json").output)
+    rows = json.loads(invoke("report", run.path, "--json").output)["rows"]
     assert rows[3]["reason"] == "link lost" and rows[3]["epos_m"] is None
     # trial 2 compared with trial 0, never with a neighbour it does not have
     e0 = trial_errors(run.read_trial(0))[0]
@@ -115,7 +117,10 @@ def test_figures_draw_the_chosen_iterations_for_both_axes(tmp_path: Path) -> Non
         levels = {line.get_ydata()[0] for line in dotted if len(line.get_ydata())}
         assert set(arena[axis]) <= levels  # the arena's edges are drawn
     # estimates exist for trials 0..2 only (learned from them)
-    assert _labels(figures["disturbance"]) == {"from trial 0"}
+    labels = _labels(figures["disturbance"])
+    assert "from trial 0" in labels and len(labels) == 2
+    two_sigma = 1e3 * float(np.median(2 * np.sqrt(run.read_estimate(0)[1])))
+    assert f"±2σ (median {two_sigma:.2g} mm)" in labels
     epos = figures["epos"]
     assert epos.axes[0].get_yscale() == "log"
     right = epos.axes[0].child_axes  # the percentage axis
@@ -206,7 +211,7 @@ def test_a_run_with_a_repeat_reports_trial_and_j_the_floor_verdicts_and_decision
     monkeypatch.setattr(gcs.cli.console, "width", 200)
 
     run = make_adaptive_run(tmp_path, trials=5, gust_m=0.01)
-    rows = json.loads(invoke("report", run.path, "--json").output)
+    rows = json.loads(invoke("report", run.path, "--json").output)["rows"]
     assert [r["trial"] for r in rows] == [0, 1, 2, 3, 4]
     assert [r["iteration"] for r in rows] == [0, 0, 1, 2, 3]  # the paper's j: a repeat is 0
     assert [r["repeat_of"] for r in rows] == [None, 0, None, None, None]
@@ -225,11 +230,11 @@ def test_a_run_with_a_repeat_reports_trial_and_j_the_floor_verdicts_and_decision
         assert r["sp_rms_m"] == pytest.approx(np.sqrt(np.mean(np.sum(dev**2, axis=1))))
         learned = run.path / f"learn-{r['trial']:03d}.json"
         expected = json.loads(learned.read_text()) if learned.exists() else None
-        assert r["learning"] == expected
+        assert r["learning"] == rounded(expected)  # every number to 9 digits
     assert rows[0]["learning"] is None and rows[1]["learning"]["next_iteration"] == 1
     assert rows[0]["sp_rms_m"] == rows[1]["sp_rms_m"] == 0.0 and rows[2]["sp_rms_m"] > 0.5
     out = invoke("report", run.path).output
-    for text in ("trial", "e_pos/floor", "verdict", "learning step", "sp RMS [m]",
+    for text in ("trial", "e/floor", "verdict", "learning step", "sp RMS [m]",
                  "0 (repeat)", "next: repeat of 0", f"e_pos {1e3 * floor:.1f} mm",
                  "after trial 2: model refreshed: north moved"):  # fmt: skip
         assert text in out, text
@@ -252,3 +257,167 @@ def test_the_epos_figure_draws_the_floor_and_the_html_the_decisions(tmp_path: Pa
     path = write_html(run, tmp_path / "r.html")
     text = path.read_text()
     assert "floor (one flight" in text and "learning step" in text and "0 (repeat)" in text
+
+
+# ------------------------------------------------------------------ what a report says it is
+
+SCHEMA = Path(__file__).resolve().parents[1] / "docs" / "report.schema.json"
+_TYPES = {"object": dict, "array": list, "string": str, "boolean": bool, "null": type(None)}
+
+
+def _is(value: object, kind: str) -> bool:
+    if kind == "integer":
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind == "number":
+        return isinstance(value, int | float) and not isinstance(value, bool)
+    return isinstance(value, _TYPES[kind])
+
+
+def _validate(value: object, schema: dict, where: str = "$") -> None:
+    """The subset of JSON Schema docs/report.schema.json uses (type, const, enum, required,
+    properties, additionalProperties, items)."""
+    kinds = schema.get("type")
+    if kinds is not None:
+        kinds = [kinds] if isinstance(kinds, str) else kinds
+        assert any(_is(value, k) for k in kinds), f"{where}: {value!r} is not {kinds}"
+    if "const" in schema:
+        assert value == schema["const"], f"{where}: {value!r} != {schema['const']!r}"
+    if "enum" in schema:
+        assert value in schema["enum"], f"{where}: {value!r} not in {schema['enum']}"
+    if isinstance(value, dict):
+        for key in schema.get("required", []):
+            assert key in value, f"{where}: missing {key!r}"
+        props = schema.get("properties", {})
+        if schema.get("additionalProperties") is False:
+            assert set(value) <= set(props), f"{where}: undocumented {set(value) - set(props)}"
+        for key, sub in props.items():
+            if key in value:
+                _validate(value[key], sub, f"{where}.{key}")
+    if isinstance(value, list) and "items" in schema:
+        for i, item in enumerate(value):
+            _validate(item, schema["items"], f"{where}[{i}]")
+
+
+def _floats(value: object) -> list[float]:
+    if isinstance(value, dict):
+        return [f for v in value.values() for f in _floats(v)]
+    if isinstance(value, list):
+        return [f for v in value for f in _floats(v)]
+    return [value] if isinstance(value, float) else []
+
+
+def test_json_is_a_documented_document_with_the_run_and_rounded_numbers(tmp_path: Path) -> None:
+    from synthetic import make_adaptive_run
+
+    schema = json.loads(SCHEMA.read_text())
+    for run in (make_run(tmp_path / "a", trials=3),
+                make_adaptive_run(tmp_path / "b", trials=4, gust_m=0.01)):  # fmt: skip
+        doc = json.loads(invoke("report", run.path, "--json").output)
+        _validate(doc, schema)
+        assert (doc["format"], doc["version"]) == ("gcs-report", 2)
+        assert doc["run"]["run_id"] == "run" and doc["run"]["profile"] == run.profile().name
+        for value in _floats(doc):
+            assert len(repr(value).lstrip("-").replace(".", "").lstrip("0")) <= 13, value
+        assert doc["rows"][0]["epos_pct"] == 100.0
+
+
+def test_every_key_and_column_is_defined_in_the_docs() -> None:
+    text = (SCHEMA.parent / "report.md").read_text()
+    schema = json.loads(SCHEMA.read_text())
+    keys = [*schema["properties"]["run"]["properties"], *schema["properties"]["rows"]["items"]
+            ["properties"]]  # fmt: skip
+    for key in keys:
+        assert f"`{key}`" in text, key
+    import tempfile
+
+    from synthetic import make_adaptive_run
+
+    from gcs.app.report_text import table_cells
+
+    with tempfile.TemporaryDirectory() as tmp:
+        from gcs.app.report import run_learning, trial_clock_rates
+
+        run = make_adaptive_run(Path(tmp), trials=3, gust_m=0.01)
+        rates = {j: 1.0 for j in trial_clock_rates(run)}
+        headers, _ = table_cells(run_metrics(run), rates, run_learning(run))
+    for header in headers:
+        assert f"`{header}`" in text, header
+
+
+def test_a_report_of_logs_latest_names_the_run_everywhere(tmp_path: Path) -> None:
+    make_run(tmp_path, trials=3)
+    latest = tmp_path / "latest"
+    assert latest.is_symlink()
+    out = invoke("report", latest).output
+    assert "run (smoother)" in out and "latest" not in out.split("\n", 2)[0]
+    doc = json.loads(invoke("report", latest, "--json").output)
+    assert doc["run"]["run_id"] == "run" and doc["run"]["path"] == str(latest)
+    target = tmp_path / "r.html"
+    assert invoke("report", latest, "--html", target).exit_code == 0
+    text = target.read_text()
+    title = text.split("<title>", 1)[1].split("</title>", 1)[0]
+    assert title.startswith("gcs report: run (smoother)") and "profile" in title
+    assert "<h1>gcs report: run</h1>" in text
+    import matplotlib.pyplot as plt
+
+    from gcs.io.rundir import RunDir
+
+    for name, fig in report_figures(RunDir.open(latest), [0, 2]).items():
+        title = fig._suptitle.get_text() if fig._suptitle is not None else ""
+        assert title.count("run (smoother)") == 1, name
+    plt.close("all")
+
+
+@pytest.mark.parametrize("width", [80, None])
+def test_the_table_is_never_cut_at_80_columns_or_in_a_pipe(tmp_path: Path, width) -> None:
+    from synthetic import make_adaptive_run
+
+    run = make_adaptive_run(tmp_path, trials=4, gust_m=0.01)
+    env = {"COLUMNS": str(width)} if width else {}
+    result = runner.invoke(app, ["report", str(run.path)], env=env)  # CliRunner: not a tty
+    assert result.exit_code == 0, result.output
+    assert "…" not in result.output
+    for header in ("e_pos", "e/e0", "change", "verdict", "learning step"):
+        assert header in result.output, header
+    assert max(len(line) for line in result.output.splitlines()[:30]) <= 80
+
+
+def test_the_change_column_is_signed_a_worse_trial_reads_as_worse(tmp_path: Path) -> None:
+    from gcs.app.report import change_pct
+    from gcs.app.report_text import table_cells
+
+    run = make_run(tmp_path, trials=3)
+    rows = run_metrics(run)
+    worse = [rows[0], rows[1], replace_epos(rows[2], rows[1].epos_m * 1.5)]
+    changes = change_pct(worse)
+    assert changes[0] is None and changes[1] < 0 and changes[2] == pytest.approx(50.0)
+    _, cells = table_cells(worse, None, None)
+    assert cells[2][3] == "+50.00" and cells[1][3].startswith("-")
+
+
+def replace_epos(row, epos_m):
+    from dataclasses import replace
+
+    return replace(row, epos_m=epos_m, delta_pct=abs(epos_m - 1.0))
+
+
+def test_xy_marks_the_start_and_the_direction_and_d_has_its_2_sigma_band(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    run = make_run(tmp_path, trials=3)
+    figures = report_figures(run, [0, 1])
+    assert {"start", "direction of flight"} <= _labels(figures["xy"])
+    ax = figures["xy"].axes[0]
+    arrows = [c for c in ax.get_children() if type(c).__name__ == "Annotation"]
+    assert 2 <= len(arrows) <= 4
+    heads = [np.array(a.xy) for a in arrows]  # one arrow per part of the path, none on another
+    assert all(np.hypot(*(h - g)) > 0 for i, h in enumerate(heads) for g in heads[:i])
+    ref = run.reference().pos_ned_m
+    start = [line for line in ax.get_lines() if line.get_label() == "start"][0]
+    assert (start.get_xdata()[0], start.get_ydata()[0]) == (ref[0, 1], ref[0, 0])
+    # the band is d ± 2 sqrt(p) of the recorded estimate
+    d, p = run.read_estimate(0)
+    band = figures["disturbance"].axes[0].collections[0]
+    top = band.get_paths()[0].vertices[:, 1].max()
+    assert top == pytest.approx(float(np.max(d[:, 0] + 2 * np.sqrt(p[:, 0]))))
+    plt.close("all")

@@ -10,7 +10,8 @@ import pytest
 from synthetic import SHORT, fly_synthetic, profile
 
 from gcs.app.learn import learn_run
-from gcs.app.report import mocap_lines, run_metrics
+from gcs.app.report import run_metrics
+from gcs.app.report_text import mocap_lines
 from gcs.core.trials import trial_errors
 from gcs.errors import RunLogError
 from gcs.io.config import trajectory_from_dict

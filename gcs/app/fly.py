@@ -405,6 +405,8 @@ class RunSource(SessionRecorder):
         ``on_row``.
     until_converged : bool
         Fly no further trial once the learning record says learning has converged.
+    mock_seed : int or None
+        The mock drone's seed, kept in the session record (None on a real vehicle).
     """
 
     run: RunDir
@@ -412,6 +414,7 @@ class RunSource(SessionRecorder):
     session: int | None = None
     on_learn: Callable[[LearnOutcome], None] | None = None
     until_converged: bool = False
+    mock_seed: int | None = None
 
     def setpoints_for(self, j: int) -> np.ndarray:
         """Trial j's setpoints from the run directory, refused if any leaves the arena.
@@ -559,6 +562,7 @@ def fly_run(
     on_learn: Callable[[LearnOutcome], None] | None = None,
     until_converged: bool = False,
     mocap: MocapLink | None = None,
+    mock_seed: int | None = None,
 ) -> RunSource:
     """Fly ``iterations`` trials of ``run`` from its next trial, learning between trials.
 
@@ -582,6 +586,8 @@ def fly_run(
         Land as soon as learning has converged (``iterations`` stays the cap).
     mocap : MocapLink or None
         A started motion-capture link (forwarded, checked, watched, logged).
+    mock_seed : int or None
+        The mock drone's seed, recorded in the session (None on a real vehicle).
 
     Returns
     -------
@@ -590,7 +596,9 @@ def fly_run(
     first = run.next_trial()
     if first > 0 and not (run.path / f"setpoints-{first:03d}.csv").exists():
         raise RunLogError(f"{run.path}: no setpoints for trial {first}; run 'gcs learn' first")
-    source = RunSource(run, on_row, on_learn=on_learn, until_converged=until_converged)
+    source = RunSource(
+        run, on_row, on_learn=on_learn, until_converged=until_converged, mock_seed=mock_seed
+    )
     fence = flight_fence(run.profile(), settings)
     run_campaign(
         url, source, iterations, first, settings, run.t_ilc_s, on_event, fence=fence, mocap=mocap

@@ -10,6 +10,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from gcs.app.fly import (
+    FlyPlan,
     converged_reason,
     fly_run,
     newest_record,
@@ -17,7 +18,7 @@ from gcs.app.fly import (
     start_run,
 )
 from gcs.app.learn import LearnOutcome
-from gcs.app.report import decision_lines, metrics_table
+from gcs.app.report_text import decision_lines, metrics_table
 from gcs.app.session import check_mock_config, check_url, vehicle_url
 from gcs.core.metrics import IterationMetrics
 from gcs.core.trials import iteration_of, repeat_of
@@ -25,7 +26,7 @@ from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
 from gcs.io.rundir import RunDir
 
-__all__ = ["fly_with_display", "live_progress", "learning_lines", "say"]
+__all__ = ["fly_with_display", "check_vehicle", "live_progress", "learning_lines", "say"]
 
 
 def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]:
@@ -131,6 +132,58 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
     return lines
 
 
+def check_vehicle(
+    console: Console,
+    plan: FlyPlan,
+    connect: str | None,
+    use_mock: bool,
+    mock_config: Path | None,
+    seed: int,
+) -> None:
+    """Read the vehicle's parameters and print the real-vehicle checklist's verdicts.
+
+    Connects (or starts the mock drone), reads every parameter, sends nothing, and judges
+    them for the flight's navigation: motion capture when the plan has one, else GPS
+    (:mod:`gcs.flight.checklist`, docs/real-vehicle.md).
+
+    Parameters
+    ----------
+    console : Console
+        Where the checklist goes.
+    plan : FlyPlan
+        The checked flight.
+    connect : str or None
+        URL of a real vehicle.
+    use_mock : bool
+        Start the mock drone instead.
+    mock_config : Path or None
+        Mock settings.
+    seed : int
+        Mock seed.
+
+    Raises
+    ------
+    VehicleError
+        A parameter is refused (the line names it and the fix), or the vehicle is unreachable.
+    """
+    import asyncio
+
+    from gcs.errors import VehicleError
+    from gcs.flight.checklist import checklist_lines, judge, read_params, refusal
+
+    navigation = "mocap" if plan.mocap is not None else "gps"
+    with vehicle_url(connect, use_mock, mock_config, seed, say(console)) as (url, _):
+        params = asyncio.run(read_params(url, plan.settings))
+    verdicts = judge(params, navigation)
+    console.print(f"checklist for {navigation} (docs/real-vehicle.md), vehicle at {url}:")
+    colour = {"ok": "green", "warn": "yellow", "refuse": "bold red"}
+    for v, line in zip(verdicts, checklist_lines(verdicts), strict=True):
+        console.print(f"[{colour[v.level]}]{escape(line)}[/]", highlight=False)
+    reason = refusal(verdicts)
+    if reason is not None:
+        raise VehicleError(reason)
+
+
 def fly_with_display(
     *,
     console: Console,
@@ -148,6 +201,7 @@ def fly_with_display(
     check_only: bool = False,
     until_converged: bool = False,
     mocap: str | None = None,
+    offline: bool = False,
 ) -> RunDir | None:
     """Validate everything, then set up (or resume) a run and fly it with a live display.
 
@@ -188,6 +242,9 @@ def fly_with_display(
     mocap : str or None
         ``--mocap``: a URL, ``mock`` (the mock's arena), or None (the profile's
         ``mocap.url``, if any).
+    offline : bool
+        With ``check_only``: connect to no vehicle (else its parameters are read and judged
+        against the checklist, :func:`check_vehicle`).
 
     Returns
     -------
@@ -222,6 +279,8 @@ def fly_with_display(
         )
         if plan.mocap is not None:
             console.print(f"checked: {plan.mocap.describe()}")
+        if not offline:
+            check_vehicle(console, plan, connect, use_mock, mock_config, seed)
         return None
     run = start_run(plan)
     settings = plan.settings
@@ -270,6 +329,7 @@ def fly_with_display(
                 on_learn,
                 until_converged,
                 mocap=link,
+                mock_seed=seed if use_mock else None,
             )
     except KeyboardInterrupt:
         console.print(
@@ -280,11 +340,12 @@ def fly_with_display(
     except GcsError as exc:
         console.print(f"[dim]completed trials are in {run.path}[/]")
         raise exc
-    from gcs.app.report import run_learning, run_metrics, trial_clock_rates
+    from gcs.app.report import run_facts, run_learning, run_metrics, trial_clock_rates
 
-    title = f"{run.path.name} ({run.algorithm})"
+    title = run_facts(run).title()
     learning = run_learning(run)
-    console.print(metrics_table(run_metrics(run), title, trial_clock_rates(run), learning))
+    rates = trial_clock_rates(run)
+    console.print(metrics_table(run_metrics(run), title, rates, learning, console.width))
     return run
 
 

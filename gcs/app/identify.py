@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gcs.app.report import save_figure
+from gcs.app.figures import save_figure
 from gcs.app.session import (
     SessionRecorder,
     flight_fence,

@@ -427,12 +427,13 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
 class SessionRecorder:
     """What the run-directory trial sources share: the record of their flight session.
 
-    Subclasses provide ``run`` (:class:`RunDir`) and ``session`` (int or None, the record's
-    number once written).
+    Subclasses provide ``run`` (:class:`RunDir`), ``session`` (int or None, the record's
+    number once written) and may set ``mock_seed`` (the mock drone's seed, or None).
     """
 
     run: RunDir
     session: int | None
+    mock_seed: int | None = None
 
     def record_session(self, session: FlightSession) -> None:
         """Write (or update) this flight session's record in the run directory.
@@ -442,7 +443,8 @@ class SessionRecorder:
         session : FlightSession
             Navigation source, hover measurements, settle tolerances.
         """
-        self.session = self.run.write_session(self.session, session_record(session))
+        record = session_record(session) | {"mock_seed": self.mock_seed}
+        self.session = self.run.write_session(self.session, record)
 
 
 def raw_mocap(recording: TrialRecording) -> Any:

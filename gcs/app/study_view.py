@@ -52,7 +52,7 @@ def study_tables(rows: list[StudyRow], settings: StudySettings) -> Table:
 
 
 def study_json(rows: list[StudyRow], settings: StudySettings) -> list[dict]:
-    """Rows as JSON objects (keys of the issue plus the counts behind ``excluded``).
+    """Rows as JSON objects (the study's keys plus the counts behind ``excluded``).
 
     ``excluded`` is the number of plants left out of the statistics: plants whose learning
     diverged when ``diverged_rule`` is "exclude", plus non-physical draws when

@@ -550,7 +550,7 @@ def run_study(
 
 
 # =============================================================================================
-# The study with the options beyond the paper (issue P5): data-driven noise model, model refresh,
+# The study with the options beyond the paper: data-driven noise model, model refresh,
 # robustness weight. Each run (plant x repeat) now has its own model and its own estimator
 # gains, so the fixed-operator trick above no longer applies; the runs still advance together
 # as the rows of (runs, ...) arrays, and the only per-run matrices are the update operators,

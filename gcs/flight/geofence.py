@@ -12,9 +12,9 @@ and sets what PX4 does on a breach:
   0.35 m above the origin).
 - **The vertical.** A polygon has no altitude. ``GF_MAX_VER_DIST`` bounds the height above
   home: the arena's ceiling plus the margin (home on the ground at the origin's height). PX4's
-  fence has no floor: an estimate sinking below the ground (the EKF2 divergence of issue P7) is
-  caught by gcs's fence only. ``GF_MAX_HOR_DIST`` is read and reported, not changed: the polygon
-  is the horizontal fence.
+  fence has no floor: an estimate sinking below the ground (the EKF2 divergence once seen on
+  PX4 SITL) is caught by gcs's fence only. ``GF_MAX_HOR_DIST`` is read and reported, not
+  changed: the polygon is the horizontal fence.
 - **The action.** ``GF_ACTION`` = 5, Land. Hold (2, PX4's default) keeps a vehicle whose
   estimate is wrong hovering where the estimate says, and with gcs gone it hovers until the
   battery fails; a landing ends on the ground whatever the estimate does horizontally (PX4's

@@ -1,7 +1,7 @@
 """How a vehicle hovers: statistics of a hover, a verdict on it, and the settle test (pure).
 
 A motion-capture vehicle holds a point to a few centimetres; a GPS-navigated one (PX4 SITL
-with EKF2 and GPS, ``shared/data/px4-sitl``) sits 0.1-1 m from its setpoint in the reported
+with EKF2 and GPS, the recorded PX4 v1.16 SITL runs) sits 0.1-1 m from its setpoint in the reported
 position, wandering slowly at up to 0.2-0.4 m/s while its estimate settles, with 1-2 cm of fast
 noise. Nothing here assumes either: before the first trial the campaign measures the hover at
 the start point (:func:`hover_stats`), refuses a vehicle that does not hold position at all

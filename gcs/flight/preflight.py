@@ -8,7 +8,7 @@ hovers in Hold until its battery failsafe. :func:`link_loss_warnings` says so be
 once, so that the operator can set a landing action first.
 
 Navigation source. What EKF2 fuses decides how well the vehicle repeats itself: with GPS the
-reported position wanders by decimetres (``shared/data/px4-sitl``), with motion capture
+reported position wanders by decimetres (the recorded PX4 v1.16 SITL runs), with motion capture
 ("external vision") by millimetres to centimetres. :func:`navigation_source` decodes PX4's
 ``EKF2_GPS_CTRL``, ``EKF2_EV_CTRL`` and ``EKF2_HGT_REF`` (PX4 v1.14-v1.16).
 """

@@ -610,6 +610,25 @@ class Vehicle:
         finally:
             param.destroy()
 
+    async def read_all_params(self) -> dict[str, float | None]:
+        """Read every parameter of the autopilot at once (one list request).
+
+        Returns
+        -------
+        dict of str to float or None
+            Integer and float parameters by name.
+        """
+        if self._system is None:
+            raise VehicleError("reading parameters: not connected")
+        param = ParamAsync(self._system)
+        try:
+            found = await self._command("read all parameters", param.get_all_params)
+        finally:
+            param.destroy()
+        values: dict[str, float | None] = {p.name: float(p.value) for p in found.int_params}
+        values |= {p.name: float(p.value) for p in found.float_params}
+        return values
+
     async def gps_global_origin(self) -> tuple[float, float, float]:
         """The global position of the local NED frame's origin (PX4's GPS_GLOBAL_ORIGIN).
 

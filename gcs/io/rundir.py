@@ -1,6 +1,6 @@
 """The run directory: one learning campaign on disk.
 
-Layout of ``logs/<run-id>/`` (documented for users in the README)::
+Layout of ``logs/<run-id>/`` (documented for users in docs/formats.md)::
 
     manifest.json          profile, trajectory and algorithm as used, software versions
     reference.csv          the reference on the grid, k = 0..N

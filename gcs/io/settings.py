@@ -106,7 +106,7 @@ class FlightSettings:
         correlation times of several seconds: measure at least 10 s on such a vehicle.
     hover_max_offset_m : float
         A vehicle whose hover gets further than this from its setpoint is refused [m]. The
-        GPS-navigated PX4 SITL vehicle of ``shared/data/px4-sitl`` reached 0.98 m.
+        GPS-navigated PX4 SITL vehicle of the recorded PX4 v1.16 SITL runs reached 0.98 m.
     hover_max_drift_m_s : float
         A hover whose least-squares trend moves away from the setpoint faster than this is
         refused as drifting [m/s]. PX4 SITL with GPS (``shared/``): up to 0.14 m/s over its

@@ -9,7 +9,7 @@ Times in :class:`Faults` (dropout, link loss, gust) count in seconds from the mo
 vehicle **first enters OFFBOARD**, so that a fault lands at the same point of a trial whatever
 the connection and take-off took. Packet loss and added latency apply from the start. The
 estimator faults (drift, divergence, jump) count from the first **arming**, so that one can
-strike during take-off, before any OFFBOARD (as the EKF2 divergence of issue P7 did).
+strike during take-off, before any OFFBOARD (as an EKF2 divergence on PX4 SITL once did).
 
 Units are SI; frames are local NED (north, east, down) with the origin at the take-off spot.
 """
@@ -492,7 +492,7 @@ class Faults:
         Estimator divergence: from ``start`` (after the first arming) for ``duration`` seconds
         the estimated position runs away as ``a t^2 / 2``, then stays off.
     divergence_ned_m_s2 : tuple of float or None
-        Its ``a`` (north, east, down) [m/s^2]; issue P7's incident is one along down.
+        Its ``a`` (north, east, down) [m/s^2]; the PX4 SITL incident was one along down.
     jump_at_s : float or None
         Estimator jump: at this time (after the first arming) the estimated position steps.
     jump_ned_m : tuple of float or None

@@ -41,8 +41,8 @@ Injected estimator faults (``gcs mock --drift/--divergence/--jump``,
 - :class:`PositionDrift`: the position error grows at a constant velocity for a while, then
   stays;
 - :class:`PositionDivergence`: it grows at a growing rate (``a t^2 / 2``), then stays: the
-  height divergence of issue P7, where EKF2's height went 480 m below ground while the vehicle
-  climbed, is one along down;
+  height divergence once seen on PX4 SITL, where EKF2's height went 480 m below ground while
+  the vehicle climbed, is one along down;
 - :class:`PositionJump`: it steps once and stays (a mis-solved motion-capture frame, an
   estimator reset).
 

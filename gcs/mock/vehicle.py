@@ -5,7 +5,7 @@ Pure logic on top of :class:`gcs.mock.physics.QuadPhysics`; no sockets. The serv
 vehicle answers with MAVLink result codes and leaves status texts in :attr:`Vehicle.events`.
 
 Behaviour copied from PX4 v1.16 (commander sources and the SIH capture in
-``shared/data/px4-sih-offboard.tlog``):
+the recorded PX4 SITL MAVLink capture):
 
 - Boot mode HOLD (AUTO.LOITER; PX4 without RC), or POSCTL by profile.
 - Mode changes are always allowed while disarmed. While armed, OFFBOARD needs a fresh

@@ -1,0 +1,61 @@
+"""Figures to files: the one place a matplotlib figure becomes PNG bytes or a PNG file.
+
+Shared by the report (:mod:`gcs.app.report_figures`, :mod:`gcs.app.report_html`) and the
+identification (:mod:`gcs.app.identify`); it knows nothing of runs or learning.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import Any
+
+__all__ = ["figure_png", "save_figure", "DPI"]
+
+#: Resolution of every PNG written [dots per inch].
+DPI = 110
+
+
+def figure_png(fig: Any) -> bytes:
+    """A matplotlib figure as PNG bytes; the figure is closed.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+
+    Returns
+    -------
+    bytes
+    """
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=DPI)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def save_figure(fig: Any, path: Path) -> Path:
+    """Write a matplotlib figure as PNG atomically (temporary file + rename) and close it.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    path : Path
+        Destination (.png).
+
+    Returns
+    -------
+    Path
+    """
+    import matplotlib.pyplot as plt
+
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.tight_layout()
+    fig.savefig(tmp, dpi=DPI)
+    plt.close(fig)
+    tmp.replace(path)
+    return path
