@@ -51,13 +51,17 @@ def cluster_of(workers: int | None, scheduler: str | None) -> object:
     ClusterError
         ``--scheduler`` is not an address, or both options are given.
     """
-    from gcs.app.study_cluster import Cluster, check_scheduler
+    from gcs.app import study_cluster
     from gcs.errors import ClusterError
 
     if scheduler is not None:
         if workers is not None:
             raise ClusterError("--workers: the workers are the scheduler's; give one of the two")
-        return Cluster(scheduler=check_scheduler(scheduler))
+        return study_cluster.Cluster(
+            scheduler=study_cluster.check_scheduler(scheduler),
+            connect_timeout_s=study_cluster.CONNECT_TIMEOUT_S,
+        )
+    Cluster = study_cluster.Cluster
     return Cluster(workers=workers)
 
 
@@ -109,6 +113,7 @@ def study(
     from rich.console import Console
 
     from gcs.app.progress import track
+    from gcs.app.study_cluster import connect
     from gcs.app.study_own import (
         build_plan,
         check_study_memory,
@@ -130,22 +135,24 @@ def study(
     check_study_memory(plan)
     runs = len(plan.settings) * len(plan.uncertainty.levels) * plan.plants
     tasks = len(plan.settings) * len(plan.uncertainty.levels) * plan.chunks
-    err.print(
+    size = (
         f"{spec.name}: {len(plan.settings)} settings x {len(plan.uncertainty.levels)} levels x "
         f"{plan.plants} plants = {runs} plant-runs of {plan.iterations} iterations at "
-        f"N = {plan.n_samples}, in {tasks} chunks, {cluster.describe()}",  # type: ignore[attr-defined]
-        highlight=False,
+        f"N = {plan.n_samples}, in {tasks} chunks"
     )
-    if check:
-        return
     target = out if out is not None else Path(f"study-{spec.name}")
+    if check:
+        err.print(size, highlight=False)
+        return
     check_output_dir(target, "--out")
     document = definition_document(spec, plan)
-    output = open_output(target, document)
-    if output.resumed:
-        err.print(f"resuming: {output.resumed} of {tasks} chunks already in {target}")
-    with track(err, spec.name, "chunks") as follow:
-        results = run_study_chunks(plan, output, cluster, follow)  # type: ignore[arg-type]
+    with connect(cluster) as client:  # type: ignore[arg-type]
+        output = open_output(target, document)
+        err.print(f"{size}, {cluster.describe()}", highlight=False)  # type: ignore[attr-defined]
+        if output.resumed:
+            err.print(f"resuming: {output.resumed} of {tasks} chunks already in {target}")
+        with track(err, spec.name, "chunks") as follow:
+            results = run_study_chunks(plan, output, client, follow)
     outcome = summarise_study(plan, results)
     atomic_write_text(
         target / "study.json", json.dumps(study_document(document, plan, outcome), indent=1) + "\n"

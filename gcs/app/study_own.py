@@ -25,7 +25,7 @@ from typing import Any
 
 from gcs import __version__
 from gcs.app.fly import _reference
-from gcs.app.study_cluster import Cluster, Task, connect, run_tasks
+from gcs.app.study_cluster import Task, run_tasks
 from gcs.core.learning import LearningInputs
 from gcs.core.study import (
     SettingSummary,
@@ -288,7 +288,7 @@ def open_output(path: Path, definition: dict) -> StudyOutput:
 def run_study_chunks(
     plan: StudyPlan,
     output: StudyOutput,
-    cluster: Cluster,
+    client: Any,
     progress: Callable[[int, int], None] | None = None,
 ) -> dict[tuple[int, int, int], dict]:
     """Run the chunks that are not in ``output`` yet; return every chunk's result.
@@ -299,8 +299,8 @@ def run_study_chunks(
         The study.
     output : StudyOutput
         Where finished chunks are kept (each written as soon as it arrives).
-    cluster : Cluster
-        Where to run.
+    client : distributed.Client or None
+        From :func:`gcs.app.study_cluster.connect` (None: in this process).
     progress : callable, optional
         ``progress(done, total)`` in chunks, finished ones from earlier runs included.
 
@@ -333,9 +333,7 @@ def run_study_chunks(
         if progress is not None:
             progress(len(results), len(keys))
 
-    if tasks:
-        with connect(cluster) as client:
-            run_tasks(client, tasks, done)
+    run_tasks(client, tasks, done)
     return results
 
 

@@ -48,9 +48,7 @@ def study_table(summaries: list[SettingSummary], title: str) -> Table:
     table = Table(title=escape(title), box=box.SIMPLE_HEAD, padding=(0, 1), pad_edge=False)
     headers = ("setting", "±", "j=0", "j=1", "steady", "floor", "div.", "u rms", "limit")
     for h in headers:
-        table.add_column(
-            h, justify="left" if h == "setting" else "right", no_wrap=h != "setting"
-        )
+        table.add_column(h, justify="left" if h == "setting" else "right", no_wrap=h != "setting")
     for s in summaries:
         table.add_row(
             escape(s.setting),

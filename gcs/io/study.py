@@ -12,6 +12,7 @@ import copy
 import itertools
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -210,6 +211,18 @@ def _set(doc: dict, path: tuple[str, ...], value: Any) -> None:
     doc[path[-1]] = value
 
 
+def _setting_error(f: _Fields, i: int, combo: dict, profile: str, message: str) -> StudyError:
+    """A profile's refusal of a setting, said with the setting's own field."""
+    m = re.search(r"field '([^']+)'", message)
+    path = tuple(m.group(1).split(".")) if m else ()
+    key = next((k for k, v in SETTING_KEYS.items() if v == path), None)
+    rest = message[m.end() :].lstrip(": ") if m else message.lstrip(": ")
+    grid = f" (grid {combo})" if combo else ""
+    where = f"settings[{i}].{key}" if key else f"settings[{i}]"
+    inner = "" if key else f" ({'.'.join(path) or 'profile'} of profile {profile})"
+    return StudyError(f"{f.where}: field '{where}'{grid}{inner} {rest}")
+
+
 def _setting_name(profile: Profile, overrides: dict) -> str:
     parts = [profile.name] + [f"{k}={v}" for k, v in overrides.items()]
     return " ".join(parts)
@@ -247,11 +260,10 @@ def _settings(f: _Fields, study_profile: tuple[Profile, Path]) -> tuple[SettingS
             doc = copy.deepcopy(profile.source)
             for key, value in overrides.items():
                 _set(doc, SETTING_KEYS[key], value)
-            where = f"settings[{i}]" + (f" with {combo}" if combo else "")
             try:
-                applied = profile_from_dict(doc, f"{f.where}: {where} on profile {profile.name}")
+                applied = profile_from_dict(doc, "")
             except GcsError as exc:
-                raise StudyError(str(exc)) from None
+                raise _setting_error(f, i, combo, profile.name, str(exc)) from None
             base = given_name or _setting_name(profile, own)
             name = " ".join([base] + [f"{k}={v}" for k, v in combo.items()])
             if name in names:
