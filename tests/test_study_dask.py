@@ -99,8 +99,20 @@ def real_cluster(tmp_path: Path) -> Iterator[tuple[str, list[subprocess.Popen]]]
     )  # fmt: skip
     workers = [
         subprocess.Popen(
-            [str(BIN / "dask"), "worker", address, "--nthreads", "1", "--no-dashboard",
-             "--host", "127.0.0.1", "--name", f"w{i}"], start_new_session=True, **common,
+            [
+                str(BIN / "dask"),
+                "worker",
+                address,
+                "--nthreads",
+                "1",
+                "--no-dashboard",
+                "--host",
+                "127.0.0.1",
+                "--name",
+                f"w{i}",
+            ],
+            start_new_session=True,
+            **common,
         )  # fmt: skip
         for i in range(2)
     ]
@@ -170,13 +182,13 @@ def test_an_interrupted_study_resumes_the_missing_chunks(
     code, output = run_cli("study", str(study_file), "--out", str(out), "--workers", "0")
     assert code == 0, output
     assert f"resuming: {len(before)} of {len(kept)} chunks" in " ".join(output.split())
-    assert {p.name: p.read_bytes() for p in (out / "chunks").iterdir() if p.name in before} == before
+    assert {
+        p.name: p.read_bytes() for p in (out / "chunks").iterdir() if p.name in before
+    } == before
     assert len(list((out / "chunks").iterdir())) == len(kept)
 
 
-def test_another_study_in_the_same_directory_is_refused(
-    study_file: Path, tmp_path: Path
-) -> None:
+def test_another_study_in_the_same_directory_is_refused(study_file: Path, tmp_path: Path) -> None:
     out = tmp_path / "o"
     code, _ = run_cli("study", str(study_file), "--out", str(out), "--workers", "0")
     assert code == 0

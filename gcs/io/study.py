@@ -314,7 +314,7 @@ def study_from_dict(data: Any, where: str = "<study>") -> StudyDefinition:
     plants = _positive_int(f, "plants", 20, MAX_PLANTS)
     iterations = _positive_int(f, "iterations", 10, 1000)
     chunk_plants = _positive_int(f, "chunk_plants", 10, MAX_PLANTS)
-    steady = _positive_int(f, "steady_trials", 3, iterations)
+    steady = _positive_int(f, "steady_trials", min(3, iterations), iterations)
     uncertainty = _uncertainty(f.sub("uncertainty", {}))
     settings = _settings(f, study_profile)
     f.done()
