@@ -18,8 +18,18 @@ N = 6000 at dt = 0.01 s (60 s at 100 Hz). Reference: an eight (north 2 m amplitu
 one lap per 20 s) with a minimum-jerk time warp so that it starts and ends at rest at the start
 point. Disturbance: slowly varying offsets of a few decimetres (wind / ground effect).
 
+Lines with ``"baseline": "per_call"`` time the whole learning step of a trial (both axes:
+Algorithm 1's smoother and eq. (8)) through the public learner, two ways in the same run on the
+same trials: ``per_call_s``, a new :class:`gcs.Learner` for every trial (everything built again
+per call, as the learning step did before the learner existed) and ``learner_s``, one learner
+kept across the trials (the QP's structure, its KKT factorisation, the Markov parameters and
+the limits' rows built once); ``ratio`` = per_call_s / learner_s, medians over trials 2..8
+(``first_step_s``: the kept learner's first step, which factorises). ``identical``: the two
+ways gave the same setpoints, bit for bit. The trials: the vehicle is the model itself plus
+the disturbance above and 5 mm of white noise.
+
 Usage: ``python benchmarks/learn_step.py`` (all cases, each in a subprocess) or
-``python benchmarks/learn_step.py --case N constrained|free [sparse|dense]``.
+``python benchmarks/learn_step.py --case N constrained|free [sparse|dense|learner]``.
 """
 
 from __future__ import annotations
@@ -36,7 +46,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from gcs.core.model import from_transfer_function, lifted_matrix, relative_degree  # noqa: E402
+from gcs import Box, Learner, LearnerSettings  # noqa: E402
+from gcs.core.model import (  # noqa: E402
+    from_transfer_function,
+    lifted_matrix,
+    relative_degree,
+    simulate,
+)
 from gcs.core.update import (  # noqa: E402
     SetpointLimits,
     UpdateWeights,
@@ -170,6 +186,52 @@ def run_dense(n: int, constrained: bool) -> dict:
     }
 
 
+TRIALS = 8
+
+
+def run_learner(n: int, constrained: bool) -> dict:
+    """A new learner per trial against one learner kept across the trials (see above)."""
+    model, yd, d_true, _, limits = scenario(n, constrained)
+    ref = np.vstack([[0.0, 0.0], np.column_stack(yd)])  # at rest at the origin before a trial
+    arena, step, dev = None, None, None
+    if constrained:
+        arena = Box((limits[0].u_min_m, limits[0].u_max_m), (limits[1].u_min_m, limits[1].u_max_m),
+                    (-3.0, 0.0))  # fmt: skip
+        step, dev = limits[0].max_step_m, limits[0].max_deviation_m
+    settings = LearnerSettings(
+        models=(model, model), arena=arena, max_step_m=step, max_deviation_m=dev
+    )
+    rng = np.random.default_rng(1)
+    kept = Learner(settings, ref)
+    u = ref[:-1].copy()
+    per_call, learner, identical = [], [], True
+    for _ in range(TRIALS):
+        y = np.column_stack([simulate(model, u[:, a]) + d_true[a] for a in range(2)])
+        y += 0.005 * rng.standard_normal(y.shape)
+        t0 = time.perf_counter()
+        fresh = Learner(settings, ref).step(u, y)
+        per_call.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        u_next = kept.step(u, y)
+        learner.append(time.perf_counter() - t0)
+        identical = identical and np.array_equal(fresh, u_next)
+        u = u_next
+    per_call_s, learner_s = statistics.median(per_call[1:]), statistics.median(learner[1:])
+    return {
+        "baseline": "per_call",
+        "n": n,
+        "axes": 2,
+        "constrained": constrained,
+        "trials": TRIALS,
+        "per_call_s": round(per_call_s, 5),
+        "learner_s": round(learner_s, 5),
+        "first_step_s": round(learner[0], 5),
+        "ratio": round(per_call_s / learner_s, 2),
+        "identical": bool(identical),
+        "methods": list(kept.last.methods),
+    }
+
+
 def _subprocess(n: int, constrained: bool, kind: str) -> dict:
     cmd = [sys.executable, __file__, "--case", str(n), "constrained" if constrained else "free"]
     out = subprocess.run(cmd + [kind], check=True, capture_output=True, text=True).stdout
@@ -180,8 +242,8 @@ def main() -> None:
     if len(sys.argv) >= 4 and sys.argv[1] == "--case":
         n, constrained = int(sys.argv[2]), sys.argv[3] == "constrained"
         kind = sys.argv[4] if len(sys.argv) > 4 else "sparse"
-        line = run_dense(n, constrained) if kind == "dense" else run_sparse(n, constrained)
-        print(json.dumps(line))
+        run = {"dense": run_dense, "learner": run_learner}.get(kind, run_sparse)
+        print(json.dumps(run(n, constrained)))
         return
     sparse_lines = {}
     for n in DT_S:
@@ -193,6 +255,9 @@ def main() -> None:
         line = _subprocess(n, constrained, "dense")
         line["ratio"] = round(line["seconds"] / sparse_lines[(n, constrained)]["seconds"], 2)
         print(json.dumps(line), flush=True)
+    for n in DT_S:
+        for constrained in (False, True):
+            print(json.dumps(_subprocess(n, constrained, "learner")), flush=True)
 
 
 if __name__ == "__main__":

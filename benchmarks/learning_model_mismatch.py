@@ -24,8 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs.app.learn import learning_inputs
-from gcs.core.learning import learning_step
+from gcs.api import Learner, learner_settings
 from gcs.core.model import DiscreteModel, from_transfer_function, simulate
 from gcs.core.trajectory import sample_eight
 from gcs.io.config import Profile, load_profile, load_trajectory
@@ -45,16 +44,15 @@ def learn_linear(plants: tuple[DiscreteModel, DiscreteModel], profile: Profile) 
     """e_pos,j [m], j = 0 .. TRIALS - 1, flying the default eight on exact linear loops."""
     ref = sample_eight(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, profile.t_ilc_s)
     r = ref.pos_ned_m[:, :2]
-    inputs = learning_inputs(profile, "smoother")
-    sp, states, out = r[:-1].copy(), None, []
+    learner = Learner(learner_settings(profile, "smoother"), r)
+    sp, out = r[:-1].copy(), []
     for _ in range(TRIALS):
         y = np.empty_like(r)
         y[0] = r[0]  # at rest at the start point: the initial reset of eq. (1)
         for a, plant in enumerate(plants):
             y[1:, a] = r[0, a] + simulate(plant, sp[:, a] - r[0, a])
         out.append(float(np.hypot(*(y[1:] - r[1:]).T).mean()))
-        step = learning_step(inputs, r, sp, y, states)
-        sp, states = step.setpoints_ne_m, step.kilc_states
+        sp = learner.step(sp, y[1:])
     return out
 
 

@@ -40,7 +40,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from synthetic import CI_FLIGHT  # noqa: E402
 
-from gcs.app.learn import trial_errors  # noqa: E402
+from gcs.core.trials import trial_errors  # noqa: E402
 from gcs.errors import RunLogError  # noqa: E402
 from gcs.io.runlog import RunDir  # noqa: E402
 from gcs.mock.mocap.arena import ArenaOptions  # noqa: E402

@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 from mock_learning_offline import fly  # the same flight: setpoint k at k t_ilc, 5 s hover first
 
-from gcs.app.learn import learning_inputs
+from gcs.api import Learner, learner_settings
 from gcs.core.floor import floor_from_flights
-from gcs.core.learning import AdaptiveSettings, learning_step, plan_next_trial
+from gcs.core.learning import AdaptiveSettings
 from gcs.core.metrics import epos
 from gcs.core.trajectory import sample_eight
 from gcs.io.config import Profile, load_profile, load_trajectory
@@ -59,39 +59,36 @@ def run_seed(cfg: MockConfig, profile: Profile, baseline: Profile, seed: int, tr
     y0b = fly(cfg, u0, r3[0], dt, flight_seed(seed, -1))
     floor = floor_from_flights(np.array([y0[1:, :2], y0b[1:, :2]]))
 
-    # the paper's method: learning_step on the newest trial
-    inputs = learning_inputs(baseline, baseline.learning.algorithm)
-    sp, states, e_paper, sp_paper = u0.copy(), None, [], []
+    # the paper's method: the newest trial
+    learner = Learner(learner_settings(baseline), r2)
+    sp, e_paper, sp_paper = u0.copy(), [], []
     pos = y0
     for j in range(trials):
         if j > 0:
             pos = fly(cfg, sp, r3[0], dt, flight_seed(seed, j))
         e_paper.append(epos(r2[1:], pos[1:, :2]))
         sp_paper.append(sp[:, :2] - r2[:-1])
-        step = learning_step(inputs, r2, sp[:, :2], pos[:, :2], states)
-        states = step.kilc_states
-        sp = np.column_stack([step.setpoints_ne_m, r3[:-1, 2]])
+        sp = np.column_stack([learner.step(sp[:, :2], pos[1:, :2]), r3[:-1, 2]])
 
     # the new options: every trial so far, the repeat of trial 0 included
     ad: AdaptiveSettings = profile.learning.adaptive
-    inputs = learning_inputs(profile, profile.learning.algorithm)
-    hist_sp, hist_pos = [u0[:, :2], u0[:, :2]], [y0[:, :2], y0b[:, :2]]
-    e_new, sp_new, decisions, models = [epos(r2[1:], y0[1:, :2])], [u0[:, :2] - r2[:-1]], [], None
+    learner = Learner(learner_settings(profile), r2, ad, repeats=1)
+    learner.step(u0[:, :2], y0[1:, :2])  # trial 0; the next flight is its repeat
+    last_sp, last_pos = u0[:, :2], y0b
+    e_new, sp_new, decisions = [epos(r2[1:], y0[1:, :2])], [u0[:, :2] - r2[:-1]], []
     seconds = []
     for j in range(1, trials):
         t0 = time.perf_counter()
-        plan = plan_next_trial(inputs, ad, r2, np.array(hist_sp), np.array(hist_pos), models=models)
+        u_ne = learner.step(last_sp, last_pos[1:, :2])
         seconds.append(time.perf_counter() - t0)
-        models = plan.models
-        decisions.append(_decisions(plan.record.as_dict()))
-        sp = np.column_stack([plan.setpoints_ne_m, r3[:-1, 2]])
+        decisions.append(_decisions(learner.decisions.as_dict()))
+        sp = np.column_stack([u_ne, r3[:-1, 2]])
         pos = fly(cfg, sp, r3[0], dt, flight_seed(seed, j))
         e_new.append(epos(r2[1:], pos[1:, :2]))
         sp_new.append(sp[:, :2] - r2[:-1])
-        hist_sp.append(sp[:, :2])
-        hist_pos.append(pos[:, :2])
-    final = plan_next_trial(inputs, ad, r2, np.array(hist_sp), np.array(hist_pos), models=models)
-    verdicts = final.record.as_dict()["verdicts"]
+        last_sp, last_pos = sp[:, :2], pos
+    learner.step(last_sp, last_pos[1:, :2])
+    verdicts = learner.decisions.as_dict()["verdicts"]
     return {
         "seed": seed,
         "epos0_m": e_paper[0],

@@ -19,8 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs.app.learn import learning_inputs
-from gcs.core.learning import learning_step
+from gcs.api import Learner, learner_settings
 from gcs.core.trajectory import sample_eight
 from gcs.io.config import Profile, load_profile, load_trajectory
 from gcs.mock.config import MockConfig, load_mock_config
@@ -57,16 +56,15 @@ def learn(
     """e_pos,j [m] for j = 0 .. trials - 1; trial j flown with gust seed ``seed + j``."""
     profile = profile or load_profile(ROOT / "profiles" / "antx.yaml")
     ref = sample_eight(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, profile.t_ilc_s)
-    inputs = learning_inputs(profile, algorithm)
+    learner = Learner(learner_settings(profile, algorithm), ref.pos_ned_m[:, :2])
     sp = ref.pos_ned_m[:-1].copy()
-    states, out = None, []
+    out = []
     for j in range(trials):
         pos = fly(cfg, sp, ref.pos_ned_m[0], profile.t_ilc_s, seed=seed + j)
         err = np.hypot(*(pos[1:, :2] - ref.pos_ned_m[1:, :2]).T).mean()
         out.append(float(err))
-        step = learning_step(inputs, ref.pos_ned_m[:, :2], sp[:, :2], pos[:, :2], states)
-        states = step.kilc_states
-        sp = np.column_stack([step.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
+        u_ne = learner.step(sp[:, :2], pos[1:, :2])
+        sp = np.column_stack([u_ne, ref.pos_ned_m[:-1, 2]])
     return out
 
 

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs.app.learn import trial_errors
 from gcs.core.model import DiscreteModel, from_transfer_function, simulate
+from gcs.core.trials import trial_errors
 from gcs.io.config import Profile, load_profile, load_trajectory, trajectory_from_dict
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
 

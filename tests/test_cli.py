@@ -226,14 +226,14 @@ def test_learned_setpoints_are_checked_on_their_grid_before_they_are_written(
     import gcs.app.learn as learn
 
     run = make_run(tmp_path, trials=1)
-    real = learn.learning_step
+    real = learn.Learner.step
 
-    def jumpy(*args, **kwargs):  # a solver that broke its step constraint
-        step = real(*args, **kwargs)
-        step.setpoints_ne_m[30, 1] += 0.8
-        return step
+    def jumpy(self, *args, **kwargs):  # a solver that broke its step constraint
+        u_next = real(self, *args, **kwargs)
+        self.last.setpoints_m[30, 1] += 0.8
+        return u_next
 
-    monkeypatch.setattr(learn, "learning_step", jumpy)
+    monkeypatch.setattr(learn.Learner, "step", jumpy)
     before = files(run.path)
     result = invoke("learn", run.path)
     assert result.exit_code == 2
@@ -287,7 +287,7 @@ def test_an_internal_error_is_one_line_with_exit_code_1(
     def broken(*args, **kwargs):
         raise KeyError("a bug")
 
-    monkeypatch.setattr("gcs.app.learn.learning_step", broken)
+    monkeypatch.setattr("gcs.app.learn.Learner.step", broken)
     result = invoke("learn", run.path)
     assert result.exit_code == 1
     assert result.output.strip() == ("error: internal error, please report it: KeyError: 'a bug'")

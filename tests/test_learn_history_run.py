@@ -22,6 +22,7 @@ from synthetic import (
     synthetic_positions,
 )
 
+from gcs.api import Learner, learner_settings
 from gcs.app.fly import (
     RunSource,
     check_until_converged,
@@ -29,8 +30,8 @@ from gcs.app.fly import (
     flyable_setpoints,
     plan_fly,
 )
-from gcs.app.learn import learn_run, learning_inputs, models_in_use
-from gcs.core.learning import learning_step, plan_next_trial
+from gcs.app.learn import learn_run, models_in_use
+from gcs.core.learner import Trial
 from gcs.errors import ProfileError, RunLogError, TrajectoryError
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import load_profile, profile_from_dict, trajectory_from_dict
@@ -41,13 +42,10 @@ def files(path: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(path.iterdir()) if p.is_file()}
 
 
-def history(run: RunDir, j: int) -> tuple[np.ndarray, np.ndarray]:
-    """Setpoints (T, N, 2) and positions (T, N+1, 2) of trials 0..j as recorded."""
+def history(run: RunDir, j: int) -> list[Trial]:
+    """Setpoints u(0..N-1) and positions y(1..N), north and east, of trials 0..j as recorded."""
     records = [run.read_trial(t) for t in range(j + 1)]
-    return (
-        np.array([r.sp_ned_m[:-1, :2] for r in records]),
-        np.array([r.pos_ned_m[:, :2] for r in records]),
-    )
+    return [Trial(r.sp_ned_m[:-1, :2], r.pos_ned_m[1:, :2]) for r in records]
 
 
 def test_trial_0_is_repeated_byte_for_byte_then_every_trial_is_learned_from(tmp_path):
@@ -71,14 +69,16 @@ def test_trial_0_is_repeated_byte_for_byte_then_every_trial_is_learned_from(tmp_
     assert record["learned_from"] == [0, 1] and record["next_trial"] == 2
     assert record["models_from"] == "profile" and record["model_file"] is None
     assert (run.path / "estimate-001.csv").exists() and (run.path / "setpoints-002.csv").exists()
-    # the record's decisions are those of plan_next_trial on the two trials
+    # the record's decisions are those of a learner given the two trials
     profile = adaptive_profile()
-    sp, pos = history(run, 1)
-    plan = plan_next_trial(
-        learning_inputs(profile, "smoother"), profile.learning.adaptive,
-        run.reference().pos_ned_m[:, :2], sp, pos,
+    trials = history(run, 1)
+    learner = Learner(
+        learner_settings(profile, "smoother"), run.reference().pos_ned_m[:, :2],
+        profile.learning.adaptive, history=trials[:1],
     )  # fmt: skip
-    np.testing.assert_allclose(run.read_setpoints(2)[:, :2], plan.setpoints_ne_m, atol=1e-8)
+    u2 = learner.step(trials[1].u_m, trials[1].y_m)
+    plan = learner.last
+    np.testing.assert_allclose(run.read_setpoints(2)[:, :2], u2, atol=1e-8)
     assert record["decision"]["epos_m"] == list(plan.record.epos_m)
     assert [v["at_floor"] for v in record["decision"]["verdicts"]] == [False, False]
 
@@ -118,20 +118,17 @@ def test_a_refreshed_model_is_a_profile_to_fly_and_the_next_step_starts_from_it(
 def test_learning_from_the_directory_equals_learning_in_memory(tmp_path):
     """Resuming reads the models back from the run: the same setpoints as one long session."""
     run = make_adaptive_run(tmp_path, trials=6)
-    profile = adaptive_profile()
-    inputs = learning_inputs(profile, "smoother")
-    ref = run.reference().pos_ned_m
-    models = None
-    for j in range(1, 6):
-        sp, pos = history(run, j)
-        plan = plan_next_trial(
-            inputs, profile.learning.adaptive, ref[:, :2], sp, pos, models=models
-        )
-        models = plan.models  # carried in memory, never written
+    learner = Learner.from_profile(adaptive_profile(), run.reference())
+    trials = history(run, 5)
+    assert learner.step(trials[0].u_m, trials[0].y_m) is not None  # the repeat
+    assert learner.last.repeat_of == 0
+    for j in range(1, 6):  # one learner, its models carried in memory, never written
+        u_next = learner.step(trials[j].u_m, trials[j].y_m)
         written = run.read_setpoints(j + 1)[:, :2]
-        np.testing.assert_allclose(written, plan.setpoints_ne_m, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(written, u_next, rtol=0, atol=1e-8)
         d_hat, _ = run.read_estimate(j)
-        np.testing.assert_allclose(d_hat, plan.d_hat_ne_m, rtol=1e-8, atol=1e-12)
+        np.testing.assert_allclose(d_hat, learner.last.d_hat_m, rtol=1e-8, atol=1e-12)
+    assert len(learner.history) == 6 and learner.floor is not None
     assert any(run.read_learn_record(j)["model_file"] for j in range(1, 6))
 
 
@@ -155,12 +152,10 @@ def test_the_paper_profile_learns_as_before_and_writes_no_record(tmp_path):
     assert not list(run.path.glob("learn-*")) + list(run.path.glob("model-*"))
     assert not (run.path / "floor.json").exists()
     record = run.read_trial(1)
-    step = learning_step(
-        learning_inputs(run.profile(), "smoother"), run.reference().pos_ned_m[:, :2],
-        record.sp_ned_m[:-1, :2], record.pos_ned_m[:, :2],
-    )  # fmt: skip
+    learner = Learner(learner_settings(run.profile(), "smoother"), run.reference().pos_ned_m[:, :2])
+    u_next = learner.step(record.sp_ned_m[:-1, :2], record.pos_ned_m[1:, :2])
     text = (run.path / "setpoints-002.csv").read_text().splitlines()[1:]
-    expected = np.column_stack([step.setpoints_ne_m, run.reference().pos_ned_m[:-1, 2]])
+    expected = np.column_stack([u_next, run.reference().pos_ned_m[:-1, 2]])
     assert [f"{v:.9g}" for v in expected[7]] == text[7].split(",")[2:]
 
 

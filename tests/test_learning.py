@@ -10,10 +10,11 @@ import pytest
 import yaml
 from synthetic import ROOT, SHORT, fly_synthetic, profile
 
-from gcs.app.learn import learn_run, learning_inputs, trial_errors
-from gcs.core.learning import learning_step
+from gcs.api import Learner, learner_settings
+from gcs.app.learn import learn_run
 from gcs.core.model import lifted_matrix, relative_degree, simulate
 from gcs.core.trajectory import sample_eight
+from gcs.core.trials import trial_errors
 from gcs.errors import RunLogError
 from gcs.io.config import profile_from_dict, trajectory_from_dict
 from gcs.io.runlog import RunDir, TrialRecord, TrialStatus
@@ -141,12 +142,13 @@ def test_learning_step_residual_is_zero_for_perfect_model():
     pos = np.tile(ref_ne[0], (len(ref_ne), 1))
     for a, model in enumerate(prof.models()):
         pos[1:, a] += simulate(model, sp[:, a] - ref_ne[0, a])
-    step = learning_step(learning_inputs(prof, "smoother"), ref_ne, sp, pos)
-    np.testing.assert_allclose(step.d_hat_ne_m, 0.0, atol=1e-12)
-    assert step.kilc_states is None
-    assert step.setpoints_ne_m.shape == (r.n_samples, 2)
+    learner = Learner(learner_settings(prof, "smoother"), ref_ne)
+    u_next = learner.step(sp, pos[1:])
+    np.testing.assert_allclose(learner.last.d_hat_m, 0.0, atol=1e-12)
+    assert learner.kilc_states is None
+    assert u_next.shape == (r.n_samples, 2)
     with pytest.raises(ValueError):
-        learning_step(learning_inputs(prof, "smoother"), ref_ne, sp[:-1], pos)
+        learner.step(sp[:-1], pos[1:])
 
 
 # ------------------------------------------------------------------------------ K-ILC state
@@ -162,19 +164,18 @@ def test_kilc_state_persists_across_separate_learn_run_calls(tmp_path):
     learn_run(reopened)
     on_disk = reopened.read_setpoints(2)[:, :2]
     # an uninterrupted in-memory sequence of learning steps
-    inputs = learning_inputs(profile(), "kilc")
+    settings = learner_settings(profile(), "kilc")
     ref = reopened.reference().pos_ned_m[:, :2]
-    step0 = learning_step(inputs, ref, rec0.sp_ned_m[:-1, :2], rec0.pos_ned_m[:, :2])
-    np.testing.assert_allclose(
-        reopened.read_setpoints(1)[:, :2], step0.setpoints_ne_m, rtol=1e-8, atol=1e-9
-    )
+    learner = Learner(settings, ref)
+    u1 = learner.step(rec0.sp_ned_m[:-1, :2], rec0.pos_ned_m[1:, :2])
+    np.testing.assert_allclose(reopened.read_setpoints(1)[:, :2], u1, rtol=1e-8, atol=1e-9)
     sp1 = reopened.read_trial(1).sp_ned_m[:-1, :2]
-    step1 = learning_step(inputs, ref, sp1, rec1.pos_ned_m[:, :2], step0.kilc_states)
-    np.testing.assert_allclose(on_disk, step1.setpoints_ne_m, rtol=1e-7, atol=1e-7)
-    assert step1.kilc_states[0].trials == 2
+    u2 = learner.step(sp1, rec1.pos_ned_m[1:, :2])
+    np.testing.assert_allclose(on_disk, u2, rtol=1e-7, atol=1e-7)
+    assert learner.kilc_states[0].trials == 2
     # the carried state matters: a filter restarted from its prior gives other setpoints
-    fresh = learning_step(inputs, ref, sp1, rec1.pos_ned_m[:, :2], None)
-    assert np.max(np.abs(fresh.setpoints_ne_m - on_disk)) > 1e-4
+    fresh = Learner(settings, ref).step(sp1, rec1.pos_ned_m[1:, :2])
+    assert np.max(np.abs(fresh - on_disk)) > 1e-4
     # the K-ILC variance recorded with the estimate is the filter's, by hand
     q, r, p0 = 0.1, 0.01, 0.1
     p1 = p0 * r / (p0 + r)

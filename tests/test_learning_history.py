@@ -1,4 +1,4 @@
-"""Tests of learning from the whole history of trials (gcs.core.learning.plan_next_trial)."""
+"""Tests of learning from the whole history of trials (gcs.Learner with adaptive settings)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from synthetic import SHORT, profile, true_plants
 
-from gcs.app.learn import learning_inputs
-from gcs.core.learning import AdaptiveSettings, learning_step, plan_next_trial
+from gcs.api import Learner, learner_settings
+from gcs.core.learner import Trial
+from gcs.core.learning import AdaptiveSettings
 from gcs.core.metrics import epos
 from gcs.core.model import simulate
 from gcs.core.trajectory import points_outside, sample_eight
@@ -50,19 +51,19 @@ def campaign(
     seed_offset: int = 0,
     **kw,
 ):
-    """Fly trial 0 twice (the repeat), then learn with plan_next_trial; return e_pos, plans."""
-    inputs = learning_inputs(PROFILE, algorithm)
-    sp0 = REF2[:-1].copy()
-    hist_sp, hist_pos = [sp0, sp0], [fly(sp0, seed_offset, **kw), fly(sp0, seed_offset + 1, **kw)]
-    plans, models = [], None
-    for j in range(1, trials):
-        plan = plan_next_trial(
-            inputs, adaptive, REF2, np.array(hist_sp), np.array(hist_pos), models
-        )
-        models = plan.models
-        plans.append(plan)
-        hist_sp.append(plan.setpoints_ne_m)
-        hist_pos.append(fly(plan.setpoints_ne_m, seed_offset + j + 1, **kw))
+    """Fly trial 0 twice (the repeat), then learn from every trial; return e_pos, steps."""
+    learner = Learner(learner_settings(PROFILE, algorithm), REF2, adaptive, repeats=1)
+    sp = REF2[:-1].copy()
+    hist_sp, hist_pos, plans = [], [], []
+    for f in range(trials + 1):
+        pos = fly(sp, seed_offset + f, **kw)
+        hist_sp.append(sp)
+        hist_pos.append(pos)
+        if f < trials:
+            sp = learner.step(sp, pos[1:])
+            assert (learner.last.repeat_of is None) == (f > 0)
+            if f > 0:
+                plans.append(learner.last)
     e = [epos(REF2[1:], p[1:]) for p in hist_pos]
     return np.array(e), plans, np.array(hist_sp), np.array(hist_pos)
 
@@ -74,27 +75,24 @@ def campaign(
     seed=st.integers(0, 1000),
 )
 def test_paper_settings_are_learning_step_bit_for_bit(algorithm: str, trials: int, seed: int):
-    """With AdaptiveSettings() the whole-history entry point is Algorithm 1 (or K-ILC)."""
-    inputs = learning_inputs(PROFILE, algorithm)
-    sp, states = REF2[:-1].copy(), None
-    hist_sp, hist_pos = [], []
+    """With AdaptiveSettings() learning from the whole history is Algorithm 1 (or K-ILC)."""
+    settings_ = learner_settings(PROFILE, algorithm)
+    paper = Learner(settings_, REF2)
+    history = Learner(settings_, REF2, AdaptiveSettings())
+    sp = REF2[:-1].copy()
     for j in range(trials):
         pos = fly(sp, seed + j)
-        hist_sp.append(sp)
-        hist_pos.append(pos)
-        step = learning_step(inputs, REF2, sp, pos, states)
-        plan = plan_next_trial(
-            inputs, AdaptiveSettings(), REF2, np.array(hist_sp), np.array(hist_pos)
-        )
-        np.testing.assert_array_equal(plan.setpoints_ne_m, step.setpoints_ne_m)
-        np.testing.assert_array_equal(plan.d_hat_ne_m, step.d_hat_ne_m)
-        np.testing.assert_array_equal(plan.p_ne_m2, step.p_ne_m2)
+        sp_paper = paper.step(sp, pos[1:])
+        np.testing.assert_array_equal(history.step(sp, pos[1:]), sp_paper)
+        step, plan = paper.last, history.last
+        assert step.record is None and plan.record is not None
+        np.testing.assert_array_equal(plan.d_hat_m, step.d_hat_m)
+        np.testing.assert_array_equal(plan.p_m2, step.p_m2)
         if algorithm == "kilc":
             for a in range(2):
                 np.testing.assert_array_equal(plan.kilc_states[a].d_hat, step.kilc_states[a].d_hat)
                 assert plan.kilc_states[a].p == step.kilc_states[a].p
-        states = step.kilc_states
-        sp = step.setpoints_ne_m
+        sp = sp_paper
     assert AdaptiveSettings().is_paper and not DATA.is_paper
 
 
@@ -119,7 +117,7 @@ def test_the_new_options_learn_and_record_every_decision() -> None:
     text = json.dumps(rec.as_dict())  # JSON-ready, for the run directory and the live table
     assert '"safeguard"' in text and '"refresh"' in text
     for plan in plans:
-        full = np.column_stack([plan.setpoints_ne_m, REF[:-1, 2]])
+        full = np.column_stack([plan.setpoints_m, REF[:-1, 2]])
         assert points_outside(full, PROFILE.arena, tol_m=1e-6).size == 0
 
 
@@ -151,7 +149,10 @@ def test_the_safeguard_reverts_after_a_bad_trial() -> None:
     e, plans, sp, pos = campaign(DATA, 4)
     bad_pos = pos.copy()
     bad_pos[-1, 1:] += 0.3  # the newest trial came out 0.3 m off
-    plan = plan_next_trial(learning_inputs(PROFILE, "smoother"), DATA, REF2, sp, bad_pos)
+    trials = [Trial(u, y[1:]) for u, y in zip(sp, bad_pos, strict=True)]
+    learner = Learner(learner_settings(PROFILE, "smoother"), REF2, DATA, history=trials[:-1])
+    learner.step(trials[-1].u_m, trials[-1].y_m)
+    plan = learner.last
     sg = plan.record.safeguard
     assert sg.action == "revert" and sg.anchor_trial == int(np.argmin(plan.record.epos_m[:-1]))
     assert sg.step == DATA.safeguard_step
@@ -175,17 +176,20 @@ def test_robustness_weight_is_recorded_and_keeps_setpoints_smoother() -> None:
 
 
 def test_history_refusals() -> None:
-    inputs = learning_inputs(PROFILE, "smoother")
-    sp = REF2[:-1][None]
-    pos = fly(REF2[:-1], 0)[None]
+    learner = Learner(learner_settings(PROFILE, "smoother"), REF2, DATA)
+    sp = REF2[:-1]
+    y = fly(REF2[:-1], 0)[1:]
     with pytest.raises(ValueError):
-        plan_next_trial(inputs, DATA, REF2, sp.transpose(0, 2, 1), pos)
+        learner.step(sp.T, y)
     with pytest.raises(ValueError):
-        plan_next_trial(inputs, DATA, REF2, sp, pos[:, :-1])
-    bad = pos.copy()
-    bad[0, 4, 1] = np.nan
+        learner.step(sp, y[:-1])
+    bad = y.copy()
+    bad[4, 1] = np.nan
     with pytest.raises(ValueError, match="NaN"):
-        plan_next_trial(inputs, DATA, REF2, sp, bad)
+        learner.step(sp, bad)
+    assert learner.history == ()  # nothing refused was kept
+    with pytest.raises(ValueError, match="north and east"):
+        Learner(replace(learner.settings, axes=(0, 2)), REF2, DATA)
     with pytest.raises(ValueError):
         AdaptiveSettings(noise="kalman")
     with pytest.raises(ValueError):

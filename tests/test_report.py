@@ -12,9 +12,9 @@ import pytest
 from synthetic import make_run
 from typer.testing import CliRunner
 
-from gcs.app.learn import trial_errors
 from gcs.app.report import report_figures, run_metrics, write_html
 from gcs.cli import app
+from gcs.core.trials import trial_errors
 from gcs.errors import RunLogError
 
 runner = CliRunner()

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from synthetic import SHORT, fly_synthetic, profile
 
-from gcs.app.learn import learn_run, trial_errors
+from gcs.app.learn import learn_run
 from gcs.app.report import mocap_lines, run_metrics
+from gcs.core.trials import trial_errors
 from gcs.errors import RunLogError
 from gcs.io.config import trajectory_from_dict
 from gcs.io.mocap_samples import MocapSeries, read_mocap_csv

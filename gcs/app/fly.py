@@ -24,7 +24,6 @@ from gcs.app.learn import (
     learn_run,
     models_in_use,
     run_measurement,
-    trial_errors,
 )
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trajectory import (
@@ -34,6 +33,7 @@ from gcs.core.trajectory import (
     points_outside,
     sample_eight,
 )
+from gcs.core.trials import trial_errors
 from gcs.errors import PathError, ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import FlightSession, run_campaign
 from gcs.flight.fence import Fence

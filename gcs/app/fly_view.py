@@ -20,9 +20,10 @@ from gcs.app.fly import (
     plan_fly,
     start_run,
 )
-from gcs.app.learn import LearnOutcome, iteration_of, repeat_of
+from gcs.app.learn import LearnOutcome
 from gcs.app.report import decision_lines, metrics_table
 from gcs.core.metrics import IterationMetrics
+from gcs.core.trials import iteration_of, repeat_of
 from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
 from gcs.flight.mocap.link import MocapLink

@@ -466,7 +466,7 @@ class IdentificationSource(SessionRecorder):
         recording : TrialRecording
             The complete recording.
         """
-        from gcs.app.learn import trial_errors
+        from gcs.core.trials import trial_errors
 
         record = _to_record(self.run, j, recording)
         e, m = trial_errors(record)

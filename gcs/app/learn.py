@@ -4,46 +4,43 @@ This is the one function behind both ``gcs learn`` and the learning between tria
 ``gcs fly``. It is deterministic and idempotent: learning twice from the same trial writes the
 same files.
 
-Two ways, chosen by the run's profile. Without ``learning.adaptive`` (the paper's method,
-``profiles/antx.yaml``): the step of :func:`gcs.core.learning.learning_step` on the newest
-complete trial, exactly as it always was. With it (``profiles/antx-adaptive.yaml``): trial 0 is
-flown again ``learning.adaptive.repeats`` times with identical setpoints (the floor), then every
-step learns from every complete trial with :func:`gcs.core.learning.plan_next_trial`, from the
-models of the previous step (read back from the run directory, so that a resumed run learns
-exactly as an uninterrupted one), and records every decision (``learn-JJJ.json``), every
-refreshed model (``model-JJJ.yaml``) and the floor (``floor.json``).
+Both go through the public learner (:class:`gcs.Learner`), resumed from what the run directory
+recorded, so that a resumed run learns exactly as an uninterrupted one. Two ways, chosen by the
+run's profile. Without ``learning.adaptive`` (the paper's method, ``profiles/antx.yaml``): the
+paper's step on the newest complete trial (K-ILC from the state recorded after the previous
+trial). With it (``profiles/antx-adaptive.yaml``): trial 0 is flown again
+``learning.adaptive.repeats`` times with identical setpoints (the floor), then every step learns
+from every complete trial, from the models of the previous step (read back from the run
+directory), and records every decision (``learn-JJJ.json``), every refreshed model
+(``model-JJJ.yaml``) and the floor (``floor.json``).
 
-Indexing: trials are numbered in the order they are flown (``trial-JJJ``); the paper's
-iteration j counts learning updates, so a repeat is a flight of iteration 0 and trial t is
-iteration ``max(0, t - repeats)``.
+Indexing: :mod:`gcs.core.trials`.
 """
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from gcs.api import Learner, learner_settings
 from gcs.core.estimators import KilcState
 from gcs.core.floor import identical_groups
-from gcs.core.learning import LearningInputs, LearningPlan, learning_step, plan_next_trial
-from gcs.core.metrics import epos, max_error
+from gcs.core.learner import LearnerStep, Trial
 from gcs.core.model import DiscreteModel, relative_degree
 from gcs.core.trajectory import Reference, check_setpoints
+from gcs.core.trials import iteration_of, setpoint_deviation
 from gcs.errors import GcsError, ProfileError, RunLogError, TrajectoryError
 from gcs.io.config import Profile, load_profile
 from gcs.io.runlog import RunDir, TrialRecord
 
 __all__ = [
     "LearnOutcome",
-    "learning_inputs",
     "learn_run",
-    "trial_errors",
-    "setpoint_deviation",
-    "iteration_of",
-    "repeat_of",
     "models_in_use",
     "check_history",
     "check_learned",
@@ -69,7 +66,7 @@ class LearnOutcome:
     methods : tuple of str
         Solver path per axis ("direct" or "clarabel"; "-" for a repeat).
     active_constraints : int
-        Active setpoint limits, both axes.
+        Active setpoint limits, every axis.
     next_iteration : int
         The paper's iteration j of the next trial (learning updates so far).
     repeat_of : int or None
@@ -82,111 +79,11 @@ class LearnOutcome:
     trial: int
     next_trial: int
     setpoints_path: Path
-    methods: tuple[str, str]
+    methods: tuple[str, ...]
     active_constraints: int
     next_iteration: int
     repeat_of: int | None = None
     record: dict | None = None
-
-
-def learning_inputs(profile: Profile, algorithm: str) -> LearningInputs:
-    """The learning settings of a profile, for one algorithm.
-
-    Parameters
-    ----------
-    profile : Profile
-        The run's profile.
-    algorithm : str
-        ``"smoother"`` or ``"kilc"``.
-
-    Returns
-    -------
-    LearningInputs
-    """
-    ln = profile.learning
-    return LearningInputs(
-        models=profile.models(),
-        algorithm=algorithm,
-        weights=ln.weights,
-        smoother=ln.smoother,
-        kilc=ln.kilc,
-        arena=profile.arena,
-        max_step_m=ln.max_step_m,
-        max_deviation_m=ln.max_deviation_m,
-    )
-
-
-def iteration_of(trial: int, repeats: int) -> int:
-    """The paper's iteration j of a trial: learning updates before it (a repeat is j = 0).
-
-    Parameters
-    ----------
-    trial : int
-        Trial number (order of flight).
-    repeats : int
-        Repeats of trial 0 the run flies (``learning.adaptive.repeats``).
-
-    Returns
-    -------
-    int
-    """
-    return max(0, trial - repeats)
-
-
-def repeat_of(trial: int, repeats: int) -> int | None:
-    """The trial that ``trial`` repeats (0 for trials 1..repeats), or None.
-
-    Parameters
-    ----------
-    trial : int
-        Trial number.
-    repeats : int
-        Repeats of trial 0 the run flies.
-
-    Returns
-    -------
-    int or None
-    """
-    return 0 if 1 <= trial <= repeats else None
-
-
-def setpoint_deviation(sp_ned_m: np.ndarray, ref_ned_m: np.ndarray) -> tuple[float, float]:
-    """RMS and largest horizontal distance of the setpoints from the reference [m].
-
-    What learning adds to the reference, sample by sample (u(k) - yd(k), not aligned by the
-    delay): it shows the setpoints growing, with noise or with a model the vehicle does not
-    follow.
-
-    Parameters
-    ----------
-    sp_ned_m : ndarray, shape (N, 3)
-        Setpoints u(0..N-1), local NED [m].
-    ref_ned_m : ndarray, shape (N+1, 3)
-        Reference yd(0..N) [m].
-
-    Returns
-    -------
-    tuple of float
-        ``(rms_m, max_m)``.
-    """
-    dev = np.hypot(*(np.asarray(sp_ned_m)[:, :2] - np.asarray(ref_ned_m)[:-1, :2]).T)
-    return float(np.sqrt(np.mean(dev**2))), float(np.max(dev))
-
-
-def trial_errors(record: TrialRecord) -> tuple[float, float]:
-    """e_pos (eq. 10) and the maximum horizontal error of a trial, over k = 1..N [m].
-
-    Parameters
-    ----------
-    record : TrialRecord
-        A complete trial.
-
-    Returns
-    -------
-    tuple of float
-    """
-    ref, pos = record.ref_ned_m[1:, :2], record.pos_ned_m[1:, :2]
-    return epos(ref, pos), max_error(ref, pos)
 
 
 def run_measurement(profile: Profile) -> str:
@@ -331,13 +228,12 @@ def check_learnable(profile: Profile, ref: Reference, algorithm: str, where: str
     ProfileError, ModelError, UpdateInfeasible
         Naming the profile.
     """
+    ne = ref.pos_ned_m[:, :2]
     try:
         with np.errstate(over="raise", invalid="raise", divide="raise"):
-            step = learning_step(
-                learning_inputs(profile, algorithm),
-                ref.pos_ned_m[:, :2], ref.pos_ned_m[:-1, :2], ref.pos_ned_m[:, :2],
-            )  # fmt: skip
-        sp = np.column_stack([step.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
+            learner = Learner(learner_settings(profile, algorithm), ne)
+            u_next = learner.step(ne[:-1], ne[1:])
+        sp = np.column_stack([u_next, ref.pos_ned_m[:-1, 2]])
         check_learned(sp, profile, ref)
     except GcsError as exc:
         raise type(exc)(f"{where}: learning cannot start on this trajectory: {exc}") from None
@@ -392,36 +288,42 @@ def learn_run(
     if np.max(np.abs(record.ref_ned_m - ref.pos_ned_m)) > 1e-6:
         raise RunLogError(f"{run.path}/trial-{j:03d}.csv: reference columns differ from the run's")
     kilc_prior = _kilc_prior(run, j) if run.algorithm == "kilc" else None
-    try:
-        with np.errstate(over="raise", invalid="raise", divide="raise"):
-            step = learning_step(
-                learning_inputs(profile, run.algorithm),
-                ref.pos_ned_m[:, :2],
-                record.sp_ned_m[:-1, :2],
-                record.pos_ned_m[:, :2],
-                kilc_prior,
-            )
-    except (ArithmeticError, RuntimeError) as exc:  # GcsErrors pass: they name their cause
-        if isinstance(exc, GcsError):
-            raise
-        raise RunLogError(
-            f"{run.path}/trial-{j:03d}.csv: the learning update failed on this trial ({exc}); "
-            "nothing written"
-        ) from None
-    sp = np.column_stack([step.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
+    where = f"{run.path}/trial-{j:03d}.csv: the learning update failed on this trial"
+    with _failure(where):
+        learner = Learner(
+            learner_settings(profile, run.algorithm), ref.pos_ned_m[:, :2],
+            kilc_states=kilc_prior,
+        )  # fmt: skip
+        learner.step(record.sp_ned_m[:-1, :2], record.pos_ned_m[1:, :2])
+    step = learner.last
+    assert step is not None and step.d_hat_m is not None and step.p_m2 is not None
+    sp = np.column_stack([step.setpoints_m, ref.pos_ned_m[:-1, 2]])
     try:  # the QP keeps these limits; this guards against a solver that did not
         check_learned(sp, profile, ref)
     except TrajectoryError as exc:
         raise RunLogError(f"{run.path}: learned from trial {j}: {exc}; nothing written") from None
-    path = run.write_learned(j, step.d_hat_ne_m, step.p_ne_m2, sp)
+    path = run.write_learned(j, step.d_hat_m, step.p_m2, sp)
     return LearnOutcome(
         trial=j,
         next_trial=j + 1,
         setpoints_path=path,
-        methods=(step.updates[0].method, step.updates[1].method),
-        active_constraints=sum(u.active_constraints for u in step.updates),
+        methods=step.methods,
+        active_constraints=step.active_constraints,
         next_iteration=j + 1,
     )
+
+
+@contextlib.contextmanager
+def _failure(where: str) -> Iterator[None]:
+    """Numerical failures of a learning step as one line naming ``where``; GcsErrors pass
+    (they name their cause)."""
+    try:
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            yield
+    except GcsError:
+        raise
+    except (ArithmeticError, RuntimeError, ValueError) as exc:
+        raise RunLogError(f"{where} ({exc}); nothing written") from None
 
 
 # ----------------------------------------------------------------------- learning with history
@@ -501,18 +403,26 @@ def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
     """A repeat of trial 0, or a step of :func:`plan_next_trial` on trials 0..j, recorded."""
     repeats = profile.learning.repeats
     records = _history(run, j, run_measurement(profile))
-    if j < repeats:
-        path = run.write_repeat(j + 1)
-        return LearnOutcome(j, j + 1, path, ("-", "-"), 0, 0, repeat_of=0)
     ref = run.reference()
     models, source = models_in_use(run, profile, j)
-    plan = _plan(run, profile, records, models, j)
-    sp = np.column_stack([plan.setpoints_ne_m, ref.pos_ned_m[:-1, 2]])
+    trials = [Trial(r.sp_ned_m[:-1, :2], r.pos_ned_m[1:, :2]) for r in records]
+    with _failure(f"{run.path}: the learning update from trials 0..{j} failed"):
+        learner = Learner.from_profile(
+            profile, ref, run.algorithm, models=models, history=trials[:-1]
+        )
+        learner.step(trials[-1].u_m, trials[-1].y_m)
+    step = learner.last
+    assert step is not None
+    if step.repeat_of is not None:
+        path = run.write_repeat(j + 1)
+        return LearnOutcome(j, j + 1, path, step.methods, 0, 0, repeat_of=step.repeat_of)
+    assert step.record is not None and step.d_hat_m is not None and step.p_m2 is not None
+    sp = np.column_stack([step.setpoints_m, ref.pos_ned_m[:-1, 2]])
     try:  # the QP keeps these limits; this guards against a solver that did not
-        check_learned(sp, profile, ref, plan.models)
+        check_learned(sp, profile, ref, step.models)
     except TrajectoryError as exc:
         raise RunLogError(f"{run.path}: learned from trial {j}: {exc}; nothing written") from None
-    refreshed = any(a.refresh is not None and a.refresh.accepted for a in plan.record.axes)
+    refreshed = any(a.refresh is not None and a.refresh.accepted for a in step.record.axes)
     rms, largest = setpoint_deviation(sp, ref.pos_ned_m)
     record = {
         "format": 1,
@@ -524,50 +434,26 @@ def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
         "models_from": source,
         "model_file": run.model_path(j).name if refreshed else None,
         "setpoints": {"rms_m": rms, "max_m": largest},
-        "decision": plan.record.as_dict(),
+        "decision": step.record.as_dict(),
     }
-    model_text = _refreshed_profile(run, profile, plan.models, j) if refreshed else None
-    floor = _floor_record(records, plan)
-    path = run.write_plan(j, plan.d_hat_ne_m, plan.p_ne_m2, record, sp, model_text, floor)
-    updates = [a.update for a in plan.record.axes]
+    model_text = _refreshed_profile(run, profile, step.models, j) if refreshed else None
+    floor = _floor_record(records, step)
+    path = run.write_plan(j, step.d_hat_m, step.p_m2, record, sp, model_text, floor)
     return LearnOutcome(
         trial=j,
         next_trial=j + 1,
         setpoints_path=path,
-        methods=(updates[0].method, updates[1].method),
-        active_constraints=sum(u.active_constraints for u in updates),
+        methods=step.methods,
+        active_constraints=step.active_constraints,
         next_iteration=record["next_iteration"],
         record=run.read_learn_record(j),
     )
 
 
-def _plan(
-    run: RunDir,
-    profile: Profile,
-    records: list[TrialRecord],
-    models: tuple[DiscreteModel, DiscreteModel],
-    j: int,
-) -> LearningPlan:
-    ref = run.reference().pos_ned_m
-    sp = np.array([r.sp_ned_m[:-1, :2] for r in records])
-    pos = np.array([r.pos_ned_m[:, :2] for r in records])
-    try:
-        with np.errstate(over="raise", invalid="raise", divide="raise"):
-            return plan_next_trial(
-                learning_inputs(profile, run.algorithm), profile.learning.adaptive,
-                ref[:, :2], sp, pos, models=models,
-            )  # fmt: skip
-    except (ArithmeticError, RuntimeError, ValueError) as exc:
-        if isinstance(exc, GcsError):  # they name their cause
-            raise
-        raise RunLogError(
-            f"{run.path}: the learning update from trials 0..{j} failed ({exc}); nothing written"
-        ) from None
-
-
-def _floor_record(records: list[TrialRecord], plan: LearningPlan) -> dict | None:
-    """``floor.json``: the plan's floor and the trials of identical setpoints it came from."""
-    floor = plan.record.floor
+def _floor_record(records: list[TrialRecord], step: LearnerStep) -> dict | None:
+    """``floor.json``: the step's floor and the trials of identical setpoints it came from."""
+    assert step.record is not None
+    floor = step.record.floor
     if floor is None:
         return None
     groups = identical_groups(np.array([r.sp_ned_m[:-1, :2] for r in records]))
@@ -575,7 +461,7 @@ def _floor_record(records: list[TrialRecord], plan: LearningPlan) -> dict | None
 
 
 def _refreshed_profile(
-    run: RunDir, profile: Profile, models: tuple[DiscreteModel, DiscreteModel], j: int
+    run: RunDir, profile: Profile, models: tuple[DiscreteModel, ...], j: int
 ) -> str:
     """The run's profile with the refreshed models, as YAML a user can fly (no clock in it:
     learning again from trial j gives the same bytes)."""

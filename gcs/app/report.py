@@ -26,17 +26,11 @@ import numpy as np
 from rich.markup import escape
 from rich.table import Table
 
-from gcs.app.learn import (
-    iteration_of,
-    measured_trial,
-    repeat_of,
-    run_measurement,
-    setpoint_deviation,
-    trial_errors,
-)
+from gcs.app.learn import measured_trial, run_measurement
 from gcs.core.floor import Floor, FloorVerdict, floor_from_flights, floor_verdicts, identical_groups
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.model import relative_degree
+from gcs.core.trials import iteration_of, repeat_of, setpoint_deviation, trial_errors
 from gcs.errors import ProfileError, RunLogError
 from gcs.io.runlog import RunDir, TrialRecord, atomic_write_text
 

@@ -1,7 +1,8 @@
-"""One learning cycle for both horizontal axes: estimate D from a trial, compute U_(j+1).
+"""The arithmetic of a learning step: estimate D from the trials, compute U_(j+1), per axis.
 
-This is the single learning step that ``gcs learn`` and ``gcs fly`` both run. It is pure:
-arrays in, arrays out.
+:class:`gcs.core.learner.Learner` is the one way in (``gcs learn``, ``gcs fly``, the
+benchmarks and a user's script all go through it); this module holds its settings, its
+records and the step's arithmetic. It is pure: arrays in, arrays out.
 
 Learning coordinates: per axis, metres relative to the trajectory's start point (the first
 reference sample). Before a trial the vehicle hovers there with that setpoint, so the model
@@ -14,7 +15,8 @@ setpoints flown, ``Y = y(1..N)`` the measured positions and ``Yd = yd(1..N)`` th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -48,17 +50,17 @@ from gcs.core.robustness import RobustnessWeight, repeat_cutoff, robustness_weig
 from gcs.core.safeguard import SafeguardDecision, SafeguardSettings, feasible_step, safeguard
 from gcs.core.trajectory import Box
 from gcs.core.update import (
+    InputUpdate,
     SetpointLimits,
     UpdateResult,
     UpdateWeights,
-    next_input,
     reference_for_inputs,
 )
 
 __all__ = [
-    "LearningInputs",
-    "LearningStep",
-    "learning_step",
+    "AXIS_NAMES",
+    "LearnerSettings",
+    "newest_step",
     "axis_limits",
     "NOISE_MODELS",
     "AdaptiveSettings",
@@ -70,67 +72,62 @@ __all__ = [
 ]
 
 
+#: Names of the local NED axes, by index.
+AXIS_NAMES = ("north", "east", "down")
+
+
 @dataclass(frozen=True)
-class LearningInputs:
-    """What one learning step needs, apart from the trial data.
+class LearnerSettings:
+    """What learning needs apart from the reference and the trial data.
 
     Parameters
     ----------
     models : tuple of DiscreteModel
-        (north, east) closed-loop models.
+        One closed-loop model "setpoint -> position" per learned axis, in the order of
+        ``axes``.
     algorithm : str
-        ``"smoother"`` or ``"kilc"``.
+        ``"smoother"`` (Algorithm 1, default) or ``"kilc"``.
     weights : UpdateWeights
-        Weights of eq. (8).
+        Weights of eq. (8) (default We = 1, Wdu = 0.01, Wu = 0).
     smoother : SmootherSettings
-        Algorithm 1 settings.
+        Algorithm 1 settings (default Table I).
     kilc : KilcSettings
-        K-ILC settings.
-    arena : Box
-        Flight volume, local NED [m]; the new setpoints stay inside it.
+        K-ILC settings (default Table I).
+    arena : Box or None
+        Flight volume, local NED [m]; the new setpoints stay inside it. None: no bounds
+        (the options beyond the paper need one).
     max_step_m : float or None
         Bound on the setpoint change per sample [m].
     max_deviation_m : float or None
         Bound on the setpoint distance from the reference [m].
+    axes : tuple of int
+        The local NED axis of each model (0 north, 1 east, 2 down): which of the arena's
+        bounds limit it. Default (0, 1): north and east.
     """
 
-    models: tuple[DiscreteModel, DiscreteModel]
-    algorithm: str
-    weights: UpdateWeights
-    smoother: SmootherSettings
-    kilc: KilcSettings
-    arena: Box
+    models: tuple[DiscreteModel, ...]
+    algorithm: str = "smoother"
+    weights: UpdateWeights = field(default_factory=UpdateWeights)
+    smoother: SmootherSettings = field(default_factory=SmootherSettings)
+    kilc: KilcSettings = field(default_factory=KilcSettings)
+    arena: Box | None = None
     max_step_m: float | None = None
     max_deviation_m: float | None = None
+    axes: tuple[int, ...] = (0, 1)
 
-
-@dataclass(frozen=True)
-class LearningStep:
-    """Result of :func:`learning_step`.
-
-    Parameters
-    ----------
-    setpoints_ne_m : ndarray, shape (N, 2)
-        Next trial's north/east setpoints u(0..N-1), absolute local NED [m].
-    d_hat_ne_m : ndarray, shape (N, 2)
-        Estimated repetitive disturbance d(1..N) per axis, learning coordinates [m].
-    p_ne_m2 : ndarray, shape (N, 2)
-        Error variance of the estimate [m^2] (K-ILC: the filter's scalar, repeated).
-    kilc_states : tuple of KilcState or None
-        Updated K-ILC states (north, east) when the algorithm is K-ILC.
-    updates : tuple of UpdateResult
-        Solver results per axis.
-    """
-
-    setpoints_ne_m: np.ndarray
-    d_hat_ne_m: np.ndarray
-    p_ne_m2: np.ndarray
-    kilc_states: tuple[KilcState, KilcState] | None
-    updates: tuple[UpdateResult, UpdateResult]
+    def __post_init__(self) -> None:
+        if self.algorithm not in ("smoother", "kilc"):
+            raise ValueError(f"algorithm must be 'smoother' or 'kilc', got {self.algorithm!r}")
+        if len(self.models) != len(self.axes) or not self.models:
+            raise ValueError(
+                f"one model per axis: {len(self.models)} models for axes {tuple(self.axes)}"
+            )
+        if len(set(self.axes)) != len(self.axes) or not set(self.axes) <= {0, 1, 2}:
+            raise ValueError(f"axes must be distinct NED indices 0..2, got {tuple(self.axes)}")
 
 
 def axis_limits(
-    arena: Box,
+    arena: Box | None,
     start_ne_m: np.ndarray,
     axis: int,
     max_step_m: float | None,
@@ -140,90 +137,87 @@ def axis_limits(
 
     Parameters
     ----------
-    arena : Box
-        Flight volume, local NED [m].
-    start_ne_m : ndarray, shape (2,)
-        Start point (north, east) [m], the origin of the learning coordinates.
+    arena : Box or None
+        Flight volume, local NED [m]; None for no bounds.
+    start_ne_m : float or ndarray
+        Start point of this axis [m] (a scalar), the origin of the learning coordinates; an
+        array of the NED start point is indexed by ``axis``.
     axis : int
-        0 for north, 1 for east.
+        Local NED index of the axis (0 north, 1 east, 2 down).
     max_step_m, max_deviation_m : float or None
-        See :class:`LearningInputs`.
+        See :class:`LearnerSettings`.
 
     Returns
     -------
     SetpointLimits
     """
-    lo, hi = arena.bounds()[axis]
+    lo, hi = (None, None) if arena is None else arena.bounds()[axis]
+    start = start_ne_m[axis] if np.ndim(start_ne_m) else start_ne_m
     return SetpointLimits(
-        u_min_m=lo - start_ne_m[axis],
-        u_max_m=hi - start_ne_m[axis],
+        u_min_m=None if lo is None else lo - start,
+        u_max_m=None if hi is None else hi - start,
         max_step_m=max_step_m,
         max_deviation_m=max_deviation_m,
     )
 
 
-def learning_step(
-    inputs: LearningInputs,
-    ref_ne_m: np.ndarray,
-    setpoints_ne_m: np.ndarray,
-    pos_ne_m: np.ndarray,
-    kilc_states: tuple[KilcState, KilcState] | None = None,
-) -> LearningStep:
-    """Estimate D from one complete trial and compute the next setpoints, both axes.
+def newest_step(
+    settings: LearnerSettings,
+    updates: Sequence[InputUpdate],
+    yd: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray,
+    kilc_states: tuple[KilcState, ...] | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[KilcState, ...] | None, tuple]:
+    """The paper's step from the newest trial, every axis (learning coordinates).
 
     Parameters
     ----------
-    inputs : LearningInputs
+    settings : LearnerSettings
         Models, algorithm and settings.
-    ref_ne_m : ndarray, shape (N+1, 2)
-        Reference yd(0..N), absolute north/east [m]; row 0 is the start point.
-    setpoints_ne_m : ndarray, shape (N, 2)
-        Setpoints flown u(0..N-1), absolute north/east [m].
-    pos_ne_m : ndarray, shape (N+1, 2)
-        Measured positions y(0..N) on the grid, absolute north/east [m].
-    kilc_states : tuple of KilcState, optional
-        K-ILC states after the previous trial; None starts from the prior (first trial).
+    updates : sequence of InputUpdate
+        Eq. (8) per axis, built for ``settings.models`` and ``yd``.
+    yd : ndarray, shape (N, n_axes)
+        Reference yd(1..N) [m].
+    u : ndarray, shape (N, n_axes)
+        Setpoints flown u(0..N-1) [m].
+    y : ndarray, shape (N, n_axes)
+        Measured positions y(1..N) [m].
+    kilc_states : tuple of KilcState or None
+        K-ILC states after the previous trial; None starts from the prior.
 
     Returns
     -------
-    LearningStep
+    tuple
+        ``(u_next, d_hat, p, kilc_states, update_results)``, arrays of shape (N, n_axes).
     """
-    ref = np.asarray(ref_ne_m, dtype=float)
-    n = ref.shape[0] - 1
-    start = ref[0]
-    u = np.asarray(setpoints_ne_m, dtype=float) - start
-    y = np.asarray(pos_ne_m, dtype=float)[1:] - start
-    yd = ref[1:] - start
-    if u.shape != (n, 2) or y.shape != (n, 2):
-        raise ValueError(f"expected setpoints ({n}, 2) and positions ({n + 1}, 2)")
-    u_next = np.empty((n, 2))
-    d_hat = np.empty((n, 2))
-    p = np.empty((n, 2))
+    n, n_axes = u.shape
+    u_next = np.empty((n, n_axes))
+    d_hat = np.empty((n, n_axes))
+    p = np.empty((n, n_axes))
     new_states: list[KilcState] = []
-    updates: list[UpdateResult] = []
-    for axis, model in enumerate(inputs.models):
+    results: list[UpdateResult] = []
+    for axis, model in enumerate(settings.models):
         z = y[:, axis] - simulate(model, u[:, axis])
-        if inputs.algorithm == "smoother":
-            smoothed = rts_smoother(z, inputs.smoother)
+        if settings.algorithm == "smoother":
+            smoothed = rts_smoother(z, settings.smoother)
             d_hat[:, axis], p[:, axis] = smoothed.d_hat, smoothed.p
         else:
-            prior = kilc_init(n, inputs.kilc) if kilc_states is None else kilc_states[axis]
-            state = kilc_update(prior, z, inputs.kilc)
+            prior = kilc_init(n, settings.kilc) if kilc_states is None else kilc_states[axis]
+            state = kilc_update(prior, z, settings.kilc)
             new_states.append(state)
             d_hat[:, axis], p[:, axis] = state.d_hat, state.p
-        limits = axis_limits(inputs.arena, start, axis, inputs.max_step_m, inputs.max_deviation_m)
-        result = next_input(model, yd[:, axis], d_hat[:, axis], u[:, axis], inputs.weights, limits)
-        updates.append(result)
+        result = updates[axis].solve(d_hat[:, axis], u[:, axis])
+        results.append(result)
         u_next[:, axis] = result.u_m
-    states = tuple(new_states) if new_states else None
-    return LearningStep(u_next + start, d_hat, p, states, tuple(updates))  # type: ignore[arg-type]
+    return u_next, d_hat, p, (tuple(new_states) if new_states else None), tuple(results)
 
 
 # =============================================================================================
-# Learning from the whole history of complete trials (issue P5): the floor, a noise model from
-# the data, robustness, a safeguard and model refresh. With AdaptiveSettings() (the default:
-# noise "table1", everything else off) plan_next_trial is learning_step on the newest trial,
-# bit for bit.
+# Learning from the whole history of complete trials: the floor, a noise model from the data,
+# robustness, a safeguard and model refresh. With AdaptiveSettings() (the default: noise
+# "table1", everything else off) plan_next_trial is newest_step on the newest trial, bit for
+# bit.
 # =============================================================================================
 
 NOISE_MODELS = ("table1", "data")
@@ -425,7 +419,7 @@ class LearningRecord:
     safeguard : SafeguardDecision or None
         The safeguard's decision (None when off).
     axes : tuple of AxisRecord
-        North and east.
+        One per learned axis.
     """
 
     trials: int
@@ -433,7 +427,7 @@ class LearningRecord:
     floor: Floor | None
     verdicts: tuple[FloorVerdict, ...]
     safeguard: SafeguardDecision | None
-    axes: tuple[AxisRecord, AxisRecord]
+    axes: tuple[AxisRecord, ...]
 
     @property
     def converged(self) -> bool:
@@ -465,83 +459,67 @@ class LearningRecord:
 
 @dataclass(frozen=True)
 class LearningPlan:
-    """Result of :func:`plan_next_trial`.
+    """Result of :func:`plan_next_trial` (learning coordinates: relative to the start point).
 
     Parameters
     ----------
-    setpoints_ne_m : ndarray, shape (N, 2)
-        Next trial's north/east setpoints u(0..N-1), absolute local NED [m].
-    d_hat_ne_m : ndarray, shape (N, 2)
-        Estimated repetitive disturbance d(1..N) per axis, learning coordinates [m].
-    p_ne_m2 : ndarray, shape (N, 2)
+    u_next_m : ndarray, shape (N, n_axes)
+        Next trial's setpoints u(0..N-1) [m].
+    d_hat_m : ndarray, shape (N, n_axes)
+        Estimated repetitive disturbance d(1..N) [m].
+    p_m2 : ndarray, shape (N, n_axes)
         Error variance of the estimate [m^2].
     models : tuple of DiscreteModel
-        (north, east) models after the refresh: pass them to the next call.
+        Models after the refresh: the next step's.
     kilc_states : tuple of KilcState or None
         K-ILC states after the newest trial (``noise = "table1"``, algorithm K-ILC).
     record : LearningRecord
         Every decision taken.
     """
 
-    setpoints_ne_m: np.ndarray
-    d_hat_ne_m: np.ndarray
-    p_ne_m2: np.ndarray
-    models: tuple[DiscreteModel, DiscreteModel]
-    kilc_states: tuple[KilcState, KilcState] | None
+    u_next_m: np.ndarray
+    d_hat_m: np.ndarray
+    p_m2: np.ndarray
+    models: tuple[DiscreteModel, ...]
+    kilc_states: tuple[KilcState, ...] | None
     record: LearningRecord
 
 
-def _history(
-    ref_ne_m: np.ndarray, setpoints_ne_m: np.ndarray, pos_ne_m: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Validate the history; return ref, setpoints (T, N, 2), positions (T, N+1, 2), start."""
-    ref = np.asarray(ref_ne_m, dtype=float)
-    sp = np.asarray(setpoints_ne_m, dtype=float)
-    pos = np.asarray(pos_ne_m, dtype=float)
-    if ref.ndim != 2 or ref.shape[1] != 2 or ref.shape[0] < 2:
-        raise ValueError(f"ref_ne_m must have shape (N+1, 2), got {ref.shape}")
-    n = ref.shape[0] - 1
-    if sp.ndim != 3 or sp.shape[1:] != (n, 2) or sp.shape[0] < 1:
-        raise ValueError(f"setpoints_ne_m must have shape (T, {n}, 2), got {sp.shape}")
-    if pos.shape != (sp.shape[0], n + 1, 2):
-        raise ValueError(f"pos_ne_m must have shape ({sp.shape[0]}, {n + 1}, 2), got {pos.shape}")
-    for name, arr in (("ref_ne_m", ref), ("setpoints_ne_m", sp), ("pos_ne_m", pos)):
-        if not np.all(np.isfinite(arr)):
-            raise ValueError(f"{name} contains NaN or inf")
-    return ref, sp, pos, ref[0]
+#: ``updates(axis, model)``: eq. (8) of one axis for one model (a learner reuses them).
+UpdatesFor = Callable[[int, DiscreteModel], InputUpdate]
 
 
-def _floor_of(sp: np.ndarray, pos: np.ndarray, given: Floor | None) -> Floor | None:
+def _floor_of(sp: np.ndarray, y: np.ndarray, given: Floor | None) -> Floor | None:
     if given is not None:
         return given
     groups = identical_groups(sp)
     if not groups:
         return None
     group = max(groups, key=len)
-    return floor_from_flights(pos[group, 1:])
+    return floor_from_flights(y[group])
 
 
 def _table1_estimate(
-    inputs: LearningInputs, z: np.ndarray
+    settings: LearnerSettings, z: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, NoiseRecord, KilcState | None]:
     n_trials, n = z.shape
     nan = float("nan")
-    if inputs.algorithm == "smoother":
-        smoothed = rts_smoother(z[-1], inputs.smoother)
+    if settings.algorithm == "smoother":
+        smoothed = rts_smoother(z[-1], settings.smoother)
         weights = (0.0,) * (n_trials - 1) + (1.0,)
-        rec = NoiseRecord("table1", nan, nan, inputs.smoother.r, False, inputs.smoother.q,
-                          inputs.smoother.r, inputs.smoother.r, weights)  # fmt: skip
+        rec = NoiseRecord("table1", nan, nan, settings.smoother.r, False, settings.smoother.q,
+                          settings.smoother.r, settings.smoother.r, weights)  # fmt: skip
         return smoothed.d_hat, smoothed.p, rec, None
-    state = kilc_init(n, inputs.kilc)
+    state = kilc_init(n, settings.kilc)
     for j in range(n_trials):
-        state = kilc_update(state, z[j], inputs.kilc)
-    rec = NoiseRecord("table1", inputs.kilc.q, 0.0, inputs.kilc.r, False, nan, nan, nan,
+        state = kilc_update(state, z[j], settings.kilc)
+    rec = NoiseRecord("table1", settings.kilc.q, 0.0, settings.kilc.r, False, nan, nan, nan,
                       (nan,) * n_trials)  # fmt: skip
     return state.d_hat, np.full(n, state.p), rec, state
 
 
 def _data_estimate(
-    inputs: LearningInputs,
+    settings: LearnerSettings,
     adaptive: AdaptiveSettings,
     model: DiscreteModel,
     u: np.ndarray,
@@ -551,7 +529,7 @@ def _data_estimate(
     z = y - simulate(model, u.T).T
     change = simulate(model, np.diff(u, axis=0).T).T.reshape(u.shape[0] - 1, u.shape[1])
     est = estimate_disturbance(
-        z, drift_scale(change), inputs.algorithm == "smoother", adaptive.drift_offset
+        z, drift_scale(change), settings.algorithm == "smoother", adaptive.drift_offset
     )
     it, tn = est.iteration, est.time
     rec = NoiseRecord(
@@ -578,33 +556,37 @@ def _refresh_axis(
 
 
 def plan_next_trial(
-    inputs: LearningInputs,
+    settings: LearnerSettings,
     adaptive: AdaptiveSettings,
-    ref_ne_m: np.ndarray,
-    setpoints_ne_m: np.ndarray,
-    pos_ne_m: np.ndarray,
-    models: tuple[DiscreteModel, DiscreteModel] | None = None,
+    updates: UpdatesFor,
+    ref_m: np.ndarray,
+    sp_m: np.ndarray,
+    y_m: np.ndarray,
+    models: tuple[DiscreteModel, ...],
     floor: Floor | None = None,
 ) -> LearningPlan:
     """The next setpoints from every complete trial so far, and a record of every decision.
 
+    Horizontal only: e_pos (eq. 10), the floor and the safeguard are defined on north and
+    east, so ``settings.axes`` must be (0, 1).
+
     Parameters
     ----------
-    inputs : LearningInputs
-        Models, algorithm, weights, Table I settings, arena and limits (as for
-        :func:`learning_step`).
+    settings : LearnerSettings
+        Models, algorithm, weights, Table I settings, arena and limits.
     adaptive : AdaptiveSettings
         The options beyond the paper; ``AdaptiveSettings()`` is the paper's method.
-    ref_ne_m : ndarray, shape (N+1, 2)
-        Reference yd(0..N), absolute north/east [m]; row 0 is the start point.
-    setpoints_ne_m : ndarray, shape (T, N, 2)
+    updates : callable
+        ``updates(axis, model)`` gives eq. (8) of that axis for that model.
+    ref_m : ndarray, shape (N+1, 2)
+        Reference yd(0..N), absolute [m]; row 0 is the start point.
+    sp_m : ndarray, shape (T, N, 2)
         Setpoints u(0..N-1) of the complete trials, oldest first, absolute [m]. Trials flown
         with identical setpoints (a repeat) measure the floor.
-    pos_ne_m : ndarray, shape (T, N+1, 2)
-        Measured positions y(0..N) of the same trials, absolute [m].
-    models : tuple of DiscreteModel, optional
-        (north, east) models in use, e.g. the ``models`` of the previous plan; default the
-        profile's (``inputs.models``).
+    y_m : ndarray, shape (T, N, 2)
+        Measured positions y(1..N) of the same trials, absolute [m].
+    models : tuple of DiscreteModel
+        Models in use (the previous plan's).
     floor : Floor, optional
         The floor, when measured elsewhere; default: from trials of identical setpoints in the
         history, if any.
@@ -613,23 +595,23 @@ def plan_next_trial(
     -------
     LearningPlan
     """
-    ref, sp, pos, start = _history(ref_ne_m, setpoints_ne_m, pos_ne_m)
+    ref, sp, y = ref_m, sp_m, y_m
+    start = ref[0]
     n_trials = sp.shape[0]
     u_all = sp - start
-    y_all = pos[:, 1:] - start
-    epos_all = np.array([epos(ref[1:], pos[j, 1:]) for j in range(n_trials)])
-    current = tuple(models) if models is not None else tuple(inputs.models)
-    the_floor = _floor_of(sp, pos, floor)
+    y_all = y - start
+    epos_all = np.array([epos(ref[1:], y[j]) for j in range(n_trials)])
+    the_floor = _floor_of(sp, y, floor)
     verdicts = floor_verdicts(epos_all, the_floor, adaptive.floor_z) if the_floor else ()
     decision = None
     if adaptive.safeguard and n_trials > 1:
-        scatter = _scatter(the_floor, current, u_all, y_all)
-        decision = safeguard(epos_all, sp, scatter, inputs.arena, adaptive.safeguard_settings())
+        scatter = _scatter(the_floor, models, u_all, y_all)
+        decision = safeguard(epos_all, sp, scatter, settings.arena, adaptive.safeguard_settings())
     anchor = n_trials - 1 if decision is None else decision.anchor_trial
     step = 1.0 if decision is None else decision.step
     axes = [
-        _plan_axis(inputs, adaptive, current[a], a, ref, sp, pos, the_floor, anchor, step)
-        for a in range(2)
+        _plan_axis(settings, adaptive, updates, models[a], a, ref, sp, y, the_floor, anchor, step)
+        for a in range(len(models))
     ]
     states = [ax.kilc_state for ax in axes if ax.kilc_state is not None]
     record = LearningRecord(
@@ -638,14 +620,14 @@ def plan_next_trial(
         floor=the_floor,
         verdicts=verdicts,
         safeguard=decision,
-        axes=(axes[0].record, axes[1].record),
+        axes=tuple(ax.record for ax in axes),
     )
     return LearningPlan(
-        setpoints_ne_m=np.column_stack([ax.u_next for ax in axes]) + start,
-        d_hat_ne_m=np.column_stack([ax.d_hat for ax in axes]),
-        p_ne_m2=np.column_stack([ax.p for ax in axes]),
-        models=(axes[0].model, axes[1].model),
-        kilc_states=(states[0], states[1]) if states else None,
+        u_next_m=np.column_stack([ax.u_next for ax in axes]),
+        d_hat_m=np.column_stack([ax.d_hat for ax in axes]),
+        p_m2=np.column_stack([ax.p for ax in axes]),
+        models=tuple(ax.model for ax in axes),
+        kilc_states=tuple(states) if states else None,
         record=record,
     )
 
@@ -663,62 +645,64 @@ class _AxisPlan:
 
 
 def _plan_axis(
-    inputs: LearningInputs,
+    settings: LearnerSettings,
     adaptive: AdaptiveSettings,
+    updates: UpdatesFor,
     model: DiscreteModel,
     axis: int,
     ref: np.ndarray,
     sp: np.ndarray,
-    pos: np.ndarray,
+    y_abs: np.ndarray,
     the_floor: Floor | None,
     anchor: int,
     step: float,
 ) -> _AxisPlan:
     """Refresh, estimate and update one axis from the whole history."""
     start = ref[0]
-    u, y = sp[:, :, axis] - start[axis], pos[:, 1:, axis] - start[axis]
+    u, y = sp[:, :, axis] - start[axis], y_abs[:, :, axis] - start[axis]
     yd = ref[1:, axis] - start[axis]
     refresh = None
     if adaptive.refresh and u.shape[0] > 1:
         r_m2 = _noise_variance(model, u, y, the_floor, axis)
-        refresh = _refresh_axis(model, u, y, r_m2, adaptive, inputs.weights)
+        refresh = _refresh_axis(model, u, y, r_m2, adaptive, settings.weights)
         model = refresh.model
     state = None
     if adaptive.noise == "table1":
-        # one trial at a time: the same arithmetic as learning_step, bit for bit
+        # one trial at a time: the same arithmetic as newest_step, bit for bit
         z = np.array([y[j] - simulate(model, u[j]) for j in range(u.shape[0])])
-        d_hat, p, noise_rec, state = _table1_estimate(inputs, z)
+        d_hat, p, noise_rec, state = _table1_estimate(settings, z)
     else:
-        d_hat, p, noise_rec = _data_estimate(inputs, adaptive, model, u, y)
-    robust, robust_rec = _robustness(inputs, adaptive, model, axis, ref, sp, pos, u[0])
-    limits = axis_limits(inputs.arena, start, axis, inputs.max_step_m, inputs.max_deviation_m)
-    result = next_input(model, yd, d_hat, u[anchor], inputs.weights, limits, robust)
+        d_hat, p, noise_rec = _data_estimate(settings, adaptive, model, u, y)
+    robust, robust_rec = _robustness(settings, adaptive, model, axis, ref, sp, y_abs, u[0])
+    update = updates(axis, model)
+    result = update.solve(d_hat, u[anchor], robust)
     if step < 1.0:  # after a safeguard revert: no further from the best trial than its limits allow
         yd_u = reference_for_inputs(yd, relative_degree(model))
-        step = feasible_step(u[anchor], result.u_m, yd_u, limits, step)
+        step = feasible_step(u[anchor], result.u_m, yd_u, update.limits, step)
     u_next = result.u_m if step >= 1.0 else u[anchor] + step * (result.u_m - u[anchor])
-    record = AxisRecord(("north", "east")[axis], noise_rec, refresh, robust_rec, result, step)
+    name = AXIS_NAMES[settings.axes[axis]]
+    record = AxisRecord(name, noise_rec, refresh, robust_rec, result, step)
     return _AxisPlan(u_next, d_hat, p, model, state, record)
 
 
 def _robustness(
-    inputs: LearningInputs,
+    settings: LearnerSettings,
     adaptive: AdaptiveSettings,
     model: DiscreteModel,
     axis: int,
     ref: np.ndarray,
     sp: np.ndarray,
-    pos: np.ndarray,
+    y: np.ndarray,
     anchor_m: np.ndarray,
 ) -> tuple[RobustnessWeight | None, dict | None]:
     """The robustness weight of one axis (None when off) and its record."""
     cutoff, source = adaptive.robustness_cutoff_rad_s, "profile"
     if cutoff == "auto":
-        cutoff, source = _auto_cutoff(sp, pos, ref, axis, model.dt_s), "auto"
+        cutoff, source = _auto_cutoff(sp, y, ref, axis, model.dt_s), "auto"
     if cutoff is None:
         return None, None
     weight = robustness_weight(
-        model, float(cutoff), adaptive.robustness_order, anchor_m, inputs.weights.we
+        model, float(cutoff), adaptive.robustness_order, anchor_m, settings.weights.we
     )
     rec = {"cutoff_rad_s": weight.cutoff_rad_s, "lam": weight.lam, "order": weight.order,
            "source": source}  # fmt: skip
@@ -743,7 +727,7 @@ def _noise_variance(
 
 def _scatter(
     the_floor: Floor | None,
-    models: tuple[DiscreteModel, DiscreteModel],
+    models: tuple[DiscreteModel, ...],
     u: np.ndarray,
     y: np.ndarray,
 ) -> float:
@@ -753,20 +737,20 @@ def _scatter(
     diff = np.column_stack(
         [
             (y[-1, :, a] - y[-2, :, a]) - simulate(models[a], u[-1, :, a] - u[-2, :, a])
-            for a in range(2)
+            for a in range(len(models))
         ]
     )
     return floor_from_difference(diff, "model-corrected pair").scatter_m
 
 
 def _auto_cutoff(
-    sp: np.ndarray, pos: np.ndarray, ref: np.ndarray, axis: int, dt_s: float
+    sp: np.ndarray, y: np.ndarray, ref: np.ndarray, axis: int, dt_s: float
 ) -> float | None:
     """The data's cutoff for one axis from the largest group of identical trials, or None."""
     groups = identical_groups(sp)
     if not groups:
         return None
     group = max(groups, key=len)
-    errors = ref[None, 1:, axis] - pos[group, 1:, axis]
+    errors = ref[None, 1:, axis] - y[group, :, axis]
     cutoff = repeat_cutoff(errors, dt_s)
     return cutoff if cutoff < 0.9 * np.pi / dt_s else None

@@ -54,6 +54,7 @@ __all__ = [
     "SetpointLimits",
     "UpdateResult",
     "next_input",
+    "InputUpdate",
     "unconstrained_update_operator",
     "reference_for_inputs",
 ]
@@ -227,6 +228,83 @@ def reference_for_inputs(yd_m: np.ndarray, r: int) -> np.ndarray:
     return np.concatenate([yd_m[r - 1 :], np.full(r - 1, yd_m[-1])])
 
 
+class _Structure:
+    """The parts of one axis's QP that do not change between trials (model, N, weights, yd).
+
+    Built once per :class:`InputUpdate`: the banded dynamics ``G z = h``, the Hessian ``P``
+    without the robustness term, its KKT factorisation (on first use), the Markov parameters
+    for the objective. Each trial then only forms the linear term ``q``.
+    """
+
+    def __init__(self, model: DiscreteModel, yd_m: np.ndarray, weights: UpdateWeights) -> None:
+        if not isinstance(model, DiscreteModel):
+            raise TypeError(f"model must be a DiscreteModel, got {type(model).__name__}")
+        if not isinstance(weights, UpdateWeights):
+            raise TypeError(f"weights must be UpdateWeights, got {type(weights).__name__}")
+        yd = _check_vector("yd_m", yd_m, None, TrajectoryError)
+        N = yd.shape[0]
+        if N == 0:
+            raise TrajectoryError("yd_m is empty")
+        controllable_slices(model, N)  # raises ModelError when the trial is shorter than r
+        r = relative_degree(model)
+        d = model.delay_samples
+        nx = model.order
+        m = N - r + 1
+        T = N - d  # number of state blocks x(d+1) .. x(N)
+        s = r - d - 1  # first state block whose output is in the cost
+        A, B, C = model.A, model.B, model.C
+        y_final = float(yd[-1])
+
+        # Dynamics: x(d+1+t) - A x(d+t) - B u(t) = 0, t = 0 .. T-1 (x(d) = 0); u(t) pinned for
+        # t >= m.
+        GX = sp.kron(sp.eye(T), sp.eye(nx)) - sp.kron(sp.eye(T, k=-1), sp.csr_matrix(A))
+        GU = sp.kron(sp.eye(T, m), sp.csr_matrix(-B))
+        G = sp.hstack([GU, GX], format="csc")
+        pinned = (np.arange(T) >= m).astype(float)
+        h = np.kron(pinned * y_final, B[:, 0])
+
+        # Cost: we (C x(k) - w(k))^2 for k = r..N, w = yd - d_hat; (wdu + wu) u^2 - 2 wdu u_prev u.
+        mask = (np.arange(T) >= s).astype(float)
+        ctc = C.T @ C
+        self.PX = sp.kron(sp.diags(mask), sp.csr_matrix(2.0 * weights.we * ctc))
+        self.PU = sp.eye(m) * (2.0 * (weights.wdu + weights.wu))
+        self.P = sp.block_diag([self.PU, self.PX], format="csc")
+        self.model, self.weights, self.yd, self.d, self.mask = model, weights, yd, d, mask
+        self.n, self.r, self.m, self.y_final = N, r, m, y_final
+        self.G, self.h = G, h
+        self.yd_u = reference_for_inputs(yd, r)
+        self.f = markov_parameters(model, N)
+        self._kkt: tuple[sp.csc_matrix, spla.SuperLU] | None = None
+
+    def problem(
+        self, d_hat_m: np.ndarray, u_prev_m: np.ndarray, robust: RobustnessWeight | None
+    ) -> _Problem:
+        """The QP of one trial: the fixed structure and this trial's linear term."""
+        N, m, weights = self.n, self.m, self.weights
+        dh = _check_vector("d_hat_m", d_hat_m, N, RunLogError)
+        up = _check_vector("u_prev_m", u_prev_m, N, RunLogError)
+        w = self.yd - dh
+        C = self.model.C
+        qX = (-2.0 * weights.we * (self.mask * w[self.d : N]))[:, None] * C[0][None, :]
+        qU = -2.0 * weights.wdu * up[:m]
+        P = self.P
+        if robust is not None and robust.lam > 0:
+            PR, qR = _robust_terms(robust, N, m, self.y_final)
+            P, qU = sp.block_diag([self.PU + PR, self.PX], format="csc"), qU + qR
+        q = np.concatenate([qU, qX.ravel()])
+        return _Problem(N, self.r, m, self.y_final, P, q, self.G, self.h, self.yd_u)
+
+    def solve_direct(self, prob: _Problem) -> np.ndarray:
+        """Unconstrained optimum (equality-constrained QP); the free inputs. The KKT matrix
+        of the structure's own Hessian is factorised once."""
+        if prob.P is not self.P:
+            return _solve_direct(prob)
+        if self._kkt is None:
+            self._kkt = _kkt_factor(self.P, self.G)
+        z, _ = _kkt_solve_factored(*self._kkt, prob.q, prob.h, self.P.shape[0])
+        return z[: prob.m]
+
+
 def _build_problem(
     model: DiscreteModel,
     yd_m: np.ndarray,
@@ -235,47 +313,8 @@ def _build_problem(
     weights: UpdateWeights,
     robust: RobustnessWeight | None = None,
 ) -> _Problem:
-    if not isinstance(model, DiscreteModel):
-        raise TypeError(f"model must be a DiscreteModel, got {type(model).__name__}")
-    if not isinstance(weights, UpdateWeights):
-        raise TypeError(f"weights must be UpdateWeights, got {type(weights).__name__}")
-    yd = _check_vector("yd_m", yd_m, None, TrajectoryError)
-    N = yd.shape[0]
-    if N == 0:
-        raise TrajectoryError("yd_m is empty")
-    dh = _check_vector("d_hat_m", d_hat_m, N, RunLogError)
-    up = _check_vector("u_prev_m", u_prev_m, N, RunLogError)
-    controllable_slices(model, N)  # raises ModelError when the trial is shorter than r
-    r = relative_degree(model)
-    d = model.delay_samples
-    nx = model.order
-    m = N - r + 1
-    T = N - d  # number of state blocks x(d+1) .. x(N)
-    s = r - d - 1  # first state block whose output is in the cost
-    A, B, C = model.A, model.B, model.C
-    y_final = float(yd[-1])
-
-    # Dynamics: x(d+1+t) - A x(d+t) - B u(t) = 0, t = 0 .. T-1 (x(d) = 0); u(t) pinned for t >= m.
-    GX = sp.kron(sp.eye(T), sp.eye(nx)) - sp.kron(sp.eye(T, k=-1), sp.csr_matrix(A))
-    GU = sp.kron(sp.eye(T, m), sp.csr_matrix(-B))
-    G = sp.hstack([GU, GX], format="csc")
-    pinned = (np.arange(T) >= m).astype(float)
-    h = np.kron(pinned * y_final, B[:, 0])
-
-    # Cost: we (C x(k) - w(k))^2 for k = r..N, w = yd - d_hat; (wdu + wu) u^2 - 2 wdu u_prev u.
-    mask = (np.arange(T) >= s).astype(float)
-    w = yd - dh
-    ctc = C.T @ C
-    PX = sp.kron(sp.diags(mask), sp.csr_matrix(2.0 * weights.we * ctc))
-    PU = sp.eye(m) * (2.0 * (weights.wdu + weights.wu))
-    qX = (-2.0 * weights.we * (mask * w[d:N]))[:, None] * C[0][None, :]
-    qU = -2.0 * weights.wdu * up[:m]
-    if robust is not None and robust.lam > 0:
-        PR, qR = _robust_terms(robust, N, m, y_final)
-        PU, qU = PU + PR, qU + qR
-    P = sp.block_diag([PU, PX], format="csc")
-    q = np.concatenate([qU, qX.ravel()])
-    return _Problem(N, r, m, y_final, P, q, G, h, reference_for_inputs(yd, r))
+    """The QP of one trial, structure and linear term built together."""
+    return _Structure(model, yd_m, weights).problem(d_hat_m, u_prev_m, robust)
 
 
 def _robust_terms(
@@ -299,25 +338,35 @@ def _full_input(prob: _Problem, u_free: np.ndarray) -> np.ndarray:
     return np.concatenate([u_free, np.full(prob.r - 1, prob.y_final)])
 
 
+def _kkt_factor(P: sp.csc_matrix, G: sp.csc_matrix) -> tuple[sp.csc_matrix, spla.SuperLU]:
+    """The KKT matrix ``[P G'; G 0]`` and its sparse LU (COLAMD column ordering, which bounds
+    the fill whatever the row pivoting: the matrix is banded up to a permutation, so the cost
+    is linear in N)."""
+    K = sp.bmat([[P, G.T], [G, None]], format="csc")
+    return K, spla.splu(K, permc_spec="COLAMD")
+
+
+def _kkt_solve_factored(
+    K: sp.csc_matrix, lu: spla.SuperLU, q: np.ndarray, h: np.ndarray, nz: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Solve ``K [z; nu] = [-q; h]`` with a factorised ``K``, plus one step of iterative
+    refinement. Returns ``(z, nu)``; ``P z + q + G' nu = 0``."""
+    rhs = np.concatenate([-q, h])
+    sol = lu.solve(rhs)
+    sol += lu.solve(rhs - K @ sol)
+    if not np.all(np.isfinite(sol)):
+        raise RuntimeError("KKT factorisation of the input update produced NaN")
+    return sol[:nz], sol[nz:]
+
+
 def _kkt_solve(
     P: sp.csc_matrix, q: np.ndarray, G: sp.csc_matrix, h: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``min 1/2 z'Pz + q'z s.t. G z = h`` via ``[P G'; G 0] [z; nu] = [-q; h]``.
 
-    Sparse LU with the COLAMD column ordering, which bounds the fill whatever the row pivoting
-    (the KKT matrix is banded up to a permutation, so the cost is linear in N), plus one step
-    of iterative refinement.
     Returns ``(z, nu)``; ``P z + q + G' nu = 0``.
     """
-    K = sp.bmat([[P, G.T], [G, None]], format="csc")
-    rhs = np.concatenate([-q, h])
-    lu = spla.splu(K, permc_spec="COLAMD")
-    sol = lu.solve(rhs)
-    sol += lu.solve(rhs - K @ sol)
-    if not np.all(np.isfinite(sol)):
-        raise RuntimeError("KKT factorisation of the input update produced NaN")
-    nz = P.shape[0]
-    return sol[:nz], sol[nz:]
+    return _kkt_solve_factored(*_kkt_factor(P, G), q, h, P.shape[0])
 
 
 def _solve_direct(prob: _Problem) -> np.ndarray:
@@ -442,11 +491,16 @@ def _clarabel_settings() -> clarabel.DefaultSettings:
 
 
 def _solve_clarabel(
-    prob: _Problem, limits: SetpointLimits | None
+    prob: _Problem,
+    limits: SetpointLimits | None,
+    rows: tuple[sp.csc_matrix, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, str, clarabel.DefaultSolution]:
-    """Solve the QP with the limits' inequalities by Clarabel; return free inputs and status."""
+    """Solve the QP with the limits' inequalities (``rows``, default from ``limits``) by
+    Clarabel; return free inputs and status."""
     nz = prob.P.shape[0]
-    A_in, b_in = _inequalities(prob, limits) if limits is not None else (sp.csc_matrix((0, nz)), [])
+    if rows is None:
+        rows = _inequalities(prob, limits) if limits is not None else (sp.csc_matrix((0, nz)), [])
+    A_in, b_in = rows
     A = sp.vstack([prob.G, A_in], format="csc")
     b = np.concatenate([prob.h, b_in])
     cones = [clarabel.ZeroConeT(prob.G.shape[0])]
@@ -513,7 +567,7 @@ def _polish(
 
 
 def _objective(
-    model: DiscreteModel,
+    f: np.ndarray,
     u: np.ndarray,
     yd: np.ndarray,
     dh: np.ndarray,
@@ -522,7 +576,6 @@ def _objective(
     r: int,
     robust: RobustnessWeight | None = None,
 ) -> float:
-    f = markov_parameters(model, u.size)
     y = scipy.signal.oaconvolve(f, u)[: u.size] if u.size > 64 else np.convolve(f, u)[: u.size]
     e = (y - yd + dh)[r - 1 :]
     du = u - up
@@ -531,6 +584,93 @@ def _objective(
         x = difference_matrix(u.size, robust.order) @ (u - robust.anchor_m)
         value += robust.lam * float(x @ x)
     return value
+
+
+class InputUpdate:
+    """Eq. (8) of one axis for a fixed model, reference, weights and limits; one call per trial.
+
+    What does not change between trials is built once: the QP's banded structure, the
+    factorisation of its KKT matrix, the Markov parameters, the limits' feasibility and their
+    inequality rows. :meth:`solve` then costs one linear term, two triangular solves and (when
+    a limit is active) one Clarabel solve. The results are those of :func:`next_input`, bit
+    for bit.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+        Closed-loop model "setpoint -> position" of this axis.
+    yd_m : ndarray, shape (N,)
+        Reference ``yd(1) .. yd(N)`` [m], learning coordinates (Y-indexed).
+    weights : UpdateWeights
+        Weights of eq. (8).
+    limits : SetpointLimits or None
+        Setpoint limits of this axis; None for none.
+
+    Raises
+    ------
+    TrajectoryError
+        ``yd_m`` has a bad shape or NaN/inf.
+    ModelError
+        The trial is shorter than the model's relative degree.
+    """
+
+    def __init__(
+        self,
+        model: DiscreteModel,
+        yd_m: np.ndarray,
+        weights: UpdateWeights,
+        limits: SetpointLimits | None = None,
+    ) -> None:
+        self._s = _Structure(model, yd_m, weights)
+        self.limits = limits
+        self._feasible = False
+        self._rows: tuple[sp.csc_matrix, np.ndarray] | None = None
+
+    @property
+    def model(self) -> DiscreteModel:
+        """The model the structure was built for."""
+        return self._s.model
+
+    def solve(
+        self,
+        d_hat_m: np.ndarray,
+        u_prev_m: np.ndarray,
+        robustness: RobustnessWeight | None = None,
+    ) -> UpdateResult:
+        """Next trial input: minimiser of eq. (8) under the limits.
+
+        Parameters
+        ----------
+        d_hat_m : ndarray, shape (N,)
+            Disturbance estimate ``d_hat(1) .. d_hat(N)`` [m] (Y-indexed).
+        u_prev_m : ndarray, shape (N,)
+            Input of the last trial ``u_j(0) .. u_j(N-1)`` [m] (U-indexed).
+        robustness : RobustnessWeight or None
+            Zero-phase weight added to eq. (8) (see :func:`next_input`).
+
+        Returns
+        -------
+        UpdateResult
+            As :func:`next_input`.
+        """
+        s, limits = self._s, self.limits
+        prob = s.problem(d_hat_m, u_prev_m, robustness)
+        u = _full_input(prob, s.solve_direct(prob))
+        method, status = "direct", "solved"
+        if limits is not None and _violations(u, prob, limits, -_FAST_PATH_TOL_M) > 0:
+            if not self._feasible:
+                _check_feasible(prob, limits)
+                self._feasible = True
+            if self._rows is None:
+                self._rows = _inequalities(prob, limits)
+            u_free, status, _ = _solve_clarabel(prob, limits, self._rows)
+            u = _full_input(prob, u_free)
+            method = "clarabel"
+        active = 0 if limits is None else _violations(u, prob, limits, _ACTIVE_TOL_M)
+        dh = np.asarray(d_hat_m, dtype=float)
+        up = np.asarray(u_prev_m, dtype=float)
+        objective = _objective(s.f, u, s.yd, dh, up, s.weights, prob.r, robustness)
+        return UpdateResult(u, status, objective, method, active)
 
 
 def next_input(
@@ -542,7 +682,10 @@ def next_input(
     limits: SetpointLimits | None = None,
     robustness: RobustnessWeight | None = None,
 ) -> UpdateResult:
-    """Next trial input: minimiser of eq. (8) under the setpoint limits (one axis).
+    """Next trial input: minimiser of eq. (8) under the setpoint limits (one axis, one call).
+
+    The same as ``InputUpdate(model, yd_m, weights, limits).solve(d_hat_m, u_prev_m,
+    robustness)``; a learner that runs many trials keeps the :class:`InputUpdate`.
 
     Parameters
     ----------
@@ -579,20 +722,7 @@ def next_input(
     RuntimeError
         Clarabel failed numerically (status other than solved or infeasible).
     """
-    prob = _build_problem(model, yd_m, d_hat_m, u_prev_m, weights, robustness)
-    yd = np.asarray(yd_m, dtype=float)
-    dh = np.asarray(d_hat_m, dtype=float)
-    up = np.asarray(u_prev_m, dtype=float)
-    u = _full_input(prob, _solve_direct(prob))
-    method, status = "direct", "solved"
-    if limits is not None and _violations(u, prob, limits, -_FAST_PATH_TOL_M) > 0:
-        _check_feasible(prob, limits)
-        u_free, status, _ = _solve_clarabel(prob, limits)
-        u = _full_input(prob, u_free)
-        method = "clarabel"
-    active = 0 if limits is None else _violations(u, prob, limits, _ACTIVE_TOL_M)
-    objective = _objective(model, u, yd, dh, up, weights, prob.r, robustness)
-    return UpdateResult(u, status, objective, method, active)
+    return InputUpdate(model, yd_m, weights, limits).solve(d_hat_m, u_prev_m, robustness)
 
 
 def unconstrained_update_operator(

@@ -1,0 +1,316 @@
+"""The learner: a reference and settings, then one call per trial.
+
+>>> learner = Learner(settings, reference_m)         # structure built once
+>>> u = reference_m[:-1]                              # trial 0: the reference itself
+>>> for j in range(5):
+...     y = fly(u)                                    # your vehicle, simulator or log
+...     u = learner.step(u, y)                        # the next trial's setpoints
+
+Problem, algorithm and workspace as in IterativeLearningControl2.jl: the problem is the
+reference and the models (:class:`LearnerSettings`), the algorithm the paper's smoother-based
+ILC or K-ILC with, optionally, the options of :class:`AdaptiveSettings`; the workspace, kept
+inside the learner, is what does not change between trials (per axis: the QP's banded
+structure and its KKT factorisation, the Markov parameters, the setpoint limits' rows) and the
+state that does (K-ILC's states, the refreshed models, the history of trials, the floor).
+
+Units and frames: metres, in any fixed frame shared by the reference, the setpoints and the
+measurements (gcs uses local NED). Learning coordinates are relative to the reference's first
+row, the start point where the vehicle rests before each trial (``u(-1) = y(0) = yd(0)``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gcs.core.estimators import KilcState
+from gcs.core.floor import Floor
+from gcs.core.learning import (
+    AdaptiveSettings,
+    LearnerSettings,
+    LearningRecord,
+    axis_limits,
+    newest_step,
+    plan_next_trial,
+)
+from gcs.core.model import DiscreteModel
+from gcs.core.update import InputUpdate, UpdateResult
+
+__all__ = ["Learner", "LearnerStep", "Trial"]
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One complete trial the learner has seen.
+
+    Parameters
+    ----------
+    u_m : ndarray, shape (N, n_axes)
+        Setpoints flown u(0..N-1) [m].
+    y_m : ndarray, shape (N, n_axes)
+        Measured positions y(1..N) [m].
+    """
+
+    u_m: np.ndarray
+    y_m: np.ndarray
+
+
+@dataclass(frozen=True)
+class LearnerStep:
+    """What one :meth:`Learner.step` computed.
+
+    Parameters
+    ----------
+    setpoints_m : ndarray, shape (N, n_axes)
+        The next trial's setpoints u(0..N-1) [m], the reference's frame.
+    d_hat_m : ndarray, shape (N, n_axes) or None
+        Estimated repetitive disturbance d(1..N), learning coordinates [m]; None for a repeat.
+    p_m2 : ndarray, shape (N, n_axes) or None
+        Error variance of the estimate [m^2] (K-ILC: the filter's scalar, repeated).
+    updates : tuple of UpdateResult
+        Eq. (8)'s solution per axis (solver path, active limits, objective); empty for a
+        repeat.
+    models : tuple of DiscreteModel
+        The models after this step (a refresh may have replaced one).
+    kilc_states : tuple of KilcState or None
+        K-ILC states after this step (algorithm K-ILC, Table I noise).
+    record : LearningRecord or None
+        Every decision of the options beyond the paper (``adaptive`` given, not a repeat).
+    repeat_of : int or None
+        0 when the next trial repeats trial 0 (the floor's flights), else None.
+    """
+
+    setpoints_m: np.ndarray
+    d_hat_m: np.ndarray | None
+    p_m2: np.ndarray | None
+    updates: tuple[UpdateResult, ...]
+    models: tuple[DiscreteModel, ...]
+    kilc_states: tuple[KilcState, ...] | None
+    record: LearningRecord | None
+    repeat_of: int | None = None
+
+    @property
+    def methods(self) -> tuple[str, ...]:
+        """Solver path per axis: ``"direct"`` or ``"clarabel"`` (``"-"`` for a repeat)."""
+        return tuple(u.method for u in self.updates) or ("-",) * len(self.models)
+
+    @property
+    def active_constraints(self) -> int:
+        """Setpoint limits holding with equality, every axis."""
+        return sum(u.active_constraints for u in self.updates)
+
+
+class Learner:
+    """Iterative learning of a repeated trajectory, one call per trial.
+
+    Parameters
+    ----------
+    settings : LearnerSettings
+        One model per axis, the algorithm (``"smoother"``: Algorithm 1; ``"kilc"``), the
+        weights of eq. (8), Table I's variances, the arena and the setpoint limits.
+    reference_m : ndarray, shape (N+1, n_axes)
+        Reference yd(0..N) [m]; row 0 is the start point (learning coordinates' origin).
+    adaptive : AdaptiveSettings, optional
+        Learn from every trial with the options beyond the paper (floor, noise model from the
+        data, refresh, robustness, safeguard) and record every decision; None (default): the
+        paper's method on the newest trial. Needs the axes (north, east).
+    repeats : int
+        With ``adaptive``: trial 0 is flown ``repeats`` more times with identical setpoints
+        (they measure the floor) before the first update.
+    floor : Floor, optional
+        With ``adaptive``: the floor when measured elsewhere (default: from trials of
+        identical setpoints in the history).
+    models : tuple of DiscreteModel, optional
+        The models to start from (e.g. refreshed ones recorded by an earlier run); default
+        ``settings.models``.
+    kilc_states : tuple of KilcState, optional
+        K-ILC states to start from (e.g. a resumed run's); default the prior.
+    history : sequence of Trial, optional
+        Trials already flown, oldest first (a resumed run's); :meth:`step` adds the next.
+
+    Raises
+    ------
+    ValueError
+        A shape, a NaN, or ``adaptive`` on axes other than (north, east).
+    TrajectoryError, ModelError
+        The reference is too short for a model.
+    """
+
+    def __init__(
+        self,
+        settings: LearnerSettings,
+        reference_m: np.ndarray,
+        adaptive: AdaptiveSettings | None = None,
+        repeats: int = 0,
+        floor: Floor | None = None,
+        *,
+        models: tuple[DiscreteModel, ...] | None = None,
+        kilc_states: tuple[KilcState, ...] | None = None,
+        history: tuple[Trial, ...] | list[Trial] = (),
+    ) -> None:
+        ref = np.asarray(reference_m, dtype=float)
+        n_axes = len(settings.models)
+        if ref.ndim != 2 or ref.shape[1] != n_axes or ref.shape[0] < 2:
+            raise ValueError(f"reference_m must have shape (N+1, {n_axes}), got {ref.shape}")
+        if not np.all(np.isfinite(ref)):
+            raise ValueError("reference_m contains NaN or inf")
+        if adaptive is not None and tuple(settings.axes) != (0, 1):
+            raise ValueError(
+                "learning with adaptive options is defined on north and east (e_pos, floor, "
+                f"safeguard); got axes {tuple(settings.axes)}"
+            )
+        if adaptive is not None and settings.arena is None:
+            raise ValueError("learning with adaptive options needs settings.arena")
+        if int(repeats) != repeats or repeats < 0:
+            raise ValueError(f"repeats must be an integer >= 0, got {repeats}")
+        self.settings = settings
+        self.adaptive = adaptive
+        self.repeats = int(repeats) if adaptive is not None else 0
+        self._floor_given = floor
+        self._ref = ref
+        self._start = ref[0]
+        self._yd = ref[1:] - ref[0]
+        self._models = tuple(models) if models is not None else tuple(settings.models)
+        if len(self._models) != n_axes:
+            raise ValueError(f"one model per axis: {len(self._models)} for {n_axes} axes")
+        self._kilc = tuple(kilc_states) if kilc_states is not None else None
+        self._history: list[Trial] = []
+        for trial in history:
+            self._history.append(self._trial(trial.u_m, trial.y_m))
+        self._updates: list[InputUpdate | None] = [None] * n_axes
+        self.last: LearnerStep | None = None
+        for axis, model in enumerate(self._models):  # the structure, once; checks the lengths
+            self._update(axis, model)
+
+    # ------------------------------------------------------------------ state, read-only
+
+    @property
+    def n_samples(self) -> int:
+        """Trial length N [samples]."""
+        return self._ref.shape[0] - 1
+
+    @property
+    def n_axes(self) -> int:
+        """Number of learned axes."""
+        return self._ref.shape[1]
+
+    @property
+    def reference_m(self) -> np.ndarray:
+        """Reference yd(0..N), shape (N+1, n_axes) [m] (a copy)."""
+        return self._ref.copy()
+
+    @property
+    def models(self) -> tuple[DiscreteModel, ...]:
+        """The models the next step starts from (refreshed ones included)."""
+        return self._models
+
+    @property
+    def kilc_states(self) -> tuple[KilcState, ...] | None:
+        """K-ILC states after the newest trial, or None."""
+        return self._kilc
+
+    @property
+    def history(self) -> tuple[Trial, ...]:
+        """Every trial seen, oldest first."""
+        return tuple(self._history)
+
+    @property
+    def floor(self) -> Floor | None:
+        """The floor of the newest step (given, or measured from repeats), or None."""
+        if self.last is not None and self.last.record is not None:
+            return self.last.record.floor
+        return self._floor_given
+
+    @property
+    def decisions(self) -> LearningRecord | None:
+        """Every decision of the newest step (``adaptive`` only), or None."""
+        return None if self.last is None else self.last.record
+
+    @property
+    def iteration(self) -> int:
+        """The paper's j of the next trial: learning updates so far (repeats are j = 0)."""
+        return max(0, len(self._history) - self.repeats)
+
+    # ------------------------------------------------------------------------- learning
+
+    def step(self, u_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+        """Learn from one complete trial; return the next trial's setpoints.
+
+        Parameters
+        ----------
+        u_m : ndarray, shape (N, n_axes)
+            Setpoints flown u(0..N-1) [m], the reference's frame.
+        y_m : ndarray, shape (N, n_axes)
+            Measured positions y(1..N) on the trial grid [m].
+
+        Returns
+        -------
+        ndarray, shape (N, n_axes)
+            The next trial's setpoints u(0..N-1) [m]; :attr:`last` has the estimate, the
+            solver results and the decisions.
+
+        Raises
+        ------
+        ValueError
+            A shape or a NaN.
+        UpdateInfeasible
+            The setpoint limits admit no sequence.
+        """
+        trial = self._trial(u_m, y_m)
+        self._history.append(trial)
+        if self.adaptive is None:
+            result = self._paper(trial)
+        elif len(self._history) <= self.repeats:
+            first = self._history[0].u_m.copy()
+            result = LearnerStep(first, None, None, (), self._models, self._kilc, None, 0)
+        else:
+            result = self._plan()
+        self._models, self._kilc = result.models, result.kilc_states
+        self.last = result
+        return result.setpoints_m.copy()
+
+    def _paper(self, trial: Trial) -> LearnerStep:
+        start = self._start
+        updates = [self._update(a, m) for a, m in enumerate(self._models)]
+        u_next, d_hat, p, states, results = newest_step(
+            self.settings, updates, self._yd, trial.u_m - start, trial.y_m - start, self._kilc
+        )
+        return LearnerStep(u_next + start, d_hat, p, results, self._models, states, None)
+
+    def _plan(self) -> LearnerStep:
+        sp = np.array([t.u_m for t in self._history])
+        y = np.array([t.y_m for t in self._history])
+        plan = plan_next_trial(
+            self.settings, self.adaptive or AdaptiveSettings(), self._update, self._ref, sp, y,
+            self._models, self._floor_given,
+        )  # fmt: skip
+        updates = tuple(a.update for a in plan.record.axes)
+        return LearnerStep(
+            plan.u_next_m + self._start, plan.d_hat_m, plan.p_m2, updates, plan.models,
+            plan.kilc_states, plan.record,
+        )  # fmt: skip
+
+    def _update(self, axis: int, model: DiscreteModel) -> InputUpdate:
+        """Eq. (8) of one axis for ``model``: built once per model, then reused."""
+        cached = self._updates[axis]
+        if cached is not None and cached.model is model:
+            return cached
+        s = self.settings
+        limits = axis_limits(
+            s.arena, self._start[axis], s.axes[axis], s.max_step_m, s.max_deviation_m
+        )
+        update = InputUpdate(model, self._yd[:, axis], s.weights, limits)
+        self._updates[axis] = update
+        return update
+
+    def _trial(self, u_m: np.ndarray, y_m: np.ndarray) -> Trial:
+        shape = (self.n_samples, self.n_axes)
+        u = np.array(u_m, dtype=float)
+        y = np.array(y_m, dtype=float)
+        for name, arr in (("u_m", u), ("y_m", y)):
+            if arr.shape != shape:
+                raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name} contains NaN or inf")
+        return Trial(u, y)

@@ -1,0 +1,144 @@
+"""Learning on recorded runs, as the command line does it: the cases of the regression record.
+
+Each case builds a run directory (synthetic trials of :mod:`synthetic`, or a PX4 SITL run of
+``shared/data/px4-sitl/`` replayed trial by trial) and learns between its trials with
+``gcs learn``'s function; :func:`learned` returns every learned file's arrays. The record
+``tests/data/learning-regression.npz`` holds them as computed by the code before the public
+learning API existed; ``tests/test_learning_regression.py`` asserts that the code of today
+computes them bit for bit. ``python tests/learning_cases.py`` writes the record again (only
+ever from a version whose learning is known to be the reference).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import yaml
+from px4_data import shared
+from synthetic import (
+    SHORT,
+    adaptive_profile,
+    fly_synthetic,
+    make_adaptive_run,
+    make_run,
+    profile,
+)
+
+from gcs.core.metrics import epos, max_error
+from gcs.io.config import load_profile, trajectory_from_dict
+from gcs.io.runlog import RunDir, TrialStatus
+
+ROOT = Path(__file__).resolve().parent
+RECORD = ROOT / "data" / "learning-regression.npz"
+PX4_RUNS = ("eq11-learn", "vision-identified-learn")
+
+
+def _learn(run: RunDir) -> None:
+    from gcs.app.learn import learn_run
+
+    learn_run(run)
+
+
+def _arrays(run: RunDir, prefix: str) -> dict[str, np.ndarray]:
+    """Every learned file of ``run``: setpoints, estimates, decision records, models."""
+    out: dict[str, np.ndarray] = {}
+    for path in sorted(run.path.iterdir()):
+        name = path.name
+        if name.startswith("setpoints-") and name != "setpoints-000.csv":
+            out[f"{prefix}/{name}"] = run.read_setpoints(int(name[10:13]))
+        elif name.startswith("estimate-"):
+            d_hat, p = run.read_estimate(int(name[9:12]))
+            out[f"{prefix}/{name}"] = np.stack([d_hat, p])
+        elif name.startswith(("learn-", "model-", "floor")):
+            # the run's creation time is in a refreshed model's description
+            text = path.read_text().replace(str(run.manifest["created_utc"]), "<created>")
+            out[f"{prefix}/{name}"] = np.array(text)
+    return out
+
+
+def _profile_file(tmp: Path, base: Path, name: str, **adaptive: object) -> Path:
+    data = yaml.safe_load(base.read_text())
+    data["learning"]["adaptive"].update(adaptive)
+    path = tmp / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _with_mocap(run: RunDir, j: int, offset_m: float) -> None:
+    """Trial j flown (synthetic) and recorded with a mocap that sees it ``offset_m`` north."""
+    record = fly_synthetic(run, j)
+    (run.path / f"trial-{j:03d}.json").unlink()
+    (run.path / f"trial-{j:03d}.csv").unlink()
+    mocap = record.pos_ned_m + np.array([offset_m, 0.01 * j, 0.0])
+    record = dataclasses.replace(record, mocap_ned_m=mocap)
+    m = record.measured("mocap")
+    ref, pos = m.ref_ned_m[1:, :2], m.pos_ned_m[1:, :2]
+    run.write_trial(j, record, TrialStatus(j, True, epos_m=epos(ref, pos),
+                                           max_err_m=max_error(ref, pos)))  # fmt: skip
+
+
+def _px4_replay(tmp: Path, name: str) -> RunDir:
+    """The PX4 run ``name`` learnt again trial by trial: its trials and nothing learned."""
+    src = shared() / "data" / "px4-sitl" / name
+    dst = tmp / name
+    dst.mkdir()
+    for f in ("manifest.json", "reference.csv", "setpoints-000.csv"):
+        shutil.copy(src / f, dst / f)
+    run = RunDir.open(dst)
+    trials = sorted(int(p.name[6:9]) for p in src.glob("trial-*.json"))
+    for j in trials:
+        for f in (f"trial-{j:03d}.csv", f"trial-{j:03d}.json"):
+            shutil.copy(src / f, dst / f)
+        _learn(run)
+        if j != trials[-1]:  # the next trial flew the setpoints the run recorded
+            shutil.copy(src / f"setpoints-{j + 1:03d}.csv", dst / f"setpoints-{j + 1:03d}.csv")
+    return run
+
+
+def learned() -> dict[str, np.ndarray]:
+    """Every case's learned arrays, by ``case/file``."""
+    out: dict[str, np.ndarray] = {}
+    with tempfile.TemporaryDirectory() as tmp_str:
+        tmp = Path(tmp_str)
+
+        def fresh(name: str) -> Path:
+            path = tmp / name
+            path.mkdir()
+            return path
+
+        out |= _arrays(make_run(fresh("smoother"), "smoother", trials=5), "smoother")
+        out |= _arrays(make_run(fresh("kilc"), "kilc", trials=5), "kilc")
+        out |= _arrays(make_adaptive_run(fresh("adaptive"), trials=6, gust_m=0.01), "adaptive")
+        base = ROOT.parent / "profiles" / "antx-adaptive.yaml"
+        prof = load_profile(_profile_file(tmp, base, "auto", robustness_cutoff_rad_s="auto",
+                                          repeats=2))  # fmt: skip
+        out |= _arrays(make_adaptive_run(fresh("auto"), 7, seed=3, gust_m=0.005, prof=prof), "auto")
+        prof = load_profile(_profile_file(tmp, base, "table1", noise="table1", refresh=False))
+        out |= _arrays(make_adaptive_run(fresh("table1"), 5, seed=5, prof=prof), "table1")
+        run = RunDir.create(fresh("mocap"), profile(), trajectory_from_dict(SHORT), "smoother",
+                            run_id="run")  # fmt: skip
+        for j in range(4):
+            _with_mocap(run, j, 0.02)
+            _learn(run)
+        out |= _arrays(run, "mocap")
+        for name in PX4_RUNS:
+            out |= _arrays(_px4_replay(fresh(f"px4-{name}"), name), f"px4-{name}")
+    assert adaptive_profile().learning.adaptive is not None
+    return out
+
+
+def main() -> None:
+    arrays = learned()
+    RECORD.parent.mkdir(exist_ok=True)
+    np.savez_compressed(RECORD, **arrays)
+    print(json.dumps({"record": str(RECORD), "arrays": len(arrays),
+                      "bytes": RECORD.stat().st_size}))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
