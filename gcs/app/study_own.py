@@ -23,10 +23,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from gcs import __version__
+from gcs import __version__, learner_settings
 from gcs.app.fly import _reference
 from gcs.app.study_cluster import Task, run_tasks
-from gcs.core.learning import LearningInputs
 from gcs.core.study import (
     SettingSummary,
     StudyPlan,
@@ -53,20 +52,6 @@ __all__ = [
     "study_document",
     "check_study_memory",
 ]
-
-
-def _inputs(profile: Any) -> LearningInputs:
-    learning = profile.learning
-    return LearningInputs(
-        models=profile.models(),
-        algorithm=learning.algorithm,
-        weights=learning.weights,
-        smoother=learning.smoother,
-        kilc=learning.kilc,
-        arena=profile.arena,
-        max_step_m=learning.max_step_m,
-        max_deviation_m=learning.max_deviation_m,
-    )
 
 
 def build_plan(study: StudyDefinition) -> StudyPlan:
@@ -109,9 +94,9 @@ def build_plan(study: StudyDefinition) -> StudyPlan:
         settings.append(
             StudySetting(
                 name=spec.name,
-                inputs=_inputs(spec.profile),
-                adaptive=learning.adaptive,
-                repeats=learning.repeats,
+                settings=learner_settings(spec.profile),
+                adaptive=learning.adaptive if learning.history else None,
+                repeats=learning.repeats if learning.history else 0,
                 source=spec.overrides,
             )
         )

@@ -5,7 +5,8 @@ model perturbed as an :class:`Uncertainty` says (natural frequency, damping and 
 mode, or every Markov parameter; an extra delay; output noise; a repeatable disturbance). Each
 plant then flies the user's reference for ``iterations`` learned trials with every
 :class:`StudySetting`, the learning being the same step ``gcs fly`` takes
-(:func:`gcs.core.learning.plan_next_trial`); the plant's simulation is on this side.
+(the public API's :class:`gcs.core.learner.Learner`, one per plant and setting, one
+``step`` per trial); the plant's simulation is on this side.
 
 Everything is per plant and linear in the trial length ``N``: the true plant is simulated as a
 difference equation (``scipy.signal.lfilter``) or, for perturbed Markov parameters, by an FFT
@@ -27,7 +28,8 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
-from gcs.core.learning import AdaptiveSettings, LearningInputs, plan_next_trial
+from gcs.core.learner import Learner
+from gcs.core.learning import AdaptiveSettings, LearnerSettings
 from gcs.core.metrics import epos
 from gcs.core.model import DiscreteModel, markov_parameters
 
@@ -130,20 +132,20 @@ class StudySetting:
     ----------
     name : str
         Label in tables and figures.
-    inputs : LearningInputs
+    settings : LearnerSettings
         Models, algorithm, weights, Table I settings, arena and limits.
-    adaptive : AdaptiveSettings
-        Options beyond the paper (``AdaptiveSettings()``: the paper's method).
+    adaptive : AdaptiveSettings or None
+        Options beyond the paper; None: the paper's method.
     repeats : int
         Flights of trial 0's setpoints after the first (they measure the floor for the
-        adaptive options).
+        adaptive options; 0 without them).
     source : dict
         What defines the setting (profile name, overrides), for the JSON.
     """
 
     name: str
-    inputs: LearningInputs
-    adaptive: AdaptiveSettings = field(default_factory=AdaptiveSettings)
+    settings: LearnerSettings
+    adaptive: AdaptiveSettings | None = None
     repeats: int = 0
     source: dict = field(default_factory=dict)
 
@@ -447,43 +449,31 @@ def fly_plant(plan: StudyPlan, setting: StudySetting, level_index: int, plant: i
     ref = plan.ref_ne_m
     start = ref[0]
     n = plan.n_samples
-    flights = 1 + setting.repeats + plan.iterations
-    sp = np.empty((flights, n, 2))
-    pos = np.empty((flights, n + 1, 2))
-    sp[0] = ref[:-1]
-    models = None
+    learner = Learner(setting.settings, ref, setting.adaptive, setting.repeats)
+    flights = 1 + learner.repeats + plan.iterations
+    e = np.full(flights, np.nan)
+    u = ref[:-1].copy()  # trial 0 flies the reference
     active = updates = 0
     failed = None
-    flown = 0
     for f in range(flights):
-        if f > 0 and f <= setting.repeats:
-            sp[f] = sp[0]
-        y = true.respond(sp[f] - start) + start
+        y = true.respond(u - start) + start
         y += np.asarray(true.noise_std_m) * noise_rng.standard_normal((n, 2))
-        pos[f, 0] = start
-        pos[f, 1:] = y
-        flown = f + 1
-        if f == flights - 1 or f < setting.repeats:
-            continue
+        e[f] = epos(ref[1:], y)
+        if f == flights - 1:
+            break
         try:
-            step = plan_next_trial(
-                setting.inputs, setting.adaptive, ref, sp[: f + 1], pos[: f + 1], models
-            )
+            u_next = learner.step(u, y)
         except ValueError as exc:  # no next input within the limits
             failed = str(exc)
             break
-        if not np.all(np.isfinite(step.setpoints_ne_m)):
+        if not np.all(np.isfinite(u_next)):
             failed = "non-finite setpoints"
             break
-        models = step.models
-        sp[f + 1] = step.setpoints_ne_m
-        for ax in step.record.axes:
+        for update in learner.last.updates:
             updates += 1
-            active += int(ax.update.active_constraints > 0)
-    e = np.array([epos(ref[1:], pos[j, 1:]) for j in range(flown)])
-    if flown < flights:
-        e = np.concatenate([e, np.full(flights - flown, np.nan)])
-    last = sp[flown - 1] - ref[:-1]
+            active += int(update.active_constraints > 0)
+        u = u_next
+    last = u - ref[:-1]
     return PlantResult(
         epos_m=e,
         setpoint_rms_m=float(np.sqrt(np.mean(last**2))),
