@@ -108,6 +108,19 @@ def study(
     Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
     interrupted (Ctrl-C; finished chunks are kept, run it again to resume); 1 an internal
     error (a bug; GCS_DEBUG=1 shows the traceback).
+    \f
+    Parameters
+    ----------
+    definition : Path
+        The study file.
+    out : Path or None
+        Output directory.
+    workers : int or None
+        LocalCluster size (0: in this process).
+    scheduler : str or None
+        Address of a running Dask scheduler.
+    check : bool
+        Check and say the size only.
     """
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from rich.console import Console
