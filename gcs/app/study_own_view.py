@@ -71,7 +71,7 @@ def study_table(summaries: list[SettingSummary], title: str) -> Table:
 
 
 def write_study_figures(summaries: list[SettingSummary], out: Path) -> list[Path]:
-    """``epos.png`` (e_pos per flight, one panel per level) and ``tradeoff.png``.
+    """``epos.png`` (e_pos per trial, one panel per level) and ``tradeoff.png``.
 
     The trade-off plots, per setting and level, the e_pos of the first learned trial (how fast
     the learning goes) against the steady e_pos (how far it gets), the marker's size growing
@@ -105,15 +105,16 @@ def write_study_figures(summaries: list[SettingSummary], out: Path) -> list[Path
             std = 1000 * np.asarray(s.epos_std_m)
             j = np.arange(mean.size)
             ax.plot(j, mean, marker="o", ms=3, color=colours[s.setting], label=s.setting)
-            ax.fill_between(j, mean - std, mean + std, color=colours[s.setting], alpha=0.15)
+            low = np.maximum(mean - std, 0.0)
+            ax.fill_between(j, low, mean + std, color=colours[s.setting], alpha=0.12)
         floor = next(s.floor_m for s in summaries if s.level == level)
         if floor > 0:
             ax.axhline(1000 * floor, color="k", ls=":", lw=1, label="noise floor")
         ax.set_title(f"±{100 * level:g} % uncertainty")
-        ax.set_xlabel("flight")
-        ax.set_ylabel("e_pos [mm]")
-        ax.set_yscale("log")
-        ax.grid(True, which="both", alpha=0.3)
+        ax.set_xlabel("trial j (0: the reference; the repeats of trial 0 left out)")
+        ax.set_ylabel("e_pos [mm], mean ± std over the plants")
+        ax.set_ylim(bottom=0.0)
+        ax.grid(True, alpha=0.3)
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
     paths = []
