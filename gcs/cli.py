@@ -718,8 +718,13 @@ def montecarlo(
     Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
     interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
-    # one BLAS thread: the study is many small products, where threads only contend
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    # OpenBLAS read its thread count when numpy was imported, before this command ran; the
+    # local workers get the same count, so that the rows are the same, bit for bit, as computed
+    # in this process (a sum's order follows the threads)
+    from gcs.app.study_cluster import machine_workers
+
+    blas = os.environ.get("OPENBLAS_NUM_THREADS")
+    blas_threads = int(blas) if blas and blas.isdigit() else machine_workers()
     from gcs.app.progress import track
     from gcs.app.study import run_montecarlo, study_document, study_settings
     from gcs.app.study_cli import cluster_of
@@ -733,7 +738,7 @@ def montecarlo(
         )
     except ValueError as exc:
         raise _study_error(str(exc)) from None
-    cluster = cluster_of(workers, scheduler)
+    cluster = cluster_of(workers, scheduler, blas_threads)
     if json_path is not None:
         check_output_file(json_path, "--json")
     with track(err_console, "montecarlo", "tasks") as follow:

@@ -7,7 +7,6 @@ the default study (its table and its ``--json``), and a small ``--adaptive`` stu
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 from typer.testing import CliRunner
@@ -39,27 +38,15 @@ def test_a_small_adaptive_study_on_two_workers_is_todays_bit_for_bit(tmp_path: P
     assert without_seconds(json.loads(out.read_text())) == without_seconds(recorded)
 
 
-def test_the_default_study_prints_todays_tables(tmp_path: Path) -> None:
-    # Today's JSON was computed with as many BLAS threads as the machine has cores (the pin to
-    # one thread came after numpy was imported); the workers run one thread each, which moves
-    # the last bit of some sums: the tables are the same, the JSON the same to 1e-13.
+def test_the_default_study_on_two_workers_is_todays_bit_for_bit(tmp_path: Path) -> None:
+    # the local workers compute with as many BLAS threads as this process does (the order of a
+    # sum follows the threads): the table and the JSON are those recorded in one process
     out = tmp_path / "mc.json"
     code, output = run_cli("montecarlo", "--workers", "2", "--json", str(out))
     assert code == 0, output
     table = (DATA / "montecarlo_default_table.txt").read_text()
     assert table.strip("\n") in output
-    got, want = (
-        json.loads(out.read_text()),
-        json.loads((DATA / "montecarlo_default.json").read_text()),
-    )
-    assert len(got) == len(want) == 8
-    for g, w in zip(got, want, strict=True):
-        assert g.keys() == w.keys()
-        for key, value in w.items():
-            if isinstance(value, float):
-                assert math.isclose(g[key], value, rel_tol=1e-13), (key, g[key], value)
-            else:
-                assert g[key] == value
+    assert out.read_bytes() == (DATA / "montecarlo_default.json").read_bytes()
 
 
 def test_a_size_beyond_memory_is_one_line() -> None:

@@ -32,7 +32,9 @@ SchedulerOption = Annotated[
 ]
 
 
-def cluster_of(workers: int | None, scheduler: str | None) -> object:
+def cluster_of(
+    workers: int | None, scheduler: str | None, blas_threads: int | None = None
+) -> object:
     """The :class:`gcs.app.study_cluster.Cluster` the options describe, checked.
 
     Parameters
@@ -41,6 +43,8 @@ def cluster_of(workers: int | None, scheduler: str | None) -> object:
         ``--workers``.
     scheduler : str or None
         ``--scheduler``.
+    blas_threads : int or None
+        BLAS threads of each local worker (None: one).
 
     Returns
     -------
@@ -61,8 +65,7 @@ def cluster_of(workers: int | None, scheduler: str | None) -> object:
             scheduler=study_cluster.check_scheduler(scheduler),
             connect_timeout_s=study_cluster.CONNECT_TIMEOUT_S,
         )
-    Cluster = study_cluster.Cluster
-    return Cluster(workers=workers)
+    return study_cluster.Cluster(workers=workers, blas_threads=blas_threads)
 
 
 def study(

@@ -43,11 +43,18 @@ class Cluster:
         Dask, the tasks run in this process.
     connect_timeout_s : float
         Seconds to wait for the scheduler.
+    blas_threads : int or None
+        BLAS threads of each local worker; None: Dask's default, one. A result computed with
+        large matrix products can differ in its last bits with the number of BLAS threads
+        (the order of a sum); ``gcs montecarlo`` gives its workers the threads this process
+        computes with, so that its rows are those computed in one process, bit for bit. The
+        workers of a running cluster keep their own setting.
     """
 
     scheduler: str | None = None
     workers: int | None = None
     connect_timeout_s: float = CONNECT_TIMEOUT_S
+    blas_threads: int | None = None
 
     def describe(self) -> str:
         """One phrase for the terminal: where the work runs."""
@@ -152,14 +159,21 @@ def connect(cluster: Cluster) -> Iterator[Any]:
         finally:
             client.close()
         return
+    import dask
+
     n = cluster.workers or machine_workers()
-    local = LocalCluster(
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        silence_logs=logging.ERROR,
-    )
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    if cluster.blas_threads is not None:
+        for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+            environ[name] = cluster.blas_threads
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+        local = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        )
     try:
         with Client(local) as client:
             yield client
