@@ -8,7 +8,8 @@ the largest difference is printed (and returned); on a run learnt by the paper's
 with the profile's ``learning.adaptive`` options it is below 1e-9 m.
 
 (K-ILC runs: ``gcs learn`` resumes the filter from the state it wrote after each trial, at the
-file's precision, where this script carries it in memory; the two agree to about 1e-8 m.)
+file's precision, where this script carries it in memory; the two can differ in the file's
+last digit, 1e-9 m.)
 
 Run: ``python examples/replay_run.py RUN_DIR``
 """

@@ -102,9 +102,10 @@ class Learner(_core.Learner):
         ----------
         profile : str, Path or Profile
             Packaged name (``"antx"``, ``"antx-adaptive"``), path, or a loaded profile.
-        reference_m : ndarray, shape (N+1, 2), or Reference
-            Reference yd(0..N), north and east [m] (a :class:`Reference`: its ``pos_ned_m``
-            north and east columns); row 0 is the start point.
+        reference_m : ndarray, shape (N+1, n_axes), or Reference
+            Reference yd(0..N) of the learnt axes (north and east) [m] (a
+            :class:`Reference`: the columns of its ``pos_ned_m`` the learner learns); row 0
+            is the start point.
         algorithm : str, optional
             ``"smoother"`` or ``"kilc"``; default the profile's.
         floor, models, kilc_states, history
@@ -115,10 +116,13 @@ class Learner(_core.Learner):
         Learner
         """
         prof = profile_of(profile)
-        ref = reference_m.pos_ned_m[:, :2] if isinstance(reference_m, Reference) else reference_m
+        settings = learner_settings(prof, algorithm)
+        ref = reference_m
+        if isinstance(reference_m, Reference):
+            ref = reference_m.pos_ned_m[:, settings.axes]
         ln = prof.learning
         adaptive: AdaptiveSettings | None = ln.adaptive if ln.history else None
         return cls(
-            learner_settings(prof, algorithm), ref, adaptive, ln.repeats if ln.history else 0,
+            settings, ref, adaptive, ln.repeats if ln.history else 0,
             floor, models=models, kilc_states=kilc_states, history=history,
         )  # fmt: skip

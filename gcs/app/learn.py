@@ -228,12 +228,12 @@ def check_learnable(profile: Profile, ref: Reference, algorithm: str, where: str
     ProfileError, ModelError, UpdateInfeasible
         Naming the profile.
     """
-    ne = ref.pos_ned_m[:, :2]
     try:
+        settings = learner_settings(profile, algorithm)
+        learnt = ref.pos_ned_m[:, settings.axes]
         with np.errstate(over="raise", invalid="raise", divide="raise"):
-            learner = Learner(learner_settings(profile, algorithm), ne)
-            u_next = learner.step(ne[:-1], ne[1:])
-        sp = np.column_stack([u_next, ref.pos_ned_m[:-1, 2]])
+            u_next = Learner(settings, learnt).step(learnt[:-1], learnt[1:])
+        sp = _setpoints(u_next, settings.axes, ref)
         check_learned(sp, profile, ref)
     except GcsError as exc:
         raise type(exc)(f"{where}: learning cannot start on this trajectory: {exc}") from None
@@ -290,14 +290,13 @@ def learn_run(
     kilc_prior = _kilc_prior(run, j) if run.algorithm == "kilc" else None
     where = f"{run.path}/trial-{j:03d}.csv: the learning update failed on this trial"
     with _failure(where):
-        learner = Learner(
-            learner_settings(profile, run.algorithm), ref.pos_ned_m[:, :2],
-            kilc_states=kilc_prior,
-        )  # fmt: skip
-        learner.step(record.sp_ned_m[:-1, :2], record.pos_ned_m[1:, :2])
+        settings = learner_settings(profile, run.algorithm)
+        axes = settings.axes
+        learner = Learner(settings, ref.pos_ned_m[:, axes], kilc_states=kilc_prior)
+        learner.step(record.sp_ned_m[:-1, axes], record.pos_ned_m[1:, axes])
     step = learner.last
     assert step is not None and step.d_hat_m is not None and step.p_m2 is not None
-    sp = np.column_stack([step.setpoints_m, ref.pos_ned_m[:-1, 2]])
+    sp = _setpoints(step.setpoints_m, axes, ref)
     try:  # the QP keeps these limits; this guards against a solver that did not
         check_learned(sp, profile, ref)
     except TrajectoryError as exc:
@@ -311,6 +310,13 @@ def learn_run(
         active_constraints=step.active_constraints,
         next_iteration=j + 1,
     )
+
+
+def _setpoints(learnt_m: np.ndarray, axes: tuple[int, ...], ref: Reference) -> np.ndarray:
+    """A trial's setpoints u(0..N-1), shape (N, 3): the learnt axes, the reference elsewhere."""
+    sp = ref.pos_ned_m[:-1].copy()
+    sp[:, list(axes)] = learnt_m
+    return sp
 
 
 @contextlib.contextmanager
@@ -400,13 +406,14 @@ def models_in_use(
 
 
 def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
-    """A repeat of trial 0, or a step of :func:`plan_next_trial` on trials 0..j, recorded."""
+    """A repeat of trial 0, or a step of the learner on trials 0..j, recorded."""
     repeats = profile.learning.repeats
     records = _history(run, j, run_measurement(profile))
     ref = run.reference()
     models, source = models_in_use(run, profile, j)
-    trials = [Trial(r.sp_ned_m[:-1, :2], r.pos_ned_m[1:, :2]) for r in records]
     with _failure(f"{run.path}: the learning update from trials 0..{j} failed"):
+        axes = learner_settings(profile).axes
+        trials = [Trial(r.sp_ned_m[:-1, axes], r.pos_ned_m[1:, axes]) for r in records]
         learner = Learner.from_profile(
             profile, ref, run.algorithm, models=models, history=trials[:-1]
         )
@@ -417,7 +424,7 @@ def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
         path = run.write_repeat(j + 1)
         return LearnOutcome(j, j + 1, path, step.methods, 0, 0, repeat_of=step.repeat_of)
     assert step.record is not None and step.d_hat_m is not None and step.p_m2 is not None
-    sp = np.column_stack([step.setpoints_m, ref.pos_ned_m[:-1, 2]])
+    sp = _setpoints(step.setpoints_m, axes, ref)
     try:  # the QP keeps these limits; this guards against a solver that did not
         check_learned(sp, profile, ref, step.models)
     except TrajectoryError as exc:

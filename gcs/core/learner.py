@@ -1,10 +1,10 @@
-"""The learner: a reference and settings, then one call per trial.
+"""The learner: a reference and settings, then one call per trial::
 
->>> learner = Learner(settings, reference_m)         # structure built once
->>> u = reference_m[:-1]                              # trial 0: the reference itself
->>> for j in range(5):
-...     y = fly(u)                                    # your vehicle, simulator or log
-...     u = learner.step(u, y)                        # the next trial's setpoints
+    learner = Learner(settings, reference_m)    # structure built once
+    u = reference_m[:-1]                         # trial 0: the reference itself
+    for j in range(5):
+        y = fly(u)                               # your vehicle, simulator or log
+        u = learner.step(u, y)                   # the next trial's setpoints
 
 Problem, algorithm and workspace as in IterativeLearningControl2.jl: the problem is the
 reference and the models (:class:`LearnerSettings`), the algorithm the paper's smoother-based
