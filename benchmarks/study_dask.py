@@ -15,7 +15,9 @@ since the machine may be shared):
    2450 (eights of 2, 4 and 9 loops, same sample time), and of ``gcs montecarlo``'s study
    at N = 600, 1200 and 2400 (dense N x N operators).
 
-Usage: ``python benchmarks/study_dask.py [--plant-runs 2000] [--iterations 2] [--skip-workers]``.
+Usage: ``python benchmarks/study_dask.py [--plant-runs 2000] [--iterations 2] [--skip-workers]``;
+``--overhead-only`` runs the plant-runs in this process and on one local worker (Dask's
+overhead, same run).
 """
 
 from __future__ import annotations
@@ -121,9 +123,27 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=2)
     parser.add_argument("--chunk", type=int, default=25)
     parser.add_argument("--skip-workers", action="store_true")
+    parser.add_argument(
+        "--overhead-only",
+        action="store_true",
+        help="only Dask's overhead: --plant-runs in this process, then on one local worker",
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
+        if args.overhead_only:
+            plants = max(args.plant_runs // 2, 1)
+            spec, plan, document = plan_of(tmp, 2, plants, args.iterations, args.chunk)
+            here = run_on(0, spec, plan, document, tmp / "here")
+            one = run_on(1, spec, plan, document, tmp / "one")
+            print(json.dumps({
+                "part": "overhead", "n": plan.n_samples, "plant_runs": 2 * plants,
+                "chunks": 2 * plan.chunks, "in_process_s": round(here[0], 2),
+                "one_worker_s": round(one[0], 2), "startup_s": round(one[1], 2),
+                "ratio": round(one[0] / here[0], 3), "identical_json": here[2] == one[2],
+                "load_avg_1min": load(),
+            }))  # fmt: skip
+            return
         plants = max(args.plant_runs // 2, 1)  # two settings
         spec, plan, document = plan_of(tmp, 2, plants, args.iterations, args.chunk)
         one = None
