@@ -167,8 +167,16 @@ def study(
         err.print(f"{size}, {cluster.describe()}", highlight=False)  # type: ignore[attr-defined]
         if output.resumed:
             err.print(f"resuming: {output.resumed} of {tasks} chunks already in {target}")
-        with track(err, spec.name, "chunks") as follow:
-            results = run_study_chunks(plan, output, client, follow)
+        try:
+            with track(err, spec.name, "chunks") as follow:
+                results = run_study_chunks(plan, output, client, follow)
+        except KeyboardInterrupt:
+            kept = sum(1 for _ in output.chunks.glob("s*-l*-c*.json"))
+            err.print(
+                f"interrupted: {kept} of {tasks} chunks kept in {target}; the same command resumes",
+                highlight=False,
+            )
+            raise
     outcome = summarise_study(plan, results)
     atomic_write_text(
         target / "study.json", json.dumps(study_document(document, plan, outcome), indent=1) + "\n"
