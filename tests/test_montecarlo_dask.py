@@ -1,7 +1,8 @@
 """``gcs montecarlo`` on Dask: today's tables and JSON, whatever the cluster.
 
 ``tests/data`` holds the output of ``gcs montecarlo`` recorded before the study ran on Dask:
-the default study (its table and its ``--json``), and a small ``--adaptive`` study.
+the default study (its table, and its ``--json`` as the learning regression records it), and a
+small ``--adaptive`` study.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def test_the_default_study_on_two_workers_is_todays_bit_for_bit(tmp_path: Path) 
     assert code == 0, output
     table = (DATA / "montecarlo_default_table.txt").read_text()
     assert table.strip("\n") in output
-    assert out.read_bytes() == (DATA / "montecarlo_default.json").read_bytes()
+    assert out.read_bytes() == (DATA / "montecarlo-default.json").read_bytes()
 
 
 def test_a_size_beyond_memory_is_one_line() -> None:
