@@ -26,6 +26,7 @@ from typer.core import TyperGroup
 from typer.exceptions import Exit
 
 from gcs import __version__
+from gcs.app.study_cli import SchedulerOption, WorkersOption
 from gcs.errors import GcsError
 
 #: Exit codes, as every command's --help states them.
@@ -707,6 +708,8 @@ def montecarlo(
             "the mean error of trials 2-5 and the diverged plants. Takes minutes, not seconds."
         ),
     ] = False,
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
 ) -> None:
     """The paper's Sec. IV Monte Carlo study, printed as Tables II and III.
 
@@ -717,16 +720,25 @@ def montecarlo(
     docs/montecarlo.md. Plants whose learning diverged are counted and, unless
     --keep-diverged, left out of the statistics.
 
+    Every (level, algorithm) row is one task on Dask: a local cluster of one worker per core
+    by default, --workers N for another size (0: no Dask, in this process), --scheduler
+    tcp://HOST:PORT for a running cluster; the rows are the same on any of them.
+
     Example: gcs montecarlo --levels 0.05,0.1 --json montecarlo.json
 
     Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
     interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
-    # one BLAS thread: the study is many small products, where threads only contend
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from rich.progress import Progress
+    # OpenBLAS read its thread count when numpy was imported, before this command ran; the
+    # local workers get the same count, so that the rows are the same, bit for bit, as computed
+    # in this process (a sum's order follows the threads)
+    from gcs.app.study_cluster import machine_workers
 
+    blas = os.environ.get("OPENBLAS_NUM_THREADS")
+    blas_threads = int(blas) if blas and blas.isdigit() else machine_workers()
+    from gcs.app.progress import track
     from gcs.app.study import run_montecarlo, study_document, study_settings
+    from gcs.app.study_cli import cluster_of
     from gcs.app.study_view import comparison_lines, study_tables
     from gcs.io.atomic import atomic_write_text
     from gcs.io.paths import check_output_file
@@ -737,15 +749,11 @@ def montecarlo(
         )
     except ValueError as exc:
         raise _study_error(str(exc)) from None
+    cluster = cluster_of(workers, scheduler, blas_threads)
     if json_path is not None:
         check_output_file(json_path, "--json")
-    with Progress(console=err_console, transient=True) as progress:
-
-        def follow(label: str) -> Callable[[int, int], None]:
-            task = progress.add_task(label, total=1)
-            return lambda done, total: progress.update(task, completed=done, total=total)
-
-        outcome = run_montecarlo(settings, adaptive, follow)
+    with track(err_console, "montecarlo", "tasks") as follow:
+        outcome = run_montecarlo(settings, adaptive, lambda label: follow, cluster)
     console.print(study_tables(outcome.rows, settings))
     for line in comparison_lines(outcome.comparison):
         console.print(line)
@@ -771,6 +779,15 @@ def _study_error(message: str) -> typer.BadParameter:
             text = message.removeprefix(f"StudySettings.{field} ")
             return typer.BadParameter(text, param_hint=option)
     return typer.BadParameter(message.removeprefix("StudySettings."))
+
+
+def _register_study() -> None:
+    from gcs.app.study_cli import study
+
+    app.command("study")(one_line_errors(study))
+
+
+_register_study()
 
 
 MOCK_EXIT_CODES = (

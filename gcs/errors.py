@@ -49,3 +49,11 @@ class PathError(GcsError, ValueError):
 
 class MocapError(GcsError, RuntimeError):
     """The motion-capture server is unreachable, the reader failed, or the stream is unusable."""
+
+
+class StudyError(GcsError, ValueError):
+    """A study definition (YAML) or a study's options are malformed; names file and field."""
+
+
+class ClusterError(GcsError, RuntimeError):
+    """The Dask scheduler is unreachable or not a scheduler's address; names it."""

@@ -1424,7 +1424,108 @@ def catalogue() -> list[Case]:
         *_identify_cases(),
         *_output_cases(),
         *_adaptive_cases(),
+        *_study_cases(),
     ]
+
+
+STUDY = {
+    "name": "tiny",
+    "profile": "antx",
+    "trajectory": "eight-short",
+    "plants": 2,
+    "iterations": 1,
+    "uncertainty": {"levels": [0.2]},
+    "grid": {"wdu": [0.01, 0.1]},
+}
+
+
+def _study(ws: Workspace, *args: str, **changes: Any) -> list[str]:
+    data = copy.deepcopy(STUDY)
+    for key, value in changes.items():
+        data = _set(data, key.replace("__", "."), value) if value is not DELETE else data
+        if value is DELETE:
+            data.pop(key, None)
+    path = ws.file("study.yaml", yaml.safe_dump(data))
+    return ["study", str(path), "--workers", "0", "--out", str(ws.path / "out"), *args]
+
+
+def _study_cases() -> Iterator[Case]:
+    k = "study file"
+    for what, changes, expect in (
+        ("an unknown setting", {"settings": [{"colour": 1}]}, "settings[0].colour"),
+        ("an unknown setting in the grid", {"grid": {"wdux": [1.0]}}, "grid.wdux"),
+        ("an empty grid", {"grid": {"wdu": []}}, "grid.wdu"),
+        ("an empty list of settings", {"settings": []}, "settings"),
+        ("a setting's bad value", {"settings": [{"we": 0.0}]}, "settings[0].we"),
+        ("a setting's profile missing", {"settings": [{"profile": "nope"}]}, "settings[0].profile"),
+        ("a setting's unknown algorithm", {"settings": [{"algorithm": "pid"}]}, "algorithm"),
+        ("no name", {"name": DELETE}, "name"),
+        ("an unknown field", {"colour": "red"}, "colour"),
+        ("plants 0", {"plants": 0}, "plants"),
+        ("iterations not an integer", {"iterations": 2.5}, "iterations"),
+        ("steady_trials beyond the iterations", {"steady_trials": 3}, "steady_trials"),
+        ("a level above 1", {"uncertainty": {"levels": [1.5]}}, "uncertainty.levels"),
+        ("an unknown uncertainty field", {"uncertainty": {"spread": 0.2}}, "uncertainty.spread"),
+        ("unknown parameters", {"uncertainty": {"parameters": "poles"}}, "parameters"),
+        ("a negative noise", {"uncertainty": {"noise_std_m": -0.1}}, "noise_std_m"),
+        ("noise from a floor without a run", {"uncertainty": {"noise_std_m": "floor"}}, "run"),
+        ("a run that is not a directory", {"uncertainty": {"run": "nope"}}, "uncertainty.run"),
+        (
+            "a bias that makes the nominal plant unstable",
+            {"uncertainty": {"levels": [0.2], "bias": {"zeta": -1.5}}},
+            "unstable",
+        ),
+        ("an unknown trajectory", {"trajectory": "nine"}, "trajectory"),
+    ):
+        yield Case(k, "study", what, lambda ws, c=changes: _study(ws, **c), expect)
+
+    def long_trajectory(ws: Workspace) -> list[str]:
+        traj = ws.trajectory("loops", 200)
+        return _study(ws, trajectory=str(traj))
+
+    yield Case(k, "study", "trials beyond the longest gcs flies", long_trajectory, "samples")
+    yield Case(
+        k,
+        "study",
+        "the study file missing",
+        lambda ws: ["study", str(ws.path / "none.yaml"), "--workers", "0"],
+        "none.yaml",
+    )
+    k = "options: study"
+    yield Case(
+        k,
+        "study",
+        "--scheduler not an address",
+        lambda ws: _study(ws, "--scheduler", "localhost:8786")[:2] + ["--scheduler", "localhost"],
+        "--scheduler",
+    )
+    yield Case(
+        k,
+        "study",
+        "--scheduler and --workers",
+        lambda ws: _study(ws, "--scheduler", "tcp://127.0.0.1:9"),
+        "--workers",
+    )
+    yield Case(
+        k,
+        "study",
+        "--out is a file",
+        lambda ws: [*_study(ws)[:4], "--out", str(ws.file("f", "x"))],
+        "--out",
+    )
+
+    def other_study(ws: Workspace) -> list[str]:
+        ws.file("out/definition.json", "{}\n")
+        return _study(ws)
+
+    yield Case(k, "study", "--out holds another study", other_study, "holds another study")
+    k = "options: montecarlo"
+    for args, expect in (
+        (["--samples", "10000000"], "--samples"),
+        (["--scheduler", "localhost:8786"], "--scheduler"),
+        (["--scheduler", "tcp://127.0.0.1:99999"], "--scheduler"),
+    ):
+        yield Case(k, "montecarlo", " ".join(args), lambda ws, a=args: ["montecarlo", *a], expect)
 
 
 # ----------------------------------------------------------------------------- running one

@@ -24,7 +24,7 @@ def templates(tmp_path_factory: pytest.TempPathFactory) -> Templates:
 
 def test_the_catalogue_walks_every_command() -> None:
     commands = {case.command for case in CASES}
-    assert commands == {"fly", "learn", "report", "identify", "montecarlo", "mock"}
+    assert commands == {"fly", "learn", "report", "identify", "montecarlo", "mock", "study"}
     assert len(CASES) >= 150
 
 

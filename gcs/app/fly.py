@@ -159,7 +159,7 @@ def plan_fly(
     trajectory = load_trajectory(trajectory_path)
     algorithm = algorithm or profile.learning.algorithm
     mocap_plan = plan_mocap(profile, where, mocap, use_mock)
-    ref = _reference(profile, trajectory, str(trajectory_path))
+    ref = flown_reference(profile, trajectory, str(trajectory_path))
     settings = flown_yaw(profile.flight, trajectory, ref, str(trajectory_path))
     check_learnable(profile, ref, algorithm, where)
     if run_path is not None:
@@ -171,7 +171,27 @@ def plan_fly(
     )
 
 
-def _reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Reference:
+def flown_reference(profile: Profile, trajectory: TrajectorySpec, where: str) -> Reference:
+    """The trajectory sampled on the profile's grid and checked against its limits and arena.
+
+    Parameters
+    ----------
+    profile : Profile
+        Its ``t_ilc_s``, vehicle limits and arena.
+    trajectory : TrajectorySpec
+        A loaded trajectory (a samples source read with its file).
+    where : str
+        The trajectory's file, for the message.
+
+    Returns
+    -------
+    Reference
+
+    Raises
+    ------
+    TrajectoryError
+        Not a trajectory to sample, too many samples, beyond a limit or the arena.
+    """
     if trajectory.shape is None:
         what = (
             "its samples file was not read (load_trajectory reads it, relative to the file)"
@@ -380,7 +400,7 @@ def prepare_run(
     -------
     RunDir
     """
-    ref = _reference(profile, trajectory, trajectory.name)
+    ref = flown_reference(profile, trajectory, trajectory.name)
     if run_path is not None:
         root, run_id = run_path.parent, run_path.name
     else:

@@ -10,9 +10,10 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
+from gcs.app.study_cluster import Cluster, Task, connect, run_tasks
 from gcs.app.study_view import study_json
 from gcs.core.learning import AdaptiveSettings
 from gcs.core.montecarlo import (
@@ -20,11 +21,21 @@ from gcs.core.montecarlo import (
     StudyRow,
     StudySettings,
     check_adaptive_size,
+    check_study_size,
     compare_study,
-    run_study,
+    error_norms,
+    sample_plants,
+    summarise,
 )
 
-__all__ = ["StudyOutcome", "study_settings", "run_montecarlo", "study_document"]
+__all__ = [
+    "StudyOutcome",
+    "study_settings",
+    "paper_row",
+    "adaptive_level",
+    "run_montecarlo",
+    "study_document",
+]
 
 #: Progress callback: ``progress(done, total)``.
 Progress = Callable[[int, int], None]
@@ -80,7 +91,7 @@ def study_settings(
     ------
     ValueError
         ``"--levels: ..."`` for the level list, else StudySettings' own message naming its
-        field (``"StudySettings.<field> ..."``).
+        field (``"StudySettings.<field> ..."``); or the study would not fit in memory.
     """
     try:
         values = tuple(float(v) for v in levels.split(",") if v.strip())
@@ -92,17 +103,71 @@ def study_settings(
         levels=values, plants=plants, repeats=repeats, iterations=iterations,
         n_samples=samples, seed=seed, diverged_rule="include" if keep_diverged else "exclude",
     )  # fmt: skip
+    check_study_size(settings)
     if adaptive:
         check_adaptive_size(settings)
     return settings
+
+
+def paper_row(settings: StudySettings, level: float, algorithm: str) -> StudyRow:
+    """One row of Tables II/III: one level with one algorithm (a task of the study).
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study.
+    level : float
+        Uncertainty level.
+    algorithm : str
+        ``"smoother"`` or ``"kilc"``.
+
+    Returns
+    -------
+    StudyRow
+        What :func:`gcs.core.montecarlo.run_study` gives for this level and algorithm.
+    """
+    plants = sample_plants(settings, level)
+    norms = error_norms(settings, level, algorithm)
+    return summarise(settings, norms, level, algorithm, plants.excluded)
+
+
+def adaptive_level(
+    settings: StudySettings, level: float, options: AdaptiveSettings
+) -> tuple[StudyRow, ComparisonRow]:
+    """The new options against the paper's method at one level (a task of ``--adaptive``).
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study.
+    level : float
+        Uncertainty level.
+    options : AdaptiveSettings
+        The new options.
+
+    Returns
+    -------
+    row : StudyRow
+        The new options' row.
+    comparison : ComparisonRow
+        The comparison at this level.
+    """
+    rows, comparison = compare_study(replace(settings, levels=(level,)), options, "smoother")
+    return rows[0], comparison[0]
 
 
 def run_montecarlo(
     settings: StudySettings,
     adaptive: bool,
     progress: Callable[[str], Progress],
+    cluster: Cluster | None = None,
 ) -> StudyOutcome:
     """Run the paper's study and, with ``adaptive``, the new options on the same plants.
+
+    Every (level, algorithm) row of the paper's study, and every level of the new options, is
+    one task on Dask; each task draws its plants and noise from the seed and its level alone,
+    so the rows are those of :func:`gcs.core.montecarlo.run_study` and
+    :func:`gcs.core.montecarlo.compare_study`, bit for bit, on any cluster.
 
     Parameters
     ----------
@@ -112,22 +177,43 @@ def run_montecarlo(
         Also learn with the noise model from the data and the model refresh
         (``AdaptiveSettings(noise="data", refresh=True)``, docs/learning-floor.md).
     progress : callable
-        ``progress(label)`` returns the callback that follows one simulation.
+        ``progress(label)`` returns the callback that follows the tasks.
+    cluster : Cluster, optional
+        Where to run; default: in this process.
 
     Returns
     -------
     StudyOutcome
     """
-    start = time.perf_counter()
-    rows = run_study(settings, progress("simulating"))
-    seconds = time.perf_counter() - start
-    comparison: list[ComparisonRow] = []
+    options = AdaptiveSettings(noise="data", refresh=True)
+    tasks = [
+        Task(f"montecarlo-{level:g}-{algorithm}", paper_row, (settings, level, algorithm))
+        for level in settings.levels
+        for algorithm in settings.algorithms
+    ]
     if adaptive:
-        options = AdaptiveSettings(noise="data", refresh=True)
-        new_rows, comparison = compare_study(
-            settings, options, "smoother", progress("simulating the adaptive options")
-        )
-        rows = rows + new_rows
+        tasks += [
+            Task(f"montecarlo-{level:g}-adaptive", adaptive_level, (settings, level, options))
+            for level in settings.levels
+        ]
+    results: dict[str, Any] = {}
+    follow = progress("simulating" + (" (with the adaptive options)" if adaptive else ""))
+
+    def done(task: Task, result: Any) -> None:
+        results[task.key] = result
+        follow(len(results), len(tasks))
+
+    start = time.perf_counter()
+    with connect(cluster or Cluster(workers=0)) as client:
+        run_tasks(client, tasks, done)
+    seconds = time.perf_counter() - start
+    rows = [results[t.key] for t in tasks if t.fn is paper_row]
+    comparison: list[ComparisonRow] = []
+    for t in tasks:
+        if t.fn is adaptive_level:
+            row, comp = results[t.key]
+            rows.append(row)
+            comparison.append(comp)
     return StudyOutcome(rows, comparison, seconds)
 
 

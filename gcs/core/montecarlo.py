@@ -25,6 +25,7 @@ gives the evidence for each default.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -54,6 +55,7 @@ __all__ = [
     "adaptive_error_norms",
     "compare_study",
     "check_adaptive_size",
+    "check_study_size",
 ]
 
 ALGORITHMS = ("smoother", "kilc")
@@ -556,6 +558,44 @@ def run_study(
 # as the rows of (runs, ...) arrays, and the only per-run matrices are the update operators,
 # recomputed for the runs whose model a refresh changed.
 # =============================================================================================
+
+
+def _physical_memory() -> float:
+    """This machine's memory [bytes] (16 GB when the system does not say)."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return 16e9
+
+
+def check_study_size(settings: StudySettings, memory_bytes: float | None = None) -> None:
+    """Refuse a study whose fixed operators and batch would not fit in memory.
+
+    The paper's study keeps about ten ``N x N`` operators (the lifted model, the update and the
+    smoother) and a few ``(plants x repeats, N)`` arrays per (level, algorithm) task.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study.
+    memory_bytes : float, optional
+        The memory it may use; default half of this machine's.
+
+    Raises
+    ------
+    ValueError
+        ``"StudySettings.n_samples ..."`` naming the size and the memory.
+    """
+    n = float(settings.n_samples)
+    runs = float(settings.plants * settings.repeats)
+    need = 8.0 * (10.0 * n * n + 8.0 * runs * n)
+    limit = 0.5 * _physical_memory() if memory_bytes is None else memory_bytes
+    if need > limit:
+        raise ValueError(
+            f"StudySettings.n_samples {settings.n_samples} with {settings.plants} x "
+            f"{settings.repeats} runs needs about {need / 1e9:.3g} GB (N x N operators), more "
+            f"than the {limit / 1e9:.3g} GB it may use on this machine; use fewer samples"
+        )
 
 
 #: Memory the adaptive study may spend on per-run update operators [bytes].

@@ -1,0 +1,215 @@
+"""Where studies run: Dask distributed, on a LocalCluster or on the user's own cluster.
+
+A study is a list of independent tasks (chunks of plants); each task's result depends only on
+its arguments (its seeds are derived from the study's seed and the chunk's index), so the
+results are the same whatever the number of workers, their order of completion, or a worker
+that died and whose tasks the scheduler gave to another. ``workers = 0`` runs the tasks one
+after the other in this process, without Dask (for debugging and for the smallest studies).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
+
+from gcs.errors import ClusterError
+
+__all__ = ["Cluster", "Task", "check_scheduler", "machine_workers", "connect", "run_tasks"]
+
+#: ``tcp://HOST:PORT`` or ``tls://HOST:PORT``; HOST a name, an IPv4 or a bracketed IPv6 address.
+_ADDRESS = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):([0-9]{1,5})$")
+#: Seconds to wait for a scheduler before saying it is unreachable.
+CONNECT_TIMEOUT_S = 10.0
+#: Times the scheduler may re-run a task whose worker died (Dask's own rescheduling aside).
+RETRIES = 2
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """Where to run.
+
+    Parameters
+    ----------
+    scheduler : str or None
+        Address of a running scheduler (``tcp://HOST:PORT``); None starts a LocalCluster.
+    workers : int or None
+        LocalCluster size (one thread each); None: the cores this process may use; 0: no
+        Dask, the tasks run in this process.
+    connect_timeout_s : float
+        Seconds to wait for the scheduler.
+    blas_threads : int or None
+        BLAS threads of each local worker; None: Dask's default, one. A result computed with
+        large matrix products can differ in its last bits with the number of BLAS threads
+        (the order of a sum); ``gcs montecarlo`` gives its workers the threads this process
+        computes with, so that its rows are those computed in one process, bit for bit. The
+        workers of a running cluster keep their own setting.
+    """
+
+    scheduler: str | None = None
+    workers: int | None = None
+    connect_timeout_s: float = CONNECT_TIMEOUT_S
+    blas_threads: int | None = None
+
+    def describe(self) -> str:
+        """One phrase for the terminal: where the work runs."""
+        if self.scheduler is not None:
+            return f"on the Dask scheduler at {self.scheduler}"
+        if self.workers == 0:
+            return "in this process"
+        n = self.workers or machine_workers()
+        return f"on a local Dask cluster of {n} worker{'s' if n != 1 else ''}"
+
+
+@dataclass(frozen=True)
+class Task:
+    """One unit of work: ``fn(*args)`` on a worker.
+
+    Parameters
+    ----------
+    key : str
+        Name (unique within a run; shown on the Dask dashboard).
+    fn : callable
+        An importable module-level function.
+    args : tuple
+        Its arguments (picklable).
+    """
+
+    key: str
+    fn: Callable[..., Any]
+    args: tuple
+
+
+def check_scheduler(url: str) -> str:
+    """Refuse what is not a scheduler's address.
+
+    Parameters
+    ----------
+    url : str
+        What the user gave to ``--scheduler``.
+
+    Returns
+    -------
+    str
+        The address.
+
+    Raises
+    ------
+    ClusterError
+        ``"--scheduler <url>: not a scheduler address ..."``.
+    """
+    m = _ADDRESS.match(url.strip())
+    if not m or not 1 <= int(m.group(3)) <= 65535:
+        raise ClusterError(
+            f"--scheduler {url}: not a scheduler address; give tcp://HOST:PORT "
+            "(what `dask scheduler` prints, default port 8786)"
+        )
+    return url.strip()
+
+
+def machine_workers() -> int:
+    """Workers of the default LocalCluster: the cores this process may run on.
+
+    Returns
+    -------
+    int
+    """
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:  # not Linux
+        return max(os.cpu_count() or 1, 1)
+
+
+@contextmanager
+def connect(cluster: Cluster) -> Iterator[Any]:
+    """A Dask client for ``cluster`` (None when ``workers == 0``), closed on exit.
+
+    Parameters
+    ----------
+    cluster : Cluster
+        Where to run.
+
+    Yields
+    ------
+    distributed.Client or None
+
+    Raises
+    ------
+    ClusterError
+        The scheduler did not answer within ``connect_timeout_s``.
+    """
+    if cluster.scheduler is None and cluster.workers == 0:
+        yield None
+        return
+    from distributed import Client, LocalCluster
+
+    if cluster.scheduler is not None:
+        address = check_scheduler(cluster.scheduler)
+        try:
+            client = Client(address, timeout=cluster.connect_timeout_s)
+        except (OSError, TimeoutError) as exc:
+            raise ClusterError(f"--scheduler {address}: unreachable ({exc})") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    import dask
+
+    n = cluster.workers or machine_workers()
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    if cluster.blas_threads is not None:
+        for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+            environ[name] = cluster.blas_threads
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+        local = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        )
+    try:
+        with Client(local) as client:
+            yield client
+    finally:
+        local.close()
+
+
+def run_tasks(
+    client: Any,
+    tasks: Sequence[Task],
+    on_result: Callable[[Task, Any], None],
+) -> None:
+    """Run every task; ``on_result(task, result)`` in this process as each one finishes.
+
+    Parameters
+    ----------
+    client : distributed.Client or None
+        From :func:`connect`; None runs the tasks here, in order.
+    tasks : sequence of Task
+        The work.
+    on_result : callable
+        Called once per task, in the order they finish.
+    """
+    if client is None:
+        for task in tasks:
+            on_result(task, task.fn(*task.args))
+        return
+    from distributed import as_completed
+
+    run = uuid.uuid4().hex[:8]
+    futures = {
+        client.submit(t.fn, *t.args, key=f"{t.key}-{run}", pure=False, retries=RETRIES): t
+        for t in tasks
+    }
+    try:
+        for future in as_completed(futures):
+            on_result(futures[future], future.result())
+    finally:
+        client.cancel(list(futures))

@@ -1,0 +1,38 @@
+"""Progress off a terminal: plain lines, at most one per interval, and one at the end."""
+
+from __future__ import annotations
+
+import io
+
+from rich.console import Console
+
+from gcs.app.progress import clock, progress_lines, track
+
+
+def test_plain_lines_every_interval_and_at_the_end() -> None:
+    now = [100.0]
+    lines: list[str] = []
+    progress = progress_lines(lines.append, "study", "chunks", 10.0, lambda: now[0])
+    for done, t in ((0, 100.0), (1, 104.0), (2, 111.0), (3, 115.0), (4, 118.0)):
+        now[0] = t
+        progress(done, 4)
+    assert lines == [
+        "study: 0/4 chunks, 00:00:00 elapsed",
+        "study: 2/4 chunks, 00:00:11 elapsed, about 00:00:11 remaining",
+        "study: 4/4 chunks, 00:00:18 elapsed",
+    ]
+
+
+def test_a_pipe_gets_lines_not_a_bar() -> None:
+    out = io.StringIO()
+    console = Console(file=out, force_terminal=False, width=200)
+    with track(console, "montecarlo", "tasks", interval_s=0.0) as progress:
+        progress(1, 2)
+        progress(2, 2)
+    text = out.getvalue()
+    assert "montecarlo: 1/2 tasks" in text and "montecarlo: 2/2 tasks" in text
+    assert "\x1b" not in text  # no control codes in a file
+
+
+def test_clock() -> None:
+    assert clock(3725.4) == "01:02:05" and clock(-1) == "00:00:00"

@@ -1,0 +1,174 @@
+"""Studies of the user's set-up: plants, chunks, summaries and the study file."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from synthetic import ROOT
+
+from gcs.app.study_own import build_plan, check_study_memory
+from gcs.core.model import from_transfer_function, markov_parameters, simulate
+from gcs.core.study import (
+    Uncertainty,
+    check_nominal,
+    draw_plant,
+    noise_floor,
+    recommend,
+    run_chunk,
+    summarise_setting,
+)
+from gcs.errors import StudyError
+from gcs.io.study import load_study
+
+TINY = {
+    "name": "tiny",
+    "profile": "antx",
+    "trajectory": "eight-short",
+    "seed": 3,
+    "plants": 4,
+    "iterations": 2,
+    "chunk_plants": 2,
+    "steady_trials": 1,
+    "uncertainty": {"levels": [0.0, 0.3], "noise_std_m": 0.01, "disturbance_rms_m": 0.05},
+    "grid": {"wdu": [0.01, 0.1]},
+}
+
+
+def write_study(tmp_path: Path, **changes: object) -> Path:
+    data = {**TINY, **changes}
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def plan_of(tmp_path: Path, **changes: object):  # noqa: ANN201
+    return build_plan(load_study(write_study(tmp_path, **changes)))
+
+
+def test_a_plant_at_zero_spread_is_the_model(tmp_path: Path) -> None:
+    plan = plan_of(tmp_path, uncertainty={"levels": [0.0]})
+    true = draw_plant(plan, 0, 0)
+    u = np.random.default_rng(1).standard_normal((plan.n_samples, 2))
+    want = np.column_stack([simulate(m, u[:, a]) for a, m in enumerate(plan.models)])
+    np.testing.assert_allclose(true.respond(u), want, atol=1e-12)
+
+
+def test_markov_plants_at_zero_spread_are_the_model(tmp_path: Path) -> None:
+    plan = plan_of(tmp_path, uncertainty={"levels": [0.0], "parameters": "markov"})
+    true = draw_plant(plan, 0, 0)
+    u = np.random.default_rng(2).standard_normal((plan.n_samples, 2))
+    want = simulate(plan.models[0], u[:, 0])
+    np.testing.assert_allclose(true.respond(u)[:, 0], want, atol=1e-12)
+
+
+def test_a_second_order_plant_moves_as_the_paper_draws_it() -> None:
+    # wn and zeta of wn^2 / (s^2 + 2 zeta wn s + wn^2) scaled: the drawn plant is that transfer
+    # function with the new wn and zeta, independently discretised, but for the sampling zero,
+    # which the draw keeps where the model has it (it moves by 0.02 % of the response here)
+    dt, wn, zeta = 0.01, 1.8, 0.8
+    model = from_transfer_function([wn * wn], [1.0, 2 * zeta * wn, wn * wn], 0.0, dt)
+    u = Uncertainty(levels=(0.1,))
+    from gcs.core.study import _modal_perturb
+
+    b, a, draws = _modal_perturb(model, 0.1, u.bias, np.array([1.0, -0.5, 0.0]))
+    wn2, zeta2 = wn * 1.1, zeta * 0.95
+    ref = from_transfer_function([wn2 * wn2], [1.0, 2 * zeta2 * wn2, wn2 * wn2], 0.0, dt)
+    import scipy.signal
+
+    impulse = np.zeros(200)
+    impulse[0] = 1.0
+    got = scipy.signal.lfilter(b[1:], a, impulse)
+    np.testing.assert_allclose(got, markov_parameters(ref, 200), rtol=1e-3, atol=1e-12)
+    assert draws["wn"] == pytest.approx(0.1) and draws["zeta"] == pytest.approx(-0.05)
+
+
+def test_results_do_not_depend_on_the_chunk_size(tmp_path: Path) -> None:
+    two = plan_of(tmp_path)
+    one = dataclasses.replace(two, chunk_plants=1)
+    pair = run_chunk(two, 1, 1, 1)["plants"]  # plants 2 and 3
+    singles = [run_chunk(one, 1, 1, c)["plants"][0] for c in (2, 3)]
+    assert pair == singles
+    assert pair[0]["epos_m"][-1] < pair[0]["epos_m"][0]  # the learning learned
+
+
+def test_every_setting_sees_the_same_plants_and_noise(tmp_path: Path) -> None:
+    plan = plan_of(tmp_path)
+    a, b = run_chunk(plan, 0, 1, 0)["plants"], run_chunk(plan, 1, 1, 0)["plants"]
+    assert [p["draws"] for p in a] == [p["draws"] for p in b]
+    assert [p["epos_m"][0] for p in a] == [p["epos_m"][0] for p in b]  # trial 0 alike
+
+
+def test_an_unstable_nominal_plant_is_refused(tmp_path: Path) -> None:
+    study = write_study(tmp_path, uncertainty={"levels": [0.2], "bias": {"zeta": -1.5}})
+    with pytest.raises(StudyError, match="uncertainty.*unstable"):
+        build_plan(load_study(study))
+    model = from_transfer_function([4.0], [1.0, 0.4, 4.0], 0.0, 0.05)
+    check_nominal(model, Uncertainty(bias=(0.0, -0.5, 0.0)))  # damping halved: still stable
+
+
+def test_summary_counts_divergence_and_the_floor(tmp_path: Path) -> None:
+    plan = plan_of(tmp_path)
+    floor = noise_floor(plan.uncertainty.noise_std_m)
+    assert floor == pytest.approx(0.01 * np.sqrt(np.pi / 2))
+    plants = [
+        {"epos_m": [0.5, 0.1, floor], "setpoint_rms_m": 0.1, "limit_active": 0.5, "failed": None},
+        {"epos_m": [0.5, 0.7, 0.9], "setpoint_rms_m": 0.3, "limit_active": 0.0, "failed": None},
+        {"epos_m": [0.5, 0.2, None], "setpoint_rms_m": 0.2, "limit_active": 1.0, "failed": "x"},
+    ]
+    s = summarise_setting(plan, 0, 0, plants)
+    assert s.diverged == 2 and s.plants == 3
+    assert s.steady_mean_m == pytest.approx(floor)
+    assert s.reached_floor == 1 and np.isinf(s.flights_to_floor)  # 1 of 3: median never
+    assert s.limit_active == pytest.approx(0.5)
+    best, reason = recommend([s, dataclasses.replace(s, setting="other", diverged=0)])
+    assert best == "other" and "0 diverged" in reason
+
+
+@pytest.mark.parametrize(
+    ("changes", "field"),
+    [
+        ({"grid": {"wdux": [1]}}, "grid.wdux"),
+        ({"grid": {"wdu": []}}, "grid.wdu"),
+        ({"settings": []}, "settings"),
+        ({"settings": [{"wdu": 0.1, "colour": 1}]}, "settings[0].colour"),
+        ({"settings": [{"we": 0.0}]}, "we"),
+        ({"plants": 0}, "plants"),
+        ({"uncertainty": {"levels": [2.0]}}, "uncertainty.levels"),
+        ({"uncertainty": {"noise_std_m": "floor"}}, "uncertainty.noise_std_m"),
+        ({"uncertainty": {"parameters": "poles"}}, "uncertainty.parameters"),
+        ({"trajectory": "nine"}, "trajectory"),
+        ({"steady_trials": 5}, "steady_trials"),
+    ],
+)
+def test_the_study_file_is_checked_field_by_field(
+    tmp_path: Path, changes: dict, field: str
+) -> None:
+    with pytest.raises(StudyError) as info:
+        build_plan(load_study(write_study(tmp_path, **changes)))
+    message = str(info.value)
+    assert message.startswith(str(tmp_path / "study.yaml")) and field in message
+    assert "\n" not in message
+
+
+def test_the_floor_comes_from_a_run(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "floor.json").write_text('{"axis_rms_m": [0.02, 0.03], "trials": [0, 1]}')
+    plan = plan_of(tmp_path, uncertainty={"levels": [0.1], "noise_std_m": "floor", "run": "run"})
+    assert plan.uncertainty.noise_std_m == (0.02, 0.03)
+    assert plan.uncertainty.floor_source.endswith("floor.json")
+
+
+def test_a_plant_beyond_memory_is_refused(tmp_path: Path) -> None:
+    plan = plan_of(tmp_path)
+    with pytest.raises(StudyError, match="GB"):
+        check_study_memory(plan, memory_bytes=1e5)
+
+
+def test_the_documented_example_parses() -> None:
+    study = load_study(ROOT / "docs" / "studies" / "antx-wdu.yaml")
+    assert len(study.settings) == 6 and study.uncertainty["levels"] == (0.2, 0.4)
