@@ -13,7 +13,7 @@ system (:data:`gcs.flight.mocap.frames.SYSTEM_FRAMES`)::
       body_forward_axis: +x
       right_handed: true      # false is refused: it mirrors an axis (see below)
       forward: true           # send the pose to PX4 as external vision (false: a bridge does)
-      message: odometry       # odometry | vision_position_estimate
+      message: vision_position_estimate   # or odometry (LOCAL_FRD: needs a magnetometer)
       position_std_m: 0.005   # standard deviation sent with the pose (covariance)
       angle_std_deg: 1.0
       measurement: mocap      # mocap | estimate: what learning and e_pos use
@@ -38,7 +38,7 @@ from gcs.flight.mocap.source import MocapSource, parse_mocap_url
 
 __all__ = ["MESSAGES", "MEASUREMENTS", "MocapSettings", "mocap_settings"]
 
-MESSAGES = ("odometry", "vision_position_estimate")
+MESSAGES = ("vision_position_estimate", "odometry")
 MEASUREMENTS = ("mocap", "estimate")
 _AXES = ("up_axis", "north_axis", "body_forward_axis")
 
@@ -81,7 +81,7 @@ class MocapSettings:
     yaw_offset_deg: float = 0.0
     origin_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     forward: bool = True
-    message: str = "odometry"
+    message: str = "vision_position_estimate"
     position_std_m: float = 0.005
     angle_std_deg: float = 1.0
     measurement: str = "mocap"
