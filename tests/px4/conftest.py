@@ -40,15 +40,16 @@ def px4_build() -> Px4Build:
 
 @pytest.fixture
 def px4_factory(px4_build: Px4Build, tmp_path: Path, request) -> Iterator:
-    """Start vehicles: ``px4_factory(params=None)`` returns a ready :class:`Px4Sitl`, each in a
+    """Start vehicles: ``px4_factory(params=None, ready=True)`` returns a :class:`Px4Sitl`
+    (ready for take-off with ``ready``, else just started), each in a
     fresh working directory under the test's tmp dir, stopped after the test; on failure its
     output and ULog logs are copied to ``logs/px4-failures/<test>/`` (the path is printed)."""
     vehicles: list[Px4Sitl] = []
 
-    def start(params: dict[str, float] | None = None) -> Px4Sitl:
+    def start(params: dict[str, float] | None = None, ready: bool = True) -> Px4Sitl:
         vehicle = Px4Sitl(px4_build, tmp_path / f"px4-{len(vehicles)}", params)
         vehicles.append(vehicle)
-        return vehicle.start()
+        return vehicle.start(ready=ready)
 
     yield start
     for vehicle in vehicles:

@@ -345,8 +345,10 @@ class Px4Sitl:
         return self.instance + 1
 
     # --- life ------------------------------------------------------------------------------
-    def start(self, timeout_s: float = START_TIMEOUT_S) -> Px4Sitl:
-        """Start PX4 on a free instance and wait for "Ready for takeoff!".
+    def start(self, timeout_s: float = START_TIMEOUT_S, ready: bool = True) -> Px4Sitl:
+        """Start PX4 on a free instance and wait for "Ready for takeoff!" (with ``ready``;
+        else for its start-up script only: a vehicle set up for motion capture is not ready
+        before vision arrives).
 
         Returns
         -------
@@ -376,7 +378,8 @@ class Px4Sitl:
                 raise
             break
         try:
-            self.output.wait_for(READY_LINE, max(1.0, timeout_s - self.elapsed_s()))
+            if ready:
+                self.output.wait_for(READY_LINE, max(1.0, timeout_s - self.elapsed_s()))
         except BaseException:
             self.stop()
             raise
