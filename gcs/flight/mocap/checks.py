@@ -23,7 +23,13 @@ import math
 
 import numpy as np
 
-__all__ = ["pose_agreement_problem", "move_direction_problem", "window_mean", "move_length"]
+__all__ = [
+    "pose_agreement_problem",
+    "move_direction_problem",
+    "moved_as_commanded",
+    "window_mean",
+    "move_length",
+]
 
 #: A move is at least this many times the hover's measured wander.
 WANDER_FACTOR = 4.0
@@ -80,6 +86,35 @@ def _went_wrong(
     if angle > max_angle_deg:
         return f"{who} moved {angle:.0f} deg off the commanded direction"
     return None
+
+
+def moved_as_commanded(
+    cmd_ned_m: np.ndarray,
+    delta_ned_m: np.ndarray,
+    min_fraction: float = 0.5,
+    max_angle_deg: float = 45.0,
+) -> bool:
+    """Whether one displacement went the commanded way (the test of
+    :func:`move_direction_problem` for one side).
+
+    Parameters
+    ----------
+    cmd_ned_m : numpy.ndarray
+        Commanded displacement, shape (3,) [m, NED].
+    delta_ned_m : numpy.ndarray
+        Displacement seen, shape (3,) [m, NED].
+    min_fraction : float
+        Least fraction of the command covered along it.
+    max_angle_deg : float
+        Largest angle to the command [deg].
+
+    Returns
+    -------
+    bool
+    """
+    cmd = _vec(cmd_ned_m, "cmd_ned_m")
+    delta = _vec(delta_ned_m, "delta_ned_m")
+    return _went_wrong(cmd, delta, "", min_fraction, max_angle_deg) is None
 
 
 def move_direction_problem(
