@@ -94,6 +94,7 @@ class SihTruth:
         self._ref: tuple[float, float, float] | None = None
         self._latest: SihState | None = None
         self._first = threading.Event()
+        self._cond = threading.Condition()
         self._stop = threading.Event()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", port))
@@ -141,6 +142,24 @@ class SihTruth:
         """
         return self._first.wait(timeout_s)
 
+    def wait_received(self, count: int, timeout_s: float) -> bool:
+        """Wait until ``count`` states have arrived in all.
+
+        Parameters
+        ----------
+        count : int
+            Total number of states.
+        timeout_s : float
+            Limit [s].
+
+        Returns
+        -------
+        bool
+            Whether they did.
+        """
+        with self._cond:
+            return self._cond.wait_for(lambda: self.received >= count, timeout_s)
+
     @property
     def latest(self) -> SihState | None:
         """The newest state, or None before the first."""
@@ -171,7 +190,9 @@ class SihTruth:
             vel_ned_m_s=np.array([msg.vx, msg.vy, msg.vz], dtype=float) * 0.01,
             quat_wxyz=np.asarray(msg.attitude_quaternion, dtype=float),
         )
-        self.received += 1
+        with self._cond:
+            self.received += 1
+            self._cond.notify_all()
         self._first.set()
 
     def __call__(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
