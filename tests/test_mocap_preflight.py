@@ -59,3 +59,10 @@ def test_odometry_without_a_heading_source_is_refused_naming_the_message() -> No
     gps_heading = {**no_mag, "EKF2_GPS_CTRL": 8}
     assert "refuse" not in [f.level for f in ekf2_findings(gps_heading, True, "odometry")]
     assert "refuse" not in [f.level for f in ekf2_findings(no_mag, False, "odometry")]
+
+
+def test_no_barometer_without_gps_is_a_warning_naming_the_landing() -> None:
+    found = ekf2_findings({**INDOOR, "EKF2_BARO_CTRL": 0}, True)
+    warned = [f.text for f in found if f.level == "warning"]
+    assert len(warned) == 1 and "EKF2_BARO_CTRL 1" in warned[0] and "landing" in warned[0]
+    assert [f.level for f in ekf2_findings({**INDOOR, "EKF2_BARO_CTRL": 1}, True)] == ["info"]

@@ -214,6 +214,7 @@ class Px4Params:
             "EKF2_HGT_REF": (integer, p.ekf2_hgt_ref),
             # no magnetometer indoors (PX4: 5, none); with GPS the default, automatic
             "EKF2_MAG_TYPE": (integer, 5 if cfg.vision.enabled else 0),
+            "EKF2_BARO_CTRL": (integer, 1),  # PX4's default (the mock has no barometer model)
             "EKF2_EV_DELAY": (real, p.ekf2_ev_delay_ms),
             "EKF2_NOAID_TOUT": (integer, round(p.ekf2_noaid_tout_s * 1e6)),
             "GF_ACTION": (integer, p.gf_action),

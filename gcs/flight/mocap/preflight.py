@@ -22,6 +22,11 @@ and aligns its heading to north only from a magnetometer or GPS. With neither
 for as long as one waits (measured on the SIH firmware). ``VISION_POSITION_ESTIMATE`` is NED:
 PX4 aligns its heading to the vision yaw. So forwarding ``odometry`` to such a vehicle is
 refused, naming ``mocap.message: vision_position_estimate``.
+
+The barometer. With ``EKF2_BARO_CTRL`` 0 and no GPS, vision is the only height source: once the
+mocap is lost PX4's failsafe descends blind and its land detector never sees the landing (flown
+on the SIH firmware: still armed and "in air" a minute later). That is a warning: keep the
+barometer fused (``EKF2_BARO_CTRL`` 1) beside the vision height reference.
 """
 
 from __future__ import annotations
@@ -30,7 +35,14 @@ from dataclasses import dataclass
 
 __all__ = ["EKF2_INT_PARAMS", "EKF2_FLOAT_PARAMS", "Finding", "ekf2_findings"]
 
-EKF2_INT_PARAMS = ("EKF2_GPS_CTRL", "EKF2_HGT_REF", "EKF2_EV_CTRL", "EKF2_MAG_TYPE")
+EKF2_INT_PARAMS = (
+    "EKF2_GPS_CTRL",
+    "EKF2_HGT_REF",
+    "EKF2_EV_CTRL",
+    "EKF2_MAG_TYPE",
+    "EKF2_BARO_CTRL",
+)
+_OPTIONAL = ("EKF2_MAG_TYPE", "EKF2_BARO_CTRL")
 EKF2_FLOAT_PARAMS = ("EKF2_EV_DELAY",)
 MAX_EV_DELAY_MS = 50.0
 
@@ -83,7 +95,7 @@ def ekf2_findings(
             f"EV_DELAY {show(delay)} ms"
         )
     ]
-    needed = [n for n in EKF2_INT_PARAMS + EKF2_FLOAT_PARAMS if n != "EKF2_MAG_TYPE"]
+    needed = [n for n in EKF2_INT_PARAMS + EKF2_FLOAT_PARAMS if n not in _OPTIONAL]
     missing = [n for n in needed if params.get(n) is None]
     mag = params.get("EKF2_MAG_TYPE")
     gps_heading = gps is not None and int(gps) >> 3 & 1
@@ -137,6 +149,16 @@ def ekf2_findings(
         out.append(
             Finding(
                 f"EKF2_GPS_CTRL = {gps:g} fuses GPS alongside vision: indoors set it to 0",
+                "warning",
+            )
+        )
+    baro = params.get("EKF2_BARO_CTRL")
+    if baro is not None and int(baro) == 0 and not gps_used:
+        out.append(
+            Finding(
+                "EKF2_BARO_CTRL = 0: if the mocap is lost the vehicle has no height left, "
+                "descends blind and may never detect its landing (PX4 v1.16 SIH stayed armed); "
+                "EKF2_BARO_CTRL 1 keeps the barometer as a second height source",
                 "warning",
             )
         )
