@@ -3,8 +3,8 @@ ground truth served as an OptiTrack rigid body by our mock Motive (the lab's rig
 flying with ``--mocap`` as a lab would (gcs forwards the mocap to PX4 as vision).
 
 The rig: PX4 SIH streams its true state as HIL_STATE_QUATERNION on its display link (UDP
-19410+N); :class:`gcs.mock.mocap.sih.SihTruth` receives it and
-:class:`gcs.mock.mocap.server.NatNetServer` serves it over NatNet at 120 Hz, in Motive's axes.
+19410+N); ``python -m gcs.mock.mocap --px4-sih N`` (:mod:`gcs.mock.mocap.sih`) receives it and
+serves it over NatNet at 120 Hz, in Motive's axes, from a process of its own.
 Every wait is on an event: gcs's own output lines, its exit, PX4's heartbeat and landed state.
 """
 
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -23,11 +24,8 @@ import pytest
 import yaml
 from synthetic import CI_FLIGHT, SHORT
 
-from gcs.flight.mocap.frames import mapping_for
 from gcs.io.runlog import RunDir
-from gcs.mock.mocap.scripted import in_room
-from gcs.mock.mocap.server import NatNetServer
-from gcs.mock.mocap.sih import SihTruth, sih_display_port
+from gcs.mock.mocap.process import MocapServerProcess
 from px4.sitl import ROOT, Px4Sitl
 
 pytestmark = pytest.mark.px4
@@ -46,20 +44,12 @@ FLY_TIMEOUT_S = 240.0
 
 
 @contextlib.contextmanager
-def lab_rig(vehicle: Px4Sitl) -> Iterator[tuple[NatNetServer, SihTruth]]:
-    """The lab's OptiTrack around ``vehicle``: its SIH ground truth served over NatNet."""
+def lab_rig(vehicle: Px4Sitl) -> Iterator[MocapServerProcess]:
+    """The lab's OptiTrack around ``vehicle``: ``python -m gcs.mock.mocap --px4-sih N``, its
+    SIH ground truth served over NatNet (a process of its own, as Motive runs on its own PC)."""
     assert vehicle.instance is not None
-    truth = SihTruth(sih_display_port(vehicle.instance)).start()
-    try:
-        assert truth.wait_first(30.0), "PX4 sent no HIL_STATE_QUATERNION on its display link"
-        server = NatNetServer(in_room(truth, mapping_for("optitrack")), rate_hz=120.0)
-        try:
-            server.start()
-            yield server, truth
-        finally:
-            server.close()
-    finally:
-        truth.close()
+    with MocapServerProcess(["--px4-sih", str(vehicle.instance)]) as rig:
+        yield rig
 
 
 class Gcs:
@@ -143,7 +133,7 @@ def test_lab_flight_arms_first_time_flies_two_trials_on_mocap_and_lands(
     setting the global origin and waiting for PX4's pre-arm checks), two trials measured by
     the mocap, landed and disarmed."""
     run_path = tmp_path / "run"
-    with lab_rig(lab_px4) as (server, _), lab_px4.monitor() as mon:
+    with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
         gcs = Gcs(
             "fly", "--connect", lab_px4.url, "--mocap", server.url, "--iter", 2,
             "--trajectory", tiny, "--profile", lab_profile(tmp_path), "--run", run_path,
@@ -181,14 +171,14 @@ def test_mocap_lost_mid_trial_gcs_aborts_and_the_vehicle_lands_and_disarms(
     detects its landing (flown: still armed, "in air", 60 s later)."""
     lab_px4 = px4_factory(params={**LAB_PARAMS, "EKF2_BARO_CTRL": 1}, ready=False)
     run_path = tmp_path / "run"
-    with lab_rig(lab_px4) as (server, _), lab_px4.monitor() as mon:
+    with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
         gcs = Gcs(
             "fly", "--connect", lab_px4.url, "--mocap", server.url, "--iter", 1,
             "--trajectory", tiny, "--profile", lab_profile(tmp_path, check_move_m=0.0),
             "--run", run_path,
         )  # fmt: skip
         gcs.wait_line("trial 0 started", FLY_TIMEOUT_S)
-        server.stop()
+        os.kill(server.pid, signal.SIGTERM)  # the lab's Motive stops serving
         t_lost = time.monotonic()
         code = gcs.wait()
         t_gcs = time.monotonic()
@@ -213,7 +203,7 @@ def test_a_mirrored_mapping_is_refused_before_take_off(
     """A left-handed (mirrored) mocap mapping: one line naming the field, exit 2, nothing
     created, and the vehicle never armed."""
     run_path = tmp_path / "run"
-    with lab_rig(lab_px4) as (server, _), lab_px4.monitor() as mon:
+    with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
         gcs = Gcs(
             "fly", "--connect", lab_px4.url, "--mocap", server.url, "--trajectory", tiny,
             "--profile", lab_profile(tmp_path, right_handed=False), "--run", run_path,
