@@ -157,7 +157,9 @@ def test_lab_flight_arms_first_time_flies_two_trials_on_mocap_and_lands(
     px4_figures.update(
         e_pos_m=[round(e, 4) for e in e_pos],
         prearm_wait=ready.strip(),
-        hover=next((ln.strip() for ln in out.splitlines() if "hover at the start" in ln), None),
+        hover=next(
+            (ln.strip() for ln in out.splitlines() if "hover at the start point:" in ln), None
+        ),
     )
 
 
@@ -198,7 +200,7 @@ def test_mocap_lost_mid_trial_gcs_aborts_and_the_vehicle_lands_and_disarms(
 
 
 def test_a_mirrored_mapping_is_refused_before_take_off(
-    lab_px4: Px4Sitl, tmp_path: Path, tiny: Path
+    lab_px4: Px4Sitl, tmp_path: Path, tiny: Path, px4_figures: dict
 ) -> None:
     """A left-handed (mirrored) mocap mapping: one line naming the field, exit 2, nothing
     created, and the vehicle never armed."""
@@ -214,3 +216,4 @@ def test_a_mirrored_mapping_is_refused_before_take_off(
     lines = [ln for ln in gcs.output().splitlines() if ln.strip()]
     assert code == 2 and len(lines) == 1 and "mocap.right_handed" in lines[0]
     assert not run_path.exists() and not armed_ever
+    px4_figures.update(exit_code=code, refused=lines[0][:120], armed=armed_ever)
