@@ -1,13 +1,59 @@
 import sys
 from pathlib import Path
 
+import pytest
+
 # tests/synthetic.py is a helper module shared by several test files
 sys.path.insert(0, str(Path(__file__).parent))
 
+from px4.sitl import ENV_VAR, ROOT, Px4Build, Px4BuildError, build_dir  # noqa: E402
+
+# The real-firmware tests (tests/px4/) run whenever a PX4 SITL build is there: PX4_SITL_DIR, or
+# ../shared/px4-v1.16-sitl beside the checkout. Without one they are not collected, and the
+# session says so in one line.
+_PX4_DIR, _PX4_CHOSEN = build_dir()
+_PX4_PRESENT = (_PX4_DIR / "bin" / "px4").is_file()
+collect_ignore = [] if _PX4_PRESENT else ["px4"]
+
+
+def pytest_configure(config) -> None:
+    if _PX4_CHOSEN:  # a build the user named must be one
+        try:
+            Px4Build(_PX4_DIR).check()
+        except Px4BuildError as exc:
+            raise pytest.UsageError(f"{ENV_VAR}: {exc}") from None
+
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Flights first: the end-to-end tests run in real time (tens of seconds each), the rest in
-    milliseconds. ``make test`` runs ``pytest -n 2 --dist worksteal``: the workers start on
-    halves of this order and an idle one steals from the other's queue, so the flights end up
-    shared and the quick tests fill the end instead of one worker finishing a flight alone."""
-    items.sort(key=lambda item: item.get_closest_marker("e2e") is None)
+    """Flights first, the real firmware's first of all: the end-to-end tests run in real time
+    (tens of seconds to minutes each), the rest in milliseconds. ``make test`` runs ``pytest -n
+    2 --dist worksteal``: the workers start on halves of this order and an idle one steals from
+    the other's queue, so the flights end up shared and the quick tests fill the end instead of
+    one worker finishing a flight alone."""
+    items.sort(
+        key=lambda item: (
+            item.get_closest_marker("px4") is None,
+            item.get_closest_marker("e2e") is None,
+        )
+    )
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    """One line on the real-firmware tests: how many ran and passed, or why none ran."""
+    if not _PX4_PRESENT:
+        where = _PX4_DIR.relative_to(ROOT.parent)
+        terminalreporter.write_line(
+            f"real PX4 firmware tests not collected: no PX4 SITL build at ../{where}; run them "
+            f"with {ENV_VAR}=<PX4-Autopilot>/build/px4_sitl_default make test"
+        )
+        return
+    counts: dict[str, int] = {}
+    for outcome in ("passed", "failed", "error", "skipped"):
+        for report in terminalreporter.stats.get(outcome, []):
+            if "px4" in getattr(report, "keywords", {}) and (
+                report.when == "call" or outcome in ("error", "skipped")
+            ):
+                counts[outcome] = counts.get(outcome, 0) + 1
+    if counts:
+        said = ", ".join(f"{n} {outcome}" for outcome, n in counts.items())
+        terminalreporter.write_line(f"real PX4 firmware tests ({_PX4_DIR}): {said}")

@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from gcs.core.frames import FrameMapping, mapping_for
-from gcs.flight.mocap.checks import move_direction_problem, pose_agreement_problem
+from gcs.flight.mocap.checks import (
+    WANDER_FACTOR,
+    move_direction_problem,
+    move_length,
+    pose_agreement_problem,
+    window_mean,
+)
 
 EAST = np.array([0.0, 0.3, 0.0])
 
@@ -65,3 +71,36 @@ def test_pose_agreement() -> None:
     assert pose_agreement_problem([0, 0, -1], [0.05, 0.0, -1.02]) is None
     reason = pose_agreement_problem([0, 0, -1], [0.0, 0.0, 1.0])  # up axis sign wrong
     assert reason is not None and "2.00 m apart (mostly down" in reason
+
+
+def test_window_mean_and_wander_against_a_direct_computation() -> None:
+    rng = np.random.default_rng(3)
+    pos = rng.normal(0.0, 0.1, (200, 3)) + [1.0, -2.0, -1.5]
+    pos[7] = np.nan
+    mean, wander = window_mean(pos)
+    ok = pos[np.isfinite(pos).all(axis=1)]
+    np.testing.assert_allclose(mean, ok.mean(axis=0))
+    d = ok[:, :2] - ok[:, :2].mean(axis=0)
+    assert wander == pytest.approx(np.sqrt((d**2).sum(axis=1).mean()))
+    with pytest.raises(ValueError, match="no finite"):
+        window_mean(np.full((3, 3), np.nan))
+
+
+def test_a_wandering_hover_lengthens_the_move_within_the_cap() -> None:
+    assert move_length(0.3, 0.01) == 0.3
+    assert move_length(0.3, 0.15) == pytest.approx(WANDER_FACTOR * 0.15)
+    assert move_length(0.3, 2.0) == 1.0
+    assert move_length(1.5, 2.0) == 1.5
+
+
+def test_averaged_windows_see_a_move_that_a_mid_swing_snapshot_hides() -> None:
+    # hover swinging +-0.25 m east; a 0.3 m east move: snapshots at opposite swings see 0.05 m
+    t = np.linspace(0.0, 1.5, 150)
+    swing = 0.25 * np.sin(2 * np.pi * t / 1.5)
+    before = np.column_stack([np.zeros_like(t), swing, np.full_like(t, -1.5)])
+    after = before + [0.0, 0.3, 0.0]
+    cmd = np.array([0.0, 0.3, 0.0])
+    snap = after[112] - before[37]  # +0.25 before, -0.25 after: seen as 0.3 - 0.5
+    assert move_direction_problem(cmd, snap, snap) is not None
+    (m0, _), (m1, _) = window_mean(before), window_mean(after)
+    assert move_direction_problem(cmd, m1 - m0, m1 - m0) is None

@@ -46,3 +46,23 @@ def test_barometer_gps_alongside_and_a_long_delay_are_warnings() -> None:
 def test_unreadable_parameters_are_named() -> None:
     findings = ekf2_findings({"EKF2_EV_CTRL": 15}, True)
     assert any("EKF2_HGT_REF" in f.text and f.level == "warning" for f in findings)
+
+
+def test_odometry_without_a_heading_source_is_refused_naming_the_message() -> None:
+    no_mag = {**INDOOR, "EKF2_MAG_TYPE": 5}
+    findings = ekf2_findings(no_mag, True, "odometry")
+    refused = [f.text for f in findings if f.level == "refuse"]
+    assert len(refused) == 1 and "vision_position_estimate" in refused[0]
+    assert [f.level for f in ekf2_findings(no_mag, True, "vision_position_estimate")] == ["info"]
+    with_mag = {**INDOOR, "EKF2_MAG_TYPE": 0}
+    assert [f.level for f in ekf2_findings(with_mag, True, "odometry")] == ["info"]
+    gps_heading = {**no_mag, "EKF2_GPS_CTRL": 8}
+    assert "refuse" not in [f.level for f in ekf2_findings(gps_heading, True, "odometry")]
+    assert "refuse" not in [f.level for f in ekf2_findings(no_mag, False, "odometry")]
+
+
+def test_no_barometer_without_gps_is_a_warning_naming_the_landing() -> None:
+    found = ekf2_findings({**INDOOR, "EKF2_BARO_CTRL": 0}, True)
+    warned = [f.text for f in found if f.level == "warning"]
+    assert len(warned) == 1 and "EKF2_BARO_CTRL 1" in warned[0] and "landing" in warned[0]
+    assert [f.level for f in ekf2_findings({**INDOOR, "EKF2_BARO_CTRL": 1}, True)] == ["info"]

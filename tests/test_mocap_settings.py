@@ -13,7 +13,7 @@ from gcs.io.mocap_source import parse_mocap_url
 
 def test_defaults_follow_the_urls_system() -> None:
     s = mocap_settings({}, "p.yaml")
-    assert s.forward and s.message == "odometry" and s.measurement == "mocap"
+    assert s.forward and s.message == "vision_position_estimate" and s.measurement == "mocap"
     for system, convention in (("optitrack", "optitrack"), ("vicon", "vicon")):
         source = parse_mocap_url(f"{system}://10.0.0.1/body")
         assert s.mapping(source) == SYSTEM_FRAMES[convention]

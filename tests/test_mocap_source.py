@@ -47,3 +47,15 @@ def test_other_systems(url: str, config: dict) -> None:
 def test_bad_urls_name_the_problem(url: str, match: str) -> None:
     with pytest.raises(ProfileError, match=match):
         parse_mocap_url(url)
+
+
+def test_a_multicast_failure_names_the_interface_option() -> None:
+    from gcs.flight.mocap.client import connect_hint
+
+    source = parse_mocap_url("optitrack://10.0.0.5/drone")
+    hint = connect_hint(source, "optitrack connect failed: set_option: No such device")
+    assert "?interface=IP" in hint
+    assert "?interface=" in connect_hint(source, "no answer from optitrack server within 5 s")
+    with_if = parse_mocap_url("optitrack://10.0.0.5/drone?interface=10.0.0.2")
+    assert connect_hint(with_if, "no answer from optitrack server within 5 s") == ""
+    assert connect_hint(parse_mocap_url("vicon://10.0.0.5/cf1"), "No such device") == ""

@@ -5,6 +5,7 @@ the mock's NatNet server (``gcs mock --config profiles/mock-mocap.yaml --mocap``
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 import socket
 import time
@@ -15,6 +16,7 @@ import numpy as np
 import pytest
 import yaml
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync, MavlinkMessage
 from mavsdk.asyncio.plugins.mocap import MocapAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
@@ -245,7 +247,7 @@ def test_vision_only_flight_and_the_failsafe_when_the_body_is_occluded(tmp_path:
         m, system = await connect(mock.url)
         action, offboard, tel = ActionAsync(system), OffboardAsync(system), TelemetryAsync(system)
         mocap = MocapAsync(system)
-        forwarder = Forwarder(mocap)
+        forwarder = Forwarder(mocap, send_vpe=True)  # NED: PX4 aligns its heading to it
         loop = asyncio.get_running_loop()
         client = MocapClient(parse_mocap_url(mock.mocap_url), on_sample=forwarder.on_sample(loop))
         tasks: list[asyncio.Task] = []
@@ -260,7 +262,15 @@ def test_vision_only_flight_and_the_failsafe_when_the_body_is_occluded(tmp_path:
                 await mocap.set_odometry(odometry(*pose))
             tasks.append(asyncio.create_task(forwarder.run()))
             await first(tel.subscribe_health(), lambda h: h.is_local_position_ok, 5.0)
-            await first(tel.subscribe_health(), lambda h: h.is_armable, 5.0)
+            # no GPS: the local frame needs a global origin before PX4 can arm (PX4 v1.16)
+            origin = {"target_system": 1, "latitude": 473977420, "longitude": 85455940,
+                      "altitude": 488000, "time_usec": 0}  # fmt: skip
+            direct = MavlinkDirectAsync(system)
+            await direct.send_message(
+                MavlinkMessage("SET_GPS_GLOBAL_ORIGIN", 0, 0, 1, 0, json.dumps(origin))
+            )
+            # PX4's checks pass 4.3 s after the first vision sample (EV_PREARM_DELAY_S)
+            await first(tel.subscribe_health(), lambda h: h.is_armable, 10.0)
             await action.arm()
             await action.takeoff()
             await first(tel.subscribe_flight_mode(), lambda f: f.name == "TAKEOFF", 3.0)
@@ -320,7 +330,7 @@ def test_vision_only_flight_and_the_failsafe_when_the_body_is_occluded(tmp_path:
     assert len(defaults) == 5 and not any(r["fused"] for r in defaults)
     assert {r["frame_id"] for r in defaults} == {14}
     used = [r for r in vision_rows(stats) if r["estimator_type"] != 6]
-    assert {(r["frame_id"], r["estimator_type"]) for r in used} == {(20, 2)}  # LOCAL_FRD, VISION
+    assert {(r["frame_id"], r["estimator_type"]) for r in used} == {(1, -1)}  # VPE: LOCAL_NED
     modes = [(c["mode"], c["armed"]) for c in stats["modes"]]
     i = modes.index(("OFFBOARD", True))
     assert modes[i + 1] == ("LAND", True) and modes[-1][1] is False

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -319,3 +320,50 @@ def test_estimator_faults_are_passed_on_the_command_line() -> None:
         Faults(drift_start_s=1.0, drift_ned_m_s=(0.0, float("nan"), 0.0))
     with pytest.raises(ValueError, match="drift_duration_s"):
         Faults(drift_start_s=1.0, drift_duration_s=-1.0, drift_ned_m_s=(0.0, 1.0, 0.0))
+
+
+def _indoor() -> Vehicle:
+    from gcs.mock.config import load_mock_config
+
+    return Vehicle(
+        load_mock_config(Path(__file__).resolve().parents[1] / "profiles" / "mock-mocap.yaml")
+    )
+
+
+def _vision(v: Vehicle, t0: float, t1: float, north: bool = True) -> None:
+    t = t0
+    while t < t1:
+        v.update(t)
+        v.on_vision(t, (0.0, 0.0, 0.0), north)
+        t += 0.02
+
+
+def test_on_vision_only_arming_waits_for_px4s_delay_an_origin_and_a_north_heading() -> None:
+    from gcs.mock.vehicle import EV_PREARM_DELAY_S
+
+    v = _indoor()
+    assert v.origin is None and int(v.params["EKF2_MAG_TYPE"]) == 5
+    _vision(v, 0.0, 1.0)
+    assert v.local_position_valid and v.navigation_problem() == "horizontal position unstable"
+    assert v.arm(True) is MavResult.TEMPORARILY_REJECTED
+    texts = [t for _, t in v.events]
+    assert "Preflight Fail: horizontal position unstable" in texts
+    assert "Arming denied: Resolve system health failures first" in texts
+    _vision(v, 1.0, EV_PREARM_DELAY_S + 0.1)
+    assert v.navigation_problem() == "No valid global position estimate" and not v.armable
+    assert v.set_origin(47.0, 8.0, 400.0) and not v.set_origin(1.0, 1.0, 1.0)  # the first stays
+    assert v.armable and v.arm(True) is MavResult.ACCEPTED
+    assert v.global_position((0.0, 0.0, 0.0)) == pytest.approx((47.0, 8.0, 400.0))
+
+
+def test_vision_in_a_relative_frame_never_aligns_the_heading_to_north() -> None:
+    v = _indoor()
+    v.set_origin(47.0, 8.0, 400.0)
+    _vision(v, 0.0, 10.0, north=False)
+    assert v.navigation_problem() == "No valid global position estimate"
+    assert v.arm(True) is MavResult.TEMPORARILY_REJECTED
+
+
+def test_with_gps_origin_and_heading_are_there_from_the_start() -> None:
+    v = Vehicle(CFG)
+    assert v.origin is not None and v.navigation_problem() is None and v.armable

@@ -19,7 +19,7 @@ import pytest
 from gcs.errors import ProfileError
 from gcs.mock.config import MockConfig, VisionConfig, load_mock_config, mock_config_from_dict
 from gcs.mock.estimator import EV_MAX_INTERVAL_S, NO_AID_TIMEOUT_S, VisionAidedError
-from gcs.mock.vehicle import MavResult, Mode, Vehicle
+from gcs.mock.vehicle import EV_PREARM_DELAY_S, MavResult, Mode, Vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
 VISION = load_mock_config(ROOT / "profiles" / "mock-mocap.yaml")
@@ -43,6 +43,12 @@ def fast(noaid_s: float = 2.0, delay_ms: float = 0.0) -> MockConfig:
 def process(cfg: VisionConfig | None = None) -> tuple[VisionAidedError, list[float]]:
     truth = [0.0, 0.0, 0.0]
     return VisionAidedError(cfg or VISION.vision, truth, random.Random(1)), truth
+
+
+def ready(v: Vehicle, t: float) -> float:
+    """Set a global origin and fly the vision past PX4's pre-arm delay; the time after."""
+    v.set_origin(47.397742, 8.545594, 488.0)
+    return run(v, t, max(t, EV_PREARM_DELAY_S + 0.05))
 
 
 def run(
@@ -260,8 +266,10 @@ def test_without_vision_there_is_no_local_position_and_nothing_to_fly() -> None:
 def test_with_vision_it_arms_takes_off_and_holds_on_the_vision() -> None:
     v = Vehicle(VISION)
     t = run(v, 0.0, 0.5)
-    assert v.local_position_valid and v.armable
+    assert v.local_position_valid and not v.armable  # PX4: checks pass later, with an origin
     assert texts(v)[:2] == ["EKF2: vision fusion started", "Local position estimate valid"]
+    t = ready(v, t)
+    assert v.armable
     assert v.arm(True) is MavResult.ACCEPTED and v.takeoff() is MavResult.ACCEPTED
     t = run(v, t, t + 8.0)
     assert v.mode is Mode.HOLD and not v.landed
@@ -273,8 +281,8 @@ def test_with_vision_it_arms_takes_off_and_holds_on_the_vision() -> None:
 def test_vision_lost_in_offboard_descends_without_position_lands_and_disarms() -> None:
     cfg = fast(noaid_s=2.0)
     v = Vehicle(cfg)
-    t = run(v, 0.0, 0.3)
-    v.arm(True)
+    t = ready(v, run(v, 0.0, 0.3))
+    assert v.arm(True) is MavResult.ACCEPTED
     v.takeoff()
     t = run(v, t, t + 4.0)
     sp = (0.5, 0.0, -1.0)
@@ -310,7 +318,7 @@ def test_vision_lost_in_offboard_descends_without_position_lands_and_disarms() -
 
 def test_vision_lost_on_the_ground_takes_no_failsafe_and_refuses_arming_again() -> None:
     v = Vehicle(fast(noaid_s=1.0))
-    t = run(v, 0.0, 0.5)
+    t = ready(v, run(v, 0.0, 0.5))
     assert v.arm(True) is MavResult.ACCEPTED and v.arm(False) is MavResult.ACCEPTED
     t = run(v, t, t + 2.0, vision=False)
     assert not v.local_position_valid and not v.failsafe and v.mode is Mode.HOLD

@@ -49,7 +49,7 @@ from mavsdk.asyncio.plugins.geofence import (
     Point,
     Polygon,
 )
-from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync, MavlinkMessage
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync
@@ -480,6 +480,41 @@ class Vehicle:
             return f"position telemetry stale ({age_s:.2f} s old)"
         return None
 
+    async def wait_until(self, predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
+        """Wait (on the vehicle's state-change events, at least every telemetry-age limit)
+        until ``predicate()`` holds, on the ground (a breach or a lost link ends it).
+
+        Parameters
+        ----------
+        predicate : callable
+            Checked on every state change.
+        timeout_s : float
+            Limit [s].
+        what : str
+            Named in the timeout's message.
+
+        Raises
+        ------
+        VehicleError
+            Not within ``timeout_s``, link lost, or a breach.
+        """
+        await self._wait_until(predicate, timeout_s, what, in_control=False)
+
+    def notify(self) -> None:
+        """Wake the waits (:meth:`wait_until`): something they check has changed."""
+        self._notify()
+
+    @property
+    def system(self) -> System:
+        """The connected MAVSDK system (for plugins gcs opens beside the vehicle's own).
+
+        Raises
+        ------
+        VehicleError
+            Not connected.
+        """
+        return self._require(self._system)
+
     async def _wait_until(
         self,
         predicate: Callable[[], bool],
@@ -648,6 +683,38 @@ class Vehicle:
         if not all(math.isfinite(float(x)) for x in values):
             raise VehicleError(f"read the global origin: not a position {values}")
         return (float(values[0]), float(values[1]), float(values[2]))
+
+    async def set_global_origin(self, lat_deg: float, lon_deg: float, alt_m: float) -> None:
+        """Set the global position of the local NED origin (MAVLink ``SET_GPS_GLOBAL_ORIGIN``).
+
+        PX4 without GPS (motion capture) has no global origin until one is set; EKF2 takes
+        it once, and PX4 answers with ``GPS_GLOBAL_ORIGIN`` (read it with
+        :meth:`gps_global_origin`).
+
+        Parameters
+        ----------
+        lat_deg, lon_deg : float
+            WGS84 latitude and longitude [deg].
+        alt_m : float
+            Altitude AMSL [m].
+
+        Raises
+        ------
+        VehicleError
+            Not connected, or MAVSDK refused the message.
+        """
+        direct = self._require(self._direct)
+        system = self._require(self._system)
+        fields = {
+            "target_system": await system.get_system_id(),
+            "latitude": round(lat_deg * 1e7),
+            "longitude": round(lon_deg * 1e7),
+            "altitude": round(alt_m * 1e3),
+            "time_usec": 0,
+        }
+        message = MavlinkMessage("SET_GPS_GLOBAL_ORIGIN", 0, 0, fields["target_system"], 0,
+                                 json.dumps(fields))  # fmt: skip
+        await self._command("set the global origin", lambda: direct.send_message(message))
 
     async def upload_inclusion_polygon(self, vertices_deg: list[tuple[float, float]]) -> None:
         """Replace the autopilot's geofence by one inclusion polygon (MAVSDK's Geofence plugin).

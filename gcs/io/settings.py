@@ -18,7 +18,7 @@ the defaults of the URL's system (:data:`gcs.core.frames.SYSTEM_FRAMES`)::
       body_forward_axis: +x
       right_handed: true      # false is refused: it mirrors an axis (see below)
       forward: true           # send the pose to PX4 as external vision (false: a bridge does)
-      message: odometry       # odometry | vision_position_estimate
+      message: vision_position_estimate   # or odometry (LOCAL_FRD: needs a magnetometer)
       position_std_m: 0.005   # standard deviation sent with the pose (covariance)
       angle_std_deg: 1.0
       measurement: mocap      # mocap | estimate: what learning and e_pos use
@@ -328,7 +328,7 @@ class IdentifySettings:
         return self.seed + 2 * experiment + AXES[axis]
 
 
-MESSAGES = ("odometry", "vision_position_estimate")
+MESSAGES = ("vision_position_estimate", "odometry")
 #: Axes of a mapping a ``mocap`` section may set explicitly.
 MAPPING_AXES = ("up_axis", "north_axis", "body_forward_axis")
 
@@ -371,7 +371,7 @@ class MocapSettings:
     yaw_offset_deg: float = 0.0
     origin_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     forward: bool = True
-    message: str = "odometry"
+    message: str = "vision_position_estimate"
     position_std_m: float = 0.005
     angle_std_deg: float = 1.0
     measurement: str = "mocap"

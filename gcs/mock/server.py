@@ -488,7 +488,8 @@ class MockServer:
         t = self._t(now)
         v = self.vehicle
         v.update(t)
-        fused = to_ekf2 and pos is not None and v.on_vision(t, pos)
+        north = frame not in (mavlink2.MAV_FRAME_LOCAL_FRD, mavlink2.MAV_FRAME_LOCAL_FLU)
+        fused = to_ekf2 and pos is not None and v.on_vision(t, pos, north)
         n, e, d = pos if pos is not None else (math.nan,) * 3
         row = (now, t, time_usec, msg.get_type(), frame, estimator, quality, n, e, d, fused)
         for key, value in zip(_VISION_KEYS, row, strict=True):
@@ -634,6 +635,8 @@ class MockServer:
         elif command == mavlink2.MAV_CMD_REQUEST_MESSAGE:
             msg_id = int(p[0]) if math.isfinite(p[0]) else -1
             sender = self._sender_for(msg_id)
+            if msg_id == mavlink2.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN and self.vehicle.origin is None:
+                sender = None  # PX4 denies a message it cannot send (no origin yet)
             result = MavResult.ACCEPTED if sender is not None else MavResult.DENIED
             send_after = sender
         elif command == mavlink2.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
@@ -748,12 +751,21 @@ class MockServer:
         return int(round(lat * 1e7)), int(round(lon * 1e7)), alt
 
     def _send_gps_global_origin(self) -> None:
-        """The local frame's origin (PX4 sends it on request and when EKF2 sets it)."""
-        p = self.cfg.px4
+        """The local frame's origin (PX4 sends it on request and when EKF2 sets it; nothing
+        while it has none, as on vision only before SET_GPS_GLOBAL_ORIGIN)."""
+        origin = self.vehicle.origin
+        if origin is None:
+            return
         self.mav.gps_global_origin_send(
-            int(round(p.home_lat_deg * 1e7)), int(round(p.home_lon_deg * 1e7)),
-            int(round(p.home_alt_m * 1000)), int(self.vehicle.t_s * 1e6),
+            int(round(origin[0] * 1e7)), int(round(origin[1] * 1e7)),
+            int(round(origin[2] * 1000)), int(self.vehicle.t_s * 1e6),
         )  # fmt: skip
+
+    def _on_set_gps_global_origin(self, msg: Any) -> None:
+        if msg.target_system not in (0, self.sysid):
+            return
+        if self.vehicle.set_origin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3):
+            self._send_gps_global_origin()
 
     def _send_heartbeat(self) -> None:
         v = self.vehicle

@@ -98,6 +98,11 @@ class Mode(enum.Enum):
 
 MODE_FROM_CUSTOM = {(m.value[0], m.value[1]): m for m in Mode}
 
+#: PX4 v1.16 SIH on external vision only: its health and arming checks pass this long after the
+#: first vision sample (measured: 4.3 s, "Horizontal position unstable" until 2.2 s, then
+#: "No valid position estimate"; docs/mock.md).
+EV_PREARM_DELAY_S = 4.3
+
 
 class LandedState(enum.IntEnum):
     """MAV_LANDED_STATE."""
@@ -208,6 +213,9 @@ class Px4Params:
             "EKF2_GPS_CTRL": (integer, p.ekf2_gps_ctrl),
             "EKF2_EV_CTRL": (integer, p.ekf2_ev_ctrl),
             "EKF2_HGT_REF": (integer, p.ekf2_hgt_ref),
+            # no magnetometer indoors (PX4: 5, none); with GPS the default, automatic
+            "EKF2_MAG_TYPE": (integer, 5 if cfg.vision.enabled else 0),
+            "EKF2_BARO_CTRL": (integer, 1),  # PX4's default (the mock has no barometer model)
             "EKF2_EV_DELAY": (real, p.ekf2_ev_delay_ms),
             "EKF2_NOAID_TOUT": (integer, round(p.ekf2_noaid_tout_s * 1e6)),
             "GF_ACTION": (integer, p.gf_action),
@@ -345,6 +353,17 @@ class Vehicle:
         self.mode_log.append(ModeChange(0.0, self.mode.name, False))
         self.vision = self.physics.vision
         self._lpos_valid = self.vision is None
+        # On vision only, as PX4 v1.16 without GPS or magnetometer: no global origin until one
+        # is set (SET_GPS_GLOBAL_ORIGIN), no heading to north until a vision yaw in NED arrives
+        # (ODOMETRY in LOCAL_FRD never aligns it), and the checks pass EV_PREARM_DELAY_S after
+        # the first vision sample. With GPS the origin and the heading come from it.
+        self.origin: tuple[float, float, float] | None = (
+            (cfg.px4.home_lat_deg, cfg.px4.home_lon_deg, cfg.px4.home_alt_m)
+            if self.vision is None
+            else None
+        )
+        self.north_aligned = self.vision is None
+        self.first_vision_t_s: float | None = None
         self.lpos_log: list[dict[str, object]] = []  # local position validity changes
         self.lpos_failsafe = False  # descending without a local position
 
@@ -414,7 +433,51 @@ class Vehicle:
             and self.mode is not Mode.LAND
             and not self._gf_denies
             and self.local_position_valid
+            and self.navigation_problem() is None
         )
+
+    def navigation_problem(self, t_s: float | None = None) -> str | None:
+        """PX4's failing navigation check on vision only (None: passes, or GPS).
+
+        Parameters
+        ----------
+        t_s : float, optional
+            Vehicle time [s]; now if omitted.
+
+        Returns
+        -------
+        str or None
+            PX4's text for it.
+        """
+        if self.vision is None:
+            return None
+        t = self.t_s if t_s is None else t_s
+        if self.first_vision_t_s is None or t - self.first_vision_t_s < EV_PREARM_DELAY_S:
+            return "horizontal position unstable"
+        if self.origin is None or not self.north_aligned:
+            return "No valid global position estimate"
+        return None
+
+    def set_origin(self, lat_deg: float, lon_deg: float, alt_m: float) -> bool:
+        """SET_GPS_GLOBAL_ORIGIN: EKF2 takes the first one (PX4 ignores later ones).
+
+        Parameters
+        ----------
+        lat_deg, lon_deg : float
+            WGS84 [deg].
+        alt_m : float
+            AMSL [m].
+
+        Returns
+        -------
+        bool
+            It was taken.
+        """
+        if self.origin is not None:
+            return False
+        self.origin = (lat_deg, lon_deg, alt_m)
+        self.events.append((6, f"New NED origin (LLA): {lat_deg:.7f}, {lon_deg:.7f}, {alt_m:.3f}"))
+        return True
 
     @property
     def _gf_denies(self) -> bool:
@@ -435,8 +498,9 @@ class Vehicle:
         tuple of float
         """
         p = self.cfg.px4
-        lat, lon = ned_to_global(p.home_lat_deg, p.home_lon_deg, pos_ned_m[0], pos_ned_m[1])
-        return lat, lon, p.home_alt_m - pos_ned_m[2]
+        lat0, lon0, alt0 = self.origin or (p.home_lat_deg, p.home_lon_deg, p.home_alt_m)
+        lat, lon = ned_to_global(lat0, lon0, pos_ned_m[0], pos_ned_m[1])
+        return lat, lon, alt0 - pos_ned_m[2]
 
     def fence_stored(self, items: tuple[FenceItem, ...]) -> None:
         """A fence transfer ended: put its items in force as PX4's navigator does.
@@ -520,7 +584,9 @@ class Vehicle:
         if self.mode is Mode.OFFBOARD and self.armed:
             self.physics.command(t_s, self.setpoint)
 
-    def on_vision(self, t_s: float, pos_ned_m: tuple[float, float, float]) -> bool:
+    def on_vision(
+        self, t_s: float, pos_ned_m: tuple[float, float, float], north_referenced: bool = True
+    ) -> bool:
         """An external-vision position arrived (ODOMETRY or VISION_POSITION_ESTIMATE, NED).
 
         Parameters
@@ -529,6 +595,9 @@ class Vehicle:
             Arrival time [s] on the vehicle clock (the physics has been stepped to it).
         pos_ned_m : tuple of float
             The position, local NED [m].
+        north_referenced : bool
+            Its yaw is a heading from north (NED frames; False for LOCAL_FRD and LOCAL_FLU,
+            which PX4 takes as relative and never aligns to north without a magnetometer).
 
         Returns
         -------
@@ -537,6 +606,9 @@ class Vehicle:
         """
         if self.vision is None:
             return False
+        if self.first_vision_t_s is None:
+            self.first_vision_t_s = t_s
+        self.north_aligned |= north_referenced
         delay_s = self.params["EKF2_EV_DELAY"] / 1000.0
         fused = self.vision.fuse(t_s, pos_ned_m, delay_s, int(self.params["EKF2_EV_CTRL"]))
         self._update_lpos(t_s)
@@ -579,6 +651,9 @@ class Vehicle:
                     why = "Resolve system health failures first"
                 elif not self.local_position_valid:
                     why = "no local position estimate (is vision fused?)"
+                elif self.navigation_problem() is not None:
+                    self.events.append((2, f"Preflight Fail: {self.navigation_problem()}"))
+                    why = "Resolve system health failures first"
                 else:
                     why = "mode not available" if self.mode is not Mode.LAND else "landing"
                 self.events.append((2, f"Arming denied: {why}"))

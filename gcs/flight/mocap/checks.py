@@ -10,6 +10,11 @@ Two checks catch a wrong frame mapping before the manoeuvre does:
   sits at the origin: a mirrored axis (left-handed mapping, east and west swapped), swapped
   axes or a yaw offset off by 90 or 180 degrees. A mirror along one axis is invisible to a
   move along the other, so fly one move per horizontal axis (north, then east).
+
+A hovering vehicle wanders (PX4 SIH on vision: +-0.2-0.3 m), so single positions before and
+after a move can show a 0.3 m move as 0.07 m. The move check therefore compares the means of a
+window before and one after (:func:`window_mean`), and the move is made long enough to stand
+out of the wander measured in the first window (:func:`move_length`).
 """
 
 from __future__ import annotations
@@ -18,7 +23,16 @@ import math
 
 import numpy as np
 
-__all__ = ["pose_agreement_problem", "move_direction_problem"]
+__all__ = [
+    "pose_agreement_problem",
+    "move_direction_problem",
+    "moved_as_commanded",
+    "window_mean",
+    "move_length",
+]
+
+#: A move is at least this many times the hover's measured wander.
+WANDER_FACTOR = 4.0
 
 
 def _vec(value: np.ndarray, name: str) -> np.ndarray:
@@ -72,6 +86,35 @@ def _went_wrong(
     if angle > max_angle_deg:
         return f"{who} moved {angle:.0f} deg off the commanded direction"
     return None
+
+
+def moved_as_commanded(
+    cmd_ned_m: np.ndarray,
+    delta_ned_m: np.ndarray,
+    min_fraction: float = 0.5,
+    max_angle_deg: float = 45.0,
+) -> bool:
+    """Whether one displacement went the commanded way (the test of
+    :func:`move_direction_problem` for one side).
+
+    Parameters
+    ----------
+    cmd_ned_m : numpy.ndarray
+        Commanded displacement, shape (3,) [m, NED].
+    delta_ned_m : numpy.ndarray
+        Displacement seen, shape (3,) [m, NED].
+    min_fraction : float
+        Least fraction of the command covered along it.
+    max_angle_deg : float
+        Largest angle to the command [deg].
+
+    Returns
+    -------
+    bool
+    """
+    cmd = _vec(cmd_ned_m, "cmd_ned_m")
+    delta = _vec(delta_ned_m, "delta_ned_m")
+    return _went_wrong(cmd, delta, "", min_fraction, max_angle_deg) is None
 
 
 def move_direction_problem(
@@ -128,3 +171,50 @@ def move_direction_problem(
 
 def _fmt(v: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:+.2f}" for x in v) + ") m NED"
+
+
+def window_mean(pos_ned_m: np.ndarray) -> tuple[np.ndarray, float]:
+    """Mean position of a window and its horizontal wander.
+
+    Parameters
+    ----------
+    pos_ned_m : numpy.ndarray
+        Positions, shape (N, 3) [m, NED]; rows with NaN are left out.
+
+    Returns
+    -------
+    tuple
+        Mean, shape (3,) [m], and the RMS horizontal distance from it [m].
+
+    Raises
+    ------
+    ValueError
+        No finite row.
+    """
+    pos = np.asarray(pos_ned_m, dtype=float).reshape(-1, 3)
+    pos = pos[np.all(np.isfinite(pos), axis=1)]
+    if pos.shape[0] == 0:
+        raise ValueError("no finite position in the window")
+    mean = pos.mean(axis=0)
+    wander = float(np.sqrt(np.mean(np.sum((pos[:, :2] - mean[:2]) ** 2, axis=1))))
+    return mean, wander
+
+
+def move_length(check_move_m: float, wander_m: float, max_m: float = 1.0) -> float:
+    """Length of the check move: the profile's, or :data:`WANDER_FACTOR` times the wander.
+
+    Parameters
+    ----------
+    check_move_m : float
+        The profile's ``mocap.check_move_m`` [m] (> 0).
+    wander_m : float
+        The hover's measured horizontal wander [m].
+    max_m : float
+        Longest move [m].
+
+    Returns
+    -------
+    float
+        ``min(max(check_move_m, WANDER_FACTOR * wander_m), max(max_m, check_move_m))`` [m].
+    """
+    return min(max(check_move_m, WANDER_FACTOR * wander_m), max(max_m, check_move_m))

@@ -71,6 +71,39 @@ class MocapSample:
     quat_wxyz: tuple[float, float, float, float]
 
 
+def connect_hint(source: MocapSource, problem: str) -> str:
+    """What fixes a failed connection, appended to the library's message ('' if unknown).
+
+    An OptiTrack client joins Motive's multicast group on an interface: without
+    ``?interface=`` it asks the system's default, and a machine without a multicast route
+    answers with the library's ``set_option: No such device``.
+
+    Parameters
+    ----------
+    source : MocapSource
+        What was connected to.
+    problem : str
+        The failure as reported.
+
+    Returns
+    -------
+    str
+        ``"; ..."`` naming the option or setting, or ``""``.
+    """
+    text = problem.lower()
+    multicast = "no such device" in text or "set_option" in text or "multicast" in text
+    silent = "no answer" in text and source.interface_ip == "0.0.0.0"
+    if source.system == "optitrack" and (multicast or silent):
+        where = source.interface_ip
+        return (
+            f"; the client joins Motive's multicast group on interface {where}: give the local "
+            "address that reaches Motive with ?interface=IP in the URL (e.g. "
+            f"optitrack://{source.host}/{source.rigid_body}?interface=192.168.1.20), or add a "
+            "multicast route"
+        )
+    return ""
+
+
 def series_of(samples: list[MocapSample]) -> MocapSeries:
     """Arrays of a list of samples.
 
@@ -190,7 +223,7 @@ class MocapClient:
         if not self._connected.is_set():
             problem = self._problem or f"no answer from {where} within {self.connect_timeout_s} s"
             self.stop()
-            raise MocapError(problem)
+            raise MocapError(problem + connect_hint(self.source, problem))
         return self
 
     def stop(self) -> None:

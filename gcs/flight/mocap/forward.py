@@ -1,20 +1,20 @@
 """Motion capture to PX4 as external vision, through MAVSDK's Mocap plugin.
 
-Each tracked sample is mapped to NED/FRD and sent as MAVLink ``ODOMETRY`` (frame
-``LOCAL_FRD``, estimator type ``VISION``, quality 100, pose covariance; velocity unknown: NaN)
-or ``VISION_POSITION_ESTIMATE`` (roll, pitch, yaw and the same covariance), stamped with the
+Each tracked sample is mapped to NED/FRD and sent as MAVLink ``VISION_POSITION_ESTIMATE``
+(roll, pitch, yaw, pose covariance) or ``ODOMETRY`` (frame ``LOCAL_FRD``, estimator type
+``VISION``, quality 100, the same covariance; velocity unknown: NaN), stamped with the
 sample's receipt time on the monotonic clock in microseconds: the clock of MAVSDK's own
 time synchronisation with PX4 (``steady_clock``), so PX4's receiver can map it to its own time
 and ``EKF2_EV_DELAY`` only has to hold the mocap's own latency (cameras, solve). Untracked
 samples are not sent: PX4 then sees vision stop, which is what it must see.
 
-Why ``LOCAL_FRD`` and ``VISION`` although the data are motion capture in NED: PX4's
-``mavlink_receiver`` (v1.14-v1.16) passes ``ODOMETRY`` to EKF2 (``vehicle_visual_odometry``)
-only with frame ``LOCAL_NED`` or ``LOCAL_FRD`` and an estimator type other than ``MOCAP``;
-``MOCAP`` goes to ``vehicle_mocap_odometry``, which EKF2 does not read, and MAVSDK's
-``MOCAP_NED`` frame is not accepted at all. MAVSDK offers ``MOCAP_NED`` and ``LOCAL_FRD``; a
-NED pose is a ``LOCAL_FRD`` pose whose forward axis is north (EKF2 aligns the frame with the
-fused vision yaw).
+Which message. ``VISION_POSITION_ESTIMATE`` (the default) reaches EKF2 in frame NED: PX4 aligns
+its heading to the vision yaw, with no magnetometer or GPS. ``ODOMETRY`` goes out in
+``LOCAL_FRD`` with estimator type ``VISION``: PX4's ``mavlink_receiver`` (v1.14-v1.16) passes
+``ODOMETRY`` to EKF2 only in a local frame and not with estimator ``MOCAP``, and MAVSDK offers
+only ``MOCAP_NED`` (dropped by PX4) and ``LOCAL_FRD``. An FRD vision yaw is relative for PX4
+v1.16: without a magnetometer or GPS heading it never aligns to north and arming is denied
+(flown on the SIH firmware; :mod:`gcs.flight.mocap.preflight` refuses that combination).
 
 The path. :class:`VisionForwarder.send` runs in the mocap client's thread (its ``on_sample``)
 and calls the *blocking* MAVSDK plugin there: no asyncio task, no executor, nothing on the

@@ -14,6 +14,19 @@ drifts indoors by decimetres), GPS fused alongside is a warning, and the delay i
 (gcs stamps each pose with its receipt time, so the delay should hold only the mocap's own
 latency: a few milliseconds; more than 50 ms is a warning). When a bridge other than gcs feeds
 the vehicle, vision not being fused is a warning only.
+
+The heading. MAVSDK sends ``ODOMETRY`` only in frame ``LOCAL_FRD`` (its other choice,
+``MOCAP_NED``, is dropped by PX4's receiver); PX4 v1.16 takes an FRD vision yaw as relative
+and aligns its heading to north only from a magnetometer or GPS. With neither
+(``EKF2_MAG_TYPE`` 5, no GPS heading) it never publishes a global position and denies arming
+for as long as one waits (measured on the SIH firmware). ``VISION_POSITION_ESTIMATE`` is NED:
+PX4 aligns its heading to the vision yaw. So forwarding ``odometry`` to such a vehicle is
+refused, naming ``mocap.message: vision_position_estimate``.
+
+The barometer. With ``EKF2_BARO_CTRL`` 0 and no GPS, vision is the only height source: once the
+mocap is lost PX4's failsafe descends blind and its land detector never sees the landing (flown
+on the SIH firmware: still armed and "in air" a minute later). That is a warning: keep the
+barometer fused (``EKF2_BARO_CTRL`` 1) beside the vision height reference.
 """
 
 from __future__ import annotations
@@ -22,7 +35,14 @@ from dataclasses import dataclass
 
 __all__ = ["EKF2_INT_PARAMS", "EKF2_FLOAT_PARAMS", "Finding", "ekf2_findings"]
 
-EKF2_INT_PARAMS = ("EKF2_GPS_CTRL", "EKF2_HGT_REF", "EKF2_EV_CTRL")
+EKF2_INT_PARAMS = (
+    "EKF2_GPS_CTRL",
+    "EKF2_HGT_REF",
+    "EKF2_EV_CTRL",
+    "EKF2_MAG_TYPE",
+    "EKF2_BARO_CTRL",
+)
+_OPTIONAL = ("EKF2_MAG_TYPE", "EKF2_BARO_CTRL")
 EKF2_FLOAT_PARAMS = ("EKF2_EV_DELAY",)
 MAX_EV_DELAY_MS = 50.0
 
@@ -43,7 +63,9 @@ class Finding:
     level: str = "info"
 
 
-def ekf2_findings(params: dict[str, float | int | None], forward: bool) -> list[Finding]:
+def ekf2_findings(
+    params: dict[str, float | int | None], forward: bool, message: str = "vision_position_estimate"
+) -> list[Finding]:
     """Judge EKF2's vision settings for a flight on motion capture.
 
     Parameters
@@ -53,6 +75,8 @@ def ekf2_findings(params: dict[str, float | int | None], forward: bool) -> list[
         vehicle did not answer.
     forward : bool
         gcs forwards the mocap as external vision (else another bridge does).
+    message : str
+        What gcs forwards: ``odometry`` (frame ``LOCAL_FRD``) or ``vision_position_estimate``.
 
     Returns
     -------
@@ -71,7 +95,19 @@ def ekf2_findings(params: dict[str, float | int | None], forward: bool) -> list[
             f"EV_DELAY {show(delay)} ms"
         )
     ]
-    missing = [n for n in EKF2_INT_PARAMS + EKF2_FLOAT_PARAMS if params.get(n) is None]
+    needed = [n for n in EKF2_INT_PARAMS + EKF2_FLOAT_PARAMS if n not in _OPTIONAL]
+    missing = [n for n in needed if params.get(n) is None]
+    mag = params.get("EKF2_MAG_TYPE")
+    gps_heading = gps is not None and int(gps) >> 3 & 1
+    if forward and message == "odometry" and mag is not None and int(mag) == 5 and not gps_heading:
+        out.append(
+            Finding(
+                "mocap.message is odometry, which MAVSDK sends in frame LOCAL_FRD: without a "
+                "magnetometer (EKF2_MAG_TYPE = 5) or GPS heading PX4 never aligns its heading to "
+                "north and denies arming; set mocap.message: vision_position_estimate (NED)",
+                "refuse",
+            )
+        )
     if missing:
         out.append(Finding(f"could not read {', '.join(missing)}: not checked", "warning"))
     who = "gcs forwards the mocap" if forward else "the mocap bridge feeds vision"
@@ -113,6 +149,16 @@ def ekf2_findings(params: dict[str, float | int | None], forward: bool) -> list[
         out.append(
             Finding(
                 f"EKF2_GPS_CTRL = {gps:g} fuses GPS alongside vision: indoors set it to 0",
+                "warning",
+            )
+        )
+    baro = params.get("EKF2_BARO_CTRL")
+    if baro is not None and int(baro) == 0 and not gps_used:
+        out.append(
+            Finding(
+                "EKF2_BARO_CTRL = 0: if the mocap is lost the vehicle has no height left, "
+                "descends blind and may never detect its landing (PX4 v1.16 SIH stayed armed); "
+                "EKF2_BARO_CTRL 1 keeps the barometer as a second height source",
                 "warning",
             )
         )

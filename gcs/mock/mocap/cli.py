@@ -13,6 +13,7 @@ from gcs.core.frames import SYSTEM_FRAMES, mapping_for
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
 from gcs.mock.mocap.server import FaultWindow, NatNetServer, parse_fault_window
+from gcs.mock.mocap.sih import SihTruth, sih_display_port
 
 __all__ = ["mocap_command", "parse_window", "parse_version"]
 
@@ -101,6 +102,14 @@ def mocap_command(
         list[str] | None,
         typer.Option("--jump", help="START:DURATION:DX:DY:DZ, s and m (mocap axes)."),
     ] = None,
+    px4_sih: Annotated[
+        int | None,
+        typer.Option(
+            "--px4-sih",
+            min=0,
+            help="Serve PX4 SITL instance N's SIH ground truth (its display link) instead.",
+        ),
+    ] = None,
 ) -> None:
     """Run a mock OptiTrack Motive streaming one rigid body over NatNet.
 
@@ -118,6 +127,12 @@ def mocap_command(
         python -m gcs.mock.mocap --rate 240 --circle 1:6
 
         python -m gcs.mock.mocap --occlusion 5:0.5 --jump 8:0.05:0.3:0:0
+
+    With ``--px4-sih N`` the rigid body is PX4 SITL instance N's simulated vehicle (SIH):
+    its ground truth, which PX4 streams on its display link (UDP 19410+N), is served as a
+    lab's Motive would, origin where the vehicle was first seen:
+
+        python -m gcs.mock.mocap --px4-sih 0
     \f
     Parameters
     ----------
@@ -141,6 +156,8 @@ def mocap_command(
         ``RADIUS:PERIOD`` of a circle, or None to hover.
     occlusion, dropout, freeze, jump : list of str or None
         Fault windows.
+    px4_sih : int or None
+        PX4 SITL instance whose SIH ground truth is served (instead of a scripted pose).
     """
     version = parse_version(natnet)
     faults = _faults(
@@ -151,7 +168,10 @@ def mocap_command(
             "jump": jump or [],
         }
     )
-    if circle is None:
+    sih = None
+    if px4_sih is not None:
+        truth = sih = SihTruth(sih_display_port(px4_sih)).start()
+    elif circle is None:
         truth = Hover()
     else:
         try:
@@ -182,4 +202,6 @@ def mocap_command(
         server.serve()
     finally:
         server.close()
+        if sih is not None:
+            sih.close()
         print(json.dumps(server.stats()), file=sys.stderr, flush=True)

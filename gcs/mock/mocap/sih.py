@@ -1,0 +1,219 @@
+"""A lab's motion capture around PX4's SIH simulator: its ground truth served over NatNet.
+
+PX4 SITL with the built-in SIH physics streams the simulated vehicle's true state as MAVLink
+``HIL_STATE_QUATERNION`` (25 Hz) on its display link: PX4 instance ``N`` sends it to UDP port
+``19410 + N`` on 127.0.0.1 (``px4-rc.mavlink``). :class:`SihTruth` listens there and keeps the
+newest state; :func:`sih_pose_ned` turns it into a NED pose relative to where the vehicle was
+first seen (the room's origin under the vehicle at start, as a lab sets its ground plane and
+origin once), and :class:`gcs.mock.mocap.server.NatNetServer` serves that as an OptiTrack rigid
+body: what a lab's Motive would stream while the vehicle flies.
+
+Between two 25 Hz states the position is carried forward with the state's velocity, so the
+mocap rate (120 Hz) sees a moving body rather than steps. The message carries latitude and
+longitude in 1e-7 degrees (about 1.1 cm north, 0.75 cm east at 47 degrees) and altitude in
+millimetres: the served pose has that resolution, coarser than a real mocap's sub-millimetre
+noise but far below the simulated vehicle's own wander (decimetres).
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+__all__ = ["SIH_DISPLAY_PORT", "SihState", "SihTruth", "sih_display_port"]
+
+#: UDP port PX4 instance 0 sends the SIH display stream to (instance N: this + N).
+SIH_DISPLAY_PORT = 19410
+_EARTH_RADIUS_M = 6_378_137.0
+
+
+def sih_display_port(instance: int) -> int:
+    """The UDP port PX4 SITL instance ``instance`` sends its SIH ground truth to.
+
+    Parameters
+    ----------
+    instance : int
+        PX4's ``-i`` instance number (>= 0).
+
+    Returns
+    -------
+    int
+    """
+    if instance < 0:
+        raise ValueError(f"instance must be >= 0, got {instance}")
+    return SIH_DISPLAY_PORT + instance
+
+
+@dataclass(frozen=True)
+class SihState:
+    """One ground-truth state, relative to the first one seen.
+
+    Parameters
+    ----------
+    t_receipt_s : float
+        Receipt time on ``time.monotonic()`` [s].
+    pos_ned_m : numpy.ndarray
+        Position from the first state seen, shape (3,) [m, NED].
+    vel_ned_m_s : numpy.ndarray
+        Velocity, shape (3,) [m/s, NED].
+    quat_wxyz : numpy.ndarray
+        Attitude FRD to NED, shape (4,).
+    """
+
+    t_receipt_s: float
+    pos_ned_m: np.ndarray
+    vel_ned_m_s: np.ndarray
+    quat_wxyz: np.ndarray
+
+
+class SihTruth:
+    """Receives PX4 SIH's ``HIL_STATE_QUATERNION`` on 127.0.0.1 in a thread.
+
+    Use as a context manager, or :meth:`start` and :meth:`close`. Calling the object is the
+    pose function of :class:`gcs.mock.mocap.server.NatNetServer` in NED (wrap it with
+    :func:`gcs.mock.mocap.scripted.in_room` for the room's axes).
+
+    Parameters
+    ----------
+    port : int
+        UDP port to listen on (:func:`sih_display_port`).
+    max_age_s : float
+        A state older than this is not served (the body counts as out of view) [s].
+    """
+
+    def __init__(self, port: int, max_age_s: float = 0.5) -> None:
+        self.port = port
+        self.max_age_s = max_age_s
+        self.received = 0
+        self._ref: tuple[float, float, float] | None = None
+        self._latest: SihState | None = None
+        self._first = threading.Event()
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind(("127.0.0.1", port))
+        self._sock.settimeout(0.2)
+        self._mav = mavlink2.MAVLink(None)
+        self._mav.robust_parsing = True
+        self._thread = threading.Thread(target=self._run, name="sih-truth", daemon=True)
+
+    def start(self) -> SihTruth:
+        """Start receiving.
+
+        Returns
+        -------
+        SihTruth
+            Itself.
+        """
+        self._thread.start()
+        return self
+
+    def __enter__(self) -> SihTruth:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop receiving and release the port."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
+        self._sock.close()
+
+    def wait_first(self, timeout_s: float) -> bool:
+        """Wait until a first state arrived.
+
+        Parameters
+        ----------
+        timeout_s : float
+            Limit [s].
+
+        Returns
+        -------
+        bool
+            Whether one arrived.
+        """
+        return self._first.wait(timeout_s)
+
+    def wait_received(self, count: int, timeout_s: float) -> bool:
+        """Wait until ``count`` states have arrived in all.
+
+        Parameters
+        ----------
+        count : int
+            Total number of states.
+        timeout_s : float
+            Limit [s].
+
+        Returns
+        -------
+        bool
+            Whether they did.
+        """
+        with self._cond:
+            return self._cond.wait_for(lambda: self.received >= count, timeout_s)
+
+    @property
+    def latest(self) -> SihState | None:
+        """The newest state, or None before the first."""
+        return self._latest
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self._sock.recv(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            for msg in self._mav.parse_buffer(data) or []:
+                if msg.get_type() == "HIL_STATE_QUATERNION":
+                    self._take(msg, time.monotonic())
+
+    def _take(self, msg: mavlink2.MAVLink_hil_state_quaternion_message, t_s: float) -> None:
+        lat, lon, alt = msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3
+        if self._ref is None:
+            self._ref = (lat, lon, alt)
+        lat0, lon0, alt0 = self._ref
+        north = math.radians(lat - lat0) * _EARTH_RADIUS_M
+        east = math.radians(lon - lon0) * _EARTH_RADIUS_M * math.cos(math.radians(lat0))
+        self._latest = SihState(
+            t_receipt_s=t_s,
+            pos_ned_m=np.array([north, east, alt0 - alt]),
+            vel_ned_m_s=np.array([msg.vx, msg.vy, msg.vz], dtype=float) * 0.01,
+            quat_wxyz=np.asarray(msg.attitude_quaternion, dtype=float),
+        )
+        with self._cond:
+            self.received += 1
+            self._cond.notify_all()
+        self._first.set()
+
+    def __call__(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The pose now, in NED (``t_s``, the server's time, is not needed: the newest state
+        is carried forward with its velocity to this moment).
+
+        Parameters
+        ----------
+        t_s : float
+            Server time [s] (unused).
+
+        Returns
+        -------
+        tuple of numpy.ndarray or None
+            Position (3,) [m, NED] and attitude ``w, x, y, z`` (4,); None before the first
+            state or when the newest is older than ``max_age_s``.
+        """
+        state = self._latest
+        if state is None:
+            return None
+        age_s = time.monotonic() - state.t_receipt_s
+        if age_s > self.max_age_s:
+            return None
+        return state.pos_ned_m + state.vel_ned_m_s * age_s, state.quat_wxyz

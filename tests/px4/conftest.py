@@ -1,0 +1,91 @@
+"""Fixtures of the real-firmware tests: a PX4 SITL vehicle per test, its records kept when the
+test fails, and the test's figures written for docs/px4-sitl.md (tools/px4_sitl_table.py)."""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from px4.sitl import FAILURES, ROOT, Px4Build, Px4Sitl, build_dir
+
+FIGURES = ROOT / "logs" / "px4-sitl"
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_runtest_makereport(item, call):
+    """Keep each phase's report on the item: the fixtures' teardown asks whether the test failed."""
+    report = yield
+    setattr(item, f"report_{report.when}", report)
+    return report
+
+
+def _failed(node) -> bool:
+    return any(
+        getattr(getattr(node, f"report_{when}", None), "failed", False)
+        for when in ("setup", "call")
+    )
+
+
+@pytest.fixture(scope="session")
+def px4_build() -> Px4Build:
+    """The firmware (``PX4_SITL_DIR`` or ``../shared/px4-v1.16-sitl``), made runnable once."""
+    build = Px4Build(build_dir()[0])
+    build.runnable()
+    return build
+
+
+@pytest.fixture
+def px4_factory(px4_build: Px4Build, tmp_path: Path, request) -> Iterator:
+    """Start vehicles: ``px4_factory(params=None, ready=True)`` returns a :class:`Px4Sitl`
+    (ready for take-off with ``ready``, else just started), each in a
+    fresh working directory under the test's tmp dir, stopped after the test; on failure its
+    output and ULog logs are copied to ``logs/px4-failures/<test>/`` (the path is printed)."""
+    vehicles: list[Px4Sitl] = []
+
+    def start(params: dict[str, float] | None = None, ready: bool = True) -> Px4Sitl:
+        vehicle = Px4Sitl(px4_build, tmp_path / f"px4-{len(vehicles)}", params)
+        vehicles.append(vehicle)
+        return vehicle.start(ready=ready)
+
+    yield start
+    for vehicle in vehicles:
+        vehicle.stop()
+    if _failed(request.node):
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        for i, vehicle in enumerate(vehicles):
+            dest = FAILURES / f"{request.node.name}-{stamp}-{i}"
+            vehicle.keep(dest)
+            print(f"PX4 output and ULog of the failed test kept in {dest.relative_to(ROOT)}")
+
+
+@pytest.fixture
+def px4(px4_factory) -> Px4Sitl:
+    """One ready PX4 SITL vehicle (GPS, the default airframe)."""
+    return px4_factory()
+
+
+@pytest.fixture
+def px4_figures(request) -> Iterator[dict]:
+    """A dict the test fills with its figures; written to ``logs/px4-sitl/<test>.json`` with the
+    test's outcome and duration (``tools/px4_sitl_table.py`` makes docs/px4-sitl.md of them)."""
+    figures: dict = {}
+    t0 = time.monotonic()
+    yield figures
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    record = {
+        "test": request.node.name,
+        "file": request.node.path.name,
+        "doc": (request.node.function.__doc__ or "").strip(),
+        "passed": not _failed(request.node),
+        "duration_s": round(time.monotonic() - t0, 1),
+        "finished": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "figures": figures,
+    }
+    path = FIGURES / f"{request.node.name}.json"
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(record, indent=1) + "\n")
+    tmp.replace(path)

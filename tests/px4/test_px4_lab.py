@@ -1,0 +1,219 @@
+"""The motion-capture lab on real PX4 firmware: EKF2 on external vision only, the simulator's
+ground truth served as an OptiTrack rigid body by our mock Motive (the lab's rig), and gcs
+flying with ``--mocap`` as a lab would (gcs forwards the mocap to PX4 as vision).
+
+The rig: PX4 SIH streams its true state as HIL_STATE_QUATERNION on its display link (UDP
+19410+N); ``python -m gcs.mock.mocap --px4-sih N`` (:mod:`gcs.mock.mocap.sih`) receives it and
+serves it over NatNet at 120 Hz, in Motive's axes, from a process of its own.
+Every wait is on an event: gcs's own output lines, its exit, PX4's heartbeat and landed state.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+from synthetic import CI_FLIGHT, SHORT
+
+from gcs.io.rundir import RunDir
+from gcs.mock.mocap.process import MocapServerProcess
+from px4.sitl import ROOT, Px4Sitl
+
+pytestmark = pytest.mark.px4
+
+#: PX4 set up as an indoor arena: external vision only, no GPS, barometer or magnetometer.
+LAB_PARAMS = {
+    "EKF2_GPS_CTRL": 0,
+    "EKF2_EV_CTRL": 11,
+    "EKF2_HGT_REF": 3,
+    "EKF2_BARO_CTRL": 0,
+    "EKF2_MAG_TYPE": 5,
+    "EKF2_EV_DELAY": 0,
+}
+LANDED = 1  # MAV_LANDED_STATE_ON_GROUND
+FLY_TIMEOUT_S = 240.0
+
+
+@contextlib.contextmanager
+def lab_rig(vehicle: Px4Sitl) -> Iterator[MocapServerProcess]:
+    """The lab's OptiTrack around ``vehicle``: ``python -m gcs.mock.mocap --px4-sih N``, its
+    SIH ground truth served over NatNet (a process of its own, as Motive runs on its own PC)."""
+    assert vehicle.instance is not None
+    with MocapServerProcess(["--px4-sih", str(vehicle.instance)]) as rig:
+        yield rig
+
+
+class Gcs:
+    """``python -m gcs ...`` in the background; its output lines awaited as events."""
+
+    def __init__(self, *args: object) -> None:
+        self.lines: list[str] = []
+        self._cond = threading.Condition()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "gcs", *map(str, args)],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
+        )
+        self._t0 = time.monotonic()
+        self.times: dict[str, float] = {}
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self._cond:
+                self.lines.append(line.rstrip("\n"))
+                self._cond.notify_all()
+        with self._cond:
+            self._cond.notify_all()
+
+    def wait_line(self, text: str, timeout_s: float) -> float:
+        """Wait for a line containing ``text``; seconds since start when it came."""
+        with self._cond:
+            ok = self._cond.wait_for(
+                lambda: any(text in ln for ln in self.lines) or self.proc.poll() is not None,
+                timeout_s,
+            )
+            if not ok or not any(text in ln for ln in self.lines):
+                raise AssertionError(f"gcs never said {text!r}:\n" + self.output())
+        self.times[text] = time.monotonic() - self._t0
+        return self.times[text]
+
+    def wait(self, timeout_s: float = FLY_TIMEOUT_S) -> int:
+        try:
+            return self.proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+            raise AssertionError("gcs did not finish:\n" + self.output()) from None
+
+    def output(self) -> str:
+        with self._cond:
+            return "\n".join(self.lines)
+
+
+def lab_profile(tmp: Path, **mocap: object) -> Path:
+    data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
+    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
+    data["mocap"] = mocap
+    path = tmp / "antx-lab.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.fixture
+def tiny(tmp_path: Path) -> Path:
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(SHORT))
+    return path
+
+
+@pytest.fixture
+def lab_px4(px4_factory) -> Px4Sitl:
+    """PX4 set up for motion capture (not ready for take-off until vision arrives)."""
+    return px4_factory(params=LAB_PARAMS, ready=False)
+
+
+def test_lab_flight_arms_first_time_flies_two_trials_on_mocap_and_lands(
+    lab_px4: Px4Sitl, tmp_path: Path, tiny: Path, px4_figures: dict
+) -> None:
+    """gcs fly --mocap on a fresh PX4 set up for vision only: arms on the first attempt (after
+    setting the global origin and waiting for PX4's pre-arm checks), two trials measured by
+    the mocap, landed and disarmed."""
+    run_path = tmp_path / "run"
+    with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
+        gcs = Gcs(
+            "fly", "--connect", lab_px4.url, "--mocap", server.url, "--iter", 2,
+            "--trajectory", tiny, "--profile", lab_profile(tmp_path), "--run", run_path,
+        )  # fmt: skip
+        code = gcs.wait()
+        out = gcs.output()
+        assert code == 0, out
+        mon.wait(
+            "disarmed on the ground", lambda s: s.armed is False and s.landed_state == LANDED, 30
+        )
+        arms = [c for c in mon.state.changes if c[1] == "armed" and c[2] is True]
+        texts = [t for _, t in mon.state.statustext]
+    assert "global origin set to" in out
+    assert len(arms) == 1, texts  # armed once: the first attempt
+    assert not any("Arming denied" in t for t in texts), texts
+    assert "as vision_position_estimate" in out and "landed and disarmed" in out
+    run = RunDir.open(run_path)
+    assert run.complete_trials() == [0, 1]
+    e_pos = [run.read_status(j).epos_m for j in (0, 1)]
+    ready = next(ln for ln in out.splitlines() if "ready to arm (after" in ln)
+    px4_figures.update(
+        e_pos_m=[round(e, 4) for e in e_pos],
+        prearm_wait=ready.strip(),
+        hover=next(
+            (ln.strip() for ln in out.splitlines() if "hover at the start point:" in ln), None
+        ),
+    )
+
+
+def test_mocap_lost_mid_trial_gcs_aborts_and_the_vehicle_lands_and_disarms(
+    px4_factory, tmp_path: Path, tiny: Path, px4_figures: dict
+) -> None:
+    """The rig stops serving as trial 0 starts: gcs names the mocap and stops; PX4, with no
+    vision left, lands (gcs's landing and PX4's own failsafe) and disarms on the ground. The
+    barometer is fused as a second height source (EKF2_BARO_CTRL 1, the height reference still
+    vision): without it PX4 has no height once vision is gone, descends blind and never
+    detects its landing (flown: still armed, "in air", 60 s later)."""
+    lab_px4 = px4_factory(params={**LAB_PARAMS, "EKF2_BARO_CTRL": 1}, ready=False)
+    run_path = tmp_path / "run"
+    with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
+        gcs = Gcs(
+            "fly", "--connect", lab_px4.url, "--mocap", server.url, "--iter", 1,
+            "--trajectory", tiny, "--profile", lab_profile(tmp_path, check_move_m=0.0),
+            "--run", run_path,
+        )  # fmt: skip
+        gcs.wait_line("trial 0 started", FLY_TIMEOUT_S)
+        os.kill(server.pid, signal.SIGTERM)  # the lab's Motive stops serving
+        t_lost = time.monotonic()
+        code = gcs.wait()
+        t_gcs = time.monotonic()
+        out = gcs.output()
+        t_down = mon.wait("on the ground", lambda s: s.landed_state == LANDED, 60)
+        t_disarmed = mon.wait("disarmed", lambda s: s.armed is False, 30)
+    assert code == 2, out
+    assert "mocap" in out.splitlines()[-1], out
+    status = RunDir.open(run_path).read_status(0)
+    assert not status.complete and "mocap" in status.reason
+    px4_figures.update(
+        gcs_stopped_after_s=round(t_gcs - t_lost, 1),
+        landed_after_s=round(t_down - t_lost, 1),
+        disarmed_after_s=round(t_disarmed - t_lost, 1),
+        reason=status.reason,
+    )
+
+
+def test_a_mirrored_mapping_is_refused_before_take_off(
+    lab_px4: Px4Sitl, tmp_path: Path, tiny: Path, px4_figures: dict
+) -> None:
+    """A left-handed (mirrored) mocap mapping: one line naming the field, exit 2, nothing
+    created, and the vehicle never armed."""
+    run_path = tmp_path / "run"
+    with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
+        gcs = Gcs(
+            "fly", "--connect", lab_px4.url, "--mocap", server.url, "--trajectory", tiny,
+            "--profile", lab_profile(tmp_path, right_handed=False), "--run", run_path,
+        )  # fmt: skip
+        code = gcs.wait(60)
+        mon.wait("a heartbeat", lambda s: s.armed is not None, 30)
+        armed_ever = any(c[1] == "armed" and c[2] for c in mon.state.changes)
+    lines = [ln for ln in gcs.output().splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1 and "mocap.right_handed" in lines[0]
+    assert not run_path.exists() and not armed_ever
+    px4_figures.update(exit_code=code, refused=lines[0][:120], armed=armed_ever)
