@@ -484,6 +484,18 @@ class Px4Sitl:
             mon.set_param(name, value, timeout_s)
 
 
+_MAIN_MODES = {1: "MANUAL", 2: "ALTCTL", 3: "POSCTL", 5: "ACRO", 6: "OFFBOARD", 7: "STABILIZED"}
+_AUTO_MODES = {1: "READY", 2: "TAKEOFF", 3: "LOITER", 4: "MISSION", 5: "RTL", 6: "LAND"}
+
+
+def mode_name(custom_mode: int) -> str:
+    """PX4's flight mode from a HEARTBEAT's ``custom_mode`` (main mode << 16 | sub mode << 24)."""
+    main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+    if main == 4:
+        return f"AUTO.{_AUTO_MODES.get(sub, sub)}"
+    return _MAIN_MODES.get(main, f"main {main}")
+
+
 def _param_text(value: float) -> str:
     return str(int(value)) if float(value).is_integer() else repr(float(value))
 
@@ -555,9 +567,31 @@ class Px4Monitor:
                     s.pos_ned_m = (msg.x, msg.y, msg.z)
                 elif kind == "STATUSTEXT":
                     s.statustext.append((now, msg.text))
-                elif kind in ("MISSION_COUNT", "MISSION_ITEM_INT", "PARAM_VALUE", "MISSION_ACK"):
+                elif kind in (
+                    "MISSION_COUNT",
+                    "MISSION_ITEM_INT",
+                    "PARAM_VALUE",
+                    "MISSION_ACK",
+                    "GPS_GLOBAL_ORIGIN",
+                ):
                     self._replies.append(msg)
                 self._cond.notify_all()
+
+    def events_since(self, t0: float) -> list[tuple[float, str]]:
+        """Changes of armed state, mode and landed state, and PX4's status texts, after the
+        monotonic time ``t0``: (seconds after ``t0``, what) in order."""
+        landed = {0: "undefined", 1: "on ground", 2: "in air", 3: "taking off", 4: "landing"}
+        with self._cond:
+            events = [
+                (t, "armed" if v else "disarmed")
+                if kind == "armed"
+                else (t, f"mode {mode_name(v)}")
+                if kind == "mode"
+                else (t, landed.get(v, str(v)))
+                for t, kind, v in self.state.changes
+            ]
+            events += [(t, f"PX4: {text}") for t, text in self.state.statustext]
+        return [(round(t - t0, 1), what) for t, what in sorted(events) if t >= t0]
 
     def wait(self, what: str, check: Callable[[VehicleState], bool], timeout_s: float) -> float:
         """Wait until ``check(state)`` holds; the monotonic time it first did.
@@ -615,6 +649,21 @@ class Px4Monitor:
             resend=lambda: self._send(msg),
         )
 
+    def global_origin(self, timeout_s: float = 10.0) -> tuple[float, float]:
+        """PX4's local origin (latitude, longitude) [deg]: GPS_GLOBAL_ORIGIN, requested with
+        MAV_CMD_REQUEST_MESSAGE."""
+        mav = self._conn.mav
+        msg_id = mavutil.mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN
+        request = mav.command_long_encode(
+            self.system_id, 1, mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, 0, msg_id, 0, 0, 0, 0, 0, 0
+        )
+        origin = self._reply(
+            lambda m: m.get_type() == "GPS_GLOBAL_ORIGIN",
+            timeout_s,
+            resend=lambda: self._send(request),
+        )
+        return origin.latitude * 1e-7, origin.longitude * 1e-7
+
     def download_fence(self, timeout_s: float = 10.0) -> list:
         """The geofence items PX4 holds (MISSION_REQUEST_LIST, mission_type FENCE)."""
         mav = self._conn.mav
@@ -636,9 +685,7 @@ class Px4Monitor:
                 )
             )
         self._send(
-            mav.mission_ack_encode(
-                self.system_id, 1, mavutil.mavlink.MAV_MISSION_ACCEPTED, fence, 0
-            )
+            mav.mission_ack_encode(self.system_id, 1, mavutil.mavlink.MAV_MISSION_ACCEPTED, fence)
         )
         return items
 
