@@ -17,7 +17,7 @@ from test_fly_e2e import ROOT, gcs, wait_for_line
 
 from gcs.flight.settings import FlightSettings
 from gcs.io.runlog import RunDir
-from px4.test_px4_gps import finish, report_rows
+from px4.flying import finish, report_rows, sitl_profile
 
 pytestmark = pytest.mark.px4
 
@@ -28,6 +28,11 @@ FAILSAFE_S = 60.0  # bounds of the waits below, not waits
 
 def _since(t0: float, t: float) -> float:
     return round(t - t0, 1)
+
+
+def first(events: list[tuple[float, str]], what: str) -> float:
+    """When ``what`` first happened in a monitor's events [s after their start]."""
+    return next(t for t, said in events if said == what)
 
 
 def test_gcs_killed_mid_trial_px4_lands_and_keeps_the_arena_fence(
@@ -41,7 +46,7 @@ def test_gcs_killed_mid_trial_px4_lands_and_keeps_the_arena_fence(
         mon.set_param("NAV_DLL_ACT", 3)
         run = tmp_path / "run"
         proc = gcs("fly", "--connect", px4.url, "--iter", 1, "--trajectory", "eight-short",
-                   "--run", run)  # fmt: skip
+                   "--run", run, "--profile", sitl_profile(tmp_path))  # fmt: skip
         seen = wait_for_line(proc, "trial 0 started")
         mon.wait("in the air, offboard", lambda s: s.landed_state == IN_AIR, 10)
         assert mon.state.armed and mon.state.custom_mode == OFFBOARD, "".join(seen)
@@ -91,15 +96,15 @@ def test_ctrl_c_mid_trial_lands_and_resume_completes_on_the_same_vehicle(
     run = tmp_path / "run"
     with px4.monitor() as mon:
         proc = gcs("fly", "--connect", px4.url, "--iter", 2, "--trajectory", "eight-short",
-                   "--run", run)  # fmt: skip
+                   "--run", run, "--profile", sitl_profile(tmp_path))  # fmt: skip
         seen = wait_for_line(proc, "trial 1 started")
         mon.wait("in the air", lambda s: s.landed_state == IN_AIR and s.armed, 10)
         proc.send_signal(signal.SIGINT)
         t_int = time.monotonic()
         code, out = finish(proc, seen)
         t_exit = time.monotonic()
-        t_ground = mon.wait("landed", lambda s: s.landed_state == ON_GROUND, FAILSAFE_S)
-        t_disarm = mon.wait("disarmed", lambda s: s.armed is False, FAILSAFE_S)
+        mon.wait("disarmed", lambda s: s.armed is False and s.landed_state == ON_GROUND, 10)
+        events = mon.events_since(t_int)
         assert code == 130, out
         assert "landed and disarmed" in out, out
         rd = RunDir.open(run)
@@ -108,8 +113,9 @@ def test_ctrl_c_mid_trial_lands_and_resume_completes_on_the_same_vehicle(
         assert not status.complete and "interrupt" in status.reason, status
         px4_figures["fault"] = {
             "gcs_exit_s": _since(t_int, t_exit),
-            "on_ground_s": _since(t_int, t_ground),
-            "disarmed_s": _since(t_int, t_disarm),
+            "on_ground_s": first(events, "on ground"),
+            "disarmed_s": first(events, "disarmed"),
+            "events": events,
         }
 
         code, out = finish(gcs("fly", "--connect", px4.url, "--resume", run, "--iter", 1))

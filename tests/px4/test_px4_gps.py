@@ -2,36 +2,21 @@
 
 from __future__ import annotations
 
-import json
 import re
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-from test_fly_e2e import ROOT, gcs
+from test_fly_e2e import gcs
 
 from gcs.core.model import dc_gain
 from gcs.core.pbsid import natural_frequency_damping
 from gcs.io.config import load_profile
 from gcs.io.runlog import RunDir
+from px4.flying import finish, report_rows, sitl_profile
 
 pytestmark = pytest.mark.px4
-FLIGHT_TIMEOUT_S = 420  # an upper bound for a whole session on a loaded machine, not a wait
-
-
-def finish(proc: subprocess.Popen, before: list[str] = ()) -> tuple[int, str]:
-    """Run ``proc`` to its end; its exit code and whole output (``before``: lines read already)."""
-    out, _ = proc.communicate(timeout=FLIGHT_TIMEOUT_S)
-    return proc.returncode, "".join(before) + out
-
-
-def report_rows(run: Path) -> list[dict]:
-    """``gcs report --json`` of a run: one row per trial."""
-    code, out = finish(gcs("report", run, "--json"))
-    assert code == 0, out
-    return json.loads(out)
 
 
 def session_figures(run: Path, out: str) -> dict:
@@ -55,7 +40,10 @@ def test_fly_two_trials_with_the_shipped_profile(px4, px4_figures, tmp_path: Pat
     """The README's `gcs fly --connect ... --iter 2` with the shipped profile and eight: take-off,
     hover, two trials, landing, disarm; e_pos falls from j = 0 to j = 1."""
     run = tmp_path / "run"
-    code, out = finish(gcs("fly", "--connect", px4.url, "--iter", 2, "--run", run))
+    code, out = finish(
+        gcs("fly", "--connect", px4.url, "--iter", 2, "--run", run, "--profile",
+            sitl_profile(tmp_path))
+    )  # fmt: skip
     assert code == 0, out
     for line in ("hover at the start point: ", "trial 0 flown", "trial 1 flown"):
         assert line in out, out
@@ -71,12 +59,11 @@ def test_fly_two_trials_with_the_shipped_profile(px4, px4_figures, tmp_path: Pat
 
 def test_identify_with_short_experiments(px4, px4_figures, tmp_path: Path) -> None:
     """`gcs identify` with two 15 s PRBS experiments (the shipped profile otherwise): the
-    profile it writes loads, and both axes' models are stable with a steady-state gain near 1
-    (position setpoint to position: PX4's position loop has no steady-state error)."""
-    data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
-    data["identification"]["duration_s"] = 15.0
-    profile_path = tmp_path / "short-prbs.yaml"
-    profile_path.write_text(yaml.safe_dump(data))
+    profile it writes loads; per axis the model is stable, a position loop (steady-state gain
+    within a factor of 2 of 1: PX4's loop has no steady-state error, but 15 s of a GPS-aided
+    hover that wanders 0.1-0.3 m pin the lowest frequencies loosely) and explains most of the
+    validation experiment (VAF above 50 %)."""
+    profile_path = sitl_profile(tmp_path, identification={"duration_s": 15.0})
     out_path = tmp_path / "identified.yaml"
     code, out = finish(
         gcs("identify", "--connect", px4.url, "--profile", profile_path, "--run",
@@ -85,6 +72,8 @@ def test_identify_with_short_experiments(px4, px4_figures, tmp_path: Path) -> No
     assert code == 0, out
     assert "landed and disarmed" in out and f"wrote profile {out_path}" in out, out
     profile = load_profile(out_path)
+    description = yaml.safe_load(out_path.read_text())["description"]
+    vafs = dict(re.findall(r"([xy]): order \d+, delay \d+, VAF ([-\d.]+) %", description))
     models = {}
     for axis, model in zip("xy", profile.models(), strict=True):
         wn, zeta = natural_frequency_damping(model)
@@ -95,13 +84,13 @@ def test_identify_with_short_experiments(px4, px4_figures, tmp_path: Path) -> No
             "wn_rad_s": round(wn, 3),
             "zeta": round(zeta, 3),
             "max_pole_abs": round(float(np.max(np.abs(np.linalg.eigvals(model.A)))), 4),
+            "vaf_pct": float(vafs[axis]),
         }
-    vaf = re.findall(r"VAF[^\n]*\n", out)
-    px4_figures.update({"models": models, "experiment_s": 15.0, "vaf_header": vaf[:1]})
+    px4_figures.update({"models": models, "experiment_s": 15.0})
     for axis, m in models.items():
         assert m["max_pole_abs"] < 1.0, (axis, m)  # stable
-        # 15 s of GPS-aided flight wandering 0.1-0.3 m: the gain is asked to be sane, not exact
-        assert 0.7 < m["dc_gain"] < 1.3, (axis, m)
+        assert 0.5 < m["dc_gain"] < 2.0, (axis, m)
+        assert m["vaf_pct"] > 50.0, (axis, m)
 
 
 def test_until_converged_reaches_a_verdict(px4, px4_figures, tmp_path: Path) -> None:
@@ -110,8 +99,8 @@ def test_until_converged_reaches_a_verdict(px4, px4_figures, tmp_path: Path) -> 
     and the run ends landed and disarmed either way."""
     run = tmp_path / "run"
     code, out = finish(
-        gcs("fly", "--connect", px4.url, "--profile", "antx-adaptive", "--trajectory",
-            "eight-short", "--iter", 4, "--until-converged", "--run", run)
+        gcs("fly", "--connect", px4.url, "--profile", sitl_profile(tmp_path, "antx-adaptive"),
+            "--trajectory", "eight-short", "--iter", 4, "--until-converged", "--run", run)
     )  # fmt: skip
     assert code == 0, out
     assert "landed and disarmed" in out, out
