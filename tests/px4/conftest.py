@@ -70,7 +70,8 @@ def px4(px4_factory) -> Px4Sitl:
 @pytest.fixture
 def px4_figures(request) -> Iterator[dict]:
     """A dict the test fills with its figures; written to ``logs/px4-sitl/<test>.json`` with the
-    test's outcome and duration (``tools/px4_sitl_table.py`` makes docs/px4-sitl.md of them)."""
+    test's outcome and duration, and the outcome appended to ``logs/px4-sitl/history.jsonl``
+    (``tools/px4_sitl_table.py`` makes docs/px4-sitl.md of them)."""
     figures: dict = {}
     t0 = time.monotonic()
     yield figures
@@ -88,3 +89,7 @@ def px4_figures(request) -> Iterator[dict]:
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(record, indent=1) + "\n")
     tmp.replace(path)
+    # one line per run of each test: the table's pass counts (a single write in append mode)
+    line = {k: record[k] for k in ("test", "passed", "duration_s", "finished")}
+    with (FIGURES / "history.jsonl").open("a") as history:
+        history.write(json.dumps(line) + "\n")
