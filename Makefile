@@ -14,8 +14,8 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@
 
-# the real-firmware tests (tests/px4/) are part of it whenever a PX4 SITL build is there:
-# PX4_SITL_DIR, or ../shared/px4-v1.16-sitl beside the checkout (docs/px4-sitl.md)
+# the real-firmware tests (tests/px4/) are part of it whenever a PX4 SITL build is there
+# (PX4_SITL_DIR, or the default in tests/px4/sitl.py; docs/px4-sitl.md)
 test: setup
 	$(BIN)/python -m pytest -n 2 --dist worksteal -q
 

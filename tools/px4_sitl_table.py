@@ -44,10 +44,10 @@ back, so PX4 never counts the test as a ground station. Every wait is on an even
 gcs or PX4, a state PX4 reported) with a bound, never a fixed time. A failed test keeps PX4's
 output and ULog in `logs/px4-failures/` and prints where.
 
-`make test` runs them whenever a PX4 SITL build is there (`PX4_SITL_DIR`, else
-`../shared/px4-v1.16-sitl` beside the checkout), flights first, and says how many ran in its
-closing lines; `make test-px4` runs them alone. Without a build `make test` says in one line
-that they were not collected.
+`make test` runs them whenever a PX4 SITL build is there (`PX4_SITL_DIR`, else the team's
+shared build beside the checkout, `DEFAULT_BUILD` in `tests/px4/sitl.py`), flights first, and
+says how many ran and passed in its closing lines; `make test-px4` runs them alone. Without a
+build `make test` says in one line that they were not collected and how to run them.
 
 ## Testing against real PX4 firmware
 
@@ -105,10 +105,12 @@ def figures_text(test: str, figures: dict) -> str:
     """The figures of one test, as a table cell."""
     parts = []
     if "e_pos_m" in figures:
-        parts.append("e_pos " + " / ".join(f"{e:.3f}" for e in figures["e_pos_m"]) + " m")
         e = figures["e_pos_m"]
+        js = figures.get("iteration", list(range(len(e))))
+        said = [f"j = {j}: {x:.3f}" for j, x in zip(js, e, strict=True)]
+        parts.append("e_pos per trial " + ", ".join(said) + " m")
         if len(e) > 1 and e[0] > 0:
-            parts[-1] += " (" + " / ".join(f"{100 * x / e[0]:.0f} %" for x in e[1:]) + " of j = 0)"
+            parts[-1] += f" (last {100 * e[-1] / e[0]:.0f} % of the first)"
     if figures.get("floor_m") is not None:
         parts.append(f"floor {figures['floor_m']:.3f} m")
     if "verdict" in figures:

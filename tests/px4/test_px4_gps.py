@@ -113,6 +113,7 @@ def test_until_converged_reaches_a_verdict(px4, px4_figures, tmp_path: Path) -> 
     px4_figures.update(
         {
             "e_pos_m": [round(r["epos_m"], 4) for r in rows],
+            "iteration": [r["iteration"] for r in rows],
             "floor_m": rows[0].get("floor_m"),
             "trials_flown": flown,
             "verdict": "converged" if converged else "bound reached",
