@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from px4.sitl import FAILURES, ROOT, Px4Build, Px4Sitl, build_dir
+from px4.sitl import FAILURES, READY_LINE, ROOT, Px4Build, Px4Sitl, build_dir
 
 FIGURES = ROOT / "logs" / "px4-sitl"
 
@@ -40,13 +40,14 @@ def px4_build() -> Px4Build:
 
 @pytest.fixture
 def px4_factory(px4_build: Px4Build, tmp_path: Path, request) -> Iterator:
-    """Start vehicles: ``px4_factory(params=None)`` returns a ready :class:`Px4Sitl`, each in a
+    """Start vehicles: ``px4_factory(params=None, ready=READY_LINE)`` returns a started
+    :class:`Px4Sitl` (its ``ready`` line printed), each in a
     fresh working directory under the test's tmp dir, stopped after the test; on failure its
     output and ULog logs are copied to ``logs/px4-failures/<test>/`` (the path is printed)."""
     vehicles: list[Px4Sitl] = []
 
-    def start(params: dict[str, float] | None = None) -> Px4Sitl:
-        vehicle = Px4Sitl(px4_build, tmp_path / f"px4-{len(vehicles)}", params)
+    def start(params: dict[str, float] | None = None, ready: str = READY_LINE) -> Px4Sitl:
+        vehicle = Px4Sitl(px4_build, tmp_path / f"px4-{len(vehicles)}", params, ready=ready)
         vehicles.append(vehicle)
         return vehicle.start()
 

@@ -308,6 +308,10 @@ class Px4Sitl:
         "Ready for takeoff!" here: set those with :meth:`set_param` once it is ready.
     model : str
         ``PX4_SIM_MODEL``.
+    ready : str
+        The line of PX4's output that :meth:`start` waits for: "Ready for takeoff!" (its
+        pre-flight checks pass); a set-up that cannot pass them before a peer joins (external
+        vision only, say) waits for :data:`STARTED_LINE` and then for its own event.
     """
 
     def __init__(
@@ -316,8 +320,10 @@ class Px4Sitl:
         workdir: Path,
         params: dict[str, float] | None = None,
         model: str = "sihsim_quadx",
+        ready: str = READY_LINE,
     ) -> None:
         self.build = build
+        self.ready = ready
         self.workdir = workdir
         self.params = dict(params or {})
         self.model = model
@@ -346,7 +352,12 @@ class Px4Sitl:
 
     # --- life ------------------------------------------------------------------------------
     def start(self, timeout_s: float = START_TIMEOUT_S) -> Px4Sitl:
-        """Start PX4 on a free instance and wait for "Ready for takeoff!".
+        """Start PX4 on a free instance and wait for its ``ready`` line ("Ready for takeoff!").
+
+        Parameters
+        ----------
+        timeout_s : float
+            Bound of the wait [s]; on expiry PX4 is stopped and the error shows its last lines.
 
         Returns
         -------
@@ -376,7 +387,11 @@ class Px4Sitl:
                 raise
             break
         try:
-            self.output.wait_for(READY_LINE, max(1.0, timeout_s - self.elapsed_s()))
+            self.output.wait_for(self.ready, max(1.0, timeout_s - self.elapsed_s()))
+        except TimeoutError as exc:
+            tail = "\n".join(self.output.lines[-15:])
+            self.stop()
+            raise TimeoutError(f"{exc} (instance {self.instance}); last lines:\n{tail}") from None
         except BaseException:
             self.stop()
             raise
