@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from px4.flying import kill_leftovers
 from px4.sitl import FAILURES, READY_LINE, ROOT, Px4Build, Px4Sitl, build_dir
 
 FIGURES = ROOT / "logs" / "px4-sitl"
@@ -28,6 +29,14 @@ def _failed(node) -> bool:
         getattr(getattr(node, f"report_{when}", None), "failed", False)
         for when in ("setup", "call")
     )
+
+
+@pytest.fixture(autouse=True)
+def _no_gcs_left_running() -> Iterator[None]:
+    """A test that fails mid-flight leaves its gcs process running: killed after the test."""
+    yield
+    for pid in kill_leftovers():
+        print(f"gcs process {pid} was still running after the test: killed")
 
 
 @pytest.fixture(scope="session")

@@ -7,7 +7,8 @@ import subprocess
 from pathlib import Path
 
 import yaml
-from test_fly_e2e import ROOT, gcs
+from test_fly_e2e import ROOT
+from test_fly_e2e import gcs as _gcs
 
 FLIGHT_TIMEOUT_S = 420  # an upper bound for a whole session on a loaded machine, not a wait
 # The watchdog limits of the mock's end-to-end flights (tests/synthetic.py's CI_FLIGHT), and
@@ -17,6 +18,29 @@ FLIGHT_TIMEOUT_S = 420  # an upper bound for a whole session on a loaded machine
 # PX4's own log shows its estimate every 8 ms of its time without a gap. The shipped 0.5 s and
 # 0.2 s are for a real vehicle, whose clock never stops.
 SITL_LIMITS = {"max_telemetry_age_s": 1.0, "max_setpoint_late_s": 0.4}
+
+
+_started: list[subprocess.Popen] = []
+
+
+def gcs(*args: object) -> subprocess.Popen:
+    """``python -m gcs *args`` started (output on a pipe), remembered for :func:`kill_leftovers`."""
+    proc = _gcs(*args)
+    _started.append(proc)
+    return proc
+
+
+def kill_leftovers() -> list[int]:
+    """SIGKILL every gcs process a test started and left running (a test that failed mid-flight);
+    the pids killed."""
+    killed = []
+    while _started:
+        proc = _started.pop()
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
+            killed.append(proc.pid)
+    return killed
 
 
 def finish(proc: subprocess.Popen, before: list[str] = ()) -> tuple[int, str]:

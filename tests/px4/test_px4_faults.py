@@ -13,11 +13,11 @@ from pathlib import Path
 
 import pytest
 import yaml
-from test_fly_e2e import ROOT, gcs, wait_for_line
+from test_fly_e2e import ROOT, wait_for_line
 
 from gcs.flight.settings import FlightSettings
 from gcs.io.runlog import RunDir
-from px4.flying import finish, report_rows, sitl_profile
+from px4.flying import finish, gcs, report_rows, sitl_profile
 
 pytestmark = pytest.mark.px4
 

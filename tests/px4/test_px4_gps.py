@@ -8,13 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from test_fly_e2e import gcs
 
 from gcs.core.model import dc_gain
 from gcs.core.pbsid import natural_frequency_damping
 from gcs.io.config import load_profile
 from gcs.io.runlog import RunDir
-from px4.flying import finish, report_rows, sitl_profile
+from px4.flying import finish, gcs, report_rows, sitl_profile
 
 pytestmark = pytest.mark.px4
 EXPERIMENT_S = 30.0  # each identification experiment
