@@ -61,8 +61,8 @@ def test_identify_with_short_experiments(px4, px4_figures, tmp_path: Path) -> No
     """`gcs identify` with two 30 s PRBS experiments (60 s shipped): the profile it writes loads;
     per axis the model is stable, a position loop (steady-state gain within a factor of 2 of 1)
     and explains part of the validation experiment (VAF above 0). Short experiments on a GPS
-    hover that wanders 0.1-0.3 m support no more: in four runs the east axis's VAF was 40-62 %
-    and the gains 1.1-1.8 (north: VAF about 91 %), where the shipped 60 s gave 80-90 %."""
+    hover that wanders 0.1-0.3 m support no more: in three runs the east axis's VAF was 40-62 %
+    and in four the gains 1.1-1.8 (north: VAF 91 %), where the shipped 60 s gave 80-90 %."""
     profile_path = sitl_profile(tmp_path, identification={"duration_s": EXPERIMENT_S})
     out_path = tmp_path / "identified.yaml"
     code, out = finish(
