@@ -89,8 +89,8 @@ to one port). To fly it by hand: start PX4 the same way with `-i 0`, then
 
 ## The tests and their figures
 
-From the last run of each test; "runs" counts the recorded runs that passed (every run of the
-tests on the machine that wrote this file).
+From the last run of each test; "runs passed" counts the recorded runs of each test that
+passed{since}.
 
 """
 
@@ -158,11 +158,13 @@ def figures_text(test: str, figures: dict) -> str:
     return "; ".join(parts).replace("|", "\\|")
 
 
-def render(records: dict[str, dict], history: list[dict]) -> str:
-    """The whole page."""
+def render(records: dict[str, dict], history: list[dict], since: str | None = None) -> str:
+    """The whole page (``history``: the runs counted, those since ``since`` if given)."""
     names = [n for n in ORDER if n in records] + sorted(set(records) - set(ORDER))
     lines = [
-        INTRO,
+        INTRO.format(
+            since=f" since {since.replace('T', ' ')} (the tests as they are now)" if since else ""
+        ),
         "| test | checks | figures (last run) | last run | runs passed |",
         "|---|---|---|---|---|",
     ]
@@ -190,6 +192,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--records", type=Path, default=RECORDS, help="logs/px4-sitl by default")
     parser.add_argument("--out", type=Path, default=OUT, help="docs/px4-sitl.md by default")
+    parser.add_argument(
+        "--since", help="count only the runs finished from this time on (YYYY-MM-DDTHH:MM:SS)"
+    )
     args = parser.parse_args(argv)
     records = {p.stem: json.loads(p.read_text()) for p in sorted(args.records.glob("test_*.json"))}
     if not records:
@@ -199,8 +204,10 @@ def main(argv: list[str] | None = None) -> int:
     history = []
     if history_path.exists():
         history = [json.loads(line) for line in history_path.read_text().splitlines() if line]
+    if args.since:
+        history = [h for h in history if h["finished"] >= args.since]
     tmp = args.out.with_suffix(".md.tmp")
-    tmp.write_text(render(records, history))
+    tmp.write_text(render(records, history, args.since))
     tmp.replace(args.out)
     print(f"wrote {args.out.relative_to(ROOT) if args.out.is_relative_to(ROOT) else args.out}")
     return 0
