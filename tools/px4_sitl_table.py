@@ -75,12 +75,16 @@ to one port). To fly it by hand: start PX4 the same way with `-i 0`, then
   position telemetry for 0.5 s while PX4's own log has its estimate every 8 ms of its time
   without a gap; gcs's shipped watchdog (0.5 s telemetry age, 0.2 s late setpoint) is for a
   real vehicle, whose clock never stops. The tests fly the shipped profiles with the watchdog
-  limits of the mock's end-to-end flights (1.0 s, 0.4 s), nothing else changed.
+  limits of the mock's end-to-end flights (1.0 s, 0.4 s); nothing else in them changes but the
+  identify test's experiment length.
 - **gcs killed mid-trial.** With the offboard stream gone PX4 leaves OFFBOARD for its
   offboard-loss action, Position mode (`COM_OBL_RC_ACT` 0); with no RC that mode cannot run,
   and PX4 descends and lands where it is, then disarms: on the ground before its data-link-loss
-  failsafe (`NAV_DLL_ACT` 3, Land, after `COM_DL_LOSS_T` 10 s) is due. The times are in the
-  table (PX4's heartbeat on the payload link: about 1 s resolution).
+  failsafe (`NAV_DLL_ACT` 3, Land, after `COM_DL_LOSS_T` 10 s) is due; PX4 prints "Matching
+  flight task was not able to run, Nav state: 2" on the way. The times are in the table (PX4's
+  heartbeat on the payload link: about 1 s resolution).
+- **Ctrl-C** mid-trial: gcs holds (AUTO.LOITER), lands (AUTO.LAND) and disarms, then exits 130;
+  the resumed run arms the same vehicle again and flies the interrupted trial.
 - **The geofence** gcs uploads stays on the vehicle after gcs is gone: read back from PX4 it is
   the arena plus the fence margin, corner for corner, around PX4's local origin.
 - **Learning on GPS** sits at this vehicle's floor: GPS-aided EKF2 wanders 0.1-0.3 m in hover and
