@@ -83,8 +83,9 @@ to one port). To fly it by hand: start PX4 the same way with `-i 0`, then
   failsafe (`NAV_DLL_ACT` 3, Land, after `COM_DL_LOSS_T` 10 s) is due; PX4 prints "Matching
   flight task was not able to run, Nav state: 2" on the way. The times are in the table (PX4's
   heartbeat on the payload link: about 1 s resolution).
-- **Ctrl-C** mid-trial: gcs holds (AUTO.LOITER), lands (AUTO.LAND) and disarms, then exits 130;
-  the resumed run arms the same vehicle again and flies the interrupted trial.
+- **Ctrl-C** mid-trial: gcs lands the vehicle (AUTO.LAND; its hold before is at times too short
+  for the 1 Hz heartbeat to show) and disarms, then exits 130; the resumed run arms the same
+  vehicle again and flies the interrupted trial.
 - **The geofence** gcs uploads stays on the vehicle after gcs is gone: read back from PX4 it is
   the arena plus the fence margin, corner for corner, around PX4's local origin.
 - **Learning on GPS** sits at this vehicle's floor: GPS-aided EKF2 wanders 0.1-0.3 m in hover and
