@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: setup test fly fly-mocap lint bench clean
+.PHONY: setup test test-px4 fly fly-mocap lint bench clean
 
 setup: $(VENV)/.installed
 
@@ -14,8 +14,14 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@
 
+# the real-firmware tests (tests/px4/) are part of it whenever a PX4 SITL build is there
+# (PX4_SITL_DIR, or the default in tests/px4/sitl.py; docs/px4-sitl.md)
 test: setup
 	$(BIN)/python -m pytest -n 2 --dist worksteal -q
+
+# the real-firmware tests alone
+test-px4: setup
+	$(BIN)/python -m pytest -n 2 --dist worksteal -q -m px4 tests/px4
 
 fly: setup
 	$(BIN)/gcs fly --mock --iter 3

@@ -81,6 +81,7 @@ def test_fly_adaptive_repeats_records_refreshes_resumes_and_stops_when_converged
         assert f"no further trial after trial {converged[0]}: learning has converged" in out
     else:  # flew to the cap, never claiming convergence
         assert flown == [0, 1, 2, 3, 4] and "learning has converged" not in out, out
+        assert "learning has not converged within --iter 2" in out, out
     assert "landed and disarmed" in out
 
     code, out = finish(gcs("report", run_path, "--json"))

@@ -340,6 +340,11 @@ def fly_with_display(
     except GcsError as exc:
         console.print(f"[dim]completed trials are in {run.path}[/]")
         raise exc
+    if until_converged and converged_reason(newest_record(run)) is None:
+        console.print(
+            f"--until-converged: learning has not converged within --iter {iterations}; "
+            f"continue with: gcs fly --resume {run.path} --iter N --until-converged"
+        )
     from gcs.app.report import run_facts, run_learning, run_metrics, trial_clock_rates
 
     title = run_facts(run).title()

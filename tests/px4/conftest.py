@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from px4.sitl import FAILURES, ROOT, Px4Build, Px4Sitl, build_dir
+from px4.flying import kill_leftovers
+from px4.sitl import FAILURES, READY_LINE, ROOT, Px4Build, Px4Sitl, build_dir
 
 FIGURES = ROOT / "logs" / "px4-sitl"
 
@@ -30,6 +31,14 @@ def _failed(node) -> bool:
     )
 
 
+@pytest.fixture(autouse=True)
+def _no_gcs_left_running() -> Iterator[None]:
+    """A test that fails mid-flight leaves its gcs process running: killed after the test."""
+    yield
+    for pid in kill_leftovers():
+        print(f"gcs process {pid} was still running after the test: killed")
+
+
 @pytest.fixture(scope="session")
 def px4_build() -> Px4Build:
     """The firmware (``PX4_SITL_DIR`` or ``../shared/px4-v1.16-sitl``), made runnable once."""
@@ -40,16 +49,16 @@ def px4_build() -> Px4Build:
 
 @pytest.fixture
 def px4_factory(px4_build: Px4Build, tmp_path: Path, request) -> Iterator:
-    """Start vehicles: ``px4_factory(params=None, ready=True)`` returns a :class:`Px4Sitl`
-    (ready for take-off with ``ready``, else just started), each in a
+    """Start vehicles: ``px4_factory(params=None, ready=READY_LINE)`` returns a started
+    :class:`Px4Sitl` (its ``ready`` line printed), each in a
     fresh working directory under the test's tmp dir, stopped after the test; on failure its
     output and ULog logs are copied to ``logs/px4-failures/<test>/`` (the path is printed)."""
     vehicles: list[Px4Sitl] = []
 
-    def start(params: dict[str, float] | None = None, ready: bool = True) -> Px4Sitl:
-        vehicle = Px4Sitl(px4_build, tmp_path / f"px4-{len(vehicles)}", params)
+    def start(params: dict[str, float] | None = None, ready: str = READY_LINE) -> Px4Sitl:
+        vehicle = Px4Sitl(px4_build, tmp_path / f"px4-{len(vehicles)}", params, ready=ready)
         vehicles.append(vehicle)
-        return vehicle.start(ready=ready)
+        return vehicle.start()
 
     yield start
     for vehicle in vehicles:
@@ -71,7 +80,8 @@ def px4(px4_factory) -> Px4Sitl:
 @pytest.fixture
 def px4_figures(request) -> Iterator[dict]:
     """A dict the test fills with its figures; written to ``logs/px4-sitl/<test>.json`` with the
-    test's outcome and duration (``tools/px4_sitl_table.py`` makes docs/px4-sitl.md of them)."""
+    test's outcome and duration, and the outcome appended to ``logs/px4-sitl/history.jsonl``
+    (``tools/px4_sitl_table.py`` makes docs/px4-sitl.md of them)."""
     figures: dict = {}
     t0 = time.monotonic()
     yield figures
@@ -89,3 +99,7 @@ def px4_figures(request) -> Iterator[dict]:
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(record, indent=1) + "\n")
     tmp.replace(path)
+    # one line per run of each test: the table's pass counts (a single write in append mode)
+    line = {k: record[k] for k in ("test", "passed", "duration_s", "finished")}
+    with (FIGURES / "history.jsonl").open("a") as history:
+        history.write(json.dumps(line) + "\n")

@@ -41,6 +41,9 @@ ENV_VAR = "PX4_SITL_DIR"
 CACHE = ROOT / ".cache" / "px4-sitl"
 FAILURES = ROOT / "logs" / "px4-failures"
 READY_LINE = "Ready for takeoff!"
+#: The start-up script done: what a vehicle set up for motion capture prints before vision
+#: arrives (it is not ready for take-off until then).
+STARTED_LINE = "Startup script returned successfully"
 STARTED_LINE = "Startup script returned successfully"
 # instances 0-9 only: from 10 on PX4 sends every vehicle's API link to the same port 14549
 INSTANCES = range(10)
@@ -308,6 +311,10 @@ class Px4Sitl:
         "Ready for takeoff!" here: set those with :meth:`set_param` once it is ready.
     model : str
         ``PX4_SIM_MODEL``.
+    ready : str
+        The line of PX4's output that :meth:`start` waits for: "Ready for takeoff!" (its
+        pre-flight checks pass); a set-up that cannot pass them before a peer joins (external
+        vision only, say) waits for :data:`STARTED_LINE` and then for its own event.
     """
 
     def __init__(
@@ -316,8 +323,10 @@ class Px4Sitl:
         workdir: Path,
         params: dict[str, float] | None = None,
         model: str = "sihsim_quadx",
+        ready: str = READY_LINE,
     ) -> None:
         self.build = build
+        self.ready = ready
         self.workdir = workdir
         self.params = dict(params or {})
         self.model = model
@@ -345,10 +354,13 @@ class Px4Sitl:
         return self.instance + 1
 
     # --- life ------------------------------------------------------------------------------
-    def start(self, timeout_s: float = START_TIMEOUT_S, ready: bool = True) -> Px4Sitl:
-        """Start PX4 on a free instance and wait for "Ready for takeoff!" (with ``ready``;
-        else for its start-up script only: a vehicle set up for motion capture is not ready
-        before vision arrives).
+    def start(self, timeout_s: float = START_TIMEOUT_S) -> Px4Sitl:
+        """Start PX4 on a free instance and wait for its ``ready`` line ("Ready for takeoff!").
+
+        Parameters
+        ----------
+        timeout_s : float
+            Bound of the wait [s]; on expiry PX4 is stopped and the error shows its last lines.
 
         Returns
         -------
@@ -378,8 +390,11 @@ class Px4Sitl:
                 raise
             break
         try:
-            if ready:
-                self.output.wait_for(READY_LINE, max(1.0, timeout_s - self.elapsed_s()))
+            self.output.wait_for(self.ready, max(1.0, timeout_s - self.elapsed_s()))
+        except TimeoutError as exc:
+            tail = "\n".join(self.output.lines[-15:])
+            self.stop()
+            raise TimeoutError(f"{exc} (instance {self.instance}); last lines:\n{tail}") from None
         except BaseException:
             self.stop()
             raise
@@ -487,6 +502,18 @@ class Px4Sitl:
             mon.set_param(name, value, timeout_s)
 
 
+_MAIN_MODES = {1: "MANUAL", 2: "ALTCTL", 3: "POSCTL", 5: "ACRO", 6: "OFFBOARD", 7: "STABILIZED"}
+_AUTO_MODES = {1: "READY", 2: "TAKEOFF", 3: "LOITER", 4: "MISSION", 5: "RTL", 6: "LAND"}
+
+
+def mode_name(custom_mode: int) -> str:
+    """PX4's flight mode from a HEARTBEAT's ``custom_mode`` (main mode << 16 | sub mode << 24)."""
+    main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+    if main == 4:
+        return f"AUTO.{_AUTO_MODES.get(sub, sub)}"
+    return _MAIN_MODES.get(main, f"main {main}")
+
+
 def _param_text(value: float) -> str:
     return str(int(value)) if float(value).is_integer() else repr(float(value))
 
@@ -558,9 +585,31 @@ class Px4Monitor:
                     s.pos_ned_m = (msg.x, msg.y, msg.z)
                 elif kind == "STATUSTEXT":
                     s.statustext.append((now, msg.text))
-                elif kind in ("MISSION_COUNT", "MISSION_ITEM_INT", "PARAM_VALUE", "MISSION_ACK"):
+                elif kind in (
+                    "MISSION_COUNT",
+                    "MISSION_ITEM_INT",
+                    "PARAM_VALUE",
+                    "MISSION_ACK",
+                    "GPS_GLOBAL_ORIGIN",
+                ):
                     self._replies.append(msg)
                 self._cond.notify_all()
+
+    def events_since(self, t0: float) -> list[tuple[float, str]]:
+        """Changes of armed state, mode and landed state, and PX4's status texts, after the
+        monotonic time ``t0``: (seconds after ``t0``, what) in order."""
+        landed = {0: "undefined", 1: "on ground", 2: "in air", 3: "taking off", 4: "landing"}
+        with self._cond:
+            events = [
+                (t, "armed" if v else "disarmed")
+                if kind == "armed"
+                else (t, f"mode {mode_name(v)}")
+                if kind == "mode"
+                else (t, landed.get(v, str(v)))
+                for t, kind, v in self.state.changes
+            ]
+            events += [(t, f"PX4: {text}") for t, text in self.state.statustext]
+        return [(round(t - t0, 1), what) for t, what in sorted(events) if t >= t0]
 
     def wait(self, what: str, check: Callable[[VehicleState], bool], timeout_s: float) -> float:
         """Wait until ``check(state)`` holds; the monotonic time it first did.
@@ -618,6 +667,21 @@ class Px4Monitor:
             resend=lambda: self._send(msg),
         )
 
+    def global_origin(self, timeout_s: float = 10.0) -> tuple[float, float]:
+        """PX4's local origin (latitude, longitude) [deg]: GPS_GLOBAL_ORIGIN, requested with
+        MAV_CMD_REQUEST_MESSAGE."""
+        mav = self._conn.mav
+        msg_id = mavutil.mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN
+        request = mav.command_long_encode(
+            self.system_id, 1, mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, 0, msg_id, 0, 0, 0, 0, 0, 0
+        )
+        origin = self._reply(
+            lambda m: m.get_type() == "GPS_GLOBAL_ORIGIN",
+            timeout_s,
+            resend=lambda: self._send(request),
+        )
+        return origin.latitude * 1e-7, origin.longitude * 1e-7
+
     def download_fence(self, timeout_s: float = 10.0) -> list:
         """The geofence items PX4 holds (MISSION_REQUEST_LIST, mission_type FENCE)."""
         mav = self._conn.mav
@@ -639,9 +703,7 @@ class Px4Monitor:
                 )
             )
         self._send(
-            mav.mission_ack_encode(
-                self.system_id, 1, mavutil.mavlink.MAV_MISSION_ACCEPTED, fence, 0
-            )
+            mav.mission_ack_encode(self.system_id, 1, mavutil.mavlink.MAV_MISSION_ACCEPTED, fence)
         )
         return items
 

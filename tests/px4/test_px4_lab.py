@@ -26,7 +26,7 @@ from synthetic import CI_FLIGHT, SHORT
 
 from gcs.io.rundir import RunDir
 from gcs.mock.mocap.process import MocapServerProcess
-from px4.sitl import ROOT, Px4Sitl
+from px4.sitl import ROOT, STARTED_LINE, Px4Sitl
 
 pytestmark = pytest.mark.px4
 
@@ -123,7 +123,7 @@ def tiny(tmp_path: Path) -> Path:
 @pytest.fixture
 def lab_px4(px4_factory) -> Px4Sitl:
     """PX4 set up for motion capture (not ready for take-off until vision arrives)."""
-    return px4_factory(params=LAB_PARAMS, ready=False)
+    return px4_factory(params=LAB_PARAMS, ready=STARTED_LINE)
 
 
 def test_lab_flight_arms_first_time_flies_two_trials_on_mocap_and_lands(
@@ -171,7 +171,7 @@ def test_mocap_lost_mid_trial_gcs_aborts_and_the_vehicle_lands_and_disarms(
     barometer is fused as a second height source (EKF2_BARO_CTRL 1, the height reference still
     vision): without it PX4 has no height once vision is gone, descends blind and never
     detects its landing (flown: still armed, "in air", 60 s later)."""
-    lab_px4 = px4_factory(params={**LAB_PARAMS, "EKF2_BARO_CTRL": 1}, ready=False)
+    lab_px4 = px4_factory(params={**LAB_PARAMS, "EKF2_BARO_CTRL": 1}, ready=STARTED_LINE)
     run_path = tmp_path / "run"
     with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
         gcs = Gcs(
