@@ -36,3 +36,37 @@ def test_a_pipe_gets_lines_not_a_bar() -> None:
 
 def test_clock() -> None:
     assert clock(3725.4) == "01:02:05" and clock(-1) == "00:00:00"
+
+
+def test_a_flight_off_a_terminal_says_each_trials_progress_in_plain_lines() -> None:
+    from gcs.app.fly_view import live_progress
+    from gcs.flight.campaign import TrialProgress, TrialStarted
+
+    out = io.StringIO()
+    console = Console(file=out, force_terminal=False, width=100)
+    progress, on_event = live_progress(console)
+    with progress:
+        on_event(TrialStarted(trial=2, number=1, iterations=3, n_setpoints=4, duration_s=0.2))
+        for k in range(1, 5):
+            on_event(TrialProgress(trial=2, k=k, n=4, err_m=0.1))
+    lines = [line for line in out.getvalue().splitlines() if line.strip()]
+    assert lines[0].startswith("trial 2 started: 4 setpoints")
+    # the first sample at once, the last at the end; nothing in between within 10 s
+    assert [line.split(",")[0] for line in lines[1:]] == [
+        "trial 2: 1/4 setpoints",
+        "trial 2: 4/4 setpoints",
+    ]
+    assert "\x1b" not in out.getvalue()  # no control codes in a pipe
+
+
+def test_a_flight_on_a_terminal_says_no_plain_progress_lines() -> None:
+    from gcs.app.fly_view import live_progress
+    from gcs.flight.campaign import TrialProgress, TrialStarted
+
+    out = io.StringIO()
+    console = Console(file=out, force_terminal=True, width=100)
+    progress, on_event = live_progress(console)
+    with progress:
+        on_event(TrialStarted(trial=0, number=1, iterations=1, n_setpoints=2, duration_s=0.1))
+        on_event(TrialProgress(trial=0, k=1, n=2, err_m=0.1))
+    assert "setpoints, 00:00" not in out.getvalue()

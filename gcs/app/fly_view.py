@@ -18,6 +18,7 @@ from gcs.app.fly import (
     start_run,
 )
 from gcs.app.learn import LearnOutcome
+from gcs.app.progress import progress_lines
 from gcs.app.report_text import decision_lines, metrics_table
 from gcs.app.session import check_mock_config, check_url, vehicle_url
 from gcs.core.metrics import IterationMetrics
@@ -35,7 +36,9 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
     Status lines are printed dimmed (warnings in yellow), each trial start is printed with its
     length, the bar follows the setpoint index with the live error, each flown trial is
     printed with its vehicle-time rate, and an incomplete trial in red. Use the progress as a
-    context manager around the flight.
+    context manager around the flight. When the console is not a terminal (a pipe, a file, a
+    batch job) the bar is invisible: each trial's progress is then a plain line now and then
+    (:func:`gcs.app.progress.progress_lines`).
 
     Parameters
     ----------
@@ -58,6 +61,7 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
         transient=True,
     )
     task = progress.add_task("waiting", total=1, err="")
+    plain: list[Callable[[int, int], None] | None] = [None]
 
     def on_event(event: object) -> None:
         if isinstance(event, Status) and event.warning:
@@ -75,8 +79,16 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
                 total=event.n_setpoints,
                 completed=0,
             )
+            if not console.is_terminal:
+                plain[0] = progress_lines(
+                    lambda line: console.print(line, markup=False, highlight=False),
+                    f"trial {event.trial}",
+                    "setpoints",
+                )
         elif isinstance(event, TrialProgress):
             progress.update(task, completed=event.k, err=f"error {event.err_m:.3f} m")
+            if plain[0] is not None:
+                plain[0](event.k, event.n)
         elif isinstance(event, TrialFinished) and not event.recording.complete:
             progress.console.print(f"[red]trial {event.trial} incomplete[/]")
         elif isinstance(event, TrialFinished):
