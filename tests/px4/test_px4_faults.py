@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 import yaml
-from gcs.flight.settings import FlightSettings
-from gcs.io.runlog import RunDir
 from test_fly_e2e import ROOT, wait_for_line
 
+from gcs.io.rundir import RunDir
+from gcs.io.settings import FlightSettings
 from px4.flying import finish, gcs, report_rows, sitl_profile
 
 pytestmark = pytest.mark.px4

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from gcs.io.runlog import RunDir
 
 from gcs.core.model import dc_gain
 from gcs.core.pbsid import natural_frequency_damping
 from gcs.io.config import load_profile
+from gcs.io.rundir import RunDir
 from px4.flying import finish, gcs, report_rows, sitl_profile
 
 pytestmark = pytest.mark.px4
