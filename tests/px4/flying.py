@@ -50,10 +50,10 @@ def finish(proc: subprocess.Popen, before: list[str] = ()) -> tuple[int, str]:
 
 
 def report_rows(run: Path) -> list[dict]:
-    """``gcs report --json`` of a run: one row per trial."""
+    """The rows of ``gcs report --json`` of a run: one per trial (docs/report.md)."""
     code, out = finish(gcs("report", run, "--json"))
     assert code == 0, out
-    return json.loads(out)
+    return json.loads(out)["rows"]
 
 
 def sitl_profile(tmp: Path, name: str = "antx", **sections: dict) -> Path:
