@@ -616,8 +616,9 @@ def identify(
     axis: Annotated[
         str | None,
         typer.Option(
-            help="x (north), y (east) or both (excited at once, independent seeds). Default: "
-            "both when flying, the axes the run excited with --from-log.",
+            help="x (north), y (east), z (down), both (x and y excited at once, independent "
+            "seeds) or all (x, y and z). Default: both when flying, the axes the run excited "
+            "with --from-log.",
             rich_help_panel=LEARNING,
         ),
     ] = None,
@@ -651,8 +652,8 @@ def identify(
 
     if sum((mock, connect is not None, from_log is not None)) != 1:
         raise typer.BadParameter("give exactly one of --mock, --connect and --from-log")
-    if axis is not None and axis not in ("x", "y", "both"):
-        raise typer.BadParameter("must be x, y or both", param_hint="--axis")
+    if axis is not None and axis not in ("x", "y", "z", "both", "all"):
+        raise typer.BadParameter("must be x, y, z, both or all", param_hint="--axis")
     if from_log is not None and (run_dir is not None or mock_config is not None):
         raise typer.BadParameter("--run and --mock-config need a flight, not --from-log")
     identify_with_display(

@@ -238,7 +238,8 @@ def identify_with_display(
         n = settings.n_samples(profile.t_ilc_s)
         console.print(
             f"identification run [bold]{run.path}[/]: {settings.excitation} "
-            f"{settings.amplitude_m:g} m on {', '.join(experiments.axes)}, two experiments of "
+            + ", ".join(f"{settings.amplitude_for(a):g} m on {a}" for a in experiments.axes)
+            + ", two experiments of "
             f"{n} samples ({n * profile.t_ilc_s:.1f} s) around {experiments.center_ned_m.tolist()}"
         )
         progress, on_event = live_progress(console)
