@@ -382,7 +382,7 @@ class AxisResult:
     Parameters
     ----------
     axis : str
-        ``"x"`` (north) or ``"y"`` (east).
+        ``"x"`` (north), ``"y"`` (east) or ``"z"`` (down).
     result : IdentificationResult
         PBSID output (fitted on trial 0).
     vaf_pct : float
@@ -390,7 +390,8 @@ class AxisResult:
     fit_pct : float
         NRMSE fit on the validation experiment [%].
     vaf_profile_pct : float
-        VAF of the input profile's model on the same data [%] (for comparison).
+        VAF of the input profile's model on the same data [%] (for comparison; NaN for z when
+        the profile has no ``model_z``).
     t_s : ndarray, shape (M,)
         Validation time grid [s].
     u_val_m, y_val_m, y_sim_m : ndarray, shape (M,)

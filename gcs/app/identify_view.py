@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -85,7 +86,7 @@ def results_table(results: Sequence[AxisResult], profile_name: str) -> Table:
             "-" if r.zeta is None else f"{r.zeta:.3f}",
             f"{r.vaf_pct:.2f}",
             f"{r.fit_pct:.1f}",
-            f"{r.vaf_profile_pct:.2f}",
+            "-" if math.isnan(r.vaf_profile_pct) else f"{r.vaf_profile_pct:.2f}",
         )
     return table
 
