@@ -62,6 +62,9 @@ def test_vertical_limits_of_their_own() -> None:
     prof = profile_from_dict(three_d(max_vertical_step_m=0.05, max_vertical_deviation_m=0.4), "p")
     settings = learner_settings(prof)
     assert settings.limits_of(2) == (0.05, 0.4) and settings.limits_of(1) == (0.5, 2.5)
+    # the numerics' own default: down bounded as north and east unless told otherwise
+    core = LearnerSettings(models=(prof.model_z,), max_step_m=0.3, axes=(2,))
+    assert core.limits_of(2) == (0.3, None)
 
 
 @pytest.mark.parametrize(
@@ -162,8 +165,8 @@ def test_three_axes_learn_down_as_a_one_axis_learner_and_its_error_falls() -> No
 
     three = Learner(settings, ref)
     down = Learner(
-        LearnerSettings(models=(prof.model_z,), arena=prof.arena, max_step_m=0.08,
-                        max_deviation_m=2.5, axes=(2,)),
+        LearnerSettings(models=(prof.model_z,), arena=prof.arena, max_step_m=0.5,
+                        max_deviation_m=2.5, axes=(2,), max_vertical_step_m=0.08),
         ref[:, [2]],
     )  # fmt: skip
     u = ref[:-1].copy()
