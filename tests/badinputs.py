@@ -352,7 +352,7 @@ def _profile_cases() -> Iterator[Case]:
         ("learning.axes", "north", "learning.axes", "antx.yaml"),
         ("learning.axes", ["east", "north"], "learning.axes", "antx.yaml"),
         ("model_z", 7, "model_z", "antx-3d.yaml"),
-        ("model_z.den", DELETE, "model_z.den", "antx-3d.yaml"),
+        ("model_z.C", "tall", "model_z.C", "antx-3d.yaml"),
         ("model_z.dt_s", 0.02, "model_z.dt_s", "antx-3d.yaml"),
         ("learning.limits.max_vertical_step_m", 0.0, "max_vertical_step_m", "antx-3d.yaml"),
         ("learning.limits.max_vertical_deviation_m", "far", "max_vertical_deviation_m",
