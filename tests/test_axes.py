@@ -234,3 +234,60 @@ def test_3d_epos_is_at_least_the_horizontal_one() -> None:
     assert epos_3d(ref, pos) >= epos(ref[:, :2], pos[:, :2])
     pos[:, 2] = ref[:, 2]
     assert epos_3d(ref, pos) == pytest.approx(epos(ref[:, :2], pos[:, :2]))
+
+
+# ------------------------------------------------------------------- a 3-D run's report
+
+
+def test_a_synthetic_3d_run_learns_down_and_reports_it_within_80_columns(tmp_path) -> None:
+    import io
+
+    from rich.console import Console
+    from synthetic import fly_synthetic, true_plants
+
+    from gcs.app.learn import learn_run
+    from gcs.app.report import is_three_d, run_learning, run_metrics, trial_clock_rates
+    from gcs.app.report_figures import report_figures
+    from gcs.app.report_text import metrics_table
+    from gcs.core.trajectory import Reference
+
+    prof = profile_from_dict(three_d(), "p")
+    run = RunDir.create(tmp_path, prof, trajectory_from_dict(SHORT), "smoother", "run")
+    plants = (*true_plants(), prof.model_z)
+    fly_synthetic(run, 0, plants=plants)
+    learn_run(run)
+    ref = run.reference()
+    assert isinstance(ref, Reference) and is_three_d(run)
+    sp1 = run.read_setpoints(1)
+    assert np.max(np.abs(sp1[:, 2] - ref.pos_ned_m[:-1, 2])) > 1e-3  # down is learned
+    assert run.read_estimate(0)[0].shape == (run.n_samples, 3)
+    fly_synthetic(run, 1, plants=plants)
+    rows = run_metrics(run)
+    for r in rows:  # by hand, from the recorded trial
+        rec = run.read_trial(r.iteration)
+        err = rec.pos_ned_m[1:] - rec.ref_ned_m[1:]
+        assert r.epos_3d_m == pytest.approx(float(np.mean(np.sqrt(np.sum(err**2, axis=1)))))
+        assert r.rms_down_m == pytest.approx(float(np.sqrt(np.mean(err[:, 2] ** 2))))
+    assert rows[1].rms_down_m < rows[0].rms_down_m
+    buf = io.StringIO()
+    console = Console(file=buf, width=80)
+    learning, rates = run_learning(run), trial_clock_rates(run)
+    console.print(metrics_table(rows, "title", rates, learning, 80, three_d=True))
+    text = buf.getvalue()
+    assert "e3d [m]" in text and "rms D [m]" in text
+    assert max(map(len, text.splitlines())) <= 80
+    figures = report_figures(run, [0, 1])
+    assert {"altitude", "views"} <= set(figures)
+
+
+def test_a_flat_run_keeps_its_table() -> None:
+    """The paper's table has no 3-D columns; the HTML's has every axis's RMS."""
+    from gcs.app.report_text import table_cells
+    from gcs.core.metrics import IterationMetrics
+
+    row = IterationMetrics(0, 0.1, 100.0, None, 0.2, 0.11, 0.05, 0.06, 0.01)
+    headers, cells = table_cells([row], None, None)
+    assert headers == ["j", "e_pos [m]", "e/e0 [%]", "change [%]", "max err [m]"]
+    headers, cells = table_cells([row], None, None, three_d=True, every_axis=True)
+    assert headers[-4:] == ["e3d [m]", "rms N [m]", "rms E [m]", "rms D [m]"]
+    assert cells[0][-4:] == ["0.1100", "0.0500", "0.0600", "0.0100"]
