@@ -106,9 +106,9 @@ class Learner(_core.Learner):
         profile : str, Path or Profile
             Packaged name (``"antx"``, ``"antx-adaptive"``), path, or a loaded profile.
         reference_m : ndarray, shape (N+1, n_axes), or Reference
-            Reference yd(0..N) of the learnt axes (north and east) [m] (a
-            :class:`Reference`: the columns of its ``pos_ned_m`` the learner learns); row 0
-            is the start point.
+            Reference yd(0..N) of the learnt axes (``learning.axes``: north and east, or with
+            down) [m] (a :class:`Reference`: the columns of its ``pos_ned_m`` the learner
+            learns); row 0 is the start point.
         algorithm : str, optional
             ``"smoother"`` or ``"kilc"``; default the profile's.
         floor, models, kilc_states, history
