@@ -1497,6 +1497,11 @@ def _study_cases() -> Iterator[Case]:
         ("an empty list of settings", {"settings": []}, "settings"),
         ("a setting's bad value", {"settings": [{"we": 0.0}]}, "settings[0].we"),
         ("a setting's profile missing", {"settings": [{"profile": "nope"}]}, "settings[0].profile"),
+        (
+            "a setting's profile learns down",
+            {"settings": [{"profile": "antx-3d"}]},
+            "settings[0].profile': learning.axes",
+        ),
         ("a setting's unknown algorithm", {"settings": [{"algorithm": "pid"}]}, "algorithm"),
         ("no name", {"name": DELETE}, "name"),
         ("an unknown field", {"colour": "red"}, "colour"),
