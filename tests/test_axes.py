@@ -291,3 +291,47 @@ def test_a_flat_run_keeps_its_table() -> None:
     headers, cells = table_cells([row], None, None, three_d=True, every_axis=True)
     assert headers[-4:] == ["e3d [m]", "rms N [m]", "rms E [m]", "rms D [m]"]
     assert cells[0][-4:] == ["0.1100", "0.0500", "0.0600", "0.0100"]
+
+
+def test_z_identified_offline_from_a_vertical_run_and_written_as_model_z(tmp_path) -> None:
+    """A synthetic vertical loop excited on z: PBSID finds it (validation VAF), x and y are
+    not excited, and the written profile keeps x and y and adds model_z, which loads."""
+    from gcs.app.identify import (
+        create_identification_run,
+        identified_profile_text,
+        identify_run,
+        plan_experiments,
+        run_axes,
+    )
+    from gcs.io.records import TrialRecord, TrialStatus
+
+    data = antx()
+    data["identification"]["duration_s"] = 30.0
+    prof = profile_from_dict(data, "antx")
+    settings = prof.identification
+    exps = plan_experiments(settings, prof.t_ilc_s, "z", prof.arena)
+    run = create_identification_run(tmp_path, prof, settings, exps, run_id="ident")
+    truth = from_transfer_function(MODEL_Z["num"], MODEL_Z["den"], 0.15, prof.t_ilc_s)
+    rng = np.random.default_rng(0)
+    for j, sp in enumerate(exps.setpoints_ned_m):
+        n, c = sp.shape[0], exps.center_ned_m
+        rows = np.vstack([sp, sp[-1]])
+        pos = np.tile(c, (n + 1, 1))
+        pos[1:, 2] += simulate(truth, sp[:, 2] - c[2]) + rng.normal(0, 0.002, n)
+        record = TrialRecord(
+            t_s=np.arange(n + 1) * prof.t_ilc_s, ref_ned_m=rows, sp_ned_m=rows, pos_ned_m=pos,
+            vel_ned_m_s=np.gradient(pos, prof.t_ilc_s, axis=0),
+            sp_sent_s=np.append(np.arange(n) * prof.t_ilc_s, np.nan),
+            interpolated=np.zeros(n + 1, dtype=bool),
+        )  # fmt: skip
+        run.write_trial(j, record, TrialStatus(j, True))
+    run = RunDir.open(run.path)
+    assert run_axes(run) == ("z",)
+    (result,) = identify_run(run, settings, prof)
+    assert result.axis == "z" and result.vaf_pct > 99.0
+    assert math.isnan(result.vaf_profile_pct)  # antx has no model_z to compare with
+    text = identified_profile_text(prof, [result], str(run.path))
+    out = profile_from_dict(yaml.safe_load(text), "identified")
+    assert out.model_z is not None and out.learning.axes == (0, 1)
+    np.testing.assert_array_equal(out.model_x.A, prof.model_x.A)
+    assert "model_z" in text.split("learning:")[0]  # beside the other models
