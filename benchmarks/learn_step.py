@@ -1,4 +1,5 @@
-"""Benchmark of the ILC input update (gcs.core.update), both horizontal axes.
+"""Benchmark of the ILC input update (gcs.core.update), both horizontal axes, and of the
+learning step on three axes against two.
 
 Prints one JSON line per case::
 
@@ -28,8 +29,18 @@ the limits' rows built once); ``ratio`` = per_call_s / learner_s, medians over t
 ways gave the same setpoints, bit for bit. The trials: the vehicle is the model itself plus
 the disturbance above and 5 mm of white noise.
 
+Lines with ``"baseline": "two_axes"`` time the learning step of a trial through one kept
+learner on three axes (north, east and down: altitude learned) against two (north and east),
+each in a fresh subprocess of the same run, N = 6000 per axis: ``learner_s`` (median over
+trials 2..8), ``first_step_s``, ``peak_mb`` (``ru_maxrss``, as above), and ``ratio`` = the
+three-axis seconds / the two-axis seconds (``peak_ratio`` the same for memory). The down axis
+has a vertical loop of its own (second order, 5.25 rad/s, damping 0.96, 0.15 s delay: the
+mock's vertical loop as ``gcs identify --axis z`` sees it), a reference that climbs 0.5 m and
+back, and a repeating vertical disturbance; constrained: the arena's floor and ceiling and
+the same step and deviation limits.
+
 Usage: ``python benchmarks/learn_step.py`` (all cases, each in a subprocess) or
-``python benchmarks/learn_step.py --case N constrained|free [sparse|dense|learner]``.
+``python benchmarks/learn_step.py --case N constrained|free [sparse|dense|learner|axes2|axes3]``.
 """
 
 from __future__ import annotations
@@ -232,6 +243,56 @@ def run_learner(n: int, constrained: bool) -> dict:
     }
 
 
+AXES_N = 6000
+
+
+def run_axes(n: int, constrained: bool, n_axes: int) -> dict:
+    """One kept learner on ``n_axes`` (2: north and east; 3: with down) over the trials."""
+    model, yd, d_true, _, limits = scenario(n, constrained)
+    dt = DT_S[n]
+    wn, zeta = 5.25, 0.96
+    model_z = from_transfer_function([wn**2], [1.0, 2 * zeta * wn, wn**2], 0.15, dt)
+    t = np.arange(1, n + 1) * dt
+    tau = t / t[-1]
+    yd = [*yd, -0.5 * np.sin(np.pi * (10 * tau**3 - 15 * tau**4 + 6 * tau**5)) ** 2]
+    d_true = [*d_true, 0.1 * np.sin(0.3 * t) ** 2]
+    models = (model, model, model_z)[:n_axes]
+    ref = np.vstack([np.zeros(n_axes), np.column_stack(yd[:n_axes])])
+    arena, step, dev = None, None, None
+    if constrained:
+        arena = Box((limits[0].u_min_m, limits[0].u_max_m), (limits[1].u_min_m, limits[1].u_max_m),
+                    (-1.0, 0.5))  # fmt: skip
+        step, dev = limits[0].max_step_m, limits[0].max_deviation_m
+    settings = LearnerSettings(
+        models=models, arena=arena, max_step_m=step, max_deviation_m=dev,
+        axes=(0, 1, 2)[:n_axes], max_vertical_step_m=step, max_vertical_deviation_m=dev,
+    )  # fmt: skip
+    import_mb = _rss_mb()
+    rng = np.random.default_rng(1)
+    kept = Learner(settings, ref)
+    u = ref[:-1].copy()
+    times = []
+    for _ in range(TRIALS):
+        y = np.column_stack([simulate(models[a], u[:, a]) + d_true[a] for a in range(n_axes)])
+        y += 0.005 * rng.standard_normal(y.shape)
+        t0 = time.perf_counter()
+        u = kept.step(u, y)
+        times.append(time.perf_counter() - t0)
+    return {
+        "baseline": "two_axes",
+        "n": n,
+        "axes": n_axes,
+        "constrained": constrained,
+        "trials": TRIALS,
+        "learner_s": round(statistics.median(times[1:]), 5),
+        "first_step_s": round(times[0], 5),
+        "peak_mb": round(_rss_mb(), 1),
+        "import_mb": round(import_mb, 1),
+        "methods": list(kept.last.methods),
+        "memory": "ru_maxrss",
+    }
+
+
 def _subprocess(n: int, constrained: bool, kind: str) -> dict:
     cmd = [sys.executable, __file__, "--case", str(n), "constrained" if constrained else "free"]
     out = subprocess.run(cmd + [kind], check=True, capture_output=True, text=True).stdout
@@ -242,6 +303,9 @@ def main() -> None:
     if len(sys.argv) >= 4 and sys.argv[1] == "--case":
         n, constrained = int(sys.argv[2]), sys.argv[3] == "constrained"
         kind = sys.argv[4] if len(sys.argv) > 4 else "sparse"
+        if kind in ("axes2", "axes3"):
+            print(json.dumps(run_axes(n, constrained, int(kind[-1]))))
+            return
         run = {"dense": run_dense, "learner": run_learner}.get(kind, run_sparse)
         print(json.dumps(run(n, constrained)))
         return
@@ -258,6 +322,13 @@ def main() -> None:
     for n in DT_S:
         for constrained in (False, True):
             print(json.dumps(_subprocess(n, constrained, "learner")), flush=True)
+    for constrained in (False, True):
+        two = _subprocess(AXES_N, constrained, "axes2")
+        three = _subprocess(AXES_N, constrained, "axes3")
+        three["ratio"] = round(three["learner_s"] / two["learner_s"], 2)
+        three["peak_ratio"] = round(three["peak_mb"] / two["peak_mb"], 2)
+        print(json.dumps(two), flush=True)
+        print(json.dumps(three), flush=True)
 
 
 if __name__ == "__main__":

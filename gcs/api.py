@@ -48,8 +48,8 @@ def profile_of(profile: str | Path | Profile) -> Profile:
 def learner_settings(
     profile: str | Path | Profile, algorithm: str | None = None
 ) -> LearnerSettings:
-    """The learning settings of a profile: its (north, east) models, weights, Table I
-    variances, arena and setpoint limits.
+    """The learning settings of a profile: the models of its learned axes (north and east, or
+    with down), weights, Table I variances, arena and setpoint limits.
 
     Parameters
     ----------
@@ -65,7 +65,7 @@ def learner_settings(
     prof = profile_of(profile)
     ln = prof.learning
     return LearnerSettings(
-        models=prof.models(),
+        models=prof.learned_models(),
         algorithm=algorithm or ln.algorithm,
         weights=ln.weights,
         smoother=ln.smoother,
@@ -73,6 +73,9 @@ def learner_settings(
         arena=prof.arena,
         max_step_m=ln.max_step_m,
         max_deviation_m=ln.max_deviation_m,
+        axes=ln.axes,
+        max_vertical_step_m=ln.max_vertical_step_m,
+        max_vertical_deviation_m=ln.max_vertical_deviation_m,
     )
 
 
@@ -103,9 +106,9 @@ class Learner(_core.Learner):
         profile : str, Path or Profile
             Packaged name (``"antx"``, ``"antx-adaptive"``), path, or a loaded profile.
         reference_m : ndarray, shape (N+1, n_axes), or Reference
-            Reference yd(0..N) of the learnt axes (north and east) [m] (a
-            :class:`Reference`: the columns of its ``pos_ned_m`` the learner learns); row 0
-            is the start point.
+            Reference yd(0..N) of the learnt axes (``learning.axes``: north and east, or with
+            down) [m] (a :class:`Reference`: the columns of its ``pos_ned_m`` the learner
+            learns); row 0 is the start point.
         algorithm : str, optional
             ``"smoother"`` or ``"kilc"``; default the profile's.
         floor, models, kilc_states, history

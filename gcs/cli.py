@@ -494,7 +494,10 @@ version.
 Figures (--plot, --html), for both axes: the horizontal path per iteration with its start and
 direction (paper Fig. 4), north and east against time (Fig. 5), the setpoints flown against
 the reference, the max_deviation_m band and the arena, the error against time, e_pos per
-iteration with a percentage axis (Fig. 2), and the learned disturbance with its ±2σ band.
+iteration with a percentage axis (Fig. 2), and the learned disturbance with its ±2σ band. A
+3-D run (down learned, or a reference that climbs or sinks) adds the 3-D e_pos and the down
+RMS to the table (every axis's RMS in the JSON and the HTML), the altitude against time and
+the path from above, the side and the front.
 
 More examples: gcs report logs/latest --html report.html --iterations 0,2,5; gcs report
 logs/latest --json
@@ -559,8 +562,9 @@ def run() -> None:  # pragma: no cover - console-script entry point alias
 IDENTIFY_DETAILS = """Flies two experiments from hover (take off, settle at
 identification.center_ned_m, fly, settle again, fly, land): trial 0 to fit the model and trial
 1, with other seeds, to validate it. Each adds a PRBS (or multisine) of
-identification.amplitude_m to the hover setpoint on the chosen axes for
-identification.duration_s; setpoints that would leave the arena are refused before take-off.
+identification.amplitude_m (z: identification.vertical_amplitude_m) to the hover setpoint on
+the chosen axes for identification.duration_s; setpoints that would leave the arena are
+refused before take-off.
 The run directory (algorithm 'identify') keeps both trials, so --from-log can identify again
 offline.
 
@@ -568,8 +572,9 @@ Per axis, PBSID-opt (docs/identify.md) fits an innovation model on trial 0 with 
 past/future windows, chooses the order and the input delay, and simulates it free-running on
 trial 1. The table shows order, delay, poles, wn and zeta (Tustin), the continuous transfer
 function, and the validation VAF and fit beside the VAF of the profile's own model. The output
-profile is the input profile with model (x) and model_y (y) replaced by the identified
-discrete state spaces; 'gcs fly --profile' uses it as is.
+profile is the input profile with model (x), model_y (y) and model_z (z) replaced by the
+identified discrete state spaces; 'gcs fly --profile' uses it as is (model_z is learned with
+learning.axes: [north, east, down]).
 
 Too little data, a constant or non-exciting input, NaNs or an incomplete trial are refused
 with one line and exit code 2; no profile is written then. The profile, the excitation
@@ -578,6 +583,7 @@ is flown or identified. The run's own identified.yaml is written once: identifyi
 again gives the same bytes, or is refused.
 
 More examples: gcs identify --from-log logs/latest --axis x --out x-only.yaml
+               gcs identify --mock --axis z --out with-model-z.yaml
 
 """ + FLIGHT_EXIT_CODES.format(what="experiment", extra=", no profile written")
 
@@ -616,8 +622,9 @@ def identify(
     axis: Annotated[
         str | None,
         typer.Option(
-            help="x (north), y (east) or both (excited at once, independent seeds). Default: "
-            "both when flying, the axes the run excited with --from-log.",
+            help="x (north), y (east), z (down), both (x and y excited at once, independent "
+            "seeds) or all (x, y and z). Default: both when flying, the axes the run excited "
+            "with --from-log.",
             rich_help_panel=LEARNING,
         ),
     ] = None,
@@ -642,7 +649,7 @@ def identify(
     """Identify the closed loop "position setpoint -> position" with PBSID and write a profile.
 
     Flies two small excitation experiments from hover (or reads them back with --from-log),
-    fits a model per horizontal axis and writes the profile with the identified models: the
+    fits a model per excited axis and writes the profile with the identified models: the
     first thing to do on a new vehicle, before learning (docs/real-vehicle.md).
 
     Example: gcs identify --mock --out profiles/mock-identified.yaml --plot plots/
@@ -651,8 +658,8 @@ def identify(
 
     if sum((mock, connect is not None, from_log is not None)) != 1:
         raise typer.BadParameter("give exactly one of --mock, --connect and --from-log")
-    if axis is not None and axis not in ("x", "y", "both"):
-        raise typer.BadParameter("must be x, y or both", param_hint="--axis")
+    if axis is not None and axis not in ("x", "y", "z", "both", "all"):
+        raise typer.BadParameter("must be x, y, z, both or all", param_hint="--axis")
     if from_log is not None and (run_dir is not None or mock_config is not None):
         raise typer.BadParameter("--run and --mock-config need a flight, not --from-log")
     identify_with_display(

@@ -345,6 +345,28 @@ def _profile_cases() -> Iterator[Case]:
             lambda ws, d=dotted, v=value: _fly(ws, profile=ws.profile(d, v)),
             expect,
         )
+    k = "profile field: learned axes and the vertical model"
+    for dotted, value, expect, base in (
+        ("learning.axes", ["north", "east", "down"], "model_z", "antx.yaml"),
+        ("learning.axes", ["up"], "learning.axes", "antx.yaml"),
+        ("learning.axes", "north", "learning.axes", "antx.yaml"),
+        ("learning.axes", ["east", "north"], "learning.axes", "antx.yaml"),
+        ("model_z", 7, "model_z", "antx-3d.yaml"),
+        ("model_z.C", "tall", "model_z.C", "antx-3d.yaml"),
+        ("model_z.dt_s", 0.02, "model_z.dt_s", "antx-3d.yaml"),
+        ("learning.limits.max_vertical_step_m", 0.0, "max_vertical_step_m", "antx-3d.yaml"),
+        ("learning.limits.max_vertical_deviation_m", "far", "max_vertical_deviation_m",
+         "antx-3d.yaml"),
+        ("learning.adaptive", {}, "learning.axes", "antx-3d.yaml"),
+        ("identification.vertical_amplitude_m", -0.3, "vertical_amplitude_m", "antx.yaml"),
+    ):  # fmt: skip
+        yield Case(
+            k,
+            "fly",
+            f"{base}: {dotted}: {value!r}",
+            lambda ws, d=dotted, v=value, b=base: _fly(ws, profile=ws.profile(d, v, b)),
+            expect,
+        )
     k = "profile field: unknown (a typo)"
     for dotted in ("arean", "learning.smoother.qq", "vehicle.max_sped_m_s", "flight.stream_rate"):
         yield Case(
@@ -1080,7 +1102,11 @@ def _identify_cases() -> Iterator[Case]:
         "trajectory.type",
     )
     yield Case(
-        k, "identify", "axis not excited", lambda ws: from_log(ws, None, "--axis", "z"), "--axis"
+        k, "identify", "axis z not excited", lambda ws: from_log(ws, None, "--axis", "z"),
+        "axis z was not excited",
+    )  # fmt: skip
+    yield Case(
+        k, "identify", "no such axis", lambda ws: from_log(ws, None, "--axis", "w"), "--axis"
     )
     yield Case(
         k,
@@ -1138,6 +1164,19 @@ def _identify_cases() -> Iterator[Case]:
         "excitation leaves the arena",
         lambda ws: [*idf, "--profile", str(ws.profile("identification.amplitude_m", 5.0))],
         "arena",
+    )
+    yield Case(
+        k,
+        "identify",
+        "vertical excitation leaves the arena",
+        lambda ws: [
+            *idf,
+            "--axis",
+            "z",
+            "--profile",
+            str(ws.profile("identification.vertical_amplitude_m", 2.0)),
+        ],  # fmt: skip
+        "vertical_amplitude_m",
     )
     yield Case(
         k,
@@ -1458,6 +1497,11 @@ def _study_cases() -> Iterator[Case]:
         ("an empty list of settings", {"settings": []}, "settings"),
         ("a setting's bad value", {"settings": [{"we": 0.0}]}, "settings[0].we"),
         ("a setting's profile missing", {"settings": [{"profile": "nope"}]}, "settings[0].profile"),
+        (
+            "a setting's profile learns down",
+            {"settings": [{"profile": "antx-3d"}]},
+            "settings[0].profile': learning.axes",
+        ),
         ("a setting's unknown algorithm", {"settings": [{"algorithm": "pid"}]}, "algorithm"),
         ("no name", {"name": DELETE}, "name"),
         ("an unknown field", {"colour": "red"}, "colour"),

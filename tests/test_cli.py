@@ -46,7 +46,7 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     assert [r["iteration"] for r in rows] == [0, 1]
     assert set(rows[0]) == {
         "iteration", "status", "reason", "epos_m", "epos_pct", "delta_pct", "change_pct",
-        "max_err_m",
+        "max_err_m", "epos_3d_m", "rms_north_m", "rms_east_m", "rms_down_m",
         "vehicle_time_rate", "trial", "repeat_of", "sp_rms_m", "sp_max_m",
     }  # fmt: skip
     # the paper's method flies no repeat: trial and iteration are one; no floor keys

@@ -317,7 +317,7 @@ def test_mode_options_are_exclusive(tmp_path: Path) -> None:
     assert result.exit_code == 2 and "exactly one of --mock" in result.output
     result = invoke("identify", "--mock", "--from-log", tmp_path)
     assert result.exit_code == 2
-    result = invoke("identify", "--from-log", tmp_path, "--axis", "z")
+    result = invoke("identify", "--from-log", tmp_path, "--axis", "w")
     assert result.exit_code == 2 and "--axis" in result.output
 
 

@@ -55,7 +55,7 @@ def test_a_three_dimensional_waypoints_trajectory_learns_and_flies_down_as_the_r
         assert abs(record.pos_ned_m[-1, 2] - ref.pos_ned_m[-1, 2]) < 0.15
     code, report = finish(gcs("report", run_path, "--json"))
     assert code == 0, report
-    rows = json.loads(report)
+    rows = json.loads(report)["rows"]
     assert [r["iteration"] for r in rows] == [0, 1]
     assert rows[1]["epos_m"] < rows[0]["epos_m"], rows
 

@@ -37,7 +37,7 @@ from gcs.core.trajectory import (
     check_reference,
 )
 from gcs.core.trajectory_sources import sample_reference
-from gcs.core.trials import trial_errors
+from gcs.core.trials import trial_errors, trial_errors_3d
 from gcs.errors import ProfileError, RunLogError, TrajectoryError
 from gcs.flight.campaign import run_campaign
 from gcs.flight.mocap.link import MocapLink
@@ -486,6 +486,8 @@ class RunSource(SessionRecorder):
         extra = trial_extra(recording, self.session)
         measured = record.measured(self.run.profile().mocap.measurement)
         e, m = trial_errors(measured)
+        extra["epos_3d_m"], *rms = trial_errors_3d(measured)
+        extra["rms_ned_m"] = rms
         if record.mocap_ned_m is not None:
             extra["epos_estimate_m"] = trial_errors(record)[0]
             extra["measurement"] = "estimate" if measured is record else "mocap"
@@ -523,9 +525,21 @@ class RunSource(SessionRecorder):
     def rows(self) -> list[IterationMetrics]:
         """Table IV rows of the complete trials so far (from the sidecars)."""
         done = [s for s in self.run.statuses() if s.complete]
-        return iteration_table(
+        rows = iteration_table(
             [s.epos_m for s in done], [s.max_err_m for s in done], [s.trial for s in done]
         )
+        return [_with_3d(r, s.extra or {}) for r, s in zip(rows, done, strict=True)]
+
+
+def _with_3d(row: IterationMetrics, extra: dict) -> IterationMetrics:
+    """A row with the 3-D e_pos and the RMS per axis a trial's sidecar records."""
+    rms = extra.get("rms_ned_m")
+    if extra.get("epos_3d_m") is None or not isinstance(rms, list) or len(rms) != 3:
+        return row
+    n, e, d = (float(v) for v in rms)
+    return replace(
+        row, epos_3d_m=float(extra["epos_3d_m"]), rms_north_m=n, rms_east_m=e, rms_down_m=d
+    )
 
 
 def converged_reason(record: dict | None) -> str | None:

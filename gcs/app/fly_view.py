@@ -302,6 +302,9 @@ def fly_with_display(
 
     ln = run.profile().learning
     repeats = ln.repeats if ln.history else 0
+    from gcs.app.report import is_three_d
+
+    three_d = is_three_d(run)
 
     def on_row(rows: list[IterationMetrics]) -> None:
         r = rows[-1]
@@ -318,6 +321,11 @@ def fly_with_display(
             f"{which}: e_pos {r.epos_m:.4f} m ({r.epos_pct:5.1f} % of {base}{delta}), "
             f"max {r.max_err_m:.3f} m"
         )
+        if three_d and r.epos_3d_m is not None:
+            progress.console.print(
+                f"  3-D e_pos {r.epos_3d_m:.4f} m; RMS north {r.rms_north_m:.4f}, "
+                f"east {r.rms_east_m:.4f}, down {r.rms_down_m:.4f} m"
+            )
 
     def on_learn(outcome: LearnOutcome) -> None:
         for line in learning_lines(outcome):
@@ -357,12 +365,13 @@ def fly_with_display(
             f"--until-converged: learning has not converged within --iter {iterations}; "
             f"continue with: gcs fly --resume {run.path} --iter N --until-converged"
         )
-    from gcs.app.report import run_facts, run_learning, run_metrics, trial_clock_rates
+    from gcs.app.report import is_three_d, run_facts, run_learning, run_metrics, trial_clock_rates
 
     title = run_facts(run).title()
     learning = run_learning(run)
     rates = trial_clock_rates(run)
-    console.print(metrics_table(run_metrics(run), title, rates, learning, console.width))
+    rows = run_metrics(run)
+    console.print(metrics_table(rows, title, rates, learning, console.width, is_three_d(run)))
     return run
 
 

@@ -113,9 +113,11 @@ class Experiments:
 def _parse_axes(axis: str) -> tuple[str, ...]:
     if axis == "both":
         return ("x", "y")
+    if axis == "all":
+        return ("x", "y", "z")
     if axis in AXES:
         return (axis,)
-    raise IdentificationError(f"axis must be x, y or both, got {axis!r}")
+    raise IdentificationError(f"axis must be x, y, z, both or all, got {axis!r}")
 
 
 def plan_experiments(
@@ -134,7 +136,8 @@ def plan_experiments(
     t_ilc_s : float
         Sample time [s].
     axis : str
-        ``"x"``, ``"y"`` or ``"both"`` (both at once, independent seeds).
+        ``"x"``, ``"y"``, ``"z"``, ``"both"`` (x and y at once, independent seeds) or
+        ``"all"`` (x, y and z at once).
     arena : Box or None
         Flight volume; every setpoint and the hover point must lie inside.
     where : str
@@ -167,13 +170,11 @@ def plan_experiments(
     for e in (0, 1):
         sp = np.tile(center, (n, 1))
         for a in axes:
-            seed = settings.seed_for(e, a)
+            seed, level = settings.seed_for(e, a), settings.amplitude_for(a)
             if settings.excitation == "prbs":
-                seq = prbs(n, t_ilc_s, settings.amplitude_m, settings.bandwidth_hz, seed)
+                seq = prbs(n, t_ilc_s, level, settings.bandwidth_hz, seed)
             else:
-                seq = multisine(
-                    n, t_ilc_s, settings.amplitude_m, settings.f_min_hz, settings.f_max_hz, seed
-                )
+                seq = multisine(n, t_ilc_s, level, settings.f_min_hz, settings.f_max_hz, seed)
             sp[:, AXES[a]] += seq
         out.append(sp)
     if arena is not None:
@@ -182,6 +183,8 @@ def plan_experiments(
                 f"identification hover point {center.tolist()} is outside the arena {arena}; "
                 "change identification.center_ned_m"
             )
+        fields = ["vertical_amplitude_m" if a == "z" else "amplitude_m" for a in axes]
+        level_field = " / ".join(dict.fromkeys(fields))
         for e, sp in enumerate(out):
             bad = points_outside(sp, arena)
             if bad.size:
@@ -189,7 +192,7 @@ def plan_experiments(
                 raise TrajectoryError(
                     f"identification experiment {e}: setpoint k = {k} "
                     f"{np.round(sp[k], 3).tolist()} is outside the arena {arena}; reduce "
-                    "identification.amplitude_m or move identification.center_ned_m; not flown"
+                    f"identification.{level_field} or move identification.center_ned_m; not flown"
                 )
     return Experiments((out[0], out[1]), axes, center)
 
@@ -379,7 +382,7 @@ class AxisResult:
     Parameters
     ----------
     axis : str
-        ``"x"`` (north) or ``"y"`` (east).
+        ``"x"`` (north), ``"y"`` (east) or ``"z"`` (down).
     result : IdentificationResult
         PBSID output (fitted on trial 0).
     vaf_pct : float
@@ -387,7 +390,8 @@ class AxisResult:
     fit_pct : float
         NRMSE fit on the validation experiment [%].
     vaf_profile_pct : float
-        VAF of the input profile's model on the same data [%] (for comparison).
+        VAF of the input profile's model on the same data [%] (for comparison; NaN for z when
+        the profile has no ``model_z``).
     t_s : ndarray, shape (M,)
         Validation time grid [s].
     u_val_m, y_val_m, y_sim_m : ndarray, shape (M,)
@@ -439,7 +443,7 @@ def run_axes(run: RunDir, axis: str | None = None) -> tuple[str, ...]:
     run : RunDir
         An identification run.
     axis : str or None
-        ``"x"``, ``"y"``, ``"both"`` or None (the run's axes).
+        ``"x"``, ``"y"``, ``"z"``, ``"both"``, ``"all"`` or None (the run's axes).
 
     Returns
     -------
@@ -521,8 +525,8 @@ def identify_run(
         if np.ptp(u_val) <= 0.0:
             raise IdentificationError(f"axis {a}, trial 1: the validation input is constant")
         y_sim = simulate_free(model, u_val)
-        prof_model = profile.models()[c]
-        y_prof = simulate_free(prof_model, u_val)
+        prof_model = (*profile.models(), profile.model_z)[c]
+        y_prof = None if prof_model is None else simulate_free(prof_model, u_val)
         try:
             wn, zeta = natural_frequency_damping(model)
         except ModelError:
@@ -534,7 +538,7 @@ def identify_run(
                 result=res,
                 vaf_pct=vaf(y_val, y_sim),
                 fit_pct=nrmse_fit(y_val, y_sim),
-                vaf_profile_pct=vaf(y_val, y_prof),
+                vaf_profile_pct=float("nan") if y_prof is None else vaf(y_val, y_prof),
                 t_s=val_trial.t_s,
                 u_val_m=u_val,
                 y_val_m=y_val,
@@ -589,6 +593,8 @@ def identified_profile_text(
     by_axis = {r.axis: r for r in results}
     data["model"] = by_axis["x"].model.as_dict() if "x" in by_axis else old_x
     data["model_y"] = by_axis["y"].model.as_dict() if "y" in by_axis else old_y
+    if "z" in by_axis:
+        data["model_z"] = by_axis["z"].model.as_dict()
     name = str(data.get("name", profile.name))
     summary = ", ".join(
         f"{r.axis}: order {r.result.order}, delay {r.result.delay_samples}, VAF {r.vaf_pct:.1f} %"
@@ -599,12 +605,14 @@ def identified_profile_text(
         f"Profile '{name}' with the closed-loop models identified by gcs identify (PBSID-opt) "
         f"from {origin} (trial 0 fit, trial 1 validation; {summary})."
     )
-    ordered = {k: data[k] for k in ("name", "description", "t_ilc_s", "model", "model_y")}
+    keys = ("name", "description", "t_ilc_s", "model", "model_y", "model_z")
+    ordered = {k: data[k] for k in keys if k in data}
     ordered.update({k: v for k, v in data.items() if k not in ordered})
     flown = f" (experiments flown {recorded_utc})" if recorded_utc else ""
     header = (
         f"# Written by 'gcs identify' from {origin}{flown}.\n"
-        f"# model / model_y: identified discrete state spaces at t_ilc_s = {profile.t_ilc_s:g} s\n"
+        f"# model / model_y / model_z: identified discrete state spaces at t_ilc_s = "
+        f"{profile.t_ilc_s:g} s\n"
         "# (x(k+1) = A x(k) + B u(k - delay_samples), y = C x; u setpoint, y position, both\n"
         "# relative to the hover point [m]). Everything else is the input profile's.\n"
     )
@@ -671,7 +679,7 @@ def write_identification_plots(
     paths = []
     fig, axs = plt.subplots(len(results), 1, figsize=(9, 3.2 * len(results)), squeeze=False)
     for ax, r in zip(axs[:, 0], results, strict=True):
-        label = "north" if r.axis == "x" else "east"
+        label = {"x": "north", "y": "east", "z": "down"}[r.axis]
         ax.step(r.t_s, r.u_val_m, where="post", color="0.75", lw=0.8, label="setpoint")
         ax.plot(r.t_s, r.y_val_m, "k", lw=1.2, label="measured")
         ax.plot(r.t_s, r.y_sim_m, "C3--", lw=1.2, label="identified model (free run)")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -85,7 +86,7 @@ def results_table(results: Sequence[AxisResult], profile_name: str) -> Table:
             "-" if r.zeta is None else f"{r.zeta:.3f}",
             f"{r.vaf_pct:.2f}",
             f"{r.fit_pct:.1f}",
-            f"{r.vaf_profile_pct:.2f}",
+            "-" if math.isnan(r.vaf_profile_pct) else f"{r.vaf_profile_pct:.2f}",
         )
     return table
 
@@ -238,7 +239,8 @@ def identify_with_display(
         n = settings.n_samples(profile.t_ilc_s)
         console.print(
             f"identification run [bold]{run.path}[/]: {settings.excitation} "
-            f"{settings.amplitude_m:g} m on {', '.join(experiments.axes)}, two experiments of "
+            + ", ".join(f"{settings.amplitude_for(a):g} m on {a}" for a in experiments.axes)
+            + ", two experiments of "
             f"{n} samples ({n * profile.t_ilc_s:.1f} s) around {experiments.center_ned_m.tolist()}"
         )
         progress, on_event = live_progress(console)

@@ -127,7 +127,7 @@ def check_learned(
     sp_ned_m: np.ndarray,
     profile: Profile,
     ref: Reference,
-    models: tuple[DiscreteModel, DiscreteModel] | None = None,
+    models: tuple[DiscreteModel, ...] | None = None,
 ) -> None:
     """Refuse setpoints that break a limit of the profile's learning, on the grid flown.
 
@@ -143,8 +143,8 @@ def check_learned(
     ref : Reference
         The run's reference.
     models : tuple of DiscreteModel, optional
-        The (north, east) models the setpoints were learned with (a refreshed model may have
-        another delay); default the profile's.
+        The models of the learned axes the setpoints were learned with (a refreshed model may
+        have another delay); default the profile's.
 
     Raises
     ------
@@ -152,10 +152,11 @@ def check_learned(
         Naming the limit, sample and axis.
     """
     ln = profile.learning
-    north, east = models if models is not None else profile.models()
+    learned = models if models is not None else profile.learned_models()
+    vertical = (ln.max_vertical_step_m, ln.max_vertical_deviation_m) if 2 in ln.axes else None
     check_setpoints(
         sp_ned_m, ref, profile.arena, ln.max_step_m, ln.max_deviation_m,
-        (relative_degree(north), relative_degree(east)),
+        tuple(relative_degree(m) for m in learned), vertical=vertical,
     )  # fmt: skip
 
 
@@ -199,11 +200,11 @@ def check_learnable(profile: Profile, ref: Reference, algorithm: str, where: str
         ) from None
 
 
-def _kilc_prior(run: RunDir, j: int) -> tuple[KilcState, KilcState] | None:
+def _kilc_prior(run: RunDir, j: int) -> tuple[KilcState, ...] | None:
     if j == 0:
         return None
     d_hat, p = run.read_estimate(j - 1)
-    return tuple(KilcState(d_hat[:, a].copy(), float(p[0, a]), j) for a in range(2))  # type: ignore[return-value]
+    return tuple(KilcState(d_hat[:, a].copy(), float(p[0, a]), j) for a in range(d_hat.shape[1]))
 
 
 def learn_run(

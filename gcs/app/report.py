@@ -24,7 +24,13 @@ import numpy as np
 
 from gcs.core.floor import Floor, FloorVerdict, floor_from_flights, floor_verdicts, identical_groups
 from gcs.core.metrics import IterationMetrics, iteration_table
-from gcs.core.trials import iteration_of, repeat_of, setpoint_deviation, trial_errors
+from gcs.core.trials import (
+    iteration_of,
+    repeat_of,
+    setpoint_deviation,
+    trial_errors,
+    trial_errors_3d,
+)
 from gcs.errors import RunLogError
 from gcs.io.records import TrialRecord, json_safe
 from gcs.io.rundir import RunDir
@@ -41,6 +47,8 @@ __all__ = [
     "trial_overview",
     "aborted_attempts",
     "run_metrics",
+    "is_three_d",
+    "METRIC_KEYS",
     "change_pct",
     "trial_clock_rates",
     "metrics_json",
@@ -281,10 +289,30 @@ def run_metrics(run: RunDir, measurement: str | None = None) -> list[IterationMe
         )
     order = sorted(errors)
     rows = iteration_table([errors[j][0] for j in order], [errors[j][1] for j in order], order)
-    return [
-        r if i == 0 or order[i] - order[i - 1] == 1 else replace(r, delta_pct=None)
-        for i, r in enumerate(rows)
-    ]
+    out = []
+    for i, r in enumerate(rows):
+        e3, rms_n, rms_e, rms_d = trial_errors_3d(records[r.iteration])
+        r = replace(r, epos_3d_m=e3, rms_north_m=rms_n, rms_east_m=rms_e, rms_down_m=rms_d)
+        out.append(r if i == 0 or order[i] - order[i - 1] == 1 else replace(r, delta_pct=None))
+    return out
+
+
+def is_three_d(run: RunDir) -> bool:
+    """True when the run learns down or its reference moves vertically: its table and live
+    lines then show the 3-D e_pos and the down RMS beside eq. (10)'s horizontal e_pos.
+
+    Parameters
+    ----------
+    run : RunDir
+        A learning run.
+
+    Returns
+    -------
+    bool
+    """
+    if 2 in run.profile().learning.axes:
+        return True
+    return bool(np.ptp(run.reference().pos_ned_m[:, 2]) > 0.0)
 
 
 @dataclass(frozen=True)
@@ -409,6 +437,13 @@ def trial_clock_rates(run: RunDir) -> dict[int, float | None]:
     return rates
 
 
+#: The metric keys of a JSON row (null for a trial that is not complete).
+METRIC_KEYS = (
+    "epos_m", "epos_pct", "delta_pct", "change_pct", "max_err_m", "epos_3d_m", "rms_north_m",
+    "rms_east_m", "rms_down_m",
+)  # fmt: skip
+
+
 def metrics_json(
     rows: list[IterationMetrics],
     rates: dict[int, float | None] | None = None,
@@ -416,7 +451,8 @@ def metrics_json(
     learning: RunLearning | None = None,
 ) -> list[dict]:
     """One JSON object per trial: iteration, status, epos_m, epos_pct, delta_pct, change_pct,
-    max_err_m (every key is defined in docs/report.md).
+    max_err_m, epos_3d_m, rms_north_m, rms_east_m, rms_down_m (every key is defined in
+    docs/report.md).
 
     Parameters
     ----------
@@ -448,7 +484,7 @@ def metrics_json(
     }  # fmt: skip
     for e in entries or []:
         if e.status != "complete":
-            empty = dict.fromkeys(("epos_m", "epos_pct", "delta_pct", "change_pct", "max_err_m"))
+            empty = dict.fromkeys(METRIC_KEYS)
             by_trial[e.trial] = {"iteration": e.trial, **empty, "status": e.status,
                                  "reason": e.reason}  # fmt: skip
     out = [by_trial[j] for j in sorted(by_trial)]

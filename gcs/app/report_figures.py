@@ -17,6 +17,7 @@ from gcs.app.report import (
     RunLearning,
     TrialLearning,
     choose_iterations,
+    is_three_d,
     run_facts,
     run_learning,
     run_metrics,
@@ -51,7 +52,7 @@ def run_label(facts: RunFacts) -> str:
 AXES = (("north", 0), ("east", 1))
 
 
-FIGURES = ("xy", "position", "setpoints", "error", "epos", "disturbance")
+FIGURES = ("xy", "position", "setpoints", "error", "epos", "disturbance", "altitude", "views")
 
 
 def _colors(iterations: list[int]) -> dict[int, Any]:
@@ -121,6 +122,51 @@ def _fig_position(
             ax.plot(r.t_s, r.pos_ned_m[:, c], lw=1.1, color=colors[j], label=names[j])
         ax.set_ylabel(f"{name} [m]")
     axs[0].legend(fontsize=8, ncol=len(iterations) + 1, loc="lower left")  # the hover: empty
+    return fig
+
+
+def _fig_altitude(
+    plt: Any, ref: Any, records: dict, iterations: list[int], names: dict, label: str
+) -> Any:
+    """Altitude (-down) per iteration over the reference, and its error, against time."""
+    colors = _colors(iterations)
+    fig, axs = _two_axes(plt, "Altitude per iteration", label)
+    axs[0].plot(ref.t_s, -ref.pos_ned_m[:, 2], "k--", lw=1.6, label="reference")
+    for j in iterations:
+        r = records[j]
+        axs[0].plot(r.t_s, -r.pos_ned_m[:, 2], lw=1.1, color=colors[j], label=names[j])
+        err = -(r.pos_ned_m[:, 2] - ref.pos_ned_m[:, 2])
+        axs[1].plot(r.t_s, err, lw=1.0, color=colors[j], label=names[j])
+    axs[0].set_ylabel("altitude -down [m]")
+    axs[1].set_ylabel("altitude error [m]")
+    axs[0].legend(fontsize=8, ncol=len(iterations) + 1, loc="lower left")
+    return fig
+
+
+def _fig_views(
+    plt: Any, ref: Any, records: dict, iterations: list[int], names: dict, label: str
+) -> Any:
+    """The path in three views: from above (east, north), from the side (north, altitude) and
+    from the front (east, altitude)."""
+    colors = _colors(iterations)
+    fig, axs = plt.subplots(1, 3, figsize=(13, 4.6))
+    fig.suptitle(f"Path per iteration in three views\n{label}", fontsize=10)
+    views = (("top", 1, 0, "east [m]", "north [m]"), ("side", 0, 2, "north [m]", "altitude [m]"),
+             ("front", 1, 2, "east [m]", "altitude [m]"))  # fmt: skip
+    for ax, (title, h, v, xlabel, ylabel) in zip(axs, views, strict=True):
+        sign = -1.0 if v == 2 else 1.0  # altitude up
+        p = ref.pos_ned_m
+        ax.plot(p[:, h], sign * p[:, v], "k--", lw=1.6, label="reference")
+        ax.plot(p[0, h], sign * p[0, v], "o", ms=8, mfc="white", mec="k", zorder=5, label="start")
+        for j in iterations:
+            q = records[j].pos_ned_m
+            ax.plot(q[:, h], sign * q[:, v], lw=1.0, color=colors[j], label=names[j])
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.set_title(title)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(True, alpha=0.3)
+    axs[0].legend(fontsize=8, loc="center left")
     return fig
 
 
@@ -286,9 +332,11 @@ def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
     reference against time per iteration; ``epos``: e_pos,j per iteration, log scale, with
     its percentage of e_pos,0 (Fig. 2), and with a floor the band of e_pos a trial at the
     floor falls in; ``disturbance``: the learned D per iteration with its ±2σ band from the
-    estimate's variance (only where estimates exist). Every figure carries the run's id,
-    profile, trajectory, seed and gcs version (:func:`run_label`). In a run with repeats the
-    trials are labelled with their number and their iteration j.
+    estimate's variance (only where estimates exist); in a 3-D run
+    (:func:`gcs.app.report.is_three_d`) ``altitude``: altitude and its error against time per
+    iteration, and ``views``: the path from above, the side and the front. Every figure
+    carries the run's id, profile, trajectory, seed and gcs version (:func:`run_label`). In a
+    run with repeats the trials are labelled with their number and their iteration j.
 
     Parameters
     ----------
@@ -328,6 +376,9 @@ def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
     disturbance = _fig_disturbance(plt, run, iterations, label)
     if disturbance is not None:
         figures["disturbance"] = disturbance
+    if run.kind == "learning" and is_three_d(run):
+        figures["altitude"] = _fig_altitude(plt, ref, records, iterations, names, label)
+        figures["views"] = _fig_views(plt, ref, records, iterations, names, label)
     return figures
 
 
@@ -366,4 +417,8 @@ CAPTIONS = {
     "falls in.",
     "disturbance": "Repetitive disturbance D estimated from each trial, per axis, with its "
     "±2σ band (the estimate's own variance).",
+    "altitude": "Altitude (-down) of each iteration over the reference (dashed), and its "
+    "error, against time (3-D runs).",
+    "views": "The path of each iteration in three views: from above, the side and the front "
+    "(3-D runs).",
 }

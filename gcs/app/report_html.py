@@ -9,6 +9,7 @@ from pathlib import Path
 from gcs.app.figures import figure_png
 from gcs.app.report import (
     choose_iterations,
+    is_three_d,
     run_facts,
     run_learning,
     run_metrics,
@@ -68,7 +69,8 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
         ("iterations drawn", ", ".join(map(str, chosen))),
     ]  # fmt: skip
     learning = run_learning(run) if run.kind == "learning" else None
-    headers, cells = table_cells(rows, rates, learning)
+    three_d = run.kind == "learning" and is_three_d(run)
+    headers, cells = table_cells(rows, rates, learning, three_d, every_axis=True)
     # words read from the left, numbers from the right
     words = [' class="words"' if h in ("verdict", "learning step") else "" for h in headers]
     parts = [

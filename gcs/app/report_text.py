@@ -316,6 +316,7 @@ def metrics_table(
     rates: dict[int, float | None] | None = None,
     learning: RunLearning | None = None,
     width: int | None = None,
+    three_d: bool = False,
 ) -> Table:
     """A rich table with one row per trial (the columns of the paper's Table IV, and more).
 
@@ -336,6 +337,8 @@ def metrics_table(
     width : int, optional
         The width it will be printed at (a console's): where the headers on one line do not
         fit, they wrap at spaces (the adaptive table fits 80 columns).
+    three_d : bool
+        Add the 3-D e_pos and the down axis's RMS error (:func:`gcs.app.report.is_three_d`).
 
     Returns
     -------
@@ -351,7 +354,7 @@ def metrics_table(
         pad_edge=False,
         show_edge=False,
     )
-    headers, cells = table_cells(rows, rates, learning)
+    headers, cells = table_cells(rows, rates, learning, three_d)
     natural = [max([len(h), *(len(row[i]) for row in cells)]) for i, h in enumerate(headers)]
     narrow = width is not None and sum(natural) + len(natural) - 1 > width
     for i, header in enumerate(headers):
@@ -378,6 +381,8 @@ def table_cells(
     rows: list[IterationMetrics],
     rates: dict[int, float | None] | None,
     learning: RunLearning | None,
+    three_d: bool = False,
+    every_axis: bool = False,
 ) -> tuple[list[str], list[list[str]]]:
     """Headers and cells of the table (the rich table and the HTML report share them).
 
@@ -391,6 +396,11 @@ def table_cells(
         Vehicle-time rate per trial (a column when one is known).
     learning : RunLearning or None
         What learning says (see :func:`metrics_table`).
+    three_d : bool
+        Add the columns ``e3d [m]`` (3-D e_pos) and ``rms D [m]`` (down's RMS error).
+    every_axis : bool
+        With ``three_d``, north's and east's RMS error as well (``rms N [m]``, ``rms E [m]``;
+        the HTML report, where 80 columns do not bind).
 
     Returns
     -------
@@ -399,6 +409,8 @@ def table_cells(
         One list per row, as many cells as headers.
     """
     headers = ["j", "e_pos [m]", "e/e0 [%]", "change [%]", "max err [m]"]
+    if three_d:
+        headers += ["e3d [m]", "rms N [m]", "rms E [m]", "rms D [m]"][:: 1 if every_axis else 3]
     if rates is not None and all(rate is None for rate in rates.values()):
         rates = None  # a run flown before rates were recorded
     if rates is not None:
@@ -421,6 +433,9 @@ def table_cells(
         cells = [
             str(r.iteration), f"{r.epos_m:.4f}", f"{r.epos_pct:.2f}", delta, f"{r.max_err_m:.4f}"
         ]  # fmt: skip
+        if three_d:
+            rms = [r.rms_north_m, r.rms_east_m] if every_axis else []
+            cells += [_metre(r.epos_3d_m), *map(_metre, rms), _metre(r.rms_down_m)]
         if rates is not None:
             rate = rates.get(r.iteration)
             cells.append("-" if rate is None else f"{rate:.3f}")
@@ -428,6 +443,10 @@ def table_cells(
             cells = _with_learning(cells, learning, r.iteration)
         out.append(cells)
     return headers, out
+
+
+def _metre(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4f}"
 
 
 def _verdict_word(v: FloorVerdict | None) -> str:

@@ -15,6 +15,7 @@ from rich.markup import escape
 
 from gcs.app.report import (
     choose_iterations,
+    is_three_d,
     parse_iterations,
     report_document,
     run_facts,
@@ -76,7 +77,8 @@ def show_report(
         console.out(json.dumps(document, indent=2, allow_nan=False), highlight=False)
     else:
         title = run_facts(run).title()
-        console.print(metrics_table(rows, title, rates, learning, console.width))
+        three_d = run.kind == "learning" and is_three_d(run)
+        console.print(metrics_table(rows, title, rates, learning, console.width, three_d))
         for line in report_notes(run, entries, learning) + mocap_lines(run):
             console.print(escape(line), highlight=False)
     if plot is not None:

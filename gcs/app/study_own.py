@@ -91,6 +91,11 @@ def build_plan(study: StudyDefinition) -> StudyPlan:
                 f"the study's profile has {study.profile.t_ilc_s:g} s"
             )
         learning = spec.profile.learning
+        if learning.axes != (0, 1):
+            raise StudyError(
+                f"{where}: field 'settings[{i}].profile': learning.axes has down; a study "
+                "learns north and east (its plants are horizontal)"
+            )
         settings.append(
             StudySetting(
                 name=spec.name,

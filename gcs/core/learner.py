@@ -297,9 +297,7 @@ class Learner:
         if cached is not None and cached.model is model:
             return cached
         s = self.settings
-        limits = axis_limits(
-            s.arena, self._start[axis], s.axes[axis], s.max_step_m, s.max_deviation_m
-        )
+        limits = axis_limits(s.arena, self._start[axis], s.axes[axis], *s.limits_of(s.axes[axis]))
         update = InputUpdate(model, self._yd[:, axis], s.weights, limits)
         self._updates[axis] = update
         return update

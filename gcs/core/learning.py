@@ -103,6 +103,9 @@ class LearnerSettings:
     axes : tuple of int
         The local NED axis of each model (0 north, 1 east, 2 down): which of the arena's
         bounds limit it. Default (0, 1): north and east.
+    max_vertical_step_m, max_vertical_deviation_m : float or None
+        The step and deviation bounds of the down axis (index 2) [m]; None: the horizontal
+        ones (``max_step_m``, ``max_deviation_m``).
     """
 
     models: tuple[DiscreteModel, ...]
@@ -114,6 +117,28 @@ class LearnerSettings:
     max_step_m: float | None = None
     max_deviation_m: float | None = None
     axes: tuple[int, ...] = (0, 1)
+    max_vertical_step_m: float | None = None
+    max_vertical_deviation_m: float | None = None
+
+    def limits_of(self, axis: int) -> tuple[float | None, float | None]:
+        """The (step, deviation) bounds of a local NED axis [m].
+
+        Parameters
+        ----------
+        axis : int
+            0 north, 1 east, 2 down.
+
+        Returns
+        -------
+        tuple of float or None
+        """
+        step, deviation = self.max_step_m, self.max_deviation_m
+        if axis == 2:
+            if self.max_vertical_step_m is not None:
+                step = self.max_vertical_step_m
+            if self.max_vertical_deviation_m is not None:
+                deviation = self.max_vertical_deviation_m
+        return step, deviation
 
     def __post_init__(self) -> None:
         if self.algorithm not in ("smoother", "kilc"):

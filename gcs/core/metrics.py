@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["IterationMetrics", "epos", "max_error", "iteration_table"]
+__all__ = ["IterationMetrics", "axis_rms", "epos", "epos_3d", "iteration_table", "max_error"]
 
 
 @dataclass(frozen=True)
@@ -25,6 +25,10 @@ class IterationMetrics:
         ``100 |e_pos,j - e_pos,j-1| / e_pos,j-1`` [%]; None for the first trial.
     max_err_m : float
         Largest horizontal error of the trial [m].
+    epos_3d_m : float or None
+        Average 3-D position error (:func:`epos_3d`) [m]; None where not computed.
+    rms_north_m, rms_east_m, rms_down_m : float or None
+        RMS error per axis (:func:`axis_rms`) [m]; None where not computed.
     """
 
     iteration: int
@@ -32,6 +36,10 @@ class IterationMetrics:
     epos_pct: float
     delta_pct: float | None
     max_err_m: float
+    epos_3d_m: float | None = None
+    rms_north_m: float | None = None
+    rms_east_m: float | None = None
+    rms_down_m: float | None = None
 
 
 def _horizontal_errors(ref_ne_m: np.ndarray, pos_ne_m: np.ndarray) -> np.ndarray:
@@ -75,6 +83,53 @@ def max_error(ref_ne_m: np.ndarray, pos_ne_m: np.ndarray) -> float:
     float
     """
     return float(np.max(_horizontal_errors(ref_ne_m, pos_ne_m)))
+
+
+def _ned_pair(ref_ned_m: np.ndarray, pos_ned_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    ref = np.asarray(ref_ned_m, dtype=float)
+    pos = np.asarray(pos_ned_m, dtype=float)
+    if ref.shape != pos.shape or ref.ndim != 2 or ref.shape[1] != 3:
+        raise ValueError(f"expected two (N, 3) arrays, got {ref.shape} and {pos.shape}")
+    return ref, pos
+
+
+def epos_3d(ref_ned_m: np.ndarray, pos_ned_m: np.ndarray) -> float:
+    """Average 3-D position error: eq. (10) with the down error under the root.
+
+    Parameters
+    ----------
+    ref_ned_m : ndarray, shape (N, 3)
+        Desired positions, k = 1..N, local NED [m].
+    pos_ned_m : ndarray, shape (N, 3)
+        Measured positions [m].
+
+    Returns
+    -------
+    float
+        ``(1/N) sum_k |p_m(k) - p_d(k)|`` (Euclidean norm over north, east, down) [m].
+    """
+    ref, pos = _ned_pair(ref_ned_m, pos_ned_m)
+    return float(np.mean(np.linalg.norm(pos - ref, axis=1)))
+
+
+def axis_rms(ref_ned_m: np.ndarray, pos_ned_m: np.ndarray) -> tuple[float, float, float]:
+    """RMS position error per axis.
+
+    Parameters
+    ----------
+    ref_ned_m : ndarray, shape (N, 3)
+        Desired positions, k = 1..N, local NED [m].
+    pos_ned_m : ndarray, shape (N, 3)
+        Measured positions [m].
+
+    Returns
+    -------
+    tuple of float
+        ``sqrt((1/N) sum_k (p_m(k) - p_d(k))^2)`` for north, east and down [m].
+    """
+    ref, pos = _ned_pair(ref_ned_m, pos_ned_m)
+    rms = np.sqrt(np.mean((pos - ref) ** 2, axis=0))
+    return float(rms[0]), float(rms[1]), float(rms[2])
 
 
 def iteration_table(

@@ -433,14 +433,15 @@ def check_setpoints(
     arena: Box,
     max_step_m: float | None = None,
     max_deviation_m: float | None = None,
-    relative_degrees: tuple[int, int] = (1, 1),
+    relative_degrees: tuple[int, ...] = (1, 1),
     tol_m: float = 1e-6,
+    vertical: tuple[float | None, float | None] | None = None,
 ) -> None:
     """Refuse a learned setpoint sequence that breaks a limit the learning keeps, on its grid.
 
     The input update keeps these limits as constraints of its QP; this checks the numbers that
     will be flown, independently of the solver: finite values, inside the arena, the step
-    ``|u(k) - u(k-1)|`` per horizontal axis with ``u(-1)`` the reference's start (the hover
+    ``|u(k) - u(k-1)|`` per learned axis with ``u(-1)`` the reference's start (the hover
     point before the trial), and the deviation ``|u(k) - yd(k + r)|`` from the reference
     aligned by each axis's relative degree ``r`` (the tail held at the last reference sample).
 
@@ -453,13 +454,19 @@ def check_setpoints(
     arena : Box
         Flight volume [m].
     max_step_m : float or None
-        Bound on the step per sample and axis [m]; None: not checked.
+        Bound on the step per sample and horizontal axis [m]; None: not checked.
     max_deviation_m : float or None
-        Bound on the deviation from the aligned reference per axis [m]; None: not checked.
+        Bound on the deviation from the aligned reference per horizontal axis [m]; None: not
+        checked.
     relative_degrees : tuple of int
-        Relative degree of the north and east models (``>= 1``).
+        Relative degree of the north and east models (``>= 1``), and of the down model when
+        down is learned (three entries).
     tol_m : float
         Tolerance of every bound [m] (the solver's constraints hold to about 1e-9 m).
+    vertical : tuple of (float or None), optional
+        ``(max_step_m, max_deviation_m)`` of the down axis when it is learned (then
+        ``relative_degrees`` has three entries); None: down is not learned (flown as the
+        reference, inside the arena).
 
     Raises
     ------
@@ -473,28 +480,31 @@ def check_setpoints(
         raise TrajectoryError(
             f"setpoint k = {k} {np.round(sp[k], 3).tolist()} is outside the arena {arena}"
         )
+    checks = [(a, name, max_step_m, max_deviation_m, "") for a, name in ((0, "north"), (1, "east"))]
+    if vertical is not None:
+        checks.append((2, "down", vertical[0], vertical[1], "vertical_"))
     yd = ref.pos_ned_m
-    for axis, name in ((0, "north"), (1, "east")):
+    for axis, name, step_m, deviation_m, prefix in checks:
         u = sp[:, axis]
-        if max_step_m is not None:
+        if step_m is not None:
             step = np.abs(np.diff(np.concatenate([[yd[0, axis]], u])))
-            over = np.flatnonzero(step > max_step_m + tol_m)
+            over = np.flatnonzero(step > step_m + tol_m)
             if over.size:
                 k = int(over[0])
                 raise TrajectoryError(
                     f"setpoint k = {k} steps {step[k]:.3f} m on {name} "
-                    f"(limit max_step_m = {max_step_m:g} m)"
+                    f"(limit max_{prefix}step_m = {step_m:g} m)"
                 )
-        if max_deviation_m is not None:
+        if deviation_m is not None:
             r = int(relative_degrees[axis])
             aligned = np.concatenate([yd[r:, axis], np.full(r - 1, yd[-1, axis])])
             dev = np.abs(u - aligned)
-            over = np.flatnonzero(dev > max_deviation_m + tol_m)
+            over = np.flatnonzero(dev > deviation_m + tol_m)
             if over.size:
                 k = int(over[0])
                 raise TrajectoryError(
                     f"setpoint k = {k} is {dev[k]:.3f} m from the reference on {name} "
-                    f"(limit max_deviation_m = {max_deviation_m:g} m)"
+                    f"(limit max_{prefix}deviation_m = {deviation_m:g} m)"
                 )
 
 

@@ -13,9 +13,16 @@ from typing import Protocol
 
 import numpy as np
 
-from gcs.core.metrics import epos, max_error
+from gcs.core.metrics import axis_rms, epos, epos_3d, max_error
 
-__all__ = ["iteration_of", "repeat_of", "setpoint_deviation", "trial_errors", "GridTrial"]
+__all__ = [
+    "iteration_of",
+    "repeat_of",
+    "setpoint_deviation",
+    "trial_errors",
+    "trial_errors_3d",
+    "GridTrial",
+]
 
 
 class GridTrial(Protocol):
@@ -85,6 +92,24 @@ def setpoint_deviation(sp_ned_m: np.ndarray, ref_ned_m: np.ndarray) -> tuple[flo
     """
     dev = np.hypot(*(np.asarray(sp_ned_m)[:, :2] - np.asarray(ref_ned_m)[:-1, :2]).T)
     return float(np.sqrt(np.mean(dev**2))), float(np.max(dev))
+
+
+def trial_errors_3d(record: GridTrial) -> tuple[float, float, float, float]:
+    """The 3-D e_pos and the RMS error per axis of a trial, over k = 1..N [m].
+
+    Parameters
+    ----------
+    record : GridTrial
+        A complete trial: its ``ref_ned_m`` and ``pos_ned_m``, shape (N+1, 3) [m].
+
+    Returns
+    -------
+    tuple of float
+        ``(epos_3d, rms_north, rms_east, rms_down)`` (:func:`gcs.core.metrics.epos_3d`,
+        :func:`gcs.core.metrics.axis_rms`).
+    """
+    ref, pos = record.ref_ned_m[1:], record.pos_ned_m[1:]
+    return (epos_3d(ref, pos), *axis_rms(ref, pos))
 
 
 def trial_errors(record: GridTrial) -> tuple[float, float]:

@@ -57,6 +57,8 @@ __all__ = [
 ]
 
 ALGORITHMS = ("smoother", "kilc")
+#: The axis sets ``learning.axes`` may name: the paper's horizontal pair, or all three.
+LEARNED_AXES = {("north", "east"): (0, 1), ("north", "east", "down"): (0, 1, 2)}
 #: Most repeats of trial 0 a profile may ask for (each is a flight: a battery's worth is a few).
 MAX_REPEATS = 5
 #: ``vehicle.max_vertical_speed_m_s`` when a profile leaves it out [m/s]: PX4's take-off speed
@@ -194,6 +196,13 @@ class LearningConfig:
         Bound on the change of a setpoint from one sample to the next [m].
     max_deviation_m : float or None
         Bound on the distance of a setpoint from the reference [m].
+    max_vertical_step_m, max_vertical_deviation_m : float or None
+        The same bounds on the down axis when it is learned (``learning.limits``; absent:
+        the horizontal ones) [m].
+    axes : tuple of int
+        Learned local NED axes (``learning.axes``): (0, 1) north and east (default, the
+        paper's), or (0, 1, 2) with down (the profile then needs ``model_z``). Axes not
+        learned are flown as the reference.
     adaptive : AdaptiveSettings
         Options beyond the paper (``learning.adaptive``); the default is the paper's method.
     history : bool
@@ -216,6 +225,9 @@ class LearningConfig:
     max_deviation_m: float | None = None
     adaptive: AdaptiveSettings = field(default_factory=AdaptiveSettings)
     history: bool = False
+    max_vertical_step_m: float | None = None
+    max_vertical_deviation_m: float | None = None
+    axes: tuple[int, ...] = (0, 1)
     repeats: int = 0
 
 
@@ -231,6 +243,9 @@ class Profile:
         ILC sample time [s].
     model_x, model_y : DiscreteModel
         Closed-loop models north setpoint -> north position and east -> east.
+    model_z : DiscreteModel or None
+        Closed-loop model down setpoint -> down position (``model_z``; PX4's vertical loop
+        differs from the horizontal one); required when ``learning.axes`` has down.
     learning : LearningConfig
         Learning settings.
     max_speed_m_s, max_accel_m_s2 : float
@@ -273,10 +288,16 @@ class Profile:
     max_vertical_accel_m_s2: float = DEFAULT_MAX_VERTICAL_ACCEL_M_S2
     max_jerk_m_s3: float | None = None
     max_vertical_jerk_m_s3: float | None = None
+    model_z: DiscreteModel | None = None
 
     def models(self) -> tuple[DiscreteModel, DiscreteModel]:
         """The (north, east) models."""
         return self.model_x, self.model_y
+
+    def learned_models(self) -> tuple[DiscreteModel, ...]:
+        """The model of every learned axis, in the order of ``learning.axes``."""
+        by_axis = (self.model_x, self.model_y, self.model_z)
+        return tuple(by_axis[a] for a in self.learning.axes)  # type: ignore[misc]
 
 
 def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
@@ -355,20 +376,46 @@ def _learning(f: _Fields) -> LearningConfig:
     repeats = adaptive.integer("repeats", 1 if history else 0)
     if not 0 <= repeats <= MAX_REPEATS:
         raise adaptive.fail("repeats", f"must be in [0, {MAX_REPEATS}], got {repeats}")
+    axes = _learned_axes(f)
+    if history and 2 in axes:
+        raise f.fail(
+            "axes", "down cannot be learned with learning.adaptive (defined on north and east)"
+        )
+    max_step_m = limits.optional_number("max_step_m")
+    max_deviation_m = limits.optional_number("max_deviation_m")
+    vertical = {}
+    for key, horizontal in (("step", max_step_m), ("deviation", max_deviation_m)):
+        value = limits.optional_number(f"max_vertical_{key}_m")
+        if value is not None and value <= 0:
+            raise limits.fail(f"max_vertical_{key}_m", f"must be > 0, got {value:g}")
+        vertical[key] = horizontal if value is None else value
     config = LearningConfig(
         algorithm=f.string("algorithm", "smoother", ALGORITHMS),
         weights=weights,
         smoother=settings["smoother"],
         kilc=settings["kilc"],
-        max_step_m=limits.optional_number("max_step_m"),
-        max_deviation_m=limits.optional_number("max_deviation_m"),
+        max_step_m=max_step_m,
+        max_deviation_m=max_deviation_m,
         adaptive=_adaptive(adaptive),
         history=history,
         repeats=repeats,
+        max_vertical_step_m=vertical["step"],
+        max_vertical_deviation_m=vertical["deviation"],
+        axes=axes,
     )
     limits.done()
     f.done()
     return config
+
+
+def _learned_axes(f: _Fields) -> tuple[int, ...]:
+    """``learning.axes``: [north, east] (default) or [north, east, down]."""
+    value = f.raw("axes", ["north", "east"])
+    ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
+    names = tuple(value) if ok else ()
+    if names not in LEARNED_AXES:
+        raise f.fail("axes", f"must be [north, east] or [north, east, down], got {value!r}")
+    return LEARNED_AXES[names]
 
 
 def _adaptive(f: _Fields) -> AdaptiveSettings:
@@ -424,15 +471,20 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
     t_ilc_s = f.number("t_ilc_s", positive=True)
     model_x = _model(f.sub("model"), t_ilc_s)
     model_y = _model(f.sub("model_y"), t_ilc_s) if f.has("model_y") else model_x
+    model_z = _model(f.sub("model_z"), t_ilc_s) if f.has("model_z") else None
     vehicle = f.sub("vehicle")
     arena = f.sub("arena")
     box = Box(_interval(arena, "north_m"), _interval(arena, "east_m"), _interval(arena, "down_m"))
+    learning = _learning(f.sub("learning", {}))
+    if 2 in learning.axes and model_z is None:
+        raise f.fail("model_z", "is required when learning.axes has down (the vertical loop)")
     profile = Profile(
         name=f.string("name"),
         t_ilc_s=t_ilc_s,
         model_x=model_x,
         model_y=model_y,
-        learning=_learning(f.sub("learning", {})),
+        learning=learning,
+        model_z=model_z,
         max_speed_m_s=vehicle.number("max_speed_m_s", positive=True),
         max_accel_m_s2=vehicle.number("max_accel_m_s2", positive=True),
         max_vertical_speed_m_s=vehicle.number(
@@ -690,6 +742,7 @@ def _identification(f: _Fields, t_ilc_s: float) -> IdentifySettings:
     d = IdentifySettings()
     excitation = f.string("excitation", d.excitation, EXCITATIONS)
     amplitude = f.number("amplitude_m", d.amplitude_m, positive=True)
+    vertical = f.number("vertical_amplitude_m", d.vertical_amplitude_m, positive=True)
     nyquist = 0.5 / t_ilc_s
     other = ("f_min_hz", "f_max_hz") if excitation == "prbs" else ("bandwidth_hz",)
     for key in other:
@@ -730,7 +783,7 @@ def _identification(f: _Fields, t_ilc_s: float) -> IdentifySettings:
     settings = IdentifySettings(
         excitation=excitation, amplitude_m=amplitude, bandwidth_hz=bandwidth, f_min_hz=f_min,
         f_max_hz=f_max, duration_s=duration, past=past, future=future, order=order,
-        max_delay=max_delay, seed=base_seed, center_ned_m=center,
+        max_delay=max_delay, seed=base_seed, center_ned_m=center, vertical_amplitude_m=vertical,
     )  # fmt: skip
     return settings
 

@@ -18,6 +18,7 @@ from gcs.io.atomic import write_once
 from gcs.io.config import profile_from_dict
 from gcs.io.records import (
     ESTIMATE_COLUMNS,
+    ESTIMATE_DOWN_COLUMNS,
     check_plausible,
     csv_text,
     is_number,
@@ -49,17 +50,19 @@ class LearnLog:
         ----------
         j : int
             Trial index the estimate was learned from.
-        d_hat_ne_m : ndarray, shape (N, 2)
+        d_hat_ne_m : ndarray, shape (N, 2) or (N, 3)
             Estimate of d(1..N), north and east, learning coordinates [m].
-        p_ne_m2 : ndarray, shape (N, 2)
+        p_ne_m2 : ndarray, shape (N, 2) or (N, 3)
             Its error variance [m^2] (K-ILC: the filter's scalar, repeated).
         """
         write_once(self._file("estimate", j, "csv"), self._estimate_text(d_hat_ne_m, p_ne_m2))
 
     def _estimate_text(self, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray) -> str:
         k = np.arange(1, self.n_samples + 1)
-        table = np.column_stack([k, k * self.t_ilc_s, d_hat_ne_m, p_ne_m2])
-        return csv_text(ESTIMATE_COLUMNS, table)
+        d, p = np.asarray(d_hat_ne_m), np.asarray(p_ne_m2)
+        table = np.column_stack([k, k * self.t_ilc_s, d[:, :2], p[:, :2], d[:, 2:], p[:, 2:]])
+        columns = ESTIMATE_COLUMNS + (ESTIMATE_DOWN_COLUMNS if d.shape[1] == 3 else ())
+        return csv_text(columns, table)
 
     def write_learned(
         self, j: int, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray, sp_ned_m: np.ndarray
@@ -74,7 +77,7 @@ class LearnLog:
         ----------
         j : int
             Trial learned from.
-        d_hat_ne_m, p_ne_m2 : ndarray, shape (N, 2)
+        d_hat_ne_m, p_ne_m2 : ndarray, shape (N, 2) or (N, 3)
             As :meth:`write_estimate`.
         sp_ned_m : ndarray, shape (N, 3)
             Setpoints of trial j+1, as :meth:`write_setpoints`.
@@ -135,7 +138,7 @@ class LearnLog:
         ----------
         j : int
             The newest trial learned from.
-        d_hat_ne_m, p_ne_m2 : ndarray, shape (N, 2)
+        d_hat_ne_m, p_ne_m2 : ndarray, shape (N, 2) or (N, 3)
             As :meth:`write_estimate`.
         record : dict
             The decision record (JSON-ready; NaN becomes null); its ``trial`` must be ``j``.
@@ -275,7 +278,8 @@ class LearnLog:
         return data
 
     def read_estimate(self, j: int) -> tuple[np.ndarray, np.ndarray]:
-        """The estimate learned from trial j: ``(d_hat (N, 2) [m], p (N, 2) [m^2])``.
+        """The estimate learned from trial j: ``(d_hat (N, n) [m], p (N, n) [m^2])``, n = 2
+        (north, east) or 3 when down was learned.
 
         Parameters
         ----------
@@ -289,11 +293,14 @@ class LearnLog:
         path = self._file("estimate", j, "csv")
         if not path.exists():
             raise RunLogError(f"{path}: no estimate for trial {j} (run 'gcs learn' on it)")
-        table = read_csv(path, ESTIMATE_COLUMNS)
+        table = read_csv(path, ESTIMATE_COLUMNS, ESTIMATE_DOWN_COLUMNS)
         if table.shape[0] != self.n_samples or not np.all(np.isfinite(table)):
             raise RunLogError(f"{path}: expected {self.n_samples} finite rows")
-        check_plausible(path, table[:, 2:6], ESTIMATE_COLUMNS[2:6])
-        return table[:, 2:4], table[:, 4:6]
+        columns = (ESTIMATE_COLUMNS + ESTIMATE_DOWN_COLUMNS)[2 : table.shape[1]]
+        check_plausible(path, table[:, 2:], columns)
+        if table.shape[1] == len(ESTIMATE_COLUMNS):
+            return table[:, 2:4], table[:, 4:6]
+        return table[:, [2, 3, 6]], table[:, [4, 5, 7]]
 
 
 def _check_learn_record(path: Path, j: int, data: Any) -> dict[str, Any]:

@@ -40,6 +40,7 @@ __all__ = [
     "SETPOINT_COLUMNS",
     "REFERENCE_COLUMNS",
     "ESTIMATE_COLUMNS",
+    "ESTIMATE_DOWN_COLUMNS",
 ]
 
 TRIAL_COLUMNS = (
@@ -56,6 +57,8 @@ MEASUREMENTS = ("mocap", "estimate")
 SETPOINT_COLUMNS = ("k", "t_s", "sp_north_m", "sp_east_m", "sp_down_m")
 REFERENCE_COLUMNS = ("k", "t_s", "ref_north_m", "ref_east_m", "ref_down_m")
 ESTIMATE_COLUMNS = ("k", "t_s", "d_north_m", "d_east_m", "p_north_m2", "p_east_m2")
+ESTIMATE_DOWN_COLUMNS = ("d_down_m", "p_down_m2")
+"""Last columns of an estimate file when down is learned (absent otherwise)."""
 
 
 @dataclass(frozen=True)

@@ -49,8 +49,8 @@ __all__ = [
     "MESSAGES",
 ]
 
-#: Horizontal axes: name -> column in the NED arrays.
-AXES = {"x": 0, "y": 1}
+#: Identifiable axes: name -> column in the NED arrays (x north, y east, z down).
+AXES = {"x": 0, "y": 1, "z": 2}
 #: Excitations of ``identification.excitation``.
 EXCITATIONS = ("prbs", "multisine")
 
@@ -264,7 +264,11 @@ class IdentifySettings:
     excitation : str
         ``"prbs"`` [default] or ``"multisine"``.
     amplitude_m : float
-        Excitation level per axis [m] [0.3]: the PRBS level, or the multisine's peak.
+        Excitation level per horizontal axis [m] [0.3]: the PRBS level, or the multisine's
+        peak.
+    vertical_amplitude_m : float
+        The same for z (down) [m] [0.3]: the vertical loop has its own range (the floor, the
+        sink-rate limit), so it is not the horizontal amplitude.
     bandwidth_hz : float or None
         PRBS band [Hz] [1.0] (clock ``2.5 x bandwidth``); PRBS only.
     f_min_hz, f_max_hz : float or None
@@ -279,7 +283,7 @@ class IdentifySettings:
         Longest input delay searched [samples] [10].
     seed : int
         Base seed of the excitation [1]: experiment e, axis a (x = 0, y = 1) uses
-        ``seed + 2 e + a``.
+        ``seed + 2 e + a``; z uses ``seed + 4 + e`` (seeds of its own, none of x's or y's).
     center_ned_m : tuple of float
         Hover point the excitation is added to, local NED [m] [(0, 0, -1.5)].
     """
@@ -296,6 +300,7 @@ class IdentifySettings:
     max_delay: int = 10
     seed: int = 1
     center_ned_m: tuple[float, float, float] = (0.0, 0.0, -1.5)
+    vertical_amplitude_m: float = 0.3
 
     def n_samples(self, t_ilc_s: float) -> int:
         """Setpoints per experiment, ``round(duration_s / t_ilc_s)``.
@@ -319,13 +324,30 @@ class IdentifySettings:
         experiment : int
             0 (fitting) or 1 (validation).
         axis : str
-            ``"x"`` or ``"y"``.
+            ``"x"``, ``"y"`` or ``"z"``.
 
         Returns
         -------
         int
         """
+        if axis == "z":  # after x's and y's four seeds: x and y stay as they were
+            return self.seed + 4 + experiment
         return self.seed + 2 * experiment + AXES[axis]
+
+    def amplitude_for(self, axis: str) -> float:
+        """Excitation level of one axis [m]: ``vertical_amplitude_m`` for z, else
+        ``amplitude_m``.
+
+        Parameters
+        ----------
+        axis : str
+            ``"x"``, ``"y"`` or ``"z"``.
+
+        Returns
+        -------
+        float
+        """
+        return self.vertical_amplitude_m if axis == "z" else self.amplitude_m
 
 
 MESSAGES = ("vision_position_estimate", "odometry")
