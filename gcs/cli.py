@@ -114,6 +114,8 @@ NAMED = "A packaged name ({names}; found from any directory) or a path to a YAML
 
 #: The panels of every command's options in --help.
 VEHICLE, LEARNING, OUTPUT, SAFETY = "Vehicle", "Learning", "Output", "Safety"
+#: The panel of a simulation study's size and seed (gcs montecarlo).
+STUDY = "Study"
 
 
 def _names(kind: str, prefix: str = "") -> str:
@@ -686,33 +688,52 @@ def identify(
 @one_line_errors
 def montecarlo(
     levels: Annotated[
-        str, typer.Option(help="Uncertainty levels (std of wn and zeta, fraction of nominal).")
+        str,
+        typer.Option(
+            help="Uncertainty levels (std of wn and zeta, fraction of nominal).",
+            rich_help_panel=STUDY,
+        ),
     ] = "0.05,0.1,0.2,0.4",
-    plants: Annotated[int, typer.Option(min=2, help="Plants per level.")] = 100,
-    repeats: Annotated[int, typer.Option(min=1, help="Noise realisations per plant.")] = 10,
+    plants: Annotated[
+        int, typer.Option(min=2, help="Plants per level.", rich_help_panel=STUDY)
+    ] = 100,
+    repeats: Annotated[
+        int, typer.Option(min=1, help="Noise realisations per plant.", rich_help_panel=STUDY)
+    ] = 10,
     iterations: Annotated[
         int,
         typer.Option(
             min=30,
             help="Learning iterations; at least 30: the steady state is the mean of trials "
             "20 to 30 (the paper's footnote 4).",
+            rich_help_panel=STUDY,
         ),
     ] = 30,
-    samples: Annotated[int, typer.Option(min=10, help="Samples per trial (t_ilc 0.01 s).")] = 200,
-    seed: Annotated[int, typer.Option(help="Seed of plants and noise.")] = 20240601,
+    samples: Annotated[
+        int, typer.Option(min=10, help="Samples per trial (t_ilc 0.01 s).", rich_help_panel=STUDY)
+    ] = 200,
+    seed: Annotated[
+        int, typer.Option(help="Seed of plants and noise.", rich_help_panel=STUDY)
+    ] = 20240601,
     keep_diverged: Annotated[
         bool,
-        typer.Option(help="Keep plants whose learning diverged in the statistics."),
+        typer.Option(
+            help="Keep plants whose learning diverged in the statistics.", rich_help_panel=LEARNING
+        ),
     ] = False,
     json_path: Annotated[
-        Path | None, typer.Option("--json", help="Also write the rows to this JSON file.")
+        Path | None,
+        typer.Option(
+            "--json", help="Also write the rows to this JSON file.", rich_help_panel=OUTPUT
+        ),
     ] = None,
     adaptive: Annotated[
         bool,
         typer.Option(
             help="Also learn on the same plants and noise with the options beyond the paper "
             "(noise model from the data, model refresh; docs/learning-floor.md) and compare "
-            "the mean error of trials 2-5 and the diverged plants. Takes minutes, not seconds."
+            "the mean error of trials 2-5 and the diverged plants. Takes minutes, not seconds.",
+            rich_help_panel=LEARNING,
         ),
     ] = False,
     workers: WorkersOption = None,

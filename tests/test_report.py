@@ -421,3 +421,15 @@ def test_xy_marks_the_start_and_the_direction_and_d_has_its_2_sigma_band(tmp_pat
     top = band.get_paths()[0].vertices[:, 1].max()
     assert top == pytest.approx(float(np.max(d[:, 0] + 2 * np.sqrt(p[:, 0]))))
     plt.close("all")
+
+
+def test_figures_written_off_a_terminal_say_their_progress_in_plain_lines(tmp_path: Path) -> None:
+    run = make_run(tmp_path, trials=2)
+    result = invoke("report", run.path, "--plot", tmp_path / "p")
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.output.splitlines() if line.startswith("report: figures:")]
+    wrote = [line for line in result.output.splitlines() if line.startswith("wrote ")]
+    # the first figure at once and the last at the end, each "done/total" of the figures written
+    assert lines[0].startswith(f"report: figures: 1/{len(wrote)} figures")
+    assert lines[-1].startswith(f"report: figures: {len(wrote)}/{len(wrote)} figures")
+    assert "\x1b" not in result.output

@@ -6,6 +6,7 @@ gcs version).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -322,7 +323,9 @@ def _trial_name(t: TrialLearning) -> str:
     return f"trial {t.trial}, j = {t.iteration}" + (" (repeat)" if t.repeat_of is not None else "")
 
 
-def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
+def report_figures(
+    run: RunDir, iterations: list[int], progress: Callable[[int, int], None] | None = None
+) -> dict[str, Any]:
     """The report's figures, by name (matplotlib figures; the caller saves and closes them).
 
     ``xy``: horizontal path per iteration over the reference (paper Fig. 4), its start and
@@ -344,6 +347,8 @@ def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
         The run directory (trial 0 complete; see :func:`run_metrics`).
     iterations : list of int
         Complete trials to draw (:func:`choose_iterations`).
+    progress : callable, optional
+        Told ``(done, total)`` figures as they are drawn (:func:`gcs.app.progress.track`).
 
     Returns
     -------
@@ -366,23 +371,33 @@ def report_figures(run: RunDir, iterations: list[int]) -> dict[str, Any]:
     if learning is not None and learning.history:
         names = {j: _trial_name(learning.trials[j]) for j in iterations}
     label = run_label(run_facts(run))
-    figures = {
-        "xy": _fig_xy(plt, ref, records, iterations, names, label),
-        "position": _fig_position(plt, ref, records, iterations, names, label),
-        "setpoints": _fig_setpoints(plt, run, ref, records, iterations, names, label),
-        "error": _fig_error(plt, ref, records, iterations, names, label),
-        "epos": _fig_epos(plt, rows, run.algorithm, label, learning),
+    draw: dict[str, Callable[[], Any]] = {
+        "xy": lambda: _fig_xy(plt, ref, records, iterations, names, label),
+        "position": lambda: _fig_position(plt, ref, records, iterations, names, label),
+        "setpoints": lambda: _fig_setpoints(plt, run, ref, records, iterations, names, label),
+        "error": lambda: _fig_error(plt, ref, records, iterations, names, label),
+        "epos": lambda: _fig_epos(plt, rows, run.algorithm, label, learning),
+        "disturbance": lambda: _fig_disturbance(plt, run, iterations, label),
     }
-    disturbance = _fig_disturbance(plt, run, iterations, label)
-    if disturbance is not None:
-        figures["disturbance"] = disturbance
     if run.kind == "learning" and is_three_d(run):
-        figures["altitude"] = _fig_altitude(plt, ref, records, iterations, names, label)
-        figures["views"] = _fig_views(plt, ref, records, iterations, names, label)
+        draw["altitude"] = lambda: _fig_altitude(plt, ref, records, iterations, names, label)
+        draw["views"] = lambda: _fig_views(plt, ref, records, iterations, names, label)
+    figures = {}
+    for done, (name, figure) in enumerate(draw.items(), start=1):
+        fig = figure()
+        if fig is not None:  # no disturbance figure where no estimate exists
+            figures[name] = fig
+        if progress is not None:
+            progress(done, len(draw))
     return figures
 
 
-def write_plots(run: RunDir, out_dir: Path, iterations: list[int] | None = None) -> list[Path]:
+def write_plots(
+    run: RunDir,
+    out_dir: Path,
+    iterations: list[int] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[Path]:
     """Write the report's figures as PNG files ``<name>.png`` (see :func:`report_figures`).
 
     Parameters
@@ -393,13 +408,15 @@ def write_plots(run: RunDir, out_dir: Path, iterations: list[int] | None = None)
         Where to write (created if missing).
     iterations : list of int, optional
         Trials to draw (default: 0, 1, 2 and the last).
+    progress : callable, optional
+        Told ``(done, total)`` figures as they are drawn.
 
     Returns
     -------
     list of Path
     """
     chosen = choose_iterations(run, iterations)
-    figures = report_figures(run, chosen)
+    figures = report_figures(run, chosen, progress)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     return [save_figure(fig, out_dir / f"{name}.png") for name, fig in figures.items()]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import html
+from collections.abc import Callable
 from pathlib import Path
 
 from gcs.app.figures import figure_png
@@ -32,7 +33,12 @@ _CSS = (
 )
 
 
-def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> Path:
+def write_html(
+    run: RunDir,
+    path: Path,
+    iterations: list[int] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Path:
     """Write one self-contained HTML report: run facts, the table, notes and every figure.
 
     The figures are embedded as base64 PNG; the file refers to nothing outside itself and
@@ -46,6 +52,8 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
         The HTML file (written atomically; its directory created if missing).
     iterations : list of int, optional
         Trials to draw (default: 0, 1, 2 and the last).
+    progress : callable, optional
+        Told ``(done, total)`` figures as they are drawn.
 
     Returns
     -------
@@ -56,7 +64,7 @@ def write_html(run: RunDir, path: Path, iterations: list[int] | None = None) -> 
     if all(rate is None for rate in rates.values()):
         rates = None
     chosen = choose_iterations(run, iterations)
-    figures = {name: figure_png(fig) for name, fig in report_figures(run, chosen).items()}
+    figures = {name: figure_png(fig) for name, fig in report_figures(run, chosen, progress).items()}
     run_info = run_facts(run)
     e = html.escape
     facts = [

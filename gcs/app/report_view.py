@@ -13,6 +13,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.markup import escape
 
+from gcs.app.progress import track
 from gcs.app.report import (
     choose_iterations,
     is_three_d,
@@ -82,7 +83,11 @@ def show_report(
         for line in report_notes(run, entries, learning) + mocap_lines(run):
             console.print(escape(line), highlight=False)
     if plot is not None:
-        for path in write_plots(run, plot, chosen):
+        with track(err_console, "report: figures", "figures") as progress:
+            paths = write_plots(run, plot, chosen, progress)
+        for path in paths:
             err_console.print(f"wrote {path}")
     if html is not None:
-        err_console.print(f"wrote {write_html(run, html, chosen)}")
+        with track(err_console, "report: HTML figures", "figures") as progress:
+            written = write_html(run, html, chosen, progress)
+        err_console.print(f"wrote {written}")
