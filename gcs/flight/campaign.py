@@ -50,6 +50,7 @@ from gcs.flight.fence import Fence
 from gcs.flight.geofence import GeofenceState, install_geofence
 from gcs.flight.hover import HoverStats, HoverVerdict, hover_stats, judge_hover, widened
 from gcs.flight.interrupts import run_guarded
+from gcs.flight.link import TelemetrySample, sample_arrays
 from gcs.flight.mocap.checks import (
     move_direction_problem,
     move_length,
@@ -68,7 +69,7 @@ from gcs.flight.preflight import (
     navigation_source,
 )
 from gcs.flight.trial import TrialRecording, TrialRun
-from gcs.flight.vehicle import TelemetrySample, Vehicle, sample_arrays
+from gcs.flight.vehicle import Vehicle
 from gcs.io.settings import FlightSettings
 
 __all__ = [
