@@ -72,6 +72,7 @@ __all__ = [
     "HoverRecord",
     "FlightSession",
     "CampaignEvent",
+    "CampaignPlan",
     "fly_campaign",
     "run_campaign",
     "check_battery",
@@ -314,39 +315,52 @@ CampaignEvent = Status | TrialStarted | TrialProgress | TrialFinished
 EventCallback = Callable[[CampaignEvent], None]
 
 
-async def fly_campaign(
-    url: str,
-    source: TrialSource,
-    iterations: int,
-    first_trial: int,
-    settings: FlightSettings,
-    t_ilc_s: float,
-    on_event: EventCallback | None = None,
-    *,
-    fence: Fence,
-    mocap: MocapLink | None = None,
-) -> None:
-    """Fly ``iterations`` trials ``first_trial, first_trial + 1, ...`` and land.
+@dataclass(frozen=True)
+class CampaignPlan:
+    """What a campaign flies: which vehicle, which trials, on which grid, inside which arena.
 
     Parameters
     ----------
     url : str
         MAVSDK connection URL of the vehicle.
-    source : TrialSource
-        Supplies each trial's setpoints and takes each recording (called in worker threads).
-    iterations : int
-        Number of trials to fly, >= 1.
     first_trial : int
         Index ``j`` of the first trial (to resume a run).
-    settings : FlightSettings
-        Flight settings; ``stream_rate_hz`` must be an integer multiple of ``1 / t_ilc_s``.
+    iterations : int
+        Number of trials to fly, >= 1.
     t_ilc_s : float
         ILC sample time [s].
+    settings : FlightSettings
+        Flight settings; ``stream_rate_hz`` must be an integer multiple of ``1 / t_ilc_s``.
+    fence : Fence
+        The arena every setpoint must lie in and the limits watched while armed.
+    """
+
+    url: str
+    first_trial: int
+    iterations: int
+    t_ilc_s: float
+    settings: FlightSettings
+    fence: Fence
+
+
+async def fly_campaign(
+    plan: CampaignPlan,
+    source: TrialSource,
+    on_event: EventCallback | None = None,
+    *,
+    mocap: MocapLink | None = None,
+) -> None:
+    """Fly ``plan.iterations`` trials ``plan.first_trial, plan.first_trial + 1, ...`` and land.
+
+    Parameters
+    ----------
+    plan : CampaignPlan
+        The vehicle, the trials, the grid and the arena.
+    source : TrialSource
+        Supplies each trial's setpoints and takes each recording (called in worker threads).
     on_event : callable, optional
         Receives :class:`Status`, :class:`TrialStarted`, :class:`TrialProgress` and
         :class:`TrialFinished` events on the event loop; must return quickly.
-    fence : Fence
-        The arena every setpoint must lie in and the limits watched while armed.
     mocap : MocapLink or None
         A started motion-capture link: forwarded to the vehicle from connection on (if its
         settings say so), checked before arming (EKF2 settings, body tracked, pose agreement)
@@ -365,16 +379,16 @@ async def fly_campaign(
     asyncio.CancelledError
         Cancelled (Ctrl-C); the vehicle was landed first.
     """
-    if iterations < 1:
-        raise ValueError(f"iterations must be >= 1, got {iterations}")
-    settings.sends_per_sample(t_ilc_s)  # fail before connecting
-    flight = _Campaign(source, settings, t_ilc_s, on_event, fence, mocap, j=first_trial)
-    flight.emit(Status(f"connecting to {url}"))
-    await flight.vehicle.connect(url)
+    if plan.iterations < 1:
+        raise ValueError(f"iterations must be >= 1, got {plan.iterations}")
+    plan.settings.sends_per_sample(plan.t_ilc_s)  # fail before connecting
+    flight = _Campaign(plan, source, on_event, mocap)
+    flight.emit(Status(f"connecting to {plan.url}"))
+    await flight.vehicle.connect(plan.url)
     try:
-        hover, setpoints = await flight.preflight(url)
+        hover, setpoints = await flight.preflight()
         await flight.take_off(hover)
-        await flight.fly_trials(iterations, hover, setpoints)
+        await flight.fly_trials(hover, setpoints)
         await flight.land()
     except BaseException as exc:
         named = await flight.stop(exc)
@@ -392,18 +406,15 @@ class _Campaign:
 
     def __init__(
         self,
+        plan: CampaignPlan,
         source: TrialSource,
-        settings: FlightSettings,
-        t_ilc_s: float,
         on_event: EventCallback | None,
-        fence: Fence,
         mocap: MocapLink | None,
-        j: int,
     ) -> None:
-        self.source, self.settings, self.t_ilc_s = source, settings, t_ilc_s
-        self.on_event, self.fence, self.mocap = on_event, fence, mocap
-        self.vehicle = Vehicle(settings, fence)
-        self.first_trial = self.j = j  # the trial in hand
+        self.plan, self.source, self.on_event, self.mocap = plan, source, on_event, mocap
+        self.settings, self.t_ilc_s, self.fence = plan.settings, plan.t_ilc_s, plan.fence
+        self.vehicle = Vehicle(plan.settings, plan.fence)
+        self.j = plan.first_trial  # the trial in hand
         self.run: TrialRun | None = None  # the trial in flight
         self.session: FlightSession | None = None
         self.mocap_report: dict | None = None
@@ -422,7 +433,7 @@ class _Campaign:
         self.session = session
         await self.vehicle.hover_while(asyncio.to_thread(self.source.record_session, session), what)
 
-    async def preflight(self, url: str) -> tuple[np.ndarray, np.ndarray]:
+    async def preflight(self) -> tuple[np.ndarray, np.ndarray]:
         """Read the vehicle, wait for it, install the fence; the first trial's plan."""
         vehicle, mocap, emit = self.vehicle, self.mocap, self.emit
         hover, setpoints = await asyncio.to_thread(_plan, self.source, self.j, self.fence)
@@ -442,7 +453,7 @@ class _Campaign:
         emit(Status(self.fence.describe()))
         geofence = await install_geofence(vehicle, self.fence)
         emit(Status(geofence.text(self.fence.margin_m), warning=not geofence.ok))
-        self.session = FlightSession(url, self.first_trial, navigation, fence=self.fence,
+        self.session = FlightSession(self.plan.url, self.j, navigation, fence=self.fence,
                                      geofence=geofence, mocap=self.mocap_report)  # fmt: skip
         await asyncio.to_thread(self.source.record_session, self.session)
         return hover, setpoints
@@ -463,9 +474,9 @@ class _Campaign:
             session = replace(self.session, mocap=self.mocap_report)
             await self.record_session(session, "recording the mocap checks")
 
-    async def fly_trials(self, iterations: int, hover: np.ndarray, setpoints: np.ndarray) -> None:
+    async def fly_trials(self, hover: np.ndarray, setpoints: np.ndarray) -> None:
         """Trial after trial: to its start point, settled, flown, recorded (and planned)."""
-        first = self.first_trial
+        first, iterations = self.plan.first_trial, self.plan.iterations
         for number, j in enumerate(range(first, first + iterations), start=1):
             self.j = j
             if number > 1:
@@ -584,15 +595,10 @@ class _Campaign:
 
 
 def run_campaign(
-    url: str,
+    plan: CampaignPlan,
     source: TrialSource,
-    iterations: int,
-    first_trial: int,
-    settings: FlightSettings,
-    t_ilc_s: float,
     on_event: EventCallback | None = None,
     *,
-    fence: Fence,
     mocap: MocapLink | None = None,
 ) -> None:
     """Fly a campaign from synchronous code: :func:`fly_campaign` under :func:`run_guarded`.
@@ -603,22 +609,12 @@ def run_campaign(
 
     Parameters
     ----------
-    url : str
-        MAVSDK connection URL of the vehicle.
+    plan : CampaignPlan
+        The vehicle, the trials, the grid and the arena.
     source : TrialSource
         Supplies each trial's setpoints and takes each recording.
-    iterations : int
-        Number of trials to fly, >= 1.
-    first_trial : int
-        Index ``j`` of the first trial.
-    settings : FlightSettings
-        Flight settings.
-    t_ilc_s : float
-        ILC sample time [s].
     on_event : callable, optional
         Receives the campaign events, and the notice of a repeated Ctrl-C.
-    fence : Fence
-        The arena and the limits watched while armed.
     mocap : MocapLink or None
         A started motion-capture link (see :func:`fly_campaign`).
 
@@ -635,11 +631,7 @@ def run_campaign(
             text = f"interrupt {count} ignored: stopping the vehicle (land, disarm)"
             on_event(Status(text, warning=True))
 
-    campaign = fly_campaign(
-        url, source, iterations, first_trial, settings, t_ilc_s, on_event, fence=fence,
-        mocap=mocap,
-    )  # fmt: skip
-    run_guarded(campaign, on_repeat)
+    run_guarded(fly_campaign(plan, source, on_event, mocap=mocap), on_repeat)
 
 
 async def _measure_hover(
