@@ -453,8 +453,10 @@ class _Campaign:
         emit(Status(self.fence.describe()))
         geofence = await install_geofence(vehicle, self.fence)
         emit(Status(geofence.text(self.fence.margin_m), warning=not geofence.ok))
-        self.session = FlightSession(self.plan.url, self.j, navigation, fence=self.fence,
-                                     geofence=geofence, mocap=self.mocap_report)  # fmt: skip
+        self.session = FlightSession(
+            self.plan.url, self.plan.first_trial, navigation, fence=self.fence,
+            geofence=geofence, mocap=self.mocap_report,
+        )  # fmt: skip
         await asyncio.to_thread(self.source.record_session, self.session)
         return hover, setpoints
 
