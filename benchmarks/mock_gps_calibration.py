@@ -370,7 +370,7 @@ class OfflineVehicle:
         return np.array(ts), np.array(ps)
 
     def goto(self, ned_m: np.ndarray, speed_m_s: float = 1.0) -> None:
-        """Minimum-jerk move at 60 Hz, as ``gcs.flight.vehicle.Vehicle.goto``."""
+        """Minimum-jerk move at 60 Hz, as ``gcs.flight.manoeuvres.Manoeuvres.goto``."""
         start, target = self.target, np.asarray(ned_m, dtype=float)
         n = max(1, math.ceil(1.875 * np.linalg.norm(target - start) / speed_m_s * 60))
         t0 = self.sim.t_s

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs.flight.campaign import FlightSession, run_campaign
+from gcs.flight.campaign import CampaignPlan, FlightSession, run_campaign
 from gcs.flight.fence import Fence
 from gcs.flight.trial import TrialRecording
 from gcs.io.settings import FlightSettings
@@ -76,7 +76,7 @@ def run_one(rate_hz: float, t_ilc_s: float, duration_s: float, workdir: Path) ->
     stats_path = workdir / f"stats-{rate_hz:g}-{t_ilc_s:g}.json"
     with MockProcess(config_path=None, seed=0, faults=Faults(), stats_path=stats_path) as mock:
         fence = Fence.around([[-3, 3], [-3, 3], [-3, 0]], settings, 3.0, 1.5)  # antx's arena
-        run_campaign(mock.url, source, 1, 0, settings, t_ilc_s, fence=fence)
+        run_campaign(CampaignPlan(mock.url, 0, 1, t_ilc_s, settings, fence), source)
     rec = source.recording
     assert rec is not None and rec.complete
     arrivals = setpoint_arrivals_s(stats_path)

@@ -12,8 +12,8 @@ import pytest
 from gcs.errors import VehicleError
 from gcs.flight.campaign import FlightSession, _measure_hover, _settle, check_battery
 from gcs.flight.clock import VehicleClock
+from gcs.flight.link import TelemetrySample
 from gcs.flight.preflight import navigation_source
-from gcs.flight.vehicle import TelemetrySample
 from gcs.io.settings import FlightSettings
 
 

@@ -31,7 +31,7 @@ from test_flight_e2e import CircleSource
 
 from gcs.core.frames import global_to_ned
 from gcs.errors import TrialAborted, VehicleError
-from gcs.flight.campaign import Status, fly_campaign
+from gcs.flight.campaign import CampaignPlan, Status, fly_campaign
 from gcs.flight.fence import EstimateMonitor, Fence
 from gcs.flight.geofence import GF_ACTION, vertical_limit_m
 from gcs.io.rundir import RunDir
@@ -67,7 +67,9 @@ def fly(tmp_path: Path, faults: Faults, source: CircleSource, config: Path | Non
     with MockProcess(config, seed=0, faults=faults, stats_path=stats_path) as mock:
         try:
             asyncio.run(
-                fly_campaign(mock.url, source, 1, 0, SETTINGS, T_ILC_S, on_event, fence=FENCE)
+                fly_campaign(
+                    CampaignPlan(mock.url, 0, 1, T_ILC_S, SETTINGS, FENCE), source, on_event
+                )
             )
         except (VehicleError, TrialAborted) as exc:
             error = exc

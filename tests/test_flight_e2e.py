@@ -17,6 +17,7 @@ import pytest
 
 from gcs.errors import TrialAborted, VehicleError
 from gcs.flight.campaign import (
+    CampaignPlan,
     FlightSession,
     Status,
     TrialFinished,
@@ -112,7 +113,9 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
 
     started = time.monotonic()
     with _mock(tmp_path) as mock:
-        asyncio.run(fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event, fence=FENCE))
+        asyncio.run(
+            fly_campaign(CampaignPlan(mock.url, 0, 2, T_ILC_S, SETTINGS, FENCE), source, on_event)
+        )
     assert time.monotonic() - started < 50.0
     assert source.asked == [0, 1]
     assert [j for j, _ in source.recorded] == [0, 1] and not source.incomplete
@@ -177,7 +180,9 @@ def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
     with MockProcess(config, faults=faults, stats_path=tmp_path / STATS) as mock:  # noqa: SIM117
         with pytest.raises((TrialAborted, VehicleError)):
             asyncio.run(
-                fly_campaign(mock.url, source, 1, 0, SETTINGS, T_ILC_S, events.append, fence=FENCE)
+                fly_campaign(
+                    CampaignPlan(mock.url, 0, 1, T_ILC_S, SETTINGS, FENCE), source, events.append
+                )
             )
     assert time.monotonic() - started < 40.0
     assert not source.recorded
@@ -212,7 +217,7 @@ def test_cancellation_mid_trial_lands_and_marks_incomplete(tmp_path: Path) -> No
                 statuses.append(event.text)
 
         task = asyncio.create_task(
-            fly_campaign(mock.url, source, 2, 0, SETTINGS, T_ILC_S, on_event, fence=FENCE)
+            fly_campaign(CampaignPlan(mock.url, 0, 2, T_ILC_S, SETTINGS, FENCE), source, on_event)
         )
         await in_trial.wait()
         task.cancel()  # what Ctrl-C does to asyncio.run's main task

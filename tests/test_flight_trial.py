@@ -15,13 +15,14 @@ import pytest
 
 from gcs.errors import ProfileError, TrialAborted
 from gcs.flight.clock import VehicleClock
+from gcs.flight.link import TelemetrySample
+from gcs.flight.manoeuvres import min_jerk
 from gcs.flight.trial import (
     TrialRun,
     align_to_grid,
     fly_trial,
     send_schedule,
 )
-from gcs.flight.vehicle import TelemetrySample, min_jerk
 from gcs.io.settings import FlightSettings
 
 # ---------------------------------------------------------------- settings

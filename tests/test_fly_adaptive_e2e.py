@@ -17,7 +17,7 @@ import yaml
 from synthetic import CI_FLIGHT
 from test_fly_e2e import finish, gcs
 
-from gcs.flight.campaign import FlightSession, Status, TrialStarted, fly_campaign
+from gcs.flight.campaign import CampaignPlan, FlightSession, Status, TrialStarted, fly_campaign
 from gcs.flight.fence import Fence
 from gcs.flight.trial import TrialRecording
 from gcs.io.rundir import RunDir
@@ -135,7 +135,9 @@ def test_a_source_that_says_no_further_trial_lands_the_vehicle_early(tmp_path: P
     fence = Fence.around([[-3.0, 3.0], [-3.0, 3.0], [-3.0, 0.0]], settings, 3.0, 1.5)  # antx's
     source, events = StopAfter(0), []
     with MockProcess(seed=0, stats_path=tmp_path / "stats.json") as mock:
-        campaign = fly_campaign(mock.url, source, 3, 0, settings, 0.05, events.append, fence=fence)
+        campaign = fly_campaign(
+            CampaignPlan(mock.url, 0, 3, 0.05, settings, fence), source, events.append
+        )
         asyncio.run(campaign)
     assert source.asked == [0] and source.recorded == [0]
     assert sum(isinstance(e, TrialStarted) for e in events) == 1

@@ -24,8 +24,9 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs.flight.clock import fit_clock
 from gcs.flight.hover import hover_stats
+from gcs.flight.link import sample_arrays
 from gcs.flight.preflight import LINK_LOSS_PARAMS, NAV_PARAMS, navigation_source
-from gcs.flight.vehicle import Vehicle, sample_arrays
+from gcs.flight.vehicle import Vehicle
 from gcs.io.settings import FlightSettings
 
 pytestmark = pytest.mark.e2e

@@ -39,7 +39,7 @@ from gcs.core.trajectory import (
 from gcs.core.trajectory_sources import sample_reference
 from gcs.core.trials import trial_errors, trial_errors_3d
 from gcs.errors import ProfileError, RunLogError, TrajectoryError
-from gcs.flight.campaign import run_campaign
+from gcs.flight.campaign import CampaignPlan, run_campaign
 from gcs.flight.mocap.link import MocapLink
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile, TrajectorySpec, load_profile, load_trajectory
@@ -634,7 +634,6 @@ def fly_run(
         run, on_row, on_learn=on_learn, until_converged=until_converged, mock_seed=mock_seed
     )
     fence = flight_fence(run.profile(), settings)
-    run_campaign(
-        url, source, iterations, first, settings, run.t_ilc_s, on_event, fence=fence, mocap=mocap
-    )
+    plan = CampaignPlan(url, first, iterations, run.t_ilc_s, settings, fence)
+    run_campaign(plan, source, on_event, mocap=mocap)
     return source

@@ -55,7 +55,7 @@ from gcs.core.pbsid import (
 )
 from gcs.core.trajectory import Reference, points_outside
 from gcs.errors import IdentificationError, ModelError, ProfileError, RunLogError, TrajectoryError
-from gcs.flight.campaign import run_campaign
+from gcs.flight.campaign import CampaignPlan, run_campaign
 from gcs.flight.mocap.link import MocapLink
 from gcs.flight.trial import TrialRecording
 from gcs.io.atomic import atomic_write_text
@@ -369,7 +369,8 @@ def fly_identification(
     center = np.asarray(_run_source(run)["center_ned_m"], dtype=float)
     source = IdentificationSource(run, center)
     fence = flight_fence(run.profile(), settings)
-    run_campaign(url, source, 2, 0, settings, run.t_ilc_s, on_event, fence=fence, mocap=mocap)
+    plan = CampaignPlan(url, 0, 2, run.t_ilc_s, settings, fence)
+    run_campaign(plan, source, on_event, mocap=mocap)
 
 
 # --------------------------------------------------------------------------- identification

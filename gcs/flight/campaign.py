@@ -33,10 +33,8 @@ from synchronous code (a command line) so that a second Ctrl-C cannot cut that s
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Protocol
@@ -50,16 +48,10 @@ from gcs.flight.fence import Fence
 from gcs.flight.geofence import GeofenceState, install_geofence
 from gcs.flight.hover import HoverStats, HoverVerdict, hover_stats, judge_hover, widened
 from gcs.flight.interrupts import run_guarded
-from gcs.flight.mocap.checks import (
-    move_direction_problem,
-    move_length,
-    moved_as_commanded,
-    pose_agreement_problem,
-    window_mean,
-)
-from gcs.flight.mocap.link import MocapLink, trial_mocap
-from gcs.flight.mocap.preflight import EKF2_FLOAT_PARAMS, EKF2_INT_PARAMS, ekf2_findings
-from gcs.flight.prearm import ensure_global_origin, wait_ready_to_arm
+from gcs.flight.link import TelemetrySample, sample_arrays
+from gcs.flight.mocap import campaign as mocap_steps
+from gcs.flight.mocap.link import MocapLink
+from gcs.flight.prearm import wait_ready_to_arm
 from gcs.flight.preflight import (
     LINK_LOSS_PARAMS,
     NAV_PARAMS,
@@ -68,7 +60,7 @@ from gcs.flight.preflight import (
     navigation_source,
 )
 from gcs.flight.trial import TrialRecording, TrialRun
-from gcs.flight.vehicle import TelemetrySample, Vehicle, sample_arrays
+from gcs.flight.vehicle import Vehicle
 from gcs.io.settings import FlightSettings
 
 __all__ = [
@@ -80,15 +72,13 @@ __all__ = [
     "HoverRecord",
     "FlightSession",
     "CampaignEvent",
+    "CampaignPlan",
     "fly_campaign",
     "run_campaign",
     "check_battery",
 ]
 
 _log = logging.getLogger(__name__)
-
-#: Length of the hover windows averaged by the pre-flight move check [s].
-MOVE_WINDOW_S = 1.5
 
 
 class TrialSource(Protocol):
@@ -325,39 +315,52 @@ CampaignEvent = Status | TrialStarted | TrialProgress | TrialFinished
 EventCallback = Callable[[CampaignEvent], None]
 
 
-async def fly_campaign(
-    url: str,
-    source: TrialSource,
-    iterations: int,
-    first_trial: int,
-    settings: FlightSettings,
-    t_ilc_s: float,
-    on_event: EventCallback | None = None,
-    *,
-    fence: Fence,
-    mocap: MocapLink | None = None,
-) -> None:
-    """Fly ``iterations`` trials ``first_trial, first_trial + 1, ...`` and land.
+@dataclass(frozen=True)
+class CampaignPlan:
+    """What a campaign flies: which vehicle, which trials, on which grid, inside which arena.
 
     Parameters
     ----------
     url : str
         MAVSDK connection URL of the vehicle.
-    source : TrialSource
-        Supplies each trial's setpoints and takes each recording (called in worker threads).
-    iterations : int
-        Number of trials to fly, >= 1.
     first_trial : int
         Index ``j`` of the first trial (to resume a run).
-    settings : FlightSettings
-        Flight settings; ``stream_rate_hz`` must be an integer multiple of ``1 / t_ilc_s``.
+    iterations : int
+        Number of trials to fly, >= 1.
     t_ilc_s : float
         ILC sample time [s].
+    settings : FlightSettings
+        Flight settings; ``stream_rate_hz`` must be an integer multiple of ``1 / t_ilc_s``.
+    fence : Fence
+        The arena every setpoint must lie in and the limits watched while armed.
+    """
+
+    url: str
+    first_trial: int
+    iterations: int
+    t_ilc_s: float
+    settings: FlightSettings
+    fence: Fence
+
+
+async def fly_campaign(
+    plan: CampaignPlan,
+    source: TrialSource,
+    on_event: EventCallback | None = None,
+    *,
+    mocap: MocapLink | None = None,
+) -> None:
+    """Fly ``plan.iterations`` trials ``plan.first_trial, plan.first_trial + 1, ...`` and land.
+
+    Parameters
+    ----------
+    plan : CampaignPlan
+        The vehicle, the trials, the grid and the arena.
+    source : TrialSource
+        Supplies each trial's setpoints and takes each recording (called in worker threads).
     on_event : callable, optional
         Receives :class:`Status`, :class:`TrialStarted`, :class:`TrialProgress` and
         :class:`TrialFinished` events on the event loop; must return quickly.
-    fence : Fence
-        The arena every setpoint must lie in and the limits watched while armed.
     mocap : MocapLink or None
         A started motion-capture link: forwarded to the vehicle from connection on (if its
         settings say so), checked before arming (EKF2 settings, body tracked, pose agreement)
@@ -376,25 +379,66 @@ async def fly_campaign(
     asyncio.CancelledError
         Cancelled (Ctrl-C); the vehicle was landed first.
     """
-    if iterations < 1:
-        raise ValueError(f"iterations must be >= 1, got {iterations}")
-    settings.sends_per_sample(t_ilc_s)  # fail before connecting
-
-    def emit(event: CampaignEvent) -> None:
-        if on_event is not None:
-            on_event(event)
-
-    vehicle = Vehicle(settings, fence)
-    emit(Status(f"connecting to {url}"))
-    await vehicle.connect(url)
-    run: TrialRun | None = None
-    session: FlightSession | None = None
-    mocap_report: dict | None = None
-    j = first_trial
+    if plan.iterations < 1:
+        raise ValueError(f"iterations must be >= 1, got {plan.iterations}")
+    plan.settings.sends_per_sample(plan.t_ilc_s)  # fail before connecting
+    flight = _Campaign(plan, source, on_event, mocap)
+    flight.emit(Status(f"connecting to {plan.url}"))
+    await flight.vehicle.connect(plan.url)
     try:
-        hover, setpoints = await asyncio.to_thread(_plan, source, j, fence)
+        hover, setpoints = await flight.preflight()
+        await flight.take_off(hover)
+        await flight.fly_trials(hover, setpoints)
+        await flight.land()
+    except BaseException as exc:
+        named = await flight.stop(exc)
+        if named is not None:
+            raise named from exc
+        raise
+    finally:
         if mocap is not None:
-            mocap_report = await _mocap_before_arming(vehicle, mocap, emit)
+            mocap.detach()  # no send may run into the plugin released with the vehicle
+        await flight.vehicle.close()
+
+
+class _Campaign:
+    """One campaign's vehicle, what it flies and what it has learned so far, by phases."""
+
+    def __init__(
+        self,
+        plan: CampaignPlan,
+        source: TrialSource,
+        on_event: EventCallback | None,
+        mocap: MocapLink | None,
+    ) -> None:
+        self.plan, self.source, self.on_event, self.mocap = plan, source, on_event, mocap
+        self.settings, self.t_ilc_s, self.fence = plan.settings, plan.t_ilc_s, plan.fence
+        self.vehicle = Vehicle(plan.settings, plan.fence)
+        self.j = plan.first_trial  # the trial in hand
+        self.run: TrialRun | None = None  # the trial in flight
+        self.session: FlightSession | None = None
+        self.mocap_report: dict | None = None
+
+    def emit(self, event: CampaignEvent) -> None:
+        """Hand ``event`` to the caller's callback."""
+        if self.on_event is not None:
+            self.on_event(event)
+
+    def note(self, text: str, warning: bool = False) -> None:
+        """Emit one line of status."""
+        self.emit(Status(text, warning=warning))
+
+    async def record_session(self, session: FlightSession, what: str) -> None:
+        """Keep ``session`` and hand it to the source, hovering meanwhile."""
+        self.session = session
+        await self.vehicle.hover_while(asyncio.to_thread(self.source.record_session, session), what)
+
+    async def preflight(self) -> tuple[np.ndarray, np.ndarray]:
+        """Read the vehicle, wait for it, install the fence; the first trial's plan."""
+        vehicle, mocap, emit = self.vehicle, self.mocap, self.emit
+        hover, setpoints = await asyncio.to_thread(_plan, self.source, self.j, self.fence)
+        if mocap is not None:
+            self.mocap_report = await mocap_steps.before_arming(vehicle, mocap, self.note)
         for warning in link_loss_warnings(await vehicle.read_int_params(LINK_LOSS_PARAMS)):
             emit(Status(warning, warning=True))
         navigation = navigation_source(await vehicle.read_int_params(NAV_PARAMS))
@@ -402,139 +446,161 @@ async def fly_campaign(
         emit(Status("waiting for a valid local position"))
         await vehicle.wait_healthy_local_position()
         if mocap is not None:
-            assert mocap_report is not None
-            mocap_report.update(await _mocap_ready(vehicle, mocap, emit))
+            assert self.mocap_report is not None
+            self.mocap_report.update(await mocap_steps.ready_to_arm(vehicle, mocap, self.note))
             vehicle.add_watch("mocap", mocap.problem)
         await _wait_prearm(vehicle, emit)
-        emit(Status(fence.describe()))
-        geofence = await install_geofence(vehicle, fence)
-        emit(Status(geofence.text(fence.margin_m), warning=not geofence.ok))
-        session = FlightSession(
-            url, first_trial, navigation, fence=fence, geofence=geofence, mocap=mocap_report
-        )
-        await asyncio.to_thread(source.record_session, session)
+        emit(Status(self.fence.describe()))
+        geofence = await install_geofence(vehicle, self.fence)
+        emit(Status(geofence.text(self.fence.margin_m), warning=not geofence.ok))
+        self.session = FlightSession(
+            self.plan.url, self.plan.first_trial, navigation, fence=self.fence,
+            geofence=geofence, mocap=self.mocap_report,
+        )  # fmt: skip
+        await asyncio.to_thread(self.source.record_session, self.session)
+        return hover, setpoints
+
+    async def take_off(self, hover: np.ndarray) -> None:
+        """Arm, take off to the hover point's altitude, start offboard, check the mocap."""
+        vehicle, mocap, settings = self.vehicle, self.mocap, self.settings
         check_battery(vehicle.battery_pct, settings.min_battery_pct, "taking off")
         altitude_m = -float(hover[2])
-        emit(Status(f"arming and taking off to {altitude_m:.1f} m"))
+        self.emit(Status(f"arming and taking off to {altitude_m:.1f} m"))
         await vehicle.arm_and_takeoff(altitude_m)
-        emit(Status("starting offboard"))
+        self.emit(Status("starting offboard"))
         await vehicle.start_offboard_at_current_position()
         if mocap is not None and mocap.settings.check_move_m > 0:
-            assert mocap_report is not None
-            mocap_report["moves"] = await _mocap_moves(vehicle, mocap, settings, emit)
-            session = replace(session, mocap=mocap_report)
-            await vehicle.hover_while(
-                asyncio.to_thread(source.record_session, session), "recording the mocap checks"
-            )
-        for number, j in enumerate(range(first_trial, first_trial + iterations), start=1):
+            assert self.mocap_report is not None and self.session is not None
+            moves = await mocap_steps.check_moves(vehicle, mocap, settings, self.note)
+            self.mocap_report["moves"] = moves
+            session = replace(self.session, mocap=self.mocap_report)
+            await self.record_session(session, "recording the mocap checks")
+
+    async def fly_trials(self, hover: np.ndarray, setpoints: np.ndarray) -> None:
+        """Trial after trial: to its start point, settled, flown, recorded (and planned)."""
+        first, iterations = self.plan.first_trial, self.plan.iterations
+        for number, j in enumerate(range(first, first + iterations), start=1):
+            self.j = j
             if number > 1:
-                hover, setpoints = await vehicle.hover_while(
-                    asyncio.to_thread(_plan, source, j, fence), f"setpoints of trial {j}"
+                hover, setpoints = await self.vehicle.hover_while(
+                    asyncio.to_thread(_plan, self.source, j, self.fence), f"setpoints of trial {j}"
                 )
-            check_battery(vehicle.battery_pct, settings.min_battery_pct, f"trial {j}")
-            emit(Status(f"moving to the start point of trial {j}"))
-            await vehicle.goto(hover, settings.transit_speed_m_s)
-            if number == 1:
-                record = await _measure_hover(vehicle, hover, j, settings, emit)
-                v = record.verdict
-                session = _with_hover(session, record, v.tolerance_m, v.speed_tolerance_m_s)
-                await vehicle.hover_while(
-                    asyncio.to_thread(source.record_session, session), "recording the hover"
-                )
-                if not record.verdict.ok:
-                    raise VehicleError(
-                        f"the vehicle does not hold the start point {_fmt(hover)}: it "
-                        f"{record.verdict.reason}"
-                    )
-            record = await _settle(vehicle, hover, j, session, settings, emit)
-            if record is not None:
-                tolerances = widened(
-                    session.tolerance_m, session.speed_tolerance_m_s, record.stats, settings
-                )
-                session = _with_hover(session, record, *tolerances)
-                await vehicle.hover_while(
-                    asyncio.to_thread(source.record_session, session), "recording the hover"
-                )
-            if settings.hover_before_trial_s > 0:
-                # the initial reset of ILC: let the state the previous trial left decay
-                emit(Status(f"holding the start point for {settings.hover_before_trial_s:g} s"))
-                await vehicle.hold(settings.hover_before_trial_s, f"the hold before trial {j}")
-            n = setpoints.shape[0]
-            emit(TrialStarted(j, number, iterations, n, n * t_ilc_s))
-
-            def progress(k: int, n: int, err_m: float, j: int = j) -> None:
-                emit(TrialProgress(j, k, n, err_m))
-
-            run = TrialRun(vehicle, setpoints, t_ilc_s, settings, progress)
-            if mocap is not None:
-                mocap.drain()  # the trial's raw file starts here
-            recording = await run.fly()
-            if mocap is not None:  # y(N) needs a mocap sample on both sides
-                await asyncio.to_thread(_mocap_past_end, mocap, recording)
-            recording = _with_mocap(recording, mocap)
-            run = None  # handed over below: no longer "in flight"
-            emit(TrialFinished(j, recording))
-            if recording.clock is not None:
-                warning = rate_warning(j, recording.clock.rate, n * t_ilc_s, t_ilc_s)
-                if warning is not None:
-                    emit(Status(warning, warning=True))
-            stop = await vehicle.hover_while(
-                asyncio.to_thread(source.record, j, recording), f"recording trial {j}"
-            )
+            await self.to_start(j, number, hover)
+            stop = await self.fly_trial(j, number, iterations, setpoints)
             if stop:
-                emit(Status(f"no further trial after trial {j}: {stop}"))
+                self.emit(Status(f"no further trial after trial {j}: {stop}"))
                 break
-        emit(Status("landing"))
-        await vehicle.land_and_disarm()
-        emit(Status("landed and disarmed"))
-        if mocap is not None and session is not None:
-            session = replace(session, mocap={**(mocap_report or {}), **mocap.describe()})
-            await asyncio.to_thread(source.record_session, session)
-    except BaseException as exc:
+
+    async def to_start(self, j: int, number: int, hover: np.ndarray) -> None:
+        """Move to trial ``j``'s start point, settle there and hold it (the initial reset).
+
+        Before the first trial the hover there is measured and judged.
+        """
+        vehicle, settings, emit = self.vehicle, self.settings, self.emit
+        check_battery(vehicle.battery_pct, settings.min_battery_pct, f"trial {j}")
+        emit(Status(f"moving to the start point of trial {j}"))
+        await vehicle.goto(hover, settings.transit_speed_m_s)
+        session = self.session
+        assert session is not None
+        if number == 1:
+            record = await _measure_hover(vehicle, hover, j, settings, emit)
+            v = record.verdict
+            session = _with_hover(session, record, v.tolerance_m, v.speed_tolerance_m_s)
+            await self.record_session(session, "recording the hover")
+            if not record.verdict.ok:
+                raise VehicleError(
+                    f"the vehicle does not hold the start point {_fmt(hover)}: it "
+                    f"{record.verdict.reason}"
+                )
+        record = await _settle(vehicle, hover, j, session, settings, emit)
+        if record is not None:
+            tolerances = widened(
+                session.tolerance_m, session.speed_tolerance_m_s, record.stats, settings
+            )
+            session = _with_hover(session, record, *tolerances)
+            await self.record_session(session, "recording the hover")
+        if settings.hover_before_trial_s > 0:
+            # the initial reset of ILC: let the state the previous trial left decay
+            emit(Status(f"holding the start point for {settings.hover_before_trial_s:g} s"))
+            await vehicle.hold(settings.hover_before_trial_s, f"the hold before trial {j}")
+
+    async def fly_trial(
+        self, j: int, number: int, iterations: int, setpoints: np.ndarray
+    ) -> str | None:
+        """Fly trial ``j`` and hand its recording over, hovering; why to stop, or None."""
+        emit, mocap, t_ilc_s = self.emit, self.mocap, self.t_ilc_s
+        n = setpoints.shape[0]
+        emit(TrialStarted(j, number, iterations, n, n * t_ilc_s))
+
+        def progress(k: int, n: int, err_m: float, j: int = j) -> None:
+            emit(TrialProgress(j, k, n, err_m))
+
+        self.run = TrialRun(self.vehicle, setpoints, t_ilc_s, self.settings, progress)
+        if mocap is not None:
+            mocap.drain()  # the trial's raw file starts here
+        recording = await self.run.fly()
+        if mocap is not None:  # y(N) needs a mocap sample on both sides
+            await asyncio.to_thread(mocap_steps.wait_past_end, mocap, recording)
+        recording = mocap_steps.with_mocap(recording, mocap)
+        self.run = None  # handed over below: no longer "in flight"
+        emit(TrialFinished(j, recording))
+        if recording.clock is not None:
+            warning = rate_warning(j, recording.clock.rate, n * t_ilc_s, t_ilc_s)
+            if warning is not None:
+                emit(Status(warning, warning=True))
+        return await self.vehicle.hover_while(
+            asyncio.to_thread(self.source.record, j, recording), f"recording trial {j}"
+        )
+
+    async def land(self) -> None:
+        """Land and disarm; the session's last mocap statistics."""
+        self.emit(Status("landing"))
+        await self.vehicle.land_and_disarm()
+        self.emit(Status("landed and disarmed"))
+        if self.mocap is not None and self.session is not None:
+            mocap = {**(self.mocap_report or {}), **self.mocap.describe()}
+            self.session = replace(self.session, mocap=mocap)
+            await asyncio.to_thread(self.source.record_session, self.session)
+
+    async def stop(self, exc: BaseException) -> VehicleError | None:
+        """Stop the vehicle after ``exc``; record why and the trial that was in flight.
+
+        Returns the breach as the error to raise when ``exc`` did not name it (else None).
+        """
         reason = _describe(exc)
-        named = _breach_first(vehicle.breach, exc, reason)
+        named = _breach_first(self.vehicle.breach, exc, reason)
         reason = str(named) if named is not None else reason
-        emit(Status(f"aborting: {reason}"))
-        outcome = await vehicle.emergency_stop(reason)
-        emit(Status(f"emergency stop: {outcome}"))
+        self.emit(Status(f"aborting: {reason}"))
+        outcome = await self.vehicle.emergency_stop(reason)
+        self.emit(Status(f"emergency stop: {outcome}"))
+        session, mocap = self.session, self.mocap
         if session is not None:
             if mocap is not None:
-                session = replace(session, mocap={**(mocap_report or {}), **mocap.describe()})
+                session = replace(session, mocap={**(self.mocap_report or {}), **mocap.describe()})
             try:
                 await asyncio.to_thread(
-                    source.record_session, replace(session, abort_reason=reason)
+                    self.source.record_session, replace(session, abort_reason=reason)
                 )
             except Exception:  # keep the original exception; the failure is logged
                 _log.exception("record_session failed")
-        if run is not None:
+        if self.run is not None:
             partial = getattr(exc, "recording", None)
             if not isinstance(partial, TrialRecording):
-                partial = run.recording(reason)
-            partial = _with_mocap(partial, mocap)
-            emit(TrialFinished(j, partial))
+                partial = self.run.recording(reason)
+            partial = mocap_steps.with_mocap(partial, mocap)
+            self.emit(TrialFinished(self.j, partial))
             try:
-                await asyncio.to_thread(source.record_incomplete, j, partial, reason)
+                await asyncio.to_thread(self.source.record_incomplete, self.j, partial, reason)
             except Exception:  # keep the original exception; the handover failure is logged
-                _log.exception("record_incomplete(%d) failed", j)
-        if named is not None:
-            raise named from exc
-        raise
-    finally:
-        if mocap is not None:
-            mocap.detach()  # no send may run into the plugin released with the vehicle
-        await vehicle.close()
+                _log.exception("record_incomplete(%d) failed", self.j)
+        return named
 
 
 def run_campaign(
-    url: str,
+    plan: CampaignPlan,
     source: TrialSource,
-    iterations: int,
-    first_trial: int,
-    settings: FlightSettings,
-    t_ilc_s: float,
     on_event: EventCallback | None = None,
     *,
-    fence: Fence,
     mocap: MocapLink | None = None,
 ) -> None:
     """Fly a campaign from synchronous code: :func:`fly_campaign` under :func:`run_guarded`.
@@ -545,22 +611,12 @@ def run_campaign(
 
     Parameters
     ----------
-    url : str
-        MAVSDK connection URL of the vehicle.
+    plan : CampaignPlan
+        The vehicle, the trials, the grid and the arena.
     source : TrialSource
         Supplies each trial's setpoints and takes each recording.
-    iterations : int
-        Number of trials to fly, >= 1.
-    first_trial : int
-        Index ``j`` of the first trial.
-    settings : FlightSettings
-        Flight settings.
-    t_ilc_s : float
-        ILC sample time [s].
     on_event : callable, optional
         Receives the campaign events, and the notice of a repeated Ctrl-C.
-    fence : Fence
-        The arena and the limits watched while armed.
     mocap : MocapLink or None
         A started motion-capture link (see :func:`fly_campaign`).
 
@@ -577,11 +633,7 @@ def run_campaign(
             text = f"interrupt {count} ignored: stopping the vehicle (land, disarm)"
             on_event(Status(text, warning=True))
 
-    campaign = fly_campaign(
-        url, source, iterations, first_trial, settings, t_ilc_s, on_event, fence=fence,
-        mocap=mocap,
-    )  # fmt: skip
-    run_guarded(campaign, on_repeat)
+    run_guarded(fly_campaign(plan, source, on_event, mocap=mocap), on_repeat)
 
 
 async def _measure_hover(
@@ -740,142 +792,11 @@ def _breach_first(breach: str | None, exc: BaseException, reason: str) -> Vehicl
     return VehicleError(breach)
 
 
-def _with_mocap(recording: TrialRecording, mocap: MocapLink | None) -> TrialRecording:
-    """The recording with the trial's motion capture (raw samples drained, on the grid)."""
-    if mocap is None:
-        return recording
-    return replace(recording, mocap=trial_mocap(mocap.drain(), mocap.mapping, recording))
-
-
-def _mocap_past_end(mocap: MocapLink, recording: TrialRecording) -> None:
-    """Wait briefly (worker thread) for a tracked mocap sample after the trial's last grid
-    time; a stream that delivers none leaves y(N) without mocap, which learning then names."""
-    clock = recording.clock
-    if clock is None or not np.isfinite(recording.t0_vehicle_s):
-        return
-    end_local = float(clock.to_local(recording.t0_vehicle_s + recording.t_s[-1]))
-    with contextlib.suppress(MocapError):
-        mocap.client.wait_until(lambda s: s.tracked and s.t_receipt_s > end_local, 0.3)
-
-
-async def _mocap_before_arming(vehicle: Vehicle, mocap: MocapLink, emit: EventCallback) -> dict:
-    """Start forwarding, then judge EKF2's vision settings (refusals stop here)."""
-    if mocap.settings.forward:
-        mocap.attach(vehicle.mocap_plugin())
-        emit(Status(f"forwarding {mocap.source.url()} to the vehicle as {mocap.settings.message}"))
-    else:
-        emit(Status(f"reading {mocap.source.url()} (not forwarded: mocap.forward is false)"))
-    params: dict[str, float | int | None] = dict(await vehicle.read_int_params(EKF2_INT_PARAMS))
-    for name in EKF2_FLOAT_PARAMS:
-        params[name] = await vehicle.read_float_param(name)
-    findings = ekf2_findings(params, mocap.settings.forward, mocap.settings.message)
-    for f in findings:
-        emit(Status(f.text, warning=f.level != "info"))
-    refused = [f.text for f in findings if f.level == "refuse"]
-    if refused:
-        raise MocapError(f"vehicle settings refused: {refused[0]}")
-    return {"ekf2": params, "findings": [f.text for f in findings[1:]]}
-
-
-async def _mocap_ready(vehicle: Vehicle, mocap: MocapLink, emit: EventCallback) -> dict:
-    """A global origin (set when there is none), then the estimate where the mocap sees the
-    vehicle: waited for while the estimator settles (bounded), refused if it never agrees."""
-    origin, was_set = await ensure_global_origin(vehicle)
-    where = f"{origin[0]:.6f}, {origin[1]:.6f}, {origin[2]:.1f} m"
-    emit(Status(f"global origin {'set to' if was_set else 'is'} {where}"))
-    started = time.monotonic()
-    problem: list[str | None] = [None]
-
-    def agree() -> bool:
-        assert vehicle.latest is not None  # a healthy local position has samples
-        est = np.asarray(vehicle.latest.pos_ned_m)
-        problem[0] = pose_agreement_problem(
-            est, mocap.require_tracked(), mocap.settings.agreement_m
-        )
-        return problem[0] is None
-
-    try:
-        await vehicle.wait_until(agree, vehicle.settings.health_timeout_s, "mocap agreement")
-    except VehicleError as exc:
-        if problem[0] is None:
-            raise
-        raise MocapError(f"pre-flight: {problem[0]}") from exc
-    pos = mocap.require_tracked()
-    assert vehicle.latest is not None
-    distance = float(np.linalg.norm(pos - np.asarray(vehicle.latest.pos_ned_m)))
-    emit(Status(f"mocap: rigid body tracked at {_fmt(pos)}, {distance:.3f} m from the estimate "
-                f"(after {time.monotonic() - started:.1f} s)"))  # fmt: skip
-    return {"agreement_m": distance, "origin": list(origin), "origin_set": was_set}
-
-
 async def _wait_prearm(vehicle: Vehicle, emit: EventCallback) -> None:
     """Wait for PX4's own pre-arm verdict (bounded); its reasons end the flight if it refuses."""
     emit(Status("waiting for the vehicle's pre-arm checks"))
     state = await wait_ready_to_arm(vehicle, vehicle.settings.health_timeout_s)
     emit(Status(f"vehicle ready to arm (after {state.waited_s:.1f} s)"))
-
-
-async def _mocap_moves(
-    vehicle: Vehicle, mocap: MocapLink, settings: FlightSettings, emit: EventCallback
-) -> list[dict]:
-    """A small move per horizontal axis, out and back: each must go the commanded way in both
-    the estimate and the mocap (a mirrored or swapped axis shows here, not in the eight).
-    Positions are means over a window before and after; the move stands out of the wander
-    measured before it."""
-    out = []
-    for axis, name in ((0, "north"), (1, "east")):
-        for attempt in (1, 2):
-            move = await _mocap_move(vehicle, mocap, settings, axis, name)
-            out.append(move)
-            step, problem = np.asarray(move["cmd_ned_m"]), move["problem"]
-            # both the estimate and the mocap saw the same wrong move: the vehicle wandered
-            # (it did not follow), which says nothing about the mapping: measured once more
-            wandered = problem is not None and not any(
-                moved_as_commanded(step, np.asarray(move[k]))
-                for k in ("est_delta_ned_m", "mocap_delta_ned_m")
-            )
-            if problem is None or not wandered or attempt == 2:
-                break
-            emit(Status(f"mocap check: {problem}; once more", warning=True))
-        if problem is not None:
-            raise MocapError(f"pre-flight {name} move: {problem}")
-        wander = move["wander_m"]
-        emit(Status(f"mocap check: a {step[axis]:+.2f} m {name} move went the right way in "
-                    f"the estimate and the mocap (hover wander {wander:.3f} m)"))  # fmt: skip
-    return out
-
-
-async def _mocap_move(
-    vehicle: Vehicle, mocap: MocapLink, settings: FlightSettings, axis: int, name: str
-) -> dict:
-    """One move along ``axis`` and back, judged on averaged windows before and after it."""
-    fence = vehicle.fence
-    home = await vehicle.hold_position()
-    est0, moc0, wander = await _still_at(vehicle, mocap, home, settings, f"before the {name} check")
-    step = np.zeros(3)
-    step[axis] = move_length(mocap.settings.check_move_m, wander)
-    if fence is not None and fence.setpoint_problem(home + step) is not None:
-        step = -step  # the other way stays inside the arena
-    await vehicle.goto(home + step, settings.transit_speed_m_s)
-    est1, moc1, _ = await _still_at(vehicle, mocap, home + step, settings, f"the {name} check")
-    await vehicle.goto(home, settings.transit_speed_m_s)
-    return {"cmd_ned_m": step.tolist(), "est_delta_ned_m": (est1 - est0).tolist(),
-            "mocap_delta_ned_m": (moc1 - moc0).tolist(), "wander_m": wander,
-            "problem": move_direction_problem(step, est1 - est0, moc1 - moc0)}  # fmt: skip
-
-
-async def _still_at(
-    vehicle: Vehicle, mocap: MocapLink, target: np.ndarray, settings: FlightSettings, what: str
-) -> tuple[np.ndarray, np.ndarray, float]:
-    """Settle at ``target`` (or give up after the settle timeout), then hover a window: the
-    mean of the estimate, the mean of the mocap and the mocap's horizontal wander."""
-    await vehicle.settle(target, settings.settle_tolerance_m, settings.settle_speed_m_s)
-    samples = await vehicle.hold(MOVE_WINDOW_S, what)
-    mocap.require_tracked()
-    est, _ = window_mean(np.array([s.pos_ned_m for s in samples]))
-    series = mocap.client.recent(MOVE_WINDOW_S)
-    moc, wander = window_mean(mocap.mapping.position_to_ned(series.pos_m[series.tracked]))
-    return est, moc, wander
 
 
 def _describe(exc: BaseException) -> str:

@@ -45,7 +45,9 @@ import numpy as np
 from gcs.core.trajectory import setpoint_array
 from gcs.errors import TrialAborted
 from gcs.flight.clock import ClockFit, fit_clock
-from gcs.flight.vehicle import TelemetrySample, Vehicle, sleep_until
+from gcs.flight.link import TelemetrySample
+from gcs.flight.manoeuvres import sleep_until
+from gcs.flight.vehicle import Vehicle
 from gcs.io.mocap_samples import MocapTrial
 from gcs.io.settings import FlightSettings
 

@@ -1,0 +1,143 @@
+"""How a vehicle comes down: landing, and the emergency stop that is safe in any state.
+
+:class:`Landing` is one part of :class:`gcs.flight.vehicle.Vehicle`, which sets its state.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState
+
+from gcs.errors import VehicleError
+from gcs.flight.manoeuvres import Manoeuvres
+
+__all__ = ["Landing"]
+
+_log = logging.getLogger(__name__)
+
+
+class Landing(Manoeuvres):
+    """Landing and the emergency stop of :class:`gcs.flight.vehicle.Vehicle`."""
+
+    async def land_and_disarm(self) -> None:
+        """Land, wait for ON_GROUND, then disarm unless PX4 has disarmed by itself.
+
+        Raises
+        ------
+        VehicleError
+            Landing refused or not finished within ``settings.land_timeout_s``, link lost.
+        """
+        action = self._require(self._action)
+        self._streaming_stopped = True
+        await self._command("land", action.land)
+        self._offboard_started = False  # PX4 lands now: a stop must not switch it to Hold
+        await self._wait_until(
+            lambda: self.landed_state == LandedState.ON_GROUND,
+            self.settings.land_timeout_s,
+            "landing",
+            in_control=False,
+        )
+        if self.armed:
+            await self._command("disarm", action.disarm)
+            await self._wait_until(
+                lambda: not self.armed,
+                self.settings.command_timeout_s,
+                "disarmed state",
+                in_control=False,
+            )
+
+    async def emergency_stop(self, reason: str) -> str:
+        """Stop streaming, leave offboard (Hold), land, and disarm once on the ground.
+
+        Every step is guarded by a timeout and failures are logged, not raised, so that a
+        dead link cannot hang or break it. Safe to call in any state, also twice.
+
+        Parameters
+        ----------
+        reason : str
+            Why (logged).
+
+        Returns
+        -------
+        str
+            One line describing the outcome, e.g. "landed and disarmed".
+        """
+        _log.warning("emergency stop: %s", reason)
+        self._streaming_stopped = True
+        if self._system is None or self._action is None or self._offboard is None:
+            return "not connected"
+        if not (self.armed or self._arm_requested) and not self._offboard_started:
+            return "vehicle not armed; nothing to do"
+        action, offboard = self._action, self._offboard
+        notes: list[str] = []
+
+        async def attempt(what: str, call: Callable[[], Awaitable[Any]]) -> bool:
+            try:
+                await self._command(what, call)
+                return True
+            except VehicleError as exc:
+                _log.warning("emergency stop: %s", exc)
+                notes.append(str(exc))
+                return False
+
+        if self._offboard_started:
+            await attempt("offboard stop (Hold)", offboard.stop)
+            self._offboard_started = False
+        on_ground = self.landed_state == LandedState.ON_GROUND
+        if self.armed and not on_ground:
+            on_ground = await self._land_with_retries(lambda: attempt("land", action.land), notes)
+        if on_ground and (self.armed or self._arm_requested) and self.connected:
+            await attempt("disarm", action.disarm)
+            with contextlib.suppress(VehicleError):
+                await self._wait_until(
+                    lambda: not self.armed,
+                    self.settings.command_timeout_s,
+                    "disarmed state",
+                    in_control=False,
+                    stopping=True,
+                )
+        if not self.connected:
+            return "link lost: vehicle left to its own failsafe (" + "; ".join(notes) + ")"
+        if on_ground and not self.armed:
+            return "landed and disarmed"
+        return "; ".join(notes) or ("on the ground, armed" if on_ground else "airborne")
+
+    async def _land_with_retries(
+        self, send_land: Callable[[], Awaitable[bool]], notes: list[str]
+    ) -> bool:
+        """Command LAND until the vehicle is on the ground or ``land_timeout_s`` passes.
+
+        A land command lost in a link outage is sent again once the vehicle is heard from and
+        still not landing, so that a temporary loss of the link does not leave it hovering.
+        """
+        deadline_s = time.monotonic() + self.settings.land_timeout_s
+        last_try_s = -math.inf
+        last_heard_s = time.monotonic()
+        while self.landed_state != LandedState.ON_GROUND:
+            now_s = time.monotonic()
+            heard = self.connected and self.telemetry_age_s() < self.settings.max_telemetry_age_s
+            if heard:
+                last_heard_s = now_s
+            elif now_s - last_heard_s > self.settings.link_regain_s:
+                notes.append(f"link not back within {self.settings.link_regain_s:g} s")
+                return False
+            if now_s >= deadline_s:
+                break
+            if heard and self.flight_mode != FlightMode.LAND and now_s - last_try_s > 1.0:
+                last_try_s = now_s
+                await send_land()
+            changed = self._changed  # woken by any state change of the mirror
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(min(deadline_s - now_s, 0.5)):
+                    await changed.wait()
+        if self.landed_state == LandedState.ON_GROUND:
+            return True
+        notes.append(f"not on the ground after {self.settings.land_timeout_s:g} s")
+        return False

@@ -1,0 +1,421 @@
+"""How a vehicle flies: take-off, offboard, moves, settling, holds, each watched.
+
+Every setpoint goes through :meth:`Manoeuvres.send_setpoint`, which refuses one outside the
+arena (:mod:`gcs.flight.fence`); every move and hold checks the vehicle's control at each step
+(:meth:`gcs.flight.watches.Watches.control_problem`). Landing and the emergency stop are in
+:mod:`gcs.flight.landing`.
+
+:class:`Manoeuvres` is one part of :class:`gcs.flight.vehicle.Vehicle`, which sets its state.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections.abc import Awaitable
+from typing import Any, TypeVar
+
+import numpy as np
+from mavsdk.asyncio import MavsdkError
+from mavsdk.asyncio.plugins.offboard import PositionNedYaw
+from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState
+
+from gcs.errors import VehicleError
+from gcs.flight.hover import SPEED_SPAN_S, is_settled
+from gcs.flight.link import TelemetrySample, sample_arrays
+from gcs.flight.watches import Watches, _WaitTimeout
+
+__all__ = ["Manoeuvres", "min_jerk", "sleep_until"]
+
+_log = logging.getLogger(__name__)
+_T = TypeVar("_T")
+
+
+async def sleep_until(deadline_s: float) -> None:
+    """Sleep until an absolute deadline on ``time.monotonic()``; yield once if it has passed.
+
+    Parameters
+    ----------
+    deadline_s : float
+        Absolute time on ``time.monotonic()`` [s].
+    """
+    delay_s = deadline_s - time.monotonic()
+    await asyncio.sleep(delay_s if delay_s > 0 else 0)
+
+
+def min_jerk(s: float) -> float:
+    """Minimum-jerk progress ``10 s^3 - 15 s^4 + 6 s^5`` of a rest-to-rest move.
+
+    Parameters
+    ----------
+    s : float
+        Normalised time in [0, 1] (clipped).
+
+    Returns
+    -------
+    float
+        Normalised distance in [0, 1]; peak slope 1.875 at ``s = 0.5``.
+    """
+    s = min(max(s, 0.0), 1.0)
+    return s**3 * (10.0 - 15.0 * s + 6.0 * s * s)
+
+
+class Manoeuvres(Watches):
+    """The flying verbs of :class:`gcs.flight.vehicle.Vehicle`."""
+
+    target_ned_m: np.ndarray | None  # the last setpoint sent
+    _streaming_stopped: bool  # by an emergency stop, for good
+    _offboard_started: bool
+
+    async def wait_healthy_local_position(self, timeout_s: float | None = None) -> None:
+        """Wait until PX4 reports a valid local position and samples are arriving.
+
+        Parameters
+        ----------
+        timeout_s : float, optional
+            Limit [s]; ``settings.health_timeout_s`` if omitted.
+
+        Raises
+        ------
+        VehicleError
+            No valid local position within the timeout, or the link was lost.
+        """
+        timeout_s = self.settings.health_timeout_s if timeout_s is None else timeout_s
+        await self._wait_until(
+            lambda: (
+                self.local_position_ok
+                and self.telemetry_age_s() <= self.settings.max_telemetry_age_s
+            ),
+            timeout_s,
+            "a valid local position estimate",
+            in_control=False,
+        )
+
+    async def arm_and_takeoff(self, altitude_m: float) -> None:
+        """Arm and take off (PX4 Takeoff mode) to ``altitude_m`` above the local origin.
+
+        The altitude is requested through ``MIS_TAKEOFF_ALT``; if the vehicle refuses that
+        parameter the take-off goes to the vehicle's default and the move to the start point
+        corrects the altitude. Take-off counts as done when the altitude is within the settle
+        tolerance, or when PX4 reports it is airborne in Hold (its state after Takeoff).
+
+        Parameters
+        ----------
+        altitude_m : float
+            Height above the local NED origin, positive up [m].
+
+        Raises
+        ------
+        VehicleError
+            Arming or take-off refused or not finished within ``settings.takeoff_timeout_s``.
+        """
+        if not (math.isfinite(altitude_m) and altitude_m > 0):
+            raise VehicleError(f"take-off altitude must be positive, got {altitude_m} m")
+        if self.fence is not None:
+            (down_lo, down_hi) = self.fence.arena_ned_m[2]
+            if not down_lo <= -altitude_m <= down_hi:
+                raise VehicleError(
+                    f"fence: take-off altitude {altitude_m:g} m is outside the arena "
+                    f"{self.fence.arena_text()}; not taking off"
+                )
+            self._require_inside("arming")
+        action = self._require(self._action)
+        try:
+            await self._command(
+                "set take-off altitude", lambda: action.set_takeoff_altitude(float(altitude_m))
+            )
+        except VehicleError as exc:
+            _log.warning("%s; taking off to the vehicle's default altitude", exc)
+        self._arm_requested = True  # the fence watches from the arm command on
+        try:
+            await self._command("arm", action.arm)
+            await self._wait_until(
+                lambda: self.armed, self.settings.command_timeout_s, "armed state", in_control=False
+            )
+        except BaseException:
+            self._arm_requested = self.armed
+            raise
+        await self._command("take-off", action.takeoff)
+        tolerance_m = self.settings.settle_tolerance_m
+        seen_takeoff_mode = [False]
+
+        def airborne() -> bool:
+            if self.latest is None:
+                return False
+            seen_takeoff_mode[0] |= self.flight_mode == FlightMode.TAKEOFF
+            height_m = -self.latest.pos_ned_m[2]
+            done_in_hold = (
+                seen_takeoff_mode[0]
+                and self.flight_mode == FlightMode.HOLD
+                and self.landed_state == LandedState.IN_AIR
+            )
+            return height_m >= altitude_m - tolerance_m or done_in_hold
+
+        await self._wait_until(
+            airborne,
+            self.settings.takeoff_timeout_s,
+            f"take-off to {altitude_m:g} m",
+            in_control=False,
+        )
+
+    async def send_setpoint(self, pos_ned_m: Any) -> None:
+        """Send one position setpoint (MAVSDK re-sends the last one at 20 Hz by itself).
+
+        Parameters
+        ----------
+        pos_ned_m : array_like, shape (3,)
+            Absolute local NED position [m].
+
+        Raises
+        ------
+        VehicleError
+            The setpoint lies outside the arena (or the vehicle has no fence), after
+            :meth:`emergency_stop` (streaming is over for good), or MAVSDK refused it.
+        """
+        if self._streaming_stopped:
+            raise VehicleError("setpoint streaming was stopped by an emergency stop")
+        if self.fence is None:
+            raise VehicleError("no arena fence: gcs sends setpoints only inside an arena")
+        problem = self.fence.setpoint_problem(pos_ned_m)
+        if problem is not None:
+            raise VehicleError(f"fence: {problem}; not sent")
+        offboard = self._require(self._offboard)
+        n, e, d = (float(x) for x in pos_ned_m)
+        setpoint = PositionNedYaw(n, e, d, self.settings.yaw_deg)
+        try:
+            await offboard.set_position_ned(setpoint)
+        except MavsdkError as exc:
+            raise VehicleError(f"setpoint refused: {getattr(exc, 'result', exc)}") from None
+        self.target_ned_m = np.array([n, e, d])
+
+    async def start_offboard_at_current_position(self, preroll_s: float = 1.0) -> None:
+        """Stream the current position as setpoint, switch to OFFBOARD and wait for it.
+
+        PX4 wants setpoints flowing before the switch (about 1 s); the last one is sent
+        immediately before ``offboard.start()`` (MAVSDK stops its re-send 3 s after the first
+        setpoint if the vehicle is not in OFFBOARD by then). The hover setpoint is the point of
+        the arena nearest to the measured position (the same point inside it); a position
+        beyond the fence's margin is refused.
+
+        Parameters
+        ----------
+        preroll_s : float
+            How long to stream the hover setpoint before switching [s]; must stay below 3 s.
+
+        Raises
+        ------
+        VehicleError
+            No fresh position, offboard refused, or OFFBOARD not reported in time.
+        """
+        if self.latest is None or self.telemetry_age_s() > self.settings.max_telemetry_age_s:
+            raise VehicleError("cannot start offboard: no fresh position telemetry")
+        self._require_inside("starting offboard")
+        hover_ned_m = self._hover_point(np.array(self.latest.pos_ned_m))
+        period_s = 1.0 / self.settings.stream_rate_hz
+        t0 = time.monotonic()
+        for i in range(max(1, math.ceil(preroll_s / period_s))):
+            await sleep_until(t0 + i * period_s)
+            breach = self.safety_problem()
+            if breach is not None:
+                raise VehicleError(f"{breach} while starting offboard")
+            await self.send_setpoint(hover_ned_m)
+        offboard = self._require(self._offboard)
+        await self.send_setpoint(hover_ned_m)
+        await self._command("start offboard", offboard.start)
+        self._offboard_started = True
+        await self._wait_until(
+            lambda: self.flight_mode == FlightMode.OFFBOARD,
+            self.settings.command_timeout_s,
+            "OFFBOARD mode",
+            in_control=False,
+        )
+
+    async def goto(self, ned_m: Any, speed_m_s: float) -> None:
+        """Move in a straight line to ``ned_m`` (no waiting there: see :meth:`settle`).
+
+        The move starts at the current target (else the measured position), follows a
+        minimum-jerk profile whose peak speed is ``speed_m_s`` and is streamed at
+        ``settings.stream_rate_hz`` against absolute deadlines (wall clock: a transit is not
+        learned from).
+
+        Parameters
+        ----------
+        ned_m : array_like, shape (3,)
+            Target in local NED [m].
+        speed_m_s : float
+            Peak speed of the move [m/s].
+
+        Raises
+        ------
+        VehicleError
+            Lost control during the move (see :meth:`control_problem`).
+        """
+        target = np.asarray(ned_m, dtype=float).reshape(3)
+        if self.fence is not None and (problem := self.fence.setpoint_problem(target)):
+            raise VehicleError(f"fence: cannot move to {_fmt(target)}: {problem}")
+        self._require_inside(f"moving to {_fmt(target)}")
+        if self.target_ned_m is not None:
+            start = self.target_ned_m.copy()
+        elif self.latest is not None:
+            start = self._hover_point(np.array(self.latest.pos_ned_m))
+        else:
+            raise VehicleError("cannot move: no position telemetry yet")
+        distance_m = float(np.linalg.norm(target - start))
+        rate_hz = self.settings.stream_rate_hz
+        duration_s = 1.875 * distance_m / speed_m_s
+        n_ticks = max(1, math.ceil(duration_s * rate_hz))
+        t0 = time.monotonic()
+        for i in range(1, n_ticks + 1):
+            await sleep_until(t0 + i / rate_hz)
+            problem = self.control_problem()
+            if problem is not None:
+                raise VehicleError(f"{problem} while moving to {_fmt(target)}")
+            await self.send_setpoint(start + min_jerk(i / n_ticks) * (target - start))
+
+    async def settle(self, ned_m: Any, tolerance_m: float, speed_tolerance_m_s: float) -> bool:
+        """Hover at ``ned_m`` until settled: distance and speed within tolerance for a while.
+
+        Settled means :func:`gcs.flight.hover.is_settled` over ``settings.settle_time_s`` of
+        vehicle time: every sample within ``tolerance_m`` of the point and every speed (over
+        1 s) within ``speed_tolerance_m_s``.
+
+        Parameters
+        ----------
+        ned_m : array_like, shape (3,)
+            Hover point in local NED [m].
+        tolerance_m : float
+            Largest distance from the point [m].
+        speed_tolerance_m_s : float
+            Largest speed [m/s].
+
+        Returns
+        -------
+        bool
+            True once settled; False when ``settings.settle_timeout_s`` ran out first (the
+            caller judges that hover: a loose hover is no error by itself).
+
+        Raises
+        ------
+        VehicleError
+            Lost control meanwhile.
+        """
+        target = np.asarray(ned_m, dtype=float).reshape(3)
+        s = self.settings
+        # samples enough for the window and its speed span at up to twice the requested rate
+        keep = math.ceil((s.settle_time_s + SPEED_SPAN_S) * 2 * s.telemetry_rate_hz) + 2
+        with self.record_telemetry() as samples:
+
+            def settled() -> bool:
+                t, pos = sample_arrays(samples[-keep:])
+                return is_settled(t, pos, target, tolerance_m, speed_tolerance_m_s, s.settle_time_s)
+
+            try:
+                await self._wait_until(
+                    settled, s.settle_timeout_s, f"settling at {_fmt(target)}", in_control=True
+                )
+            except _WaitTimeout:
+                return False
+        return True
+
+    async def hold(self, duration_s: float, what: str) -> list[TelemetrySample]:
+        """Hover at the current target for ``duration_s`` of vehicle time, watching it.
+
+        Parameters
+        ----------
+        duration_s : float
+            How long, on the vehicle's clock [s] (a simulator slower than real time takes
+            longer in wall time).
+        what : str
+            Name of the hold for error messages.
+
+        Returns
+        -------
+        list of TelemetrySample
+            The samples received during the hold.
+
+        Raises
+        ------
+        VehicleError
+            Control was lost (see :meth:`control_problem`) before the hold ended.
+        """
+        await self.hold_position()
+        fit = self.clock_fit()
+        with self.record_telemetry() as samples:
+            # until a sample stamped duration_s after the vehicle's "now" (not its last sample)
+            end_s = float(fit.to_vehicle(time.monotonic())) + duration_s
+            # twice the expected wall time: a simulator may slow down meanwhile (silence is the
+            # watchdog's to catch, not the timeout's)
+            await self._wait_until(
+                lambda: self.clock.latest_s >= end_s,
+                2 * duration_s / fit.rate + 2 * self.settings.max_telemetry_age_s,
+                what,
+                in_control=True,
+            )
+            return list(samples)
+
+    async def hold_position(self) -> np.ndarray:
+        """Hover at the current target: re-send it so MAVSDK keeps re-sending it at 20 Hz.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            The hover point in local NED [m] (the last target, else the measured position).
+        """
+        if self.target_ned_m is not None:
+            hover = self.target_ned_m.copy()
+        elif self.latest is not None:
+            hover = self._hover_point(np.array(self.latest.pos_ned_m))
+        else:
+            raise VehicleError("cannot hold: no position telemetry yet")
+        await self.send_setpoint(hover)
+        return hover
+
+    def _hover_point(self, pos_ned_m: np.ndarray) -> np.ndarray:
+        """A hover setpoint at a measured position: its nearest point of the arena."""
+        return pos_ned_m if self.fence is None else self.fence.clamp(pos_ned_m)
+
+    async def hover_while(self, work: Awaitable[_T], what: str) -> _T:
+        """Hover while ``work`` (e.g. ``asyncio.to_thread(...)``) runs, watching the vehicle.
+
+        Parameters
+        ----------
+        work : awaitable
+            The work to await; it is not cancelled if the vehicle fails (a thread cannot be).
+        what : str
+            Name of the work for error messages.
+
+        Returns
+        -------
+        object
+            The result of ``work``.
+
+        Raises
+        ------
+        VehicleError
+            Control was lost (see :meth:`control_problem`) before ``work`` finished.
+        """
+        await self.hold_position()
+        task = asyncio.ensure_future(work)
+        while True:
+            # woken by every state change (each position sample), at the latest at half the
+            # telemetry-age limit so that silence is noticed
+            changed = asyncio.ensure_future(self._changed.wait())
+            try:
+                await asyncio.wait(
+                    {task, changed},
+                    timeout=self.settings.max_telemetry_age_s / 2,
+                    return_when=asyncio.FIRST_COMPLETED,
+                )
+            finally:
+                changed.cancel()
+            if task.done():
+                return task.result()
+            problem = self.control_problem()
+            if problem is not None:
+                raise VehicleError(f"{problem} while hovering for {what}")
+
+
+def _fmt(ned_m: np.ndarray) -> str:
+    return "NED (" + ", ".join(f"{x:.2f}" for x in ned_m) + ") m"
