@@ -44,7 +44,7 @@ import numpy as np
 from gcs.core.trajectory import setpoint_array
 from gcs.errors import MocapError, TrajectoryError, TrialAborted, VehicleError
 from gcs.flight.clock import rate_warning
-from gcs.flight.fence import Fence
+from gcs.flight.fence import Fence, format_ned
 from gcs.flight.geofence import GeofenceState, install_geofence
 from gcs.flight.hover import HoverStats, HoverVerdict, hover_stats, judge_hover, widened
 from gcs.flight.interrupts import run_guarded
@@ -509,7 +509,7 @@ class _Campaign:
             await self.record_session(session, "recording the hover")
             if not record.verdict.ok:
                 raise VehicleError(
-                    f"the vehicle does not hold the start point {_fmt(hover)}: it "
+                    f"the vehicle does not hold the start point {format_ned(hover)}: it "
                     f"{record.verdict.reason}"
                 )
         record = await _settle(vehicle, hover, j, session, settings, emit)
@@ -684,8 +684,8 @@ async def _settle(
     record = _judge(recent, target, j, "settle timeout", vehicle, settings)
     if not record.verdict.ok:
         raise VehicleError(
-            f"the vehicle did not settle at the start point {_fmt(target)} of trial {j} within "
-            f"{settings.settle_timeout_s:g} s: it {record.verdict.reason}"
+            f"the vehicle did not settle at the start point {format_ned(target)} of trial {j} "
+            f"within {settings.settle_timeout_s:g} s: it {record.verdict.reason}"
         )
     tolerance_m, speed_m_s = widened(
         session.tolerance_m, session.speed_tolerance_m_s, record.stats, settings
@@ -715,7 +715,7 @@ def _judge(
     try:
         stats = hover_stats(t, pos, target)
     except ValueError as exc:
-        raise VehicleError(f"cannot measure the hover at {_fmt(target)}: {exc}") from None
+        raise VehicleError(f"cannot measure the hover at {format_ned(target)}: {exc}") from None
     fit = vehicle.clock.fit()
     rate = fit.rate if fit is not None else math.nan
     target_t = (float(target[0]), float(target[1]), float(target[2]))
@@ -740,10 +740,6 @@ def _with_hover(
         tolerance_m=tolerance_m,
         speed_tolerance_m_s=speed_tolerance_m_s,
     )
-
-
-def _fmt(ned_m: np.ndarray) -> str:
-    return "NED (" + ", ".join(f"{x:.2f}" for x in ned_m) + ") m"
 
 
 def _plan(source: TrialSource, j: int, fence: Fence) -> tuple[np.ndarray, np.ndarray]:

@@ -68,7 +68,18 @@ def _ned(x: Any) -> np.ndarray:
     return v
 
 
-def _fmt(ned_m: np.ndarray) -> str:
+def format_ned(ned_m: np.ndarray) -> str:
+    """A local NED position for a message: ``NED (n, e, d) m`` to the centimetre.
+
+    Parameters
+    ----------
+    ned_m : ndarray, shape (3,)
+        North, east, down [m].
+
+    Returns
+    -------
+    str
+    """
     return "NED (" + ", ".join(f"{x:.2f}" for x in ned_m) + ") m"
 
 
@@ -186,7 +197,7 @@ class Fence:
             return f"setpoint {p.tolist()} is not finite"
         out = self.outside_by(p)
         if out > SETPOINT_TOLERANCE_M:
-            return f"setpoint {_fmt(p)} is {out:.2f} m outside the arena {self.arena_text()}"
+            return f"setpoint {format_ned(p)} is {out:.2f} m outside the arena {self.arena_text()}"
         return None
 
     def setpoints_problem(self, setpoints_ned_m: Any) -> str | None:
@@ -227,7 +238,7 @@ class Fence:
         out = self.outside_by(p)
         if out > self.margin_m or not np.all(np.isfinite(p)):
             return (
-                f"the measured position {_fmt(p)} is {out:.2f} m outside the arena "
+                f"the measured position {format_ned(p)} is {out:.2f} m outside the arena "
                 f"{self.arena_text()} (margin {self.margin_m:g} m)"
             )
         return None

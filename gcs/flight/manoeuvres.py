@@ -23,6 +23,7 @@ from mavsdk.asyncio.plugins.offboard import PositionNedYaw
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState
 
 from gcs.errors import VehicleError
+from gcs.flight.fence import format_ned
 from gcs.flight.hover import SPEED_SPAN_S, is_settled
 from gcs.flight.link import TelemetrySample, sample_arrays
 from gcs.flight.watches import Watches, _WaitTimeout
@@ -254,8 +255,8 @@ class Manoeuvres(Watches):
         """
         target = np.asarray(ned_m, dtype=float).reshape(3)
         if self.fence is not None and (problem := self.fence.setpoint_problem(target)):
-            raise VehicleError(f"fence: cannot move to {_fmt(target)}: {problem}")
-        self._require_inside(f"moving to {_fmt(target)}")
+            raise VehicleError(f"fence: cannot move to {format_ned(target)}: {problem}")
+        self._require_inside(f"moving to {format_ned(target)}")
         if self.target_ned_m is not None:
             start = self.target_ned_m.copy()
         elif self.latest is not None:
@@ -271,7 +272,7 @@ class Manoeuvres(Watches):
             await sleep_until(t0 + i / rate_hz)
             problem = self.control_problem()
             if problem is not None:
-                raise VehicleError(f"{problem} while moving to {_fmt(target)}")
+                raise VehicleError(f"{problem} while moving to {format_ned(target)}")
             await self.send_setpoint(start + min_jerk(i / n_ticks) * (target - start))
 
     async def settle(self, ned_m: Any, tolerance_m: float, speed_tolerance_m_s: float) -> bool:
@@ -313,7 +314,10 @@ class Manoeuvres(Watches):
 
             try:
                 await self._wait_until(
-                    settled, s.settle_timeout_s, f"settling at {_fmt(target)}", in_control=True
+                    settled,
+                    s.settle_timeout_s,
+                    f"settling at {format_ned(target)}",
+                    in_control=True,
                 )
             except _WaitTimeout:
                 return False
@@ -415,7 +419,3 @@ class Manoeuvres(Watches):
             problem = self.control_problem()
             if problem is not None:
                 raise VehicleError(f"{problem} while hovering for {what}")
-
-
-def _fmt(ned_m: np.ndarray) -> str:
-    return "NED (" + ", ".join(f"{x:.2f}" for x in ned_m) + ") m"

@@ -18,6 +18,7 @@ from dataclasses import replace
 import numpy as np
 
 from gcs.errors import MocapError, VehicleError
+from gcs.flight.fence import format_ned
 from gcs.flight.mocap.checks import (
     move_direction_problem,
     move_length,
@@ -168,7 +169,7 @@ async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> dict:
     pos = mocap.require_tracked()
     assert vehicle.latest is not None
     distance = float(np.linalg.norm(pos - np.asarray(vehicle.latest.pos_ned_m)))
-    note(f"mocap: rigid body tracked at {_fmt(pos)}, {distance:.3f} m from the estimate "
+    note(f"mocap: rigid body tracked at {format_ned(pos)}, {distance:.3f} m from the estimate "
          f"(after {time.monotonic() - started:.1f} s)")  # fmt: skip
     return {"agreement_m": distance, "origin": list(origin), "origin_set": was_set}
 
@@ -257,7 +258,3 @@ async def _still_at(
     series = mocap.client.recent(MOVE_WINDOW_S)
     moc, wander = window_mean(mocap.mapping.position_to_ned(series.pos_m[series.tracked]))
     return est, moc, wander
-
-
-def _fmt(ned_m: np.ndarray) -> str:
-    return "NED (" + ", ".join(f"{x:.2f}" for x in ned_m) + ") m"
