@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from px4.flying import kill_leftovers
+from px4.flying import forget_transcripts, keep_transcripts, kill_leftovers
 from px4.sitl import FAILURES, READY_LINE, ROOT, Px4Build, Px4Sitl, build_dir
 
 FIGURES = ROOT / "logs" / "px4-sitl"
@@ -32,11 +32,19 @@ def _failed(node) -> bool:
 
 
 @pytest.fixture(autouse=True)
-def _no_gcs_left_running() -> Iterator[None]:
-    """A test that fails mid-flight leaves its gcs process running: killed after the test."""
+def _no_gcs_left_running(request, tmp_path: Path) -> Iterator[None]:
+    """A test that fails mid-flight leaves its gcs process running: killed after the test. On
+    failure what each gcs process said and the test's run directories are copied to
+    ``logs/px4-failures/<test>-<time>-gcs/`` (beside the vehicles' records)."""
     yield
     for pid in kill_leftovers():
         print(f"gcs process {pid} was still running after the test: killed")
+    if _failed(request.node):
+        dest = FAILURES / f"{request.node.name}-{time.strftime('%Y%m%d-%H%M%S')}-gcs"
+        keep_transcripts(dest, tmp_path)
+        print(f"gcs output and run directories of the failed test kept in {dest.relative_to(ROOT)}")
+    else:
+        forget_transcripts()
 
 
 @pytest.fixture(scope="session")

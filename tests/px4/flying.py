@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import yaml
@@ -21,13 +23,78 @@ SITL_LIMITS = {"max_telemetry_age_s": 1.0, "max_setpoint_late_s": 0.4}
 
 
 _started: list[subprocess.Popen] = []
+#: what each gcs process of the running test said: (its arguments, its output so far)
+_transcripts: list[tuple[str, Callable[[], str]]] = []
+
+
+class _Recorded:
+    """A process's stdout that keeps every line a test reads from it (the rest of the output,
+    read by ``communicate``, is added by :func:`finish` and :func:`kill_leftovers`)."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self.parts: list[str] = []
+
+    def __iter__(self) -> Iterator[str]:
+        for line in self._stream:
+            self.parts.append(line)
+            yield line
+
+    def readline(self, *args) -> str:
+        line = self._stream.readline(*args)
+        self.parts.append(line)
+        return line
+
+    def read(self, *args) -> str:
+        text = self._stream.read(*args)
+        self.parts.append(text)
+        return text
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
 
 
 def gcs(*args: object) -> subprocess.Popen:
-    """``python -m gcs *args`` started (output on a pipe), remembered for :func:`kill_leftovers`."""
+    """``python -m gcs *args`` started (output on a pipe), remembered for :func:`kill_leftovers`
+    and its output for :func:`keep_transcripts`."""
     proc = _gcs(*args)
+    proc.stdout = recorded = _Recorded(proc.stdout)
     _started.append(proc)
+    remember(" ".join(map(str, args)), lambda: "".join(recorded.parts))
     return proc
+
+
+def remember(command: str, output: Callable[[], str]) -> None:
+    """Keep ``output()`` (a gcs process's output so far) if the running test fails."""
+    _transcripts.append((command, output))
+
+
+def keep_transcripts(dest: Path, tmp: Path) -> list[Path]:
+    """Write what every gcs process of the test said to ``dest/gcs-<k>.txt`` and copy its files
+    (run directories, profiles: everything under ``tmp`` but the vehicles' working directories,
+    kept by their fixture) to ``dest/files``; then forget them. The files written."""
+    written = []
+    dest.mkdir(parents=True, exist_ok=True)
+    for k, (command, output) in enumerate(_transcripts):
+        path = dest / f"gcs-{k}.txt"
+        path.write_text(f"$ gcs {command}\n{output()}")
+        written.append(path)
+    _transcripts.clear()
+    for item in sorted(tmp.iterdir()):
+        if not item.name.startswith("px4-"):
+            target = dest / "files" / item.name
+            if item.is_dir():
+                shutil.copytree(item, target, symlinks=True, dirs_exist_ok=True)
+            else:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(item, target)
+            written.append(target)
+    return written
+
+
+def forget_transcripts() -> None:
+    """The test passed: nothing of its gcs processes to keep."""
+    _transcripts.clear()
 
 
 def kill_leftovers() -> list[int]:
@@ -38,7 +105,8 @@ def kill_leftovers() -> list[int]:
         proc = _started.pop()
         if proc.poll() is None:
             proc.kill()
-            proc.communicate(timeout=10)
+            out, _ = proc.communicate(timeout=10)
+            proc.stdout.parts.append(out or "")
             killed.append(proc.pid)
     return killed
 
@@ -46,6 +114,8 @@ def kill_leftovers() -> list[int]:
 def finish(proc: subprocess.Popen, before: list[str] = ()) -> tuple[int, str]:
     """Run ``proc`` to its end; its exit code and whole output (``before``: lines read already)."""
     out, _ = proc.communicate(timeout=FLIGHT_TIMEOUT_S)
+    if isinstance(proc.stdout, _Recorded):
+        proc.stdout.parts.append(out)
     return proc.returncode, "".join(before) + out
 
 

@@ -26,6 +26,7 @@ from synthetic import CI_FLIGHT, SHORT
 
 from gcs.io.rundir import RunDir
 from gcs.mock.mocap.process import MocapServerProcess
+from px4.flying import remember
 from px4.sitl import ROOT, STARTED_LINE, Px4Sitl
 
 pytestmark = pytest.mark.px4
@@ -68,6 +69,7 @@ class Gcs:
         )
         self._t0 = time.monotonic()
         self.times: dict[str, float] = {}
+        remember(" ".join(map(str, args)), self.output)
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self) -> None:
