@@ -331,6 +331,7 @@ def _profile_cases() -> Iterator[Case]:
         ("vehicle.max_vertical_accel_m_s2", -3.0, "vehicle.max_vertical_accel_m_s2"),
         ("vehicle.max_jerk_m_s3", 0.0, "vehicle.max_jerk_m_s3"),
         ("vehicle.max_vertical_jerk_m_s3", "high", "vehicle.max_vertical_jerk_m_s3"),
+        ("vehicle.max_yaw_rate_deg_s", 0.0, "vehicle.max_yaw_rate_deg_s"),
         ("model.delay_s", -0.1, "model"),
         ("learning.weights.we", 0.0, "learning.weights.we"),
         ("arena.north_m", [3.0, -3.0], "arena.north_m"),
@@ -514,6 +515,18 @@ def _samples_csv(dt: float = 0.1) -> str:
 SAMPLES_CSV = _samples_csv()
 
 
+def _samples_csv_yaw(deg_per_sample: float) -> str:
+    """:data:`SAMPLES_CSV` with a yaw column turning ``deg_per_sample`` each 0.1 s sample."""
+    lines = SAMPLES_CSV.splitlines()
+    return (
+        "\n".join(
+            [lines[0] + ",yaw_deg"]
+            + [f"{line},{deg_per_sample * i:g}" for i, line in enumerate(lines[1:])]
+        )
+        + "\n"
+    )
+
+
 def _traj(ws: Workspace, base: dict, dotted: str | None = None, value: Any = None) -> Path:
     data = base if dotted is None else _set(base, dotted, value)
     return ws.file("trajectory.yaml", yaml.safe_dump(data))
@@ -625,8 +638,10 @@ def _source_cases() -> Iterator[Case]:
         ("end not at the start", SAMPLES_CSV + "4.1,1.0,0.0,-1.5\n", "where it began"),
         ("beyond the arena", SAMPLES_CSV.replace(",0.0,", ",3.5,"), "leaves the arena"),
         ("too fast", _samples_csv(0.01), "exceeds the vehicle limit"),
-        ("a varying yaw", SAMPLES_CSV.replace("down_m", "down_m,yaw_deg").replace(
-            "-1.5\n", "-1.5,10\n", 3).replace("-1.5\n", "-1.5,0\n"), "yaw"),
+        ("a yaw turning faster than the vehicle", _samples_csv_yaw(20.0),
+            "exceeds the vehicle limit 90 deg/s (vehicle.max_yaw_rate_deg_s"),
+        ("a NaN yaw", _samples_csv_yaw(1.0).replace(",3\n", ",nan\n"),
+            "line 5: column 'yaw_deg' is nan"),
     ):  # fmt: skip
         yield Case(
             k, "fly", f"samples CSV: {what}", lambda ws, x=text: _fly(ws, traj=_samples(ws, x)),

@@ -12,11 +12,13 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from gcs.errors import ProfileError, TrialAborted
+from gcs.errors import ProfileError, TrajectoryError, TrialAborted
 from gcs.flight.clock import VehicleClock
 from gcs.flight.link import TelemetrySample
-from gcs.flight.manoeuvres import min_jerk
+from gcs.flight.manoeuvres import heading_deg, min_jerk
 from gcs.flight.trial import (
     TrialRun,
     align_to_grid,
@@ -88,6 +90,22 @@ def test_send_schedule_zero_order_hold() -> None:
     # the first send of every setpoint is exactly on its sample boundary
     first = deadlines[::3]
     np.testing.assert_allclose(first, np.arange(4) * 0.05)
+
+
+@given(st.floats(-1e5, 1e5))
+def test_heading_is_the_same_direction_in_range(yaw: float) -> None:
+    h = heading_deg(yaw)
+    assert -180.0 <= h < 180.0
+    # the same direction: compared as unit vectors (independent of the wrapping arithmetic)
+    a, b = np.radians(yaw), np.radians(h)
+    assert np.hypot(np.cos(a) - np.cos(b), np.sin(a) - np.sin(b)) < 1e-9
+    if -180.0 <= yaw < 180.0:
+        assert h == yaw  # in range: sent exactly as given
+
+
+def test_heading_of_turns_past_half_a_turn() -> None:
+    assert heading_deg(190.0) == -170.0 and heading_deg(-190.0) == 170.0
+    assert heading_deg(180.0) == -180.0 and heading_deg(720.0) == 0.0
 
 
 def test_min_jerk_profile() -> None:
@@ -167,6 +185,7 @@ class FakeVehicle:
         motion=None,  # type: ignore[no-untyped-def]
     ):
         self.sent: list[tuple[float, np.ndarray]] = []
+        self.yaws: list[float | None] = []
         self.pos = np.zeros(3)
         self.target = np.zeros(3)
         self.latest: TelemetrySample | None = None
@@ -183,10 +202,11 @@ class FakeVehicle:
     def vehicle_time(self, wall_s: float) -> float:
         return (wall_s - self.boot_s) * self.rate
 
-    async def send_setpoint(self, pos_ned_m: np.ndarray) -> None:
+    async def send_setpoint(self, pos_ned_m: np.ndarray, yaw_deg: float | None = None) -> None:
         now = time.monotonic()
         self.t_first = self.t_first if self.t_first is not None else now
         self.sent.append((now, np.array(pos_ned_m)))
+        self.yaws.append(yaw_deg)
         self.target = np.array(pos_ned_m)
 
     def control_problem(self) -> str | None:
@@ -271,6 +291,32 @@ def test_trial_streams_on_deadlines_and_records_grid() -> None:
     assert rec.raw_t_s[-1] >= rec.t_s[-1]  # y(N) was measured, not extrapolated
     assert 1 <= len(progress) <= 12 and progress[-1][1] == 12
     np.testing.assert_array_equal(rec.setpoints_ned_m, sp)
+
+
+def test_trial_sends_each_setpoint_with_its_own_yaw_and_none_without_one() -> None:
+    settings = FlightSettings(stream_rate_hz=60, telemetry_rate_hz=50)
+    sp = _circle(12)
+    yaw = np.linspace(0.0, 330.0, 12)  # a turn: one heading per setpoint
+    vehicle = FakeVehicle()
+    rec = asyncio.run(
+        _with_telemetry(vehicle, fly_trial(vehicle, sp, 0.05, settings, yaw_deg=yaw))  # type: ignore[arg-type]
+    )
+    assert rec.complete
+    sent = np.array(vehicle.yaws, dtype=float)
+    # three sends per sample, each with its setpoint's yaw, then the last repeated until y(N)
+    np.testing.assert_array_equal(sent[:36], np.repeat(yaw, 3))
+    assert np.all(sent[36:] == yaw[-1])
+    held = FakeVehicle()
+    asyncio.run(_with_telemetry(held, fly_trial(held, sp, 0.05, settings)))  # type: ignore[arg-type]
+    assert held.yaws and all(y is None for y in held.yaws)  # the profile's flight.yaw_deg
+
+
+@pytest.mark.parametrize(
+    ("yaw", "match"), [(np.zeros(11), "one per setpoint"), (np.full(12, np.nan), "k = 0")]
+)
+def test_trial_refuses_a_yaw_not_one_finite_value_per_setpoint(yaw: np.ndarray, match: str) -> None:
+    with pytest.raises(TrajectoryError, match=match):
+        TrialRun(FakeVehicle(), _circle(12), 0.05, FlightSettings(), yaw_deg=yaw)  # type: ignore[arg-type]
 
 
 def test_trial_flags_telemetry_gap() -> None:

@@ -1,8 +1,8 @@
 """End to end: trajectories of the user's own, flown on the mock drone through the real MAVSDK.
 
 A three-dimensional ``waypoints`` trajectory learns over two trials (north and east learned,
-down flown as the reference); a planner's ``samples`` CSV is flown as the file resampled onto
-the grid.
+down flown as the reference); a planner's ``samples`` CSV with a yaw column is flown as the
+file resampled onto the grid, every setpoint with its own yaw.
 """
 
 from __future__ import annotations
@@ -61,18 +61,21 @@ def test_a_three_dimensional_waypoints_trajectory_learns_and_flies_down_as_the_r
 
 
 def test_a_samples_csv_is_flown_as_the_file_resampled_to_the_grid(tmp_path: Path) -> None:
-    # a planner's output at 40 Hz (not the 20 Hz ILC grid): out 0.8 m east and back, 1.5 m up
+    # a planner's output at 40 Hz (not the 20 Hz ILC grid): out 0.8 m east and back, 1.5 m up,
+    # turning to face east (90 deg) on the way out and back to north
     t = np.arange(161) / 40.0
     east = 0.4 * (1.0 - np.cos(2.0 * np.pi * t / 4.0))
-    lines = ["t_s,north_m,east_m,down_m"]
-    lines += [f"{a:.3f},0.0,{e:.6f},-1.5" for a, e in zip(t, east, strict=True)]
+    yaw = 45.0 * (1.0 - np.cos(2.0 * np.pi * t / 4.0))  # at most 71 deg/s
+    lines = ["t_s,north_m,east_m,down_m,yaw_deg"]
+    lines += [f"{a:.3f},0.0,{e:.6f},-1.5,{y:.4f}" for a, e, y in zip(t, east, yaw, strict=True)]
     (tmp_path / "planner.csv").write_text("\n".join(lines) + "\n")
     trajectory = tmp_path / "planner.yaml"
     trajectory.write_text(
         yaml.safe_dump({"name": "planner", "type": "samples", "file": "planner.csv"})
     )
     run_path = tmp_path / "run"
-    with MockProcess(seed=0) as mock:
+    stats_path = tmp_path / "stats.json"
+    with MockProcess(seed=0, stats_path=stats_path) as mock:
         code, out = finish(
             gcs(
                 "fly",
@@ -91,9 +94,19 @@ def test_a_samples_csv_is_flown_as_the_file_resampled_to_the_grid(tmp_path: Path
     assert code == 0, out
     run = RunDir.open(run_path)
     data = read_samples(tmp_path / "planner.csv")
-    expected = sample_samples(SamplesShape(data.t_s, data.pos_ned_m), run.t_ilc_s)
+    expected = sample_samples(
+        SamplesShape(data.t_s, data.pos_ned_m, np.radians(data.yaw_deg)), run.t_ilc_s
+    )
     record = run.read_trial(0)
     assert record.t_s.shape == expected.t_s.shape
     np.testing.assert_allclose(record.ref_ned_m, expected.pos_ned_m, atol=1e-3)
     np.testing.assert_allclose(record.sp_ned_m[:-1], expected.pos_ned_m[:-1], atol=1e-3)
     assert np.ptp(record.pos_ned_m[:, 1]) > 0.5  # the vehicle flew it
+    # the yaw: recorded with the reference, and every setpoint reached the vehicle with its own
+    np.testing.assert_allclose(run.reference().yaw_rad, expected.yaw_rad, atol=1e-6)
+    sent = json.loads(stats_path.read_text())["setpoints"]
+    got = np.column_stack([sent[k] for k in ("north_m", "east_m", "down_m", "yaw_rad")])
+    for k in range(expected.n_samples):
+        near = np.all(np.abs(got[:, :3] - record.sp_ned_m[k]) < 1e-4, axis=1)
+        assert np.any(np.abs(got[near, 3] - expected.yaw_rad[k]) < 1e-4), k
+    assert np.degrees(got[:, 3].max()) == pytest.approx(90.0, abs=0.5)

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs.core.trajectory import Box, check_reference
+from gcs.core.trajectory import Box, Reference, check_reference
 from gcs.core.trajectory_sources import (
     EllipseShape,
     SamplesShape,
@@ -394,28 +394,55 @@ def test_a_reference_that_passes_the_check_respects_the_limits_on_its_grid(shape
 # ----------------------------------------------------------------------- planning a flight
 
 
-def test_a_constant_yaw_is_flown_and_a_varying_one_refused(tmp_path):
+def test_a_constant_yaw_is_flown_and_a_varying_one_flown_per_setpoint(tmp_path):
     import yaml
 
-    from gcs.app.fly import plan_fly
+    from gcs.app.fly import plan_fly, start_run, trial_yaw_deg
+    from gcs.io.rundir import RunDir
 
     profile = ROOT / "profiles" / "antx.yaml"
     data = yaml.safe_load((ROOT / "trajectories" / "circle.yaml").read_text())
     held = tmp_path / "held.yaml"
     held.write_text(yaml.safe_dump(data))
-    assert plan_fly(profile, held, None, logs=tmp_path / "logs").settings.yaw_deg == 0.0
+    plan = plan_fly(profile, held, None, logs=tmp_path / "logs")
+    assert plan.settings.yaw_deg == 0.0 and trial_yaw_deg(plan.reference) is None
     turned = tmp_path / "turned.yaml"
     turned.write_text(yaml.safe_dump(dict(data, yaw_deg=90.0)))
     plan = plan_fly(profile, turned, None, logs=tmp_path / "logs")
-    assert plan.settings.yaw_deg == 90.0 and np.all(plan.reference.yaw_rad == np.pi / 2)
+    assert plan.settings.yaw_deg == pytest.approx(90.0)
+    assert np.all(plan.reference.yaw_rad == np.pi / 2)
+    np.testing.assert_allclose(trial_yaw_deg(plan.reference), 90.0)
+    # a samples file's yaw column: 0 -> 40 deg over 4 s (10 deg/s), one heading per setpoint
     t = np.arange(41) * 0.1
-    rows = [f"{a:.1f},{0.2 * np.sin(np.pi * a / 4) ** 2:.6f},0,-1.5,{a}" for a in t]
+    rows = [f"{a:.1f},{0.2 * np.sin(np.pi * a / 4) ** 2:.6f},0,-1.5,{10 * a:g}" for a in t]
     (tmp_path / "p.csv").write_text("t_s,north_m,east_m,down_m,yaw_deg\n" + "\n".join(rows))
     samples = tmp_path / "s.yaml"
     samples.write_text(yaml.safe_dump({"name": "s", "type": "samples", "file": "p.csv"}))
-    with pytest.raises(TrajectoryError, match="yaw that varies .* not flown yet"):
+    plan = plan_fly(profile, samples, None, run_path=tmp_path / "run", logs=tmp_path / "logs")
+    yaw = trial_yaw_deg(plan.reference)
+    assert yaw.shape == (plan.reference.n_samples,)
+    assert plan.settings.yaw_deg == pytest.approx(0.0) and yaw.max() == pytest.approx(40.0)
+    # recorded in reference.csv, read back the same (to the file's 9 digits)
+    run = RunDir.open(start_run(plan).path)
+    np.testing.assert_allclose(run.reference().yaw_rad, plan.reference.yaw_rad, rtol=1e-8)
+    # ten times faster: 100 deg/s is beyond the default 90 deg/s, refused naming the limit
+    rows = [f"{a:.1f},{0.2 * np.sin(np.pi * a / 4) ** 2:.6f},0,-1.5,{100 * a:g}" for a in t]
+    (tmp_path / "p.csv").write_text("t_s,north_m,east_m,down_m,yaw_deg\n" + "\n".join(rows))
+    with pytest.raises(TrajectoryError, match=r"yaw rate .* 90 deg/s .*max_yaw_rate_deg_s"):
         plan_fly(profile, samples, None, logs=tmp_path / "logs")
     assert not (tmp_path / "logs").exists()
+
+
+def test_the_yaw_rate_is_checked_on_the_flown_grid_through_a_wrap():
+    t = np.arange(5) * 0.1
+    pos = np.zeros((5, 3))
+    # 170 -> -170 deg is 20 deg the short way round, as np.unwrap records it: 200 deg/s
+    yaw = np.unwrap(np.radians([170.0, 170.0, -170.0, -170.0, -170.0]))
+    ref = Reference(t, pos, pos, pos, yaw)
+    check_reference(ref, 1, 1, WIDE, max_yaw_rate_deg_s=200.0 + 1e-6)
+    with pytest.raises(TrajectoryError, match=r"yaw rate on the flown grid 200.00 deg/s .* 0.10"):
+        check_reference(ref, 1, 1, WIDE, max_yaw_rate_deg_s=150.0)
+    check_reference(Reference(t, pos, pos, pos, None), 1, 1, WIDE, max_yaw_rate_deg_s=1e-9)
 
 
 def test_a_samples_run_resumes_from_its_recorded_reference(tmp_path):

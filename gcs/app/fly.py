@@ -160,7 +160,7 @@ def plan_fly(
     algorithm = algorithm or profile.learning.algorithm
     mocap_plan = plan_mocap(profile, where, mocap, use_mock)
     ref = flown_reference(profile, trajectory, str(trajectory_path))
-    settings = flown_yaw(profile.flight, trajectory, ref, str(trajectory_path))
+    settings = flown_yaw(profile.flight, ref)
     check_learnable(profile, ref, algorithm, where)
     if run_path is not None:
         check_new_dir(run_path, "--run")
@@ -216,38 +216,45 @@ def flown_reference(profile: Profile, trajectory: TrajectorySpec, where: str) ->
     return ref
 
 
-def flown_yaw(
-    settings: FlightSettings, trajectory: TrajectorySpec, ref: Reference, where: str
-) -> FlightSettings:
-    """The flight settings with the trajectory's yaw: its constant ``yaw_deg`` if it has one.
+def flown_yaw(settings: FlightSettings, ref: Reference) -> FlightSettings:
+    """The flight settings with the heading the trajectory starts with.
 
-    Without ``yaw_deg`` the yaw is held at the profile's ``flight.yaw_deg``. A yaw that varies
-    along the trajectory (a samples file's ``yaw_deg`` column) is sampled and checked but not
-    flown: it is refused here rather than silently held.
+    A trajectory with a yaw (a constant ``yaw_deg``, or a samples file's ``yaw_deg`` column)
+    is flown facing its own way: the take-off, the moves and the hovers hold its first yaw,
+    each trial's setpoints carry theirs (:func:`trial_yaw_deg`). Without one the yaw is held
+    at the profile's ``flight.yaw_deg``.
 
     Parameters
     ----------
     settings : FlightSettings
         The profile's flight settings.
-    trajectory : TrajectorySpec
-        The trajectory (its ``yaw_deg`` field).
     ref : Reference
-        Its reference on the grid (a run's ``reference.csv`` carries no yaw).
-    where : str
-        The trajectory's file, for the message.
+        The reference on the grid (its ``yaw_rad``).
 
     Returns
     -------
     FlightSettings
     """
-    yaw_deg = trajectory.source.get("yaw_deg")
-    if ref.yaw_rad is not None and yaw_deg is None:
-        raise TrajectoryError(
-            f"{where}: a yaw that varies along the trajectory (the samples file's yaw_deg "
-            "column) is not flown yet: leave the column out, or give a constant yaw_deg in the "
-            "trajectory file"
-        )
-    return settings if yaw_deg is None else replace(settings, yaw_deg=float(yaw_deg))
+    if ref.yaw_rad is None:
+        return settings
+    return replace(settings, yaw_deg=float(np.degrees(ref.yaw_rad[0])))
+
+
+def trial_yaw_deg(ref: Reference) -> np.ndarray | None:
+    """The heading of each trial setpoint ``u(0) .. u(N-1)``: the reference's yaw (flown as the
+    reference, never learned), or None when the yaw is held.
+
+    Parameters
+    ----------
+    ref : Reference
+        The reference on the grid.
+
+    Returns
+    -------
+    ndarray, shape (N,), or None
+        [deg, clockwise from north; unwrapped].
+    """
+    return None if ref.yaw_rad is None else np.degrees(ref.yaw_rad[:-1])
 
 
 def check_within_limits(ref: Reference, profile: Profile) -> None:
@@ -274,6 +281,7 @@ def check_within_limits(ref: Reference, profile: Profile) -> None:
         max_vertical_speed_m_s=profile.max_vertical_speed_m_s,
         max_vertical_accel_m_s2=profile.max_vertical_accel_m_s2,
         max_vertical_jerk_m_s3=profile.max_vertical_jerk_m_s3,
+        max_yaw_rate_deg_s=profile.max_yaw_rate_deg_s,
     )
 
 
@@ -302,7 +310,7 @@ def _plan_resume(
                 )
     profile, trajectory = run.profile(), run.trajectory()
     ref = run.reference()
-    settings = flown_yaw(profile.flight, trajectory, ref, f"{run.path}/manifest.json:trajectory")
+    settings = flown_yaw(profile.flight, ref)
     try:
         check_within_limits(ref, profile)
     except TrajectoryError as exc:
@@ -634,6 +642,8 @@ def fly_run(
         run, on_row, on_learn=on_learn, until_converged=until_converged, mock_seed=mock_seed
     )
     fence = flight_fence(run.profile(), settings)
-    plan = CampaignPlan(url, first, iterations, run.t_ilc_s, settings, fence)
+    plan = CampaignPlan(
+        url, first, iterations, run.t_ilc_s, settings, fence, trial_yaw_deg(run.reference())
+    )
     run_campaign(plan, source, on_event, mocap=mocap)
     return source

@@ -272,6 +272,7 @@ def check_reference(
     max_vertical_speed_m_s: float | None = None,
     max_vertical_accel_m_s2: float | None = None,
     max_vertical_jerk_m_s3: float | None = None,
+    max_yaw_rate_deg_s: float | None = None,
 ) -> None:
     """Refuse a reference beyond the vehicle's limits or outside the arena.
 
@@ -302,6 +303,9 @@ def check_reference(
         Largest vertical acceleration [m/s^2]; None: not checked.
     max_vertical_jerk_m_s3 : float or None
         Largest vertical jerk [m/s^3]; None: not checked.
+    max_yaw_rate_deg_s : float or None
+        Largest yaw rate of a reference with a yaw [deg/s], on the flown grid (the first
+        difference of the unwrapped yaw); None: not checked.
 
     Raises
     ------
@@ -359,8 +363,17 @@ def check_reference(
                 f"vertical jerk {flown}", "m/s^3", "vehicle.max_vertical_jerk_m_s3",
             ),
         ]  # fmt: skip
-    if ref.yaw_rad is not None and not np.all(np.isfinite(ref.yaw_rad)):
-        raise TrajectoryError("yaw is not finite (NaN or inf in the reference)")
+    if ref.yaw_rad is not None:
+        if not np.all(np.isfinite(ref.yaw_rad)):
+            raise TrajectoryError("yaw is not finite (NaN or inf in the reference)")
+        if ref.yaw_rad.size >= 2:
+            checks.append(
+                (
+                    np.degrees(np.abs(np.diff(ref.yaw_rad))) / dt, ref.t_s[:-1],
+                    max_yaw_rate_deg_s, "yaw rate on the flown grid", "deg/s",
+                    "vehicle.max_yaw_rate_deg_s",
+                )
+            )  # fmt: skip
     for values, times, limit, what, unit, field in checks:
         if not np.all(np.isfinite(values)):
             raise TrajectoryError(f"{what} is not finite (NaN or inf in the reference)")

@@ -36,7 +36,7 @@ import asyncio
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -333,6 +333,11 @@ class CampaignPlan:
         Flight settings; ``stream_rate_hz`` must be an integer multiple of ``1 / t_ilc_s``.
     fence : Fence
         The arena every setpoint must lie in and the limits watched while armed.
+    yaw_deg : ndarray, shape (N,), or None
+        Heading of each trial setpoint [deg, clockwise from north], the same every trial (the
+        yaw is flown as the reference, not learned); None: ``settings.yaw_deg`` throughout.
+        Outside the trials (take-off, moves, hovers) the heading is ``settings.yaw_deg``: give
+        it the first of these so that each trial starts facing its own way.
     """
 
     url: str
@@ -341,6 +346,7 @@ class CampaignPlan:
     t_ilc_s: float
     settings: FlightSettings
     fence: Fence
+    yaw_deg: np.ndarray | None = field(default=None, compare=False)
 
 
 async def fly_campaign(
@@ -535,7 +541,9 @@ class _Campaign:
         def progress(k: int, n: int, err_m: float, j: int = j) -> None:
             emit(TrialProgress(j, k, n, err_m))
 
-        self.run = TrialRun(self.vehicle, setpoints, t_ilc_s, self.settings, progress)
+        self.run = TrialRun(
+            self.vehicle, setpoints, t_ilc_s, self.settings, progress, self.plan.yaw_deg
+        )
         if mocap is not None:
             mocap.drain()  # the trial's raw file starts here
         recording = await self.run.fly()

@@ -28,7 +28,7 @@ from gcs.flight.hover import SPEED_SPAN_S, is_settled
 from gcs.flight.link import TelemetrySample, sample_arrays
 from gcs.flight.watches import Watches, _WaitTimeout
 
-__all__ = ["Manoeuvres", "min_jerk", "sleep_until"]
+__all__ = ["Manoeuvres", "heading_deg", "min_jerk", "sleep_until"]
 
 _log = logging.getLogger(__name__)
 _T = TypeVar("_T")
@@ -61,6 +61,25 @@ def min_jerk(s: float) -> float:
     """
     s = min(max(s, 0.0), 1.0)
     return s**3 * (10.0 - 15.0 * s + 6.0 * s * s)
+
+
+def heading_deg(yaw_deg: float) -> float:
+    """A yaw as the heading sent to the vehicle: wrapped to [-180, 180) [deg].
+
+    An unwrapped yaw (a trajectory that turns past 180 degrees goes on counting) is sent as
+    the same heading; a yaw already in range is sent exactly as given.
+
+    Parameters
+    ----------
+    yaw_deg : float
+        Yaw [deg, clockwise from north], any value.
+
+    Returns
+    -------
+    float
+    """
+    yaw = float(yaw_deg)
+    return yaw if -180.0 <= yaw < 180.0 else (yaw + 180.0) % 360.0 - 180.0
 
 
 class Manoeuvres(Watches):
@@ -161,13 +180,16 @@ class Manoeuvres(Watches):
             in_control=False,
         )
 
-    async def send_setpoint(self, pos_ned_m: Any) -> None:
+    async def send_setpoint(self, pos_ned_m: Any, yaw_deg: float | None = None) -> None:
         """Send one position setpoint (MAVSDK re-sends the last one at 20 Hz by itself).
 
         Parameters
         ----------
         pos_ned_m : array_like, shape (3,)
             Absolute local NED position [m].
+        yaw_deg : float or None
+            Heading [deg, clockwise from north], sent wrapped to [-180, 180); None: the
+            profile's ``flight.yaw_deg`` (the heading held outside a trial's yaw reference).
 
         Raises
         ------
@@ -184,7 +206,8 @@ class Manoeuvres(Watches):
             raise VehicleError(f"fence: {problem}; not sent")
         offboard = self._require(self._offboard)
         n, e, d = (float(x) for x in pos_ned_m)
-        setpoint = PositionNedYaw(n, e, d, self.settings.yaw_deg)
+        yaw = heading_deg(self.settings.yaw_deg if yaw_deg is None else yaw_deg)
+        setpoint = PositionNedYaw(n, e, d, yaw)
         try:
             await offboard.set_position_ned(setpoint)
         except MavsdkError as exc:

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gcs.core.trajectory import setpoint_array
-from gcs.errors import TrialAborted
+from gcs.errors import TrajectoryError, TrialAborted
 from gcs.flight.clock import ClockFit, fit_clock
 from gcs.flight.link import TelemetrySample
 from gcs.flight.manoeuvres import sleep_until
@@ -220,6 +220,19 @@ def align_to_grid(
     return values, gap
 
 
+def _yaw_array(yaw_deg: object | None, n: int) -> np.ndarray | None:
+    """A trial's headings as a finite float array of shape (n,), or a refusal."""
+    if yaw_deg is None:
+        return None
+    yaw = np.array(yaw_deg, dtype=float)
+    if yaw.shape != (n,):
+        raise TrajectoryError(f"yaw has shape {yaw.shape}, expected ({n},): one per setpoint")
+    bad = np.flatnonzero(~np.isfinite(yaw))
+    if bad.size:
+        raise TrajectoryError(f"yaw of setpoint k = {bad[0]} is NaN or inf")
+    return yaw
+
+
 class TrialRun:
     """One trial in flight; :func:`fly_trial` is the usual entry point.
 
@@ -239,6 +252,8 @@ class TrialRun:
     on_progress : callable, optional
         ``on_progress(k, n, err_m)``, called at most 10 times a second on the event loop
         (must return quickly).
+    yaw_deg : array_like, shape (N,), or None
+        Heading of each setpoint [deg]; None: the profile's ``flight.yaw_deg`` throughout.
     """
 
     def __init__(
@@ -248,9 +263,11 @@ class TrialRun:
         t_ilc_s: float,
         settings: FlightSettings,
         on_progress: ProgressCallback | None = None,
+        yaw_deg: object | None = None,
     ) -> None:
         self.vehicle = vehicle
         self.setpoints_ned_m = setpoint_array(setpoints_ned_m)
+        self.yaw_deg = _yaw_array(yaw_deg, self.setpoints_ned_m.shape[0])
         self.t_ilc_s = float(t_ilc_s)
         self.settings = settings
         self.sends_per_sample = settings.sends_per_sample(self.t_ilc_s)
@@ -277,7 +294,7 @@ class TrialRun:
         VehicleError
             No clock fit yet (no time-stamped samples).
         """
-        vehicle, settings, sp = self.vehicle, self.settings, self.setpoints_ned_m
+        vehicle, settings, sp, yaw = self.vehicle, self.settings, self.setpoints_ned_m, self.yaw_deg
         n, m = sp.shape[0], self.sends_per_sample
         tick_s = self.t_ilc_s / m  # vehicle time between ticks
         refit_ticks = max(1, round(REFIT_S / tick_s))
@@ -298,7 +315,8 @@ class TrialRun:
                 if k >= n and samples and samples[-1].t_vehicle_s >= v_end:
                     break  # y(N) is measured
                 issued_s = time.monotonic()
-                await vehicle.send_setpoint(sp[min(k, n - 1)])
+                kk = min(k, n - 1)
+                await vehicle.send_setpoint(sp[kk], None if yaw is None else yaw[kk])
                 if k < n and i % m == 0:
                     self.sent_abs_s[k] = issued_s
                 late_s = issued_s - deadline_s
@@ -398,6 +416,7 @@ async def fly_trial(
     t_ilc_s: float,
     settings: FlightSettings,
     on_progress: ProgressCallback | None = None,
+    yaw_deg: object | None = None,
 ) -> TrialRecording:
     """Fly one trial's setpoint sequence and record the response on the sample grid.
 
@@ -413,6 +432,9 @@ async def fly_trial(
         Stream rate (an integer multiple of 1/t_ilc_s) and watchdog limits.
     on_progress : callable, optional
         ``on_progress(k, n, err_m)`` at most 10 times a second (see the module docstring).
+    yaw_deg : array_like, shape (N,), or None
+        Heading of each setpoint [deg, clockwise from north]; None: the profile's
+        ``flight.yaw_deg`` throughout.
 
     Returns
     -------
@@ -425,6 +447,7 @@ async def fly_trial(
         Late setpoint, stale telemetry, link loss or a mode other than OFFBOARD; its
         ``recording`` attribute holds the partial recording.
     TrajectoryError
-        ``setpoints_ned_m`` is not a finite (N, 3) array.
+        ``setpoints_ned_m`` is not a finite (N, 3) array, or ``yaw_deg`` not N finite values.
     """
-    return await TrialRun(vehicle, setpoints_ned_m, t_ilc_s, settings, on_progress).fly()
+    run = TrialRun(vehicle, setpoints_ned_m, t_ilc_s, settings, on_progress, yaw_deg)
+    return await run.fly()

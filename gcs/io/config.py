@@ -53,6 +53,7 @@ __all__ = [
     "ALGORITHMS",
     "DEFAULT_MAX_VERTICAL_SPEED_M_S",
     "DEFAULT_MAX_VERTICAL_ACCEL_M_S2",
+    "DEFAULT_MAX_YAW_RATE_DEG_S",
     "TRAJECTORY_TYPES",
 ]
 
@@ -67,6 +68,10 @@ DEFAULT_MAX_VERTICAL_SPEED_M_S = 1.5
 #: ``vehicle.max_vertical_accel_m_s2`` when a profile leaves it out [m/s^2]: the smaller of
 #: PX4's vertical acceleration limits (``MPC_ACC_DOWN_MAX`` 3, ``MPC_ACC_UP_MAX`` 4, v1.16).
 DEFAULT_MAX_VERTICAL_ACCEL_M_S2 = 3.0
+#: ``vehicle.max_yaw_rate_deg_s`` when a profile leaves it out [deg/s]: gcs's own cautious
+#: bound on the yaw a trajectory may ask for (a quarter turn a second), well inside what
+#: PX4's attitude loop allows (``MC_YAWRATE_MAX``); raise it for a vehicle tuned for more.
+DEFAULT_MAX_YAW_RATE_DEG_S = 90.0
 #: Trajectory sources (the ``type`` of a trajectory file).
 TRAJECTORY_TYPES = ("eight", "circle", "ellipse", "waypoints", "samples")
 #: A trajectory's name becomes part of a run directory's name.
@@ -260,6 +265,9 @@ class Profile:
     max_jerk_m_s3, max_vertical_jerk_m_s3 : float or None
         Horizontal and vertical jerk a trajectory may ask for [m/s^3] (optional; absent: not
         checked).
+    max_yaw_rate_deg_s : float
+        Yaw rate a trajectory's yaw may ask for [deg/s] (optional in the file, default
+        :data:`DEFAULT_MAX_YAW_RATE_DEG_S`).
     arena : Box
         Flight volume, local NED [m].
     flight : FlightSettings
@@ -289,6 +297,7 @@ class Profile:
     max_jerk_m_s3: float | None = None
     max_vertical_jerk_m_s3: float | None = None
     model_z: DiscreteModel | None = None
+    max_yaw_rate_deg_s: float = DEFAULT_MAX_YAW_RATE_DEG_S
 
     def models(self) -> tuple[DiscreteModel, DiscreteModel]:
         """The (north, east) models."""
@@ -495,6 +504,9 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
         ),
         max_jerk_m_s3=vehicle.optional_number("max_jerk_m_s3"),
         max_vertical_jerk_m_s3=vehicle.optional_number("max_vertical_jerk_m_s3"),
+        max_yaw_rate_deg_s=vehicle.number(
+            "max_yaw_rate_deg_s", DEFAULT_MAX_YAW_RATE_DEG_S, positive=True
+        ),
         arena=box,
         flight=_flight(f.mapping("flight"), where, t_ilc_s),
         identification=_identification(

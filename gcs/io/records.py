@@ -39,6 +39,7 @@ __all__ = [
     "MEASUREMENTS",
     "SETPOINT_COLUMNS",
     "REFERENCE_COLUMNS",
+    "REFERENCE_YAW_COLUMNS",
     "ESTIMATE_COLUMNS",
     "ESTIMATE_DOWN_COLUMNS",
 ]
@@ -56,6 +57,9 @@ MOCAP_GRID_COLUMNS = ("mocap_north_m", "mocap_east_m", "mocap_down_m")
 MEASUREMENTS = ("mocap", "estimate")
 SETPOINT_COLUMNS = ("k", "t_s", "sp_north_m", "sp_east_m", "sp_down_m")
 REFERENCE_COLUMNS = ("k", "t_s", "ref_north_m", "ref_east_m", "ref_down_m")
+REFERENCE_YAW_COLUMNS = ("ref_yaw_deg",)
+"""Last column of a reference file when the trajectory has a yaw (unwrapped: a turn past
+180 degrees goes on counting) [deg]; absent when the yaw is held."""
 ESTIMATE_COLUMNS = ("k", "t_s", "d_north_m", "d_east_m", "p_north_m2", "p_east_m2")
 ESTIMATE_DOWN_COLUMNS = ("d_down_m", "p_down_m2")
 """Last columns of an estimate file when down is learned (absent otherwise)."""

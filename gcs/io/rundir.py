@@ -74,6 +74,7 @@ from gcs.io.paths import check_writable_dir
 from gcs.io.records import (
     MOCAP_GRID_COLUMNS,
     REFERENCE_COLUMNS,
+    REFERENCE_YAW_COLUMNS,
     SETPOINT_COLUMNS,
     TRIAL_COLUMNS,
     TrialRecord,
@@ -179,8 +180,7 @@ class RunDir(LearnLog):
         try:
             staged = cls(staging, manifest)
             atomic_write_text(staging / "manifest.json", json.dumps(manifest, indent=2) + "\n")
-            table = np.column_stack([np.arange(ref.n_samples + 1), ref.t_s, ref.pos_ned_m])
-            atomic_write_text(staging / "reference.csv", csv_text(REFERENCE_COLUMNS, table))
+            atomic_write_text(staging / "reference.csv", _reference_text(ref))
             staged.write_setpoints(0, ref.pos_ned_m[:-1])
             path = _rename_into_place(staging, root, base, fixed=run_id is not None)
         except BaseException:
@@ -295,14 +295,19 @@ class RunDir(LearnLog):
 
     def _read_reference(self) -> Reference:
         path = self.path / "reference.csv"
-        table = read_csv(path, REFERENCE_COLUMNS)
+        table = read_csv(path, REFERENCE_COLUMNS, REFERENCE_YAW_COLUMNS)
         self._check_grid(path, table, self.n_samples + 1)
         if not np.all(np.isfinite(table)):
             raise RunLogError(f"{path}: contains NaN or inf")
-        check_plausible(path, table[:, 2:5], REFERENCE_COLUMNS[2:5])
+        check_plausible(path, table[:, 2:], (REFERENCE_COLUMNS + REFERENCE_YAW_COLUMNS)[2:])
         pos = table[:, 2:5]
         vel = np.gradient(pos, self.t_ilc_s, axis=0)
-        return Reference(table[:, 1], pos, vel, np.gradient(vel, self.t_ilc_s, axis=0))
+        if table.shape[1] > 5:
+            yaw = np.radians(table[:, 5])
+        else:  # a run of before the yaw column: its trajectory's constant yaw, if any
+            yaw_deg = self.manifest["trajectory"].get("yaw_deg")
+            yaw = None if yaw_deg is None else np.full(len(pos), np.radians(float(yaw_deg)))
+        return Reference(table[:, 1], pos, vel, np.gradient(vel, self.t_ilc_s, axis=0), yaw)
 
     def _file(self, kind: str, j: int, ext: str) -> Path:
         return self.path / f"{kind}-{j:03d}.{ext}"
@@ -604,6 +609,15 @@ class RunDir(LearnLog):
                 raise RunLogError(f"{path}: field 'session' must be {number}, as its name says")
             out.append(data)
         return out
+
+
+def _reference_text(ref: Reference) -> str:
+    """``reference.csv``: k, t and the position; the yaw [deg] last when the reference has one."""
+    table = np.column_stack([np.arange(ref.n_samples + 1), ref.t_s, ref.pos_ned_m])
+    if ref.yaw_rad is None:
+        return csv_text(REFERENCE_COLUMNS, table)
+    table = np.column_stack([table, np.degrees(ref.yaw_rad)])
+    return csv_text(REFERENCE_COLUMNS + REFERENCE_YAW_COLUMNS, table)
 
 
 def _check_manifest(mpath: Path, manifest: Any) -> None:
