@@ -1,0 +1,39 @@
+"""A researcher's first hour: the resume command, the mock's seed per session, and friends."""
+
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+
+from gcs.app.fly_view import mock_session_seed, resume_command
+from gcs.io.paths import packaged_dir
+
+
+def test_a_session_flies_its_seed_unless_an_earlier_session_flew_it() -> None:
+    assert mock_session_seed(0, 1) == 0  # a new run: --seed itself
+    assert mock_session_seed(4, 2, {3}) == 4  # a resume given a seed of its own
+    again = mock_session_seed(0, 2, {0})
+    assert again != 0 and again == mock_session_seed(0, 2, {0})  # derived, reproducibly
+    third = mock_session_seed(0, 3, {0, again})
+    assert third not in {0, again}
+    assert 0 <= again < 2**31 and 0 <= third < 2**31
+
+
+def test_the_resume_command_names_the_vehicle_as_the_session_did() -> None:
+    run = Path("logs/run 1")
+    mock = resume_command(
+        run, connect=None, use_mock=True, mock_config=packaged_dir("profile") / "mock-gps.yaml",
+        mocap=None, seed=5, iterations=2,
+    )  # fmt: skip
+    assert shlex.split(mock) == [
+        "gcs", "fly", "--resume", "logs/run 1", "--mock", "--mock-config", "mock-gps",
+        "--seed", "5", "--iter", "2",
+    ]  # fmt: skip
+    real = resume_command(
+        run, connect="udpin://0.0.0.0:14540", use_mock=False, mock_config=None,
+        mocap="optitrack://10.0.0.2/drone", seed=0, iterations=3, until_converged=True,
+    )  # fmt: skip
+    assert shlex.split(real) == [
+        "gcs", "fly", "--resume", "logs/run 1", "--connect", "udpin://0.0.0.0:14540",
+        "--mocap", "optitrack://10.0.0.2/drone", "--iter", "3", "--until-converged",
+    ]  # fmt: skip
