@@ -647,6 +647,15 @@ def _source_cases() -> Iterator[Case]:
             k, "fly", f"samples CSV: {what}", lambda ws, x=text: _fly(ws, traj=_samples(ws, x)),
             expect,
         )  # fmt: skip
+    for what, name, text, expect in (
+        ("wrong columns", "lemniscate.csv", "t_s,x,y\n0,0,0\n1,0,0\n",
+            "lemniscate.csv: line 1: column 'north_m' is missing"),
+        ("an .npz without t_s", "lemniscate.npz", _npz(north_m=np.zeros(5)), "t_s"),
+    ):  # fmt: skip
+        yield Case(
+            k, "fly", f"a samples file given as --trajectory: {what}",
+            lambda ws, n=name, x=text: _fly(ws, traj=ws.file(n, x)), expect,
+        )  # fmt: skip
     yield Case(
         k,
         "fly",
@@ -686,6 +695,14 @@ def _source_cases() -> Iterator[Case]:
         ),
         "yaw_deg",
     )  # fmt: skip
+
+
+def _npz(**arrays: np.ndarray) -> bytes:
+    import io
+
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    return buffer.getvalue()
 
 
 def _npy(array: np.ndarray) -> bytes:

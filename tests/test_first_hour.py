@@ -5,6 +5,8 @@ from __future__ import annotations
 import shlex
 from pathlib import Path
 
+import numpy as np
+
 from gcs.app.fly_view import mock_session_seed, resume_command
 from gcs.io.paths import packaged_dir
 
@@ -37,3 +39,18 @@ def test_the_resume_command_names_the_vehicle_as_the_session_did() -> None:
         "gcs", "fly", "--resume", "logs/run 1", "--connect", "udpin://0.0.0.0:14540",
         "--mocap", "optitrack://10.0.0.2/drone", "--iter", "3", "--until-converged",
     ]  # fmt: skip
+
+
+def test_a_samples_file_is_a_trajectory_of_its_own(tmp_path: Path) -> None:
+    from gcs.app.fly import plan_fly
+
+    root = Path(__file__).resolve().parents[1] / "trajectories"
+    csv = tmp_path / "my racetrack.csv"
+    csv.write_bytes((root / "racetrack.csv").read_bytes())
+    direct = plan_fly(packaged_dir("profile") / "antx.yaml", csv, None, logs=tmp_path)
+    wrapped = plan_fly(packaged_dir("profile") / "antx.yaml", root / "racetrack.yaml", None)
+    assert direct.trajectory.name == "my-racetrack"
+    assert direct.trajectory.source == {
+        "name": "my-racetrack", "type": "samples", "file": "my racetrack.csv"
+    }  # fmt: skip
+    np.testing.assert_array_equal(direct.reference.pos_ned_m, wrapped.reference.pos_ned_m)

@@ -713,8 +713,35 @@ _SOURCES = {
 }
 
 
+#: Files taken as a ``samples`` trajectory themselves (``--trajectory lemniscate.csv``).
+SAMPLES_SUFFIXES = (".csv", ".npy", ".npz")
+
+
+def samples_trajectory(path: Path) -> dict:
+    """The trajectory a samples file given on its own stands for.
+
+    ``--trajectory lemniscate.csv`` is read as if wrapped in ``{name: lemniscate, type:
+    samples, file: lemniscate.csv}`` (the defaults of a ``samples`` trajectory otherwise).
+
+    Parameters
+    ----------
+    path : Path
+        A ``.csv``, ``.npy`` or ``.npz`` file (docs/trajectories.md).
+
+    Returns
+    -------
+    dict
+        The trajectory mapping, as a run's manifest keeps it.
+    """
+    name = re.sub(r"[^A-Za-z0-9._-]", "-", path.stem).lstrip("._-")[:64] or "samples"
+    return {"name": name, "type": "samples", "file": path.name}
+
+
 def load_trajectory(path: str | Path) -> TrajectorySpec:
     """Read and validate a trajectory YAML file (and a ``samples`` trajectory's file).
+
+    A ``.csv``, ``.npy`` or ``.npz`` file is a ``samples`` trajectory of its own
+    (:func:`samples_trajectory`).
 
     Parameters
     ----------
@@ -726,6 +753,8 @@ def load_trajectory(path: str | Path) -> TrajectorySpec:
     TrajectorySpec
     """
     path = Path(path)
+    if path.suffix.lower() in SAMPLES_SUFFIXES:
+        return trajectory_from_dict(samples_trajectory(path), str(path), path.parent)
     return trajectory_from_dict(read_yaml(path, TrajectoryError), str(path), path.parent)
 
 
