@@ -240,7 +240,7 @@ def _profile_cases() -> Iterator[Case]:
         "fly",
         "unknown packaged name",
         lambda ws: _fly(ws, "--profile", "antz"),
-        "no packaged profile",
+        "); did you mean 'antx'?",  # after the list of packaged profiles
     )
     yield Case(k, "fly", "a directory", lambda ws: _fly(ws, profile=ws.path), "is a directory")
     yield Case(
@@ -369,14 +369,27 @@ def _profile_cases() -> Iterator[Case]:
             expect,
         )
     k = "profile field: unknown (a typo)"
-    for dotted in ("arean", "learning.smoother.qq", "vehicle.max_sped_m_s", "flight.stream_rate"):
+    for dotted, meant in (
+        ("arean", "arena"),
+        ("learning.smoother.qq", "q"),
+        ("vehicle.max_sped_m_s", "max_speed_m_s"),
+        ("flight.stream_rate", "stream_rate_hz"),
+    ):
         yield Case(
             k,
             "fly",
             dotted,
             lambda ws, d=dotted: _fly(ws, profile=ws.profile(d, 1.0)),
-            dotted.split(".")[-1],
+            f"'{dotted}' is not {'known' if dotted.startswith('flight.') else 'a known field'}; "
+            f"did you mean '{meant}'?",
         )
+    yield Case(
+        k,
+        "fly",
+        "trajectory start_angel_deg",
+        lambda ws: _fly(ws, traj=_traj(ws, _set(CIRCLE, "start_angel_deg", 10.0))),
+        "field 'start_angel_deg' is not a known field; did you mean 'start_angle_deg'?",
+    )
     k = "profile: flight settings"
     for dotted, value, expect in (
         ("flight.stream_rate_hz", 50, "integer multiple"),
@@ -442,7 +455,7 @@ def _trajectory_cases() -> Iterator[Case]:
         "fly",
         "unknown packaged name",
         lambda ws: _fly(ws, "--trajectory", "eigth"),
-        "no packaged trajectory",
+        "); did you mean 'eight'?",  # after the list of packaged trajectories
     )
     yield Case(
         k,

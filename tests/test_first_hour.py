@@ -54,3 +54,14 @@ def test_a_samples_file_is_a_trajectory_of_its_own(tmp_path: Path) -> None:
         "name": "my-racetrack", "type": "samples", "file": "my racetrack.csv"
     }  # fmt: skip
     np.testing.assert_array_equal(direct.reference.pos_ned_m, wrapped.reference.pos_ned_m)
+
+
+def test_did_you_mean_names_the_closest_known_name_or_nothing() -> None:
+    from gcs.io.suggest import did_you_mean
+
+    assert did_you_mean("antz", ["antx", "antx-3d", "mock"]) == "; did you mean 'antx'?"
+    assert did_you_mean("Stream_Rate", ["stream_rate_hz", "yaw_deg"]) == (
+        "; did you mean 'stream_rate_hz'?"
+    )
+    assert did_you_mean("colour", ["frame", "url"]) == ""
+    assert did_you_mean("x", []) == ""
