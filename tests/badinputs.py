@@ -384,9 +384,9 @@ def _profile_cases() -> Iterator[Case]:
             f"did you mean '{meant}'?",
         )
     yield Case(
-        k,
+        "trajectory file",
         "fly",
-        "trajectory start_angel_deg",
+        "unknown field (a typo): start_angel_deg",
         lambda ws: _fly(ws, traj=_traj(ws, _set(CIRCLE, "start_angel_deg", 10.0))),
         "field 'start_angel_deg' is not a known field; did you mean 'start_angle_deg'?",
     )
