@@ -65,3 +65,27 @@ def test_did_you_mean_names_the_closest_known_name_or_nothing() -> None:
     )
     assert did_you_mean("colour", ["frame", "url"]) == ""
     assert did_you_mean("x", []) == ""
+
+
+def test_mavsdks_harmless_warning_is_logged_at_debug_and_others_as_they_come(caplog) -> None:
+    import logging
+
+    from mavsdk import LogLevel
+
+    from gcs.flight.link import _route_mavsdk_log
+
+    with caplog.at_level(logging.DEBUG, logger="gcs.flight.mavsdk"):
+        _route_mavsdk_log(LogLevel.WARN, "Unexpected component ID 0", None, 0)
+        _route_mavsdk_log(LogLevel.WARN, "Unexpected component ID 1", None, 0)
+    assert [(r.levelno, r.getMessage()) for r in caplog.records] == [
+        (logging.DEBUG, "Unexpected component ID 0"),
+        (logging.WARNING, "Unexpected component ID 1"),
+    ]
+
+
+def test_the_connect_hint_says_what_to_check_for_each_kind_of_url() -> None:
+    from gcs.flight.link import connect_hint
+
+    assert "UDP port 14540: is PX4 SITL running" in connect_hint("udpin://0.0.0.0:14540")
+    assert "listening at 10.0.0.2:14550" in connect_hint("udpout://10.0.0.2:14550")
+    assert "on /dev/ttyUSB0, powered" in connect_hint("serial:///dev/ttyUSB0:57600")

@@ -456,6 +456,11 @@ def fly_with_display(
         for line in learning_lines(outcome):
             progress.console.print(line, highlight=False)
 
+    if not use_mock:  # said at once: a vehicle that is not there is silent until the timeout
+        say(console)(
+            f"waiting up to {settings.connect_timeout_s:g} s for a vehicle on {connect} "
+            "(flight.connect_timeout_s)"
+        )
     try:
         with (
             vehicle_url(connect, use_mock, mock_config, session_seed, say(console), plan.mocap) as (
@@ -487,9 +492,11 @@ def fly_with_display(
         raise
     except GcsError as exc:
         left = max(1, iterations - (run.next_trial() - plan.first_trial))
+        kept = f"completed trials are in {run.path}" if run.complete_trials() else (
+            f"no trial was flown; the run is set up in {run.path}"
+        )  # fmt: skip
         console.print(
-            f"[dim]completed trials are in {run.path}; once the cause is fixed, continue "
-            f"with: {escape(resume_hint(left))}[/]",
+            f"[dim]{kept}; once the cause is fixed, continue with: {escape(resume_hint(left))}[/]",
             highlight=False,
             soft_wrap=True,
         )
