@@ -337,6 +337,7 @@ def fly(
         typer.Option(
             help="Trajectory to learn: "
             + NAMED.format(names=_names("trajectory"))
+            + " A planner's samples file (.csv, .npy, .npz) is taken as a 'samples' trajectory."
             + f" Default: {DEFAULT_TRAJECTORY}; with --resume, the run's own (a different "
             "one is refused).",
             show_default=False,

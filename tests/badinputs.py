@@ -240,7 +240,7 @@ def _profile_cases() -> Iterator[Case]:
         "fly",
         "unknown packaged name",
         lambda ws: _fly(ws, "--profile", "antz"),
-        "no packaged profile",
+        "); did you mean 'antx'?",  # after the list of packaged profiles
     )
     yield Case(k, "fly", "a directory", lambda ws: _fly(ws, profile=ws.path), "is a directory")
     yield Case(
@@ -369,14 +369,27 @@ def _profile_cases() -> Iterator[Case]:
             expect,
         )
     k = "profile field: unknown (a typo)"
-    for dotted in ("arean", "learning.smoother.qq", "vehicle.max_sped_m_s", "flight.stream_rate"):
+    for dotted, meant in (
+        ("arean", "arena"),
+        ("learning.smoother.qq", "q"),
+        ("vehicle.max_sped_m_s", "max_speed_m_s"),
+        ("flight.stream_rate", "stream_rate_hz"),
+    ):
         yield Case(
             k,
             "fly",
             dotted,
             lambda ws, d=dotted: _fly(ws, profile=ws.profile(d, 1.0)),
-            dotted.split(".")[-1],
+            f"'{dotted}' is not {'known' if dotted.startswith('flight.') else 'a known field'}; "
+            f"did you mean '{meant}'?",
         )
+    yield Case(
+        "trajectory file",
+        "fly",
+        "unknown field (a typo): start_angel_deg",
+        lambda ws: _fly(ws, traj=_traj(ws, _set(CIRCLE, "start_angel_deg", 10.0))),
+        "field 'start_angel_deg' is not a known field; did you mean 'start_angle_deg'?",
+    )
     k = "profile: flight settings"
     for dotted, value, expect in (
         ("flight.stream_rate_hz", 50, "integer multiple"),
@@ -442,7 +455,7 @@ def _trajectory_cases() -> Iterator[Case]:
         "fly",
         "unknown packaged name",
         lambda ws: _fly(ws, "--trajectory", "eigth"),
-        "no packaged trajectory",
+        "); did you mean 'eight'?",  # after the list of packaged trajectories
     )
     yield Case(
         k,
@@ -647,6 +660,15 @@ def _source_cases() -> Iterator[Case]:
             k, "fly", f"samples CSV: {what}", lambda ws, x=text: _fly(ws, traj=_samples(ws, x)),
             expect,
         )  # fmt: skip
+    for what, name, text, expect in (
+        ("wrong columns", "lemniscate.csv", "t_s,x,y\n0,0,0\n1,0,0\n",
+            "lemniscate.csv: line 1: column 'north_m' is missing"),
+        ("an .npz without t_s", "lemniscate.npz", _npz(north_m=np.zeros(5)), "t_s"),
+    ):  # fmt: skip
+        yield Case(
+            k, "fly", f"a samples file given as --trajectory: {what}",
+            lambda ws, n=name, x=text: _fly(ws, traj=ws.file(n, x)), expect,
+        )  # fmt: skip
     yield Case(
         k,
         "fly",
@@ -686,6 +708,14 @@ def _source_cases() -> Iterator[Case]:
         ),
         "yaw_deg",
     )  # fmt: skip
+
+
+def _npz(**arrays: np.ndarray) -> bytes:
+    import io
+
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    return buffer.getvalue()
 
 
 def _npy(array: np.ndarray) -> bytes:

@@ -60,3 +60,48 @@ def test_every_docs_page_says_what_it_is_for() -> None:
         lines = [line for line in page.read_text().splitlines() if line.strip()]
         assert lines[0].startswith("# "), page.name
         assert len(lines) > 1 and not lines[1].startswith("#"), page.name
+
+
+#: A profile, trajectory or mock settings named on a command line of a page.
+NAMED = re.compile(r"--(profile|trajectory|mock-config)[ =]([^\s`)|,;'\"]+)")
+#: A file of the repository named by its path.
+REPO_PATH = re.compile(
+    r"(?<![\w/.<-])((?:tools|benchmarks|examples|profiles|trajectories|tests|docs|gcs)/"
+    r"[\w./-]+\.(?:py|yaml|md|csv|json|txt))"
+)
+#: Placeholders for the reader's own file: "my-loop.yaml", "profiles/mine.yaml".
+OWN = re.compile(r"(^|/)(my-|mine\b)")
+
+
+def _created_by(text: str, name: str) -> bool:
+    """Whether the page writes ``name`` before using it (``--out``, ``>``, ``open(.., 'w')``)."""
+    n = re.escape(name)
+    return bool(
+        re.search(rf"--out[ =]{n}(\s|$)|>\s*{n}(\s|$)|open\(['\"]{n}['\"],\s*['\"]w", text, re.M)
+    )
+
+
+def test_every_profile_and_trajectory_a_page_names_is_shipped_or_made_there() -> None:
+    from gcs.io.paths import packaged_names
+
+    shipped = {
+        "profile": set(packaged_names("profile")),
+        "trajectory": set(packaged_names("trajectory")),
+        "mock-config": set(packaged_names("profile")),
+    }
+    dead = []
+    for page in [ROOT / "logs" / "README.md", *PAGES]:
+        if page.name == "bad-inputs.md":  # the catalogue names bad inputs on purpose
+            continue
+        text = page.read_text()
+        for option, value in NAMED.findall(text):
+            value = value.rstrip(".:")
+            name = value[:-5] if value.endswith(".yaml") else value
+            if name in shipped[option] or (ROOT / value).is_file() or OWN.search(value):
+                continue
+            if not _created_by(text, value):
+                dead.append(f"{page.relative_to(ROOT)}: --{option} {value}")
+        for path in REPO_PATH.findall(text):
+            if not (ROOT / path).exists() and not _created_by(text, path) and not OWN.search(path):
+                dead.append(f"{page.relative_to(ROOT)}: {path}")
+    assert not dead, "\n".join(dead)

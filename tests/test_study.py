@@ -122,7 +122,8 @@ def test_summary_counts_divergence_and_the_floor(tmp_path: Path) -> None:
     s = summarise_setting(plan, 0, 0, plants)
     assert s.diverged == 2 and s.plants == 3
     assert s.steady_mean_m == pytest.approx(floor)
-    assert s.reached_floor == 1 and np.isinf(s.flights_to_floor)  # 1 of 3: median never
+    assert s.reached_floor == 1 and s.never_reached_floor == 2
+    assert s.flights_to_floor == 3  # of the one plant that got there; never is no count
     assert s.limit_active == pytest.approx(0.5)
     best, reason = recommend([s, dataclasses.replace(s, setting="other", diverged=0)])
     assert best == "other" and "0 diverged" in reason

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 
 from rich.console import Console
@@ -27,7 +27,116 @@ from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
 from gcs.io.rundir import RunDir
 
-__all__ = ["fly_with_display", "check_vehicle", "live_progress", "learning_lines", "say"]
+__all__ = [
+    "fly_with_display",
+    "check_vehicle",
+    "live_progress",
+    "learning_lines",
+    "mock_session_seed",
+    "resume_command",
+    "say",
+]
+
+
+def mock_session_seed(seed: int, session: int, used: Collection[int] = ()) -> int:
+    """The mock drone's seed for flight session ``session`` of a run, never one flown before.
+
+    ``--seed`` itself when no earlier session of the run flew it (a new run, or a resume given
+    a seed of its own); else a seed drawn from ``(seed, session)`` by NumPy's ``SeedSequence``.
+    A resumed run therefore never replays an earlier session's gusts and noise: a repeat of
+    trial 0 flown after ``--resume`` with the same ``--seed`` would otherwise fly trial 0's
+    gusts again and measure a floor of the replay (millimetres), not of the vehicle. The seed
+    flown is kept in the session's record (``mock_seed``).
+
+    Parameters
+    ----------
+    seed : int
+        ``--seed``.
+    session : int
+        The session's number (1 for the first).
+    used : collection of int
+        The mock seeds the run's earlier sessions flew.
+
+    Returns
+    -------
+    int
+        ``seed``, or a seed in [0, 2**31) that is not in ``used``.
+    """
+    if seed not in used:
+        return seed
+    import numpy as np
+
+    attempt = 0
+    while True:
+        state = np.random.SeedSequence([seed, session, attempt]).generate_state(1)[0]
+        derived = int(state) % 2**31
+        if derived not in used:
+            return derived
+        attempt += 1
+
+
+def resume_command(
+    run_path: Path,
+    *,
+    connect: str | None,
+    use_mock: bool,
+    mock_config: Path | None,
+    mocap: str | None,
+    seed: int,
+    iterations: int,
+    until_converged: bool = False,
+) -> str:
+    """The ``gcs fly --resume`` command that continues ``run_path`` with the same vehicle.
+
+    The vehicle is named as the session named it (``--mock`` with its settings and seed, or
+    ``--connect URL``), and motion capture when ``--mocap`` was given: a resumed run takes its
+    profile and trajectory from its record, but never its vehicle (which is chosen anew by
+    whoever resumes: a port, PX4 SITL or the real vehicle).
+
+    Parameters
+    ----------
+    run_path : Path
+        The run to continue.
+    connect : str or None
+        ``--connect`` of the session.
+    use_mock : bool
+        ``--mock`` of the session.
+    mock_config : Path or None
+        ``--mock-config`` as given (None: the default).
+    mocap : str or None
+        ``--mocap`` as given.
+    seed : int
+        ``--seed`` (only printed when it is not the default, 0).
+    iterations : int
+        ``--iter`` of the command.
+    until_converged : bool
+        ``--until-converged``.
+
+    Returns
+    -------
+    str
+        One shell command line, quoted where needed.
+    """
+    import shlex
+
+    from gcs.io.paths import packaged_dir
+
+    args = ["gcs", "fly", "--resume", str(run_path)]
+    if use_mock:
+        args.append("--mock")
+        if mock_config is not None:
+            packaged = mock_config.parent.resolve() == packaged_dir("profile").resolve()
+            args += ["--mock-config", mock_config.stem if packaged else str(mock_config)]
+        if seed != 0:
+            args += ["--seed", str(seed)]
+    elif connect is not None:
+        args += ["--connect", connect]
+    if mocap is not None:
+        args += ["--mocap", mocap]
+    args += ["--iter", str(iterations)]
+    if until_converged:
+        args.append("--until-converged")
+    return shlex.join(args)
 
 
 def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]:
@@ -267,6 +376,7 @@ def fly_with_display(
         profile_path, trajectory_path, algorithm, run_path, resume, logs, until_converged,
         mocap, use_mock,
     )  # fmt: skip
+    given_mock_config = mock_config
     if use_mock and mock_config is None and plan.mocap is not None and plan.mocap.source is None:
         from gcs.io.paths import resolve_named
 
@@ -296,6 +406,21 @@ def fly_with_display(
         return None
     run = start_run(plan)
     settings = plan.settings
+    earlier = run.sessions()
+    used = {s["mock_seed"] for s in earlier if isinstance(s.get("mock_seed"), int)}
+    session_seed = mock_session_seed(seed, len(earlier) + 1, used)
+    if use_mock and session_seed != seed:
+        say(console)(
+            f"mock seed {session_seed}: --seed {seed} was flown by an earlier session of this "
+            "run, and a resumed run never replays its gusts"
+        )
+
+    def resume_hint(n: int) -> str:
+        return resume_command(
+            run.path, connect=connect, use_mock=use_mock, mock_config=given_mock_config,
+            mocap=mocap, seed=seed, iterations=n, until_converged=until_converged,
+        )  # fmt: skip
+
     console.print(f"run [bold]{run.path}[/] ({run.algorithm}), next trial {run.next_trial()}")
 
     progress, on_event = live_progress(console)
@@ -331,9 +456,14 @@ def fly_with_display(
         for line in learning_lines(outcome):
             progress.console.print(line, highlight=False)
 
+    if not use_mock:  # said at once: a vehicle that is not there is silent until the timeout
+        say(console)(
+            f"waiting up to {settings.connect_timeout_s:g} s for a vehicle on {connect} "
+            "(flight.connect_timeout_s)"
+        )
     try:
         with (
-            vehicle_url(connect, use_mock, mock_config, seed, say(console), plan.mocap) as (
+            vehicle_url(connect, use_mock, mock_config, session_seed, say(console), plan.mocap) as (
                 url,
                 link,
             ),
@@ -349,21 +479,34 @@ def fly_with_display(
                 on_learn,
                 until_converged,
                 mocap=link,
-                mock_seed=seed if use_mock else None,
+                mock_seed=session_seed if use_mock else None,
             )
     except KeyboardInterrupt:
+        left = max(1, iterations - (run.next_trial() - plan.first_trial))
         console.print(
             f"interrupted; completed trials are in {run.path}. "
-            f"Continue with: gcs fly --resume {run.path}"
+            f"Continue with: {escape(resume_hint(left))}",
+            highlight=False,
+            soft_wrap=True,
         )
         raise
     except GcsError as exc:
-        console.print(f"[dim]completed trials are in {run.path}[/]")
+        left = max(1, iterations - (run.next_trial() - plan.first_trial))
+        kept = f"completed trials are in {run.path}" if run.complete_trials() else (
+            f"no trial was flown; the run is set up in {run.path}"
+        )  # fmt: skip
+        console.print(
+            f"[dim]{kept}; once the cause is fixed, continue with: {escape(resume_hint(left))}[/]",
+            highlight=False,
+            soft_wrap=True,
+        )
         raise exc
     if until_converged and converged_reason(newest_record(run)) is None:
         console.print(
             f"--until-converged: learning has not converged within --iter {iterations}; "
-            f"continue with: gcs fly --resume {run.path} --iter N --until-converged"
+            f"continue with: {escape(resume_hint(iterations))}",
+            highlight=False,
+            soft_wrap=True,
         )
     from gcs.app.report import is_three_d, run_facts, run_learning, run_metrics, trial_clock_rates
 

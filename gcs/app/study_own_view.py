@@ -25,10 +25,14 @@ def _pm(mean: float, std: float) -> str:
     return "-" if not math.isfinite(mean) else f"{_mm(mean)}±{_mm(std)}"
 
 
-def _flights(x: float) -> str:
-    if math.isnan(x):
+def _flights(s: SettingSummary) -> str:
+    """Median flights to the floor of the plants that got there, and how many did."""
+    if not s.floor_m > 0:
         return "-"
-    return "never" if math.isinf(x) else f"{x:g}"
+    if s.reached_floor == 0:
+        return "never"
+    median = f"{s.flights_to_floor:g}"
+    return median if s.reached_floor == s.plants else f"{median} ({s.reached_floor}/{s.plants})"
 
 
 def study_table(summaries: list[SettingSummary], title: str) -> Table:
@@ -56,15 +60,17 @@ def study_table(summaries: list[SettingSummary], title: str) -> Table:
             _mm(s.epos_mean_m[0]),
             _mm(s.epos_mean_m[1]) if len(s.epos_mean_m) > 1 else "-",
             _pm(s.steady_mean_m, s.steady_std_m),
-            _flights(s.flights_to_floor),
+            _flights(s),
             f"{s.diverged}/{s.plants}",
             _mm(s.setpoint_rms_m),
             f"{100 * s.limit_active:.0f}%",
         )
     table.caption = escape(
         "e_pos [mm], mean over the plants that did not diverge (steady: ± std over them) of "
-        "trial 0, the first learned trial and the last trials; floor: median flights until "
-        f"e_pos <= {FLOOR_FACTOR:g} x the noise's own e_pos; div.: diverged plants; u rms: the "
+        "trial 0, the first learned trial and the steady state (the last learned trials, "
+        "docs/studies.md); floor: median flights until e_pos <= "
+        f"{FLOOR_FACTOR:g} x the noise's own e_pos over the plants that got there (n/m: how "
+        "many did; never: none); div.: diverged plants; u rms: the "
         "last setpoints' distance from the reference [mm]; limit: updates with a limit active"
     )
     return table
@@ -94,6 +100,7 @@ def write_study_figures(summaries: list[SettingSummary], out: Path) -> list[Path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
+    from matplotlib.ticker import MaxNLocator
 
     levels = list(dict.fromkeys(s.level for s in summaries))
     names = list(dict.fromkeys(s.setting for s in summaries))
@@ -114,6 +121,7 @@ def write_study_figures(summaries: list[SettingSummary], out: Path) -> list[Path
         ax.set_xlabel("trial j (0: the reference; the repeats of trial 0 left out)")
         ax.set_ylabel("e_pos [mm], mean ± std over the plants")
         ax.set_ylim(bottom=0.0)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # trials are whole numbers
         ax.grid(True, alpha=0.3)
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()

@@ -46,6 +46,7 @@ __all__ = [
     "chunk_plants",
     "SettingSummary",
     "summarise_setting",
+    "steady_window",
     "recommend",
     "check_nominal",
     "noise_floor",
@@ -547,12 +548,15 @@ class SettingSummary:
         e_pos of trial 0 and of every learned trial (the repeats of trial 0 left out) over
         the plants that did not diverge [m].
     flights_to_floor : float
-        Median flights (the repeats included) until e_pos is within 1.15 floors (NaN: no
-        noise, no floor; inf: more than half of the plants never reached it).
+        Median, over the plants that reached the floor, of the flights (the repeats included)
+        until their e_pos was within 1.15 floors; the plants that never did are left out of
+        it and counted apart (``plants - reached_floor``). NaN: no noise (no floor), or no
+        plant reached it.
     reached_floor : int
         Plants that reached the floor.
     steady_mean_m, steady_std_m : float
-        Mean e_pos of the last ``steady_trials`` trials over the plants that did not diverge.
+        Mean e_pos of the steady state (the last ``steady_trials`` learned trials, see
+        :func:`steady_window`) over the plants that did not diverge.
     diverged : int
         Plants whose steady e_pos exceeds trial 0's, or whose learning failed.
     plants : int
@@ -563,6 +567,8 @@ class SettingSummary:
         Share of updates with an active limit.
     floor_m : float
         e_pos of the noise alone (what a learner that leaves nothing repeatable scores) [m].
+    steady_trials : int
+        Learned trials averaged for the steady state.
     """
 
     setting: str
@@ -578,6 +584,12 @@ class SettingSummary:
     setpoint_rms_m: float
     limit_active: float
     floor_m: float
+    steady_trials: int = 1
+
+    @property
+    def never_reached_floor(self) -> int | None:
+        """Plants that never reached the floor (None without noise: no floor)."""
+        return self.plants - self.reached_floor if self.floor_m > 0 else None
 
     def as_dict(self) -> dict:
         """JSON-ready dictionary (NaN and inf as None and strings)."""
@@ -592,6 +604,7 @@ class SettingSummary:
             "epos_std_m": [j(x) for x in self.epos_std_m],
             "flights_to_floor": j(self.flights_to_floor),
             "reached_floor": self.reached_floor,
+            "never_reached_floor": self.never_reached_floor,
             "steady_mean_m": j(self.steady_mean_m),
             "steady_std_m": j(self.steady_std_m),
             "diverged": self.diverged,
@@ -599,6 +612,7 @@ class SettingSummary:
             "setpoint_rms_m": self.setpoint_rms_m,
             "limit_active": self.limit_active,
             "floor_m": self.floor_m,
+            "steady_trials": self.steady_trials,
         }
 
 
@@ -618,6 +632,28 @@ def noise_floor(noise_std_m: tuple[float, float]) -> float:
     """
     sn, se = noise_std_m
     return float(math.sqrt(math.pi / 4.0 * (sn * sn + se * se)))
+
+
+def steady_window(iterations: int, steady_trials: int) -> int:
+    """How many of the last learned trials the steady state averages.
+
+    The last ``steady_trials``, but at most the later half of the learned trials (at least
+    one): the first learned trials are the transient, never part of the steady state (with
+    3 learned trials and ``steady_trials`` 3, trial j = 3 alone, not j = 1..3).
+
+    Parameters
+    ----------
+    iterations : int
+        Learned trials (after trial 0 and its repeats).
+    steady_trials : int
+        The study's ``steady_trials``.
+
+    Returns
+    -------
+    int
+        ``min(steady_trials, max(1, iterations // 2))``.
+    """
+    return min(steady_trials, max(1, iterations // 2))
 
 
 def summarise_setting(
@@ -642,7 +678,7 @@ def summarise_setting(
     flights = np.array([[np.nan if x is None else x for x in p["epos_m"]] for p in plants])
     e = np.concatenate([flights[:, :1], flights[:, 1 + repeats :]], axis=1)  # trials j
     failed = np.array([p["failed"] is not None for p in plants])
-    k = min(plan.steady_trials, e.shape[1])
+    k = steady_window(e.shape[1] - 1, plan.steady_trials)
     steady = e[:, -k:].mean(axis=1)
     diverged = failed | ~(steady <= e[:, 0])
     kept = e[~diverged]
@@ -650,10 +686,10 @@ def summarise_setting(
     nan = float("nan")
     if floor > 0:
         hit = flights <= FLOOR_FACTOR * floor  # counted in flights, the repeats included
-        first = np.where(hit.any(axis=1), hit.argmax(axis=1) + 1, np.iinfo(np.int64).max)
-        reached = int(hit.any(axis=1).sum())
-        med = float(np.median(first))
-        to_floor = med if med < np.iinfo(np.int64).max else math.inf
+        got_there = hit.any(axis=1)
+        first = hit.argmax(axis=1)[got_there] + 1  # "never" is no count: left out, counted
+        reached = int(got_there.sum())
+        to_floor = float(np.median(first)) if reached else nan
     else:
         reached, to_floor = 0, nan
     with np.errstate(invalid="ignore"):
@@ -674,6 +710,7 @@ def summarise_setting(
         setpoint_rms_m=float(np.mean([p["setpoint_rms_m"] for p in plants])),
         limit_active=float(np.mean([p["limit_active"] for p in plants])),
         floor_m=floor,
+        steady_trials=k,
     )
 
 
@@ -681,7 +718,8 @@ def recommend(summaries: list[SettingSummary]) -> tuple[str, str]:
     """The setting to fly, and why.
 
     Rule: fewest diverged plants over every level; then the lowest steady e_pos averaged
-    over the levels; then the fewest flights to the floor.
+    over the levels; then the fewest plants that never reached the floor; then the fewest
+    flights to the floor (the median of the plants that reached it, averaged over the levels).
 
     Parameters
     ----------
@@ -697,26 +735,36 @@ def recommend(summaries: list[SettingSummary]) -> tuple[str, str]:
     """
     names = list(dict.fromkeys(s.setting for s in summaries))
 
-    def key(name: str) -> tuple[int, float, float]:
+    def key(name: str) -> tuple[int, float, int, float]:
         rows = [s for s in summaries if s.setting == name]
         steady = [s.steady_mean_m for s in rows]
         floor = [s.flights_to_floor for s in rows if not math.isnan(s.flights_to_floor)]
         return (
             sum(s.diverged for s in rows),
             float(np.mean(steady)) if all(math.isfinite(x) for x in steady) else math.inf,
+            sum(s.never_reached_floor or 0 for s in rows),
             float(np.mean(floor)) if floor else math.inf,
         )
 
     ranked = sorted(names, key=key)
     best = ranked[0]
-    div, steady, floor = key(best)
+    div, steady, _, floor = key(best)
     reason = (
         f"{div} diverged plants over every level, the lowest mean steady e_pos "
         f"({1000 * steady:.1f} mm) among the settings with that few"
     )
     if len(ranked) > 1:
-        d2, s2, _ = key(ranked[1])
+        d2, s2, _, _ = key(ranked[1])
         reason += f"; next: {ranked[1]} ({d2} diverged, {1000 * s2:.1f} mm)"
-    if math.isfinite(floor):
-        reason += f"; the floor in {floor:g} flights (median)"
+    rows = [s for s in summaries if s.setting == best and s.floor_m > 0]
+    if rows:
+        reached = sum(s.reached_floor for s in rows)
+        plants = sum(s.plants for s in rows)
+        if math.isfinite(floor):
+            reason += (
+                f"; the floor in {floor:g} flights (median of the {reached} of {plants} "
+                "plants that reached it)"
+            )
+        else:
+            reason += f"; none of its {plants} plants reached the floor"
     return best, reason

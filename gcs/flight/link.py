@@ -59,10 +59,44 @@ _LOG_LEVELS = {
 }
 
 
+#: MAVSDK's warnings that say nothing about the flight, logged at DEBUG instead: MAVSDK asks
+#: every autopilot for its COMPONENT_METADATA, and when the request fails (the mock and many
+#: vehicles do not serve it) its callback gets an empty message, compid 0, and MAVSDK warns.
+_HARMLESS = frozenset({"Unexpected component ID 0"})
+
+
 def _route_mavsdk_log(level: LogLevel, message: str, file: str | None, line: int) -> bool:
     """Send a line of the C++ core's log to Python logging instead of coloured stderr."""
-    _mavsdk_log.log(_LOG_LEVELS.get(level, logging.INFO), "%s", message)
+    logged = logging.DEBUG if message.strip() in _HARMLESS else _LOG_LEVELS.get(level, logging.INFO)
+    _mavsdk_log.log(logged, "%s", message)
     return True
+
+
+def connect_hint(url: str) -> str:
+    """What to check when nothing answered on ``url`` (a clause for the error's line).
+
+    Parameters
+    ----------
+    url : str
+        The MAVSDK connection URL.
+
+    Returns
+    -------
+    str
+        E.g. ``"; nothing arrived on UDP port 14540: is PX4 SITL running ..."``.
+    """
+    scheme, _, rest = url.partition("://")
+    port = rest.rsplit(":", 1)[-1] if ":" in rest else "?"
+    if scheme == "udpin":
+        return (
+            f"; nothing arrived on UDP port {port}: is PX4 SITL running (it sends to port "
+            "14540), or the vehicle's telemetry link sending to this machine on that port?"
+        )
+    if scheme in ("udpout", "tcpout", "tcp"):
+        return f"; is a vehicle listening at {rest} (PX4 SITL: udpin://0.0.0.0:14540)?"
+    if scheme == "serial":
+        return f"; is the vehicle on {rest.rsplit(':', 1)[0]}, powered, at that baud rate?"
+    return ""
 
 
 class TelemetrySample(NamedTuple):
@@ -164,7 +198,9 @@ class Link:
             raise
         if system is None:
             await self.close()
-            raise VehicleError(f"no autopilot answered on {url} within {timeout_s:g} s")
+            raise VehicleError(
+                f"no autopilot answered on {url} within {timeout_s:g} s{connect_hint(url)}"
+            )
         self._system = system
         self._action = ActionAsync(system)
         self._offboard = OffboardAsync(system)

@@ -39,6 +39,7 @@ from gcs.io.settings import (
     IdentifySettings,
     MocapSettings,
 )
+from gcs.io.suggest import did_you_mean
 from gcs.io.yamlfile import read_yaml
 
 __all__ = [
@@ -86,6 +87,7 @@ class _Fields:
             raise error(f"{where}: field '{path or '<top>'}' must be a mapping")
         self.data, self.where, self.path, self.error = data, where, path, error
         self.used: set[str] = set()
+        self.asked: set[str] = set()  # every field looked for: the known ones
 
     def _name(self, key: str) -> str:
         return f"{self.path}.{key}" if self.path else key
@@ -94,9 +96,11 @@ class _Fields:
         return self.error(f"{self.where}: field '{self._name(key)}' {message}")
 
     def has(self, key: str) -> bool:
+        self.asked.add(key)
         return key in self.data
 
     def raw(self, key: str, default: Any = ...) -> Any:
+        self.asked.add(key)
         if key not in self.data:
             if default is ...:
                 raise self.fail(key, "is missing")
@@ -180,7 +184,8 @@ class _Fields:
     def done(self) -> None:
         extra = sorted(set(self.data) - self.used)
         if extra:
-            raise self.fail(extra[0], "is not a known field")
+            hint = did_you_mean(str(extra[0]), self.asked)
+            raise self.fail(extra[0], f"is not a known field{hint}")
 
 
 @dataclass(frozen=True)
@@ -713,8 +718,35 @@ _SOURCES = {
 }
 
 
+#: Files taken as a ``samples`` trajectory themselves (``--trajectory lemniscate.csv``).
+SAMPLES_SUFFIXES = (".csv", ".npy", ".npz")
+
+
+def samples_trajectory(path: Path) -> dict:
+    """The trajectory a samples file given on its own stands for.
+
+    ``--trajectory lemniscate.csv`` is read as if wrapped in ``{name: lemniscate, type:
+    samples, file: lemniscate.csv}`` (the defaults of a ``samples`` trajectory otherwise).
+
+    Parameters
+    ----------
+    path : Path
+        A ``.csv``, ``.npy`` or ``.npz`` file (docs/trajectories.md).
+
+    Returns
+    -------
+    dict
+        The trajectory mapping, as a run's manifest keeps it.
+    """
+    name = re.sub(r"[^A-Za-z0-9._-]", "-", path.stem).lstrip("._-")[:64] or "samples"
+    return {"name": name, "type": "samples", "file": path.name}
+
+
 def load_trajectory(path: str | Path) -> TrajectorySpec:
     """Read and validate a trajectory YAML file (and a ``samples`` trajectory's file).
+
+    A ``.csv``, ``.npy`` or ``.npz`` file is a ``samples`` trajectory of its own
+    (:func:`samples_trajectory`).
 
     Parameters
     ----------
@@ -726,6 +758,8 @@ def load_trajectory(path: str | Path) -> TrajectorySpec:
     TrajectorySpec
     """
     path = Path(path)
+    if path.suffix.lower() in SAMPLES_SUFFIXES:
+        return trajectory_from_dict(samples_trajectory(path), str(path), path.parent)
     return trajectory_from_dict(read_yaml(path, TrajectoryError), str(path), path.parent)
 
 
@@ -734,7 +768,8 @@ def _flight(section: dict, where: str, t_ilc_s: float) -> FlightSettings:
     known = {f.name for f in fields(FlightSettings)}
     for key, value in section.items():
         if key not in known:
-            raise ProfileError(f"{where}: field 'flight.{key}' is not known")
+            hint = did_you_mean(str(key), known)
+            raise ProfileError(f"{where}: field 'flight.{key}' is not known{hint}")
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ProfileError(f"{where}: field 'flight.{key}' must be a number, got {value!r}")
     try:
@@ -826,7 +861,8 @@ def mocap_settings(section: Any, where: str) -> MocapSettings:
     known |= set(MAPPING_AXES) | {"right_handed"}
     for key in section:
         if key not in known:
-            raise ProfileError(f"{where}: field 'mocap.{key}' is not known")
+            hint = did_you_mean(str(key), known)
+            raise ProfileError(f"{where}: field 'mocap.{key}' is not known{hint}")
 
     def fail(key: str, message: str) -> ProfileError:
         return ProfileError(f"{where}: field 'mocap.{key}' {message}")

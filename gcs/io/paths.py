@@ -110,8 +110,14 @@ def resolve_named(value: str | Path, kind: str, option: str) -> Path:
         candidate = packaged_dir(kind) / f"{name}.yaml"
         if candidate.is_file():
             return candidate
-    known = ", ".join(packaged_names(kind)) or "none"
-    raise PathError(f"{option} {text}: no such file, and no packaged {kind} of that name ({known})")
+    from gcs.io.suggest import did_you_mean
+
+    names = packaged_names(kind)
+    known = ", ".join(names) or "none"
+    raise PathError(
+        f"{option} {text}: no such file, and no packaged {kind} of that name ({known})"
+        + did_you_mean(name, names)
+    )
 
 
 def _nearest_existing(path: Path, option: str) -> Path:
