@@ -32,6 +32,7 @@ __all__ = [
     "LinkUnreachable",
     "PositionReport",
     "VehicleLink",
+    "is_registered",
     "registered_link",
     "register_scheme",
     "unregister_scheme",
@@ -331,6 +332,21 @@ def unregister_scheme(scheme: str) -> None:
         URL scheme.
     """
     _SCHEMES.pop(scheme, None)
+
+
+def is_registered(url: str) -> bool:
+    """Whether ``url``'s scheme was registered (:func:`register_scheme`).
+
+    Parameters
+    ----------
+    url : str
+        Connection URL.
+
+    Returns
+    -------
+    bool
+    """
+    return "://" in url and url.split("://", 1)[0] in _SCHEMES
 
 
 def registered_link(url: str) -> VehicleLink | None:
