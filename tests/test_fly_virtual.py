@@ -14,13 +14,12 @@ import numpy as np
 import pytest
 import yaml
 from synthetic import CI_FLIGHT, SHORT, ci_profile
+from test_fly_e2e import arrivals_on_the_vehicle_clock
 from virtual import ctrl_c, on_trial, run_gcs
 
 from gcs.io.rundir import RunDir
 from gcs.mock.config import Faults, load_mock_config
 from gcs.sim.drone import SimulatedDrone
-
-from test_fly_e2e import arrivals_on_the_vehicle_clock  # noqa: I001
 
 
 @pytest.fixture
