@@ -21,6 +21,8 @@ from typer.testing import CliRunner
 
 from gcs.cli import app
 from gcs.flight import campaign
+from gcs.mock.config import load_mock_config
+from gcs.sim.drone import SimulatedDrone
 from gcs.sim.loop import virtual_time
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,3 +68,46 @@ def on_trial(
 def ctrl_c() -> None:
     """What the operator's Ctrl-C does: SIGINT to this process."""
     os.kill(os.getpid(), signal.SIGINT)
+
+
+class SimMockProcess:
+    """Stands in for :class:`gcs.mock.process.MockProcess` inside ``gcs fly --mock`` and
+    ``gcs identify --mock``: the same settings and seed, as a simulated drone (no arena)."""
+
+    last: SimulatedDrone | None = None
+
+    def __init__(self, config_path=None, seed: int = 0, arena=None, **_: object) -> None:  # type: ignore[no-untyped-def]
+        if arena is not None:
+            raise AssertionError("the simulated drone serves no motion capture: fly it on the wire")
+        self.drone = SimulatedDrone(load_mock_config(config_path), seed=seed)
+        self.mocap_url = ""
+
+    @property
+    def url(self) -> str:
+        return self.drone.url
+
+    def __enter__(self) -> SimMockProcess:
+        self.drone.__enter__()
+        SimMockProcess.last = self.drone
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.drone.__exit__(*exc)
+
+
+def sim_mock(monkeypatch: pytest.MonkeyPatch) -> type[SimMockProcess]:
+    """Make ``--mock`` start a simulated drone (:class:`SimMockProcess`) in this test."""
+    import gcs.mock.process
+
+    monkeypatch.setattr(gcs.mock.process, "MockProcess", SimMockProcess)
+    return SimMockProcess
+
+
+def fly_two_trials(tmp: Path, trajectory: Path, run: Path, *vehicle: object) -> tuple[int, str]:
+    """``gcs fly <vehicle> --iter 2`` on ``trajectory`` with the CI profile (in-process)."""
+    from synthetic import ci_profile
+
+    return run_gcs(
+        "fly", *vehicle, "--iter", 2, "--trajectory", trajectory, "--run", run,
+        "--profile", ci_profile(tmp),
+    )  # fmt: skip
