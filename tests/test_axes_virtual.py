@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 from synthetic import CI_FLIGHT, ROOT
 from virtual import run_gcs
@@ -17,6 +18,10 @@ from virtual import run_gcs
 from gcs.io.rundir import RunDir
 from gcs.mock.config import load_mock_config
 from gcs.sim.drone import SimulatedDrone
+
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
 
 #: One loop of a 0.8 m circle that climbs 0.5 m by mid-manoeuvre and comes back (about 8 s).
 HELIX = {

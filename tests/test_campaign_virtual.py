@@ -35,6 +35,9 @@ from gcs.flight.hover import SPEED_SPAN_S
 from gcs.mock.config import Faults, load_mock_config
 from gcs.sim.drone import SimulatedDrone
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
 
 def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     source = CircleSource()

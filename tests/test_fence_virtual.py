@@ -37,6 +37,9 @@ from gcs.io.rundir import RunDir
 from gcs.mock.config import Faults, load_mock_config
 from gcs.sim.drone import SimulatedDrone
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
 
 def fly(tmp_path: Path, faults: Faults, source: CircleSource, config: Path | None = None):
     """Fly one trial of ``source`` on the simulated drone: (statuses, error, stats)."""
@@ -139,6 +142,7 @@ def test_a_divergence_in_hover_aborts_within_a_second(tmp_path: Path) -> None:
 def test_the_incident_a_divergence_during_take_off_is_caught_before_anything_is_streamed(
     tmp_path: Path,
 ) -> None:
+
     # as once on PX4 SITL: EKF2's height diverged during take-off; gcs took off, started
     # offboard at the diverged position and streamed a transit from far outside the arena for
     # ten minutes

@@ -23,6 +23,9 @@ from gcs.io.settings import FlightSettings
 from gcs.mock.config import load_mock_config
 from gcs.sim.drone import SimulatedDrone
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = ROOT / "trajectories" / "eight-short.yaml"
 
@@ -45,6 +48,7 @@ def adaptive_ci_profile(tmp: Path) -> Path:
 def test_fly_adaptive_repeats_records_refreshes_resumes_and_stops_when_converged(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+
     sim_mock(monkeypatch)
     run_path = tmp_path / "run"
     profile = adaptive_ci_profile(tmp_path)

@@ -14,12 +14,32 @@ import numpy as np
 import pytest
 import yaml
 from synthetic import CI_FLIGHT, SHORT, ci_profile
-from test_fly_e2e import arrivals_on_the_vehicle_clock
 from virtual import ctrl_c, on_trial, run_gcs
 
 from gcs.io.rundir import RunDir
 from gcs.mock.config import Faults, load_mock_config
 from gcs.sim.drone import SimulatedDrone
+
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
+
+def arrivals_on_the_vehicle_clock(stats: dict, setpoints: np.ndarray, t0_vehicle_s: float):
+    """(k, vehicle time of the first arrival of setpoint k - t0) for every change of setpoint."""
+    sp = stats["setpoints"]
+    t = np.array(sp["t_rx_vehicle_s"])
+    ne = np.column_stack([sp["north_m"], sp["east_m"]])
+    ks, times = [], []
+    i = int(np.searchsorted(t, t0_vehicle_s - 0.1))
+    for k in range(1, len(setpoints)):
+        if np.allclose(setpoints[k, :2], setpoints[k - 1, :2], atol=1e-6):
+            continue  # the same value again: no arrival marks its start
+        match = np.flatnonzero(np.all(np.abs(ne[i:] - setpoints[k, :2]) < 1e-5, axis=1))
+        assert match.size, k
+        i += int(match[0])
+        ks.append(k)
+        times.append(t[i] - t0_vehicle_s)
+    return np.array(ks), np.array(times)
 
 
 @pytest.fixture
@@ -109,6 +129,7 @@ def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
 def test_more_ctrl_c_while_stopping_cannot_leave_the_vehicle_in_the_air(
     tmp_path, tiny, monkeypatch
 ) -> None:
+
     # an operator who finds the landing slow presses Ctrl-C again, then sends SIGTERM
     from gcs.flight.vehicle import Vehicle
 

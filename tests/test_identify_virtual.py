@@ -21,6 +21,9 @@ from gcs.io.rundir import RunDir
 from gcs.mock.config import load_mock_config
 from gcs.mock.physics import measure_axes, step_response
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 120
 
@@ -28,6 +31,7 @@ TIMEOUT_S = 120
 def test_identify_mock_writes_a_profile_close_to_the_mock(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+
     sim_mock(monkeypatch)
     data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
     data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)

@@ -18,6 +18,9 @@ from gcs.core.model import dc_gain
 from gcs.io.config import load_profile
 from gcs.io.rundir import RunDir
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 150
 
@@ -25,6 +28,7 @@ TIMEOUT_S = 150
 def test_identify_mock_gps_settles_on_the_measured_hover_and_writes_a_profile(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+
     sim_mock(monkeypatch)
     data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
     limits = {k: v for k, v in CI_FLIGHT.items() if k != "hover_measure_s"}  # GPS: measure 10 s

@@ -19,6 +19,10 @@ from gcs.io.settings import FlightSettings
 from gcs.mock.config import load_mock_config
 from gcs.sim.drone import SimulatedDrone
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -22,6 +22,9 @@ from gcs.io.samples_file import read_samples
 from gcs.mock.config import load_mock_config
 from gcs.sim.drone import SimulatedDrone
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
 #: A short climbing triangle: 0.5 m of altitude gained on the way round (about 5 s of motion).
 TRIANGLE = {
     "name": "triangle",
@@ -35,6 +38,7 @@ TRIANGLE = {
 def test_a_three_dimensional_waypoints_trajectory_learns_and_flies_down_as_the_reference(
     tmp_path: Path,
 ) -> None:
+
     trajectory = tmp_path / "triangle.yaml"
     trajectory.write_text(yaml.safe_dump(TRIANGLE))
     run_path = tmp_path / "run"
