@@ -1,4 +1,4 @@
-"""The campaign's pure checks (the flights themselves are in tests/test_flight_e2e.py)."""
+"""The campaign's pure checks (the flights: tests/test_campaign_virtual.py, test_flight_e2e.py)."""
 
 from __future__ import annotations
 

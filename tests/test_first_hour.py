@@ -72,11 +72,11 @@ def test_mavsdks_harmless_warning_is_logged_at_debug_and_others_as_they_come(cap
 
     from mavsdk import LogLevel
 
-    from gcs.flight.link import _route_mavsdk_log
+    from gcs.flight.mavsdk_link import route_mavsdk_log
 
     with caplog.at_level(logging.DEBUG, logger="gcs.flight.mavsdk"):
-        _route_mavsdk_log(LogLevel.WARN, "Unexpected component ID 0", None, 0)
-        _route_mavsdk_log(LogLevel.WARN, "Unexpected component ID 1", None, 0)
+        route_mavsdk_log(LogLevel.WARN, "Unexpected component ID 0", None, 0)
+        route_mavsdk_log(LogLevel.WARN, "Unexpected component ID 1", None, 0)
     assert [(r.levelno, r.getMessage()) for r in caplog.records] == [
         (logging.DEBUG, "Unexpected component ID 0"),
         (logging.WARNING, "Unexpected component ID 1"),

@@ -16,7 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from gcs.errors import ProfileError, TrajectoryError, TrialAborted
-from gcs.flight.clock import VehicleClock
+from gcs.flight.clock import WALL_CLOCK, VehicleClock
 from gcs.flight.link import TelemetrySample
 from gcs.flight.manoeuvres import heading_deg, min_jerk
 from gcs.flight.trial import (
@@ -198,6 +198,7 @@ class FakeVehicle:
         self.motion = motion
         self.boot_s = time.monotonic() - 100.0  # booted a while ago
         self.clock = VehicleClock()
+        self.local_clock = WALL_CLOCK
 
     def vehicle_time(self, wall_s: float) -> float:
         return (wall_s - self.boot_s) * self.rate

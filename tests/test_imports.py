@@ -12,7 +12,8 @@ The layers, lowest first (a module may import its own layer's modules and any lo
 4. ``gcs.api``: the public API's conveniences that read files (``Learner.from_profile``);
 5. ``gcs.flight`` and ``gcs.mock``: the vehicle side and the mock drone, beside each other
    (neither imports the other: the mock is a separate program that talks MAVLink);
-6. ``gcs.app``: one room per command beside its view;
+6. ``gcs.app``: one room per command beside its view; ``gcs.sim``: the mock drone in-process
+   behind a simulated link on a virtual clock, for the tests (it joins the two sides of 5);
 7. ``gcs.cli`` and ``gcs.__main__``: the command line, which only wires.
 """
 
@@ -35,11 +36,17 @@ LAYERS = {
     "gcs.flight": 5,
     "gcs.mock": 5,
     "gcs.app": 6,
+    "gcs.sim": 6,
     "gcs.cli": 7,
     "gcs.__main__": 7,
 }
 #: Parts of the same layer that must not import each other.
-SIBLINGS = {("gcs.flight", "gcs.mock"), ("gcs.mock", "gcs.flight")}
+SIBLINGS = {
+    ("gcs.flight", "gcs.mock"),
+    ("gcs.mock", "gcs.flight"),
+    ("gcs.app", "gcs.sim"),
+    ("gcs.sim", "gcs.app"),
+}
 #: Errors that name a file, a run directory or the vehicle: the numerics never raise them
 #: (the caller that read the file or flew the vehicle names it).
 NOT_FOR_CORE = {

@@ -19,18 +19,29 @@ counter wrap (uint32, after 49.7 days) adds ``2**32`` ms, and a restart of the v
 clock jumps back) continues from where the old clock would have been by the receipt times,
 so that nothing downstream sees time go backwards. :class:`VehicleClock` does the same
 sample by sample and keeps a sliding window for the fit.
+
+:class:`Clock` is the *local* clock itself, injected into the flight layer (``now``, ``sleep``):
+:class:`WallClock` by default, the simulated link's virtual clock in the tests
+(:mod:`gcs.sim`), so that a flight can run in virtual time.
 """
 
 from __future__ import annotations
 
+import asyncio
 import math
+import time
 from collections import deque
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 __all__ = [
     "BOOT_MS_WRAP_S",
+    "Clock",
+    "LoopClock",
+    "WALL_CLOCK",
+    "WallClock",
     "RESTART_JUMP_S",
     "ClockFit",
     "VehicleClock",
@@ -342,3 +353,69 @@ def rate_warning(trial: int, rate: float, duration_s: float, t_ilc_s: float) -> 
         f"{duration_s:.1f} s, and the wall-clock limits (watchdog, MAVSDK timeouts) stretch "
         f"by {1.0 / rate:.2f}x in vehicle time"
     )
+
+
+class Clock(Protocol):
+    """The local clock the flight layer reads and sleeps on (injected; the wall clock by default).
+
+    ``now`` must agree with the running event loop's ``time()``, on which ``asyncio.timeout``
+    and ``asyncio.sleep`` count: :class:`WallClock` with asyncio's own loop
+    (``time.monotonic``), :class:`LoopClock` with any loop (a virtual-time one in the tests).
+    """
+
+    def now(self) -> float:
+        """The local time [s]."""
+        ...
+
+    async def sleep(self, delay_s: float) -> None:
+        """Sleep ``delay_s`` of local time (no sleep, one yield, when not positive).
+
+        Parameters
+        ----------
+        delay_s : float
+            Delay [s].
+        """
+        ...
+
+
+class WallClock:
+    """``time.monotonic()``, the clock of asyncio's own event loop."""
+
+    def now(self) -> float:
+        """The local time [s] (``time.monotonic()``).
+
+        Returns
+        -------
+        float
+        """
+        return time.monotonic()
+
+    async def sleep(self, delay_s: float) -> None:
+        """Sleep ``delay_s`` seconds on the event loop.
+
+        Parameters
+        ----------
+        delay_s : float
+            Delay [s]; not positive: one yield.
+        """
+        await asyncio.sleep(max(delay_s, 0.0))
+
+
+class LoopClock(WallClock):
+    """The running event loop's own ``time()`` (a virtual-time loop's virtual time)."""
+
+    def now(self) -> float:
+        """The running loop's time [s] (``time.monotonic()`` outside a loop).
+
+        Returns
+        -------
+        float
+        """
+        try:
+            return asyncio.get_running_loop().time()
+        except RuntimeError:
+            return time.monotonic()
+
+
+WALL_CLOCK = WallClock()
+"""The default :class:`Clock` of the flight layer."""

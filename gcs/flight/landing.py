@@ -9,7 +9,6 @@ import asyncio
 import contextlib
 import logging
 import math
-import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -34,9 +33,9 @@ class Landing(Manoeuvres):
         VehicleError
             Landing refused or not finished within ``settings.land_timeout_s``, link lost.
         """
-        action = self._require(self._action)
+        link = self.link
         self._streaming_stopped = True
-        await self._command("land", action.land)
+        await self._command("land", link.land)
         self._offboard_started = False  # PX4 lands now: a stop must not switch it to Hold
         await self._wait_until(
             lambda: self.landed_state == LandedState.ON_GROUND,
@@ -45,7 +44,7 @@ class Landing(Manoeuvres):
             in_control=False,
         )
         if self.armed:
-            await self._command("disarm", action.disarm)
+            await self._command("disarm", link.disarm)
             await self._wait_until(
                 lambda: not self.armed,
                 self.settings.command_timeout_s,
@@ -71,11 +70,11 @@ class Landing(Manoeuvres):
         """
         _log.warning("emergency stop: %s", reason)
         self._streaming_stopped = True
-        if self._system is None or self._action is None or self._offboard is None:
+        if self._link is None:
             return "not connected"
         if not (self.armed or self._arm_requested) and not self._offboard_started:
             return "vehicle not armed; nothing to do"
-        action, offboard = self._action, self._offboard
+        link = self._link
         notes: list[str] = []
 
         async def attempt(what: str, call: Callable[[], Awaitable[Any]]) -> bool:
@@ -88,13 +87,13 @@ class Landing(Manoeuvres):
                 return False
 
         if self._offboard_started:
-            await attempt("offboard stop (Hold)", offboard.stop)
+            await attempt("offboard stop (Hold)", link.stop_offboard)
             self._offboard_started = False
         on_ground = self.landed_state == LandedState.ON_GROUND
         if self.armed and not on_ground:
-            on_ground = await self._land_with_retries(lambda: attempt("land", action.land), notes)
+            on_ground = await self._land_with_retries(lambda: attempt("land", link.land), notes)
         if on_ground and (self.armed or self._arm_requested) and self.connected:
-            await attempt("disarm", action.disarm)
+            await attempt("disarm", link.disarm)
             with contextlib.suppress(VehicleError):
                 await self._wait_until(
                     lambda: not self.armed,
@@ -117,11 +116,12 @@ class Landing(Manoeuvres):
         A land command lost in a link outage is sent again once the vehicle is heard from and
         still not landing, so that a temporary loss of the link does not leave it hovering.
         """
-        deadline_s = time.monotonic() + self.settings.land_timeout_s
+        clock = self.local_clock
+        deadline_s = clock.now() + self.settings.land_timeout_s
         last_try_s = -math.inf
-        last_heard_s = time.monotonic()
+        last_heard_s = clock.now()
         while self.landed_state != LandedState.ON_GROUND:
-            now_s = time.monotonic()
+            now_s = clock.now()
             heard = self.connected and self.telemetry_age_s() < self.settings.max_telemetry_age_s
             if heard:
                 last_heard_s = now_s

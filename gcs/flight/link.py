@@ -1,16 +1,17 @@
-"""The MAVSDK connection to a PX4 multirotor and the mirror of its state.
+"""The connection to a PX4 multirotor and the mirror of its state.
 
-:class:`Link` owns the ``Mavsdk`` instance, the Action/Offboard/Telemetry plugins and a few
-background tasks, the ``_watch_*`` coroutines, that mirror the vehicle's state (position and
+:class:`Link` owns a :class:`gcs.flight.backend.VehicleLink` (MAVSDK's, or a simulated one:
+:func:`gcs.flight.backend.registered_link` picks it by the URL) and a few background tasks, the
+``_watch_*`` coroutines, that mirror the vehicle's state (position and
 velocity, flight mode, armed, landed state, link, health, battery). Each state change wakes the
 waits (:meth:`Link.notify`); every command is guarded by a timeout (:meth:`Link._command`) so
 that a dead link cannot hang the caller, and MAVSDK errors become one-line
 :class:`gcs.errors.VehicleError`.
 
-Position samples carry two times: the receipt time on ``time.monotonic()`` and the vehicle's own
-time stamp. MAVSDK's ``position_velocity_ned`` has no time stamp, so LOCAL_POSITION_NED is read
-raw through MAVSDK's MavlinkDirect plugin (its ``time_boot_ms``); :attr:`Link.clock` makes
-that a continuous vehicle time and fits it to the local clock (:mod:`gcs.flight.clock`).
+Position samples carry two times: the receipt time on the local clock (:attr:`Link.local_clock`,
+the link's: ``time.monotonic()`` on the wire) and the vehicle's own time stamp
+(LOCAL_POSITION_NED's ``time_boot_ms``); :attr:`Link.clock` makes that a continuous vehicle time
+and fits it to the local clock (:mod:`gcs.flight.clock`).
 
 :class:`Link` is one part of :class:`gcs.flight.vehicle.Vehicle`, which sets its state.
 """
@@ -19,57 +20,25 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import math
-import time
 from collections.abc import Awaitable, Callable, Iterator
 from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
-from mavsdk import LogLevel, log_subscribe
-from mavsdk.asyncio import (
-    ComponentType,
-    Configuration,
-    Mavsdk,
-    MavsdkConnectionError,
-    MavsdkError,
-    System,
-)
-from mavsdk.asyncio.plugins.action import ActionAsync
-from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-from mavsdk.asyncio.plugins.offboard import OffboardAsync
-from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync
+from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState
 
 from gcs.errors import VehicleError
+from gcs.flight.backend import CommandRefused, LinkUnreachable, VehicleLink, registered_link
+from gcs.flight.clock import Clock as LocalClock
 from gcs.flight.clock import ClockFit, VehicleClock
+from gcs.flight.mavsdk_link import MavsdkLink
 from gcs.io.settings import FlightSettings
 
 __all__ = ["Link", "TelemetrySample", "sample_arrays"]
 
 _log = logging.getLogger(__name__)
-_mavsdk_log = logging.getLogger("gcs.flight.mavsdk")
 _T = TypeVar("_T")
-
-_LOG_LEVELS = {
-    LogLevel.DEBUG: logging.DEBUG,
-    LogLevel.INFO: logging.INFO,
-    LogLevel.WARN: logging.WARNING,
-    LogLevel.ERROR: logging.ERROR,
-}
-
-
-#: MAVSDK's warnings that say nothing about the flight, logged at DEBUG instead: MAVSDK asks
-#: every autopilot for its COMPONENT_METADATA, and when the request fails (the mock and many
-#: vehicles do not serve it) its callback gets an empty message, compid 0, and MAVSDK warns.
-_HARMLESS = frozenset({"Unexpected component ID 0"})
-
-
-def _route_mavsdk_log(level: LogLevel, message: str, file: str | None, line: int) -> bool:
-    """Send a line of the C++ core's log to Python logging instead of coloured stderr."""
-    logged = logging.DEBUG if message.strip() in _HARMLESS else _LOG_LEVELS.get(level, logging.INFO)
-    _mavsdk_log.log(logged, "%s", message)
-    return True
 
 
 def connect_hint(url: str) -> str:
@@ -105,7 +74,8 @@ class TelemetrySample(NamedTuple):
     Parameters
     ----------
     t_s : float
-        Receipt time on ``time.monotonic()`` [s] (the asyncio loop clock).
+        Receipt time on the local clock [s] (``time.monotonic()``, the asyncio loop clock, on
+        the wire).
     pos_ned_m : tuple of 3 float
         Position in local NED [m].
     vel_ned_m_s : tuple of 3 float
@@ -156,15 +126,13 @@ class Link:
     local_position_ok: bool
     battery_pct: float
     clock: VehicleClock
+    local_clock: LocalClock  # the clock of receipt times, waits and deadlines
     _changed: asyncio.Event
     _recorders: list[list[TelemetrySample]]
     _tasks: list[asyncio.Task[None]]
-    _mavsdk: Mavsdk | None
-    _system: System | None
-    _action: ActionAsync | None
-    _offboard: OffboardAsync | None
-    _telemetry: TelemetryAsync | None
-    _direct: MavlinkDirectAsync | None
+    _link: VehicleLink | None
+    _link_given: VehicleLink | None  # injected at construction (else by the URL)
+    _clock_given: LocalClock | None  # injected at construction (else the link's)
     _check_sample: Callable[[TelemetrySample], None]  # the safety watches (watches.py)
 
     async def connect(self, url: str, timeout_s: float | None = None) -> None:
@@ -173,7 +141,8 @@ class Link:
         Parameters
         ----------
         url : str
-            MAVSDK connection URL, e.g. ``udpout://127.0.0.1:14540`` or ``udpin://0.0.0.0:14540``.
+            Connection URL, e.g. ``udpout://127.0.0.1:14540`` or ``udpin://0.0.0.0:14540``
+            (MAVSDK), or a scheme registered with :func:`gcs.flight.backend.register_scheme`.
         timeout_s : float, optional
             How long to wait for an autopilot [s]; ``settings.connect_timeout_s`` if omitted.
 
@@ -183,30 +152,25 @@ class Link:
             Invalid URL, no autopilot within the timeout, or the telemetry rate was refused.
         """
         timeout_s = self.settings.connect_timeout_s if timeout_s is None else timeout_s
-        log_subscribe(_route_mavsdk_log)
         self.url = url
-        config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
-        self._mavsdk = Mavsdk(config)
+        link = self._link_given or registered_link(url) or MavsdkLink()
+        self._link = link
+        if self._clock_given is None:
+            self.local_clock = link.clock
         try:
-            await self._mavsdk.add_any_connection(url)
-            system = await self._mavsdk.first_autopilot(timeout_s)
-        except MavsdkConnectionError as exc:
+            found = await link.connect(url, timeout_s)
+        except LinkUnreachable as exc:
             await self.close()
             raise VehicleError(f"cannot open connection {url!r}: {exc}") from None
         except BaseException:
             await self.close()
             raise
-        if system is None:
+        if not found:
             await self.close()
             raise VehicleError(
                 f"no autopilot answered on {url} within {timeout_s:g} s{connect_hint(url)}"
             )
-        self._system = system
-        self._action = ActionAsync(system)
-        self._offboard = OffboardAsync(system)
-        self._telemetry = TelemetryAsync(system)
-        self._direct = MavlinkDirectAsync(system)
-        self.connected = await system.is_connected()
+        self.connected = await link.is_connected()
         for watch in (
             self._watch_position,
             self._watch_connection,
@@ -217,29 +181,22 @@ class Link:
             self._watch_battery,
         ):
             self._tasks.append(asyncio.create_task(watch(), name=f"gcs-{watch.__name__}"))
-        telemetry = self._telemetry
-        await self._command(
-            "set position telemetry rate",
-            lambda: telemetry.set_rate_position_velocity_ned(self.settings.telemetry_rate_hz),
-        )
+        rate_hz = self.settings.telemetry_rate_hz
+        await self._command("set position telemetry rate", lambda: link.set_position_rate(rate_hz))
         try:  # 5 Hz landed state makes landing detection snappier; not essential.
-            await self._command("set landed-state rate", lambda: telemetry.set_rate_landed_state(5))
+            await self._command("set landed-state rate", lambda: link.set_landed_state_rate(5))
         except VehicleError as exc:
             _log.warning("%s", exc)
 
     async def close(self) -> None:
-        """Stop the background tasks and release MAVSDK (the vehicle is left as it is)."""
+        """Stop the background tasks and release the link (the vehicle is left as it is)."""
         tasks, self._tasks = self._tasks, []
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
-        for plugin in (self._action, self._offboard, self._telemetry):
-            if plugin is not None:
-                plugin.destroy()
-        self._action = self._offboard = self._telemetry = self._direct = None
-        if self._mavsdk is not None:
-            self._mavsdk.destroy()
-            self._mavsdk = None
+        link, self._link = self._link, None
+        if link is not None:
+            await link.close()
         self.connected = False
 
     def mocap_plugin(self) -> Any:
@@ -258,11 +215,9 @@ class Link:
         VehicleError
             Not connected.
         """
-        from mavsdk.plugins.mocap import Mocap
-
-        if self._system is None:
+        if self._link is None:
             raise VehicleError("not connected: no vehicle to forward the mocap to")
-        return Mocap(self._system._system)
+        return self._link.mocap_plugin()
 
     # ------------------------------------------------------------------ state mirror
 
@@ -271,15 +226,12 @@ class Link:
         event.set()
 
     async def _watch_position(self) -> None:
-        assert self._direct is not None
-        async for message in self._direct.subscribe_message("LOCAL_POSITION_NED"):
-            receipt_s = time.monotonic()
-            f = json.loads(message.fields_json)
-            pos = (float(f["x"]), float(f["y"]), float(f["z"]))
-            vel = (float(f["vx"]), float(f["vy"]), float(f["vz"]))
+        async for report in self.link.positions():
+            receipt_s = self.local_clock.now()
+            pos, vel = report.pos_ned_m, report.vel_ned_m_s
             if not all(math.isfinite(x) for x in pos + vel):
                 continue  # an estimator without a position: not a sample
-            t_vehicle_s = self.clock.add(f["time_boot_ms"] / 1000.0, receipt_s)
+            t_vehicle_s = self.clock.add(report.time_boot_s, receipt_s)
             sample = TelemetrySample(receipt_s, pos, vel, t_vehicle_s)
             self._check_sample(sample)
             if self.latest is None or t_vehicle_s >= self.latest.t_vehicle_s:
@@ -289,23 +241,20 @@ class Link:
             self._notify()
 
     async def _watch_connection(self) -> None:
-        assert self._system is not None
-        async for connected in self._system.is_connected_state():
+        async for connected in self.link.connection_states():
             self.connected = connected
             if not connected:
                 _log.warning("link to %s lost (no heartbeat for 3 s)", self.url)
             self._notify()
 
     async def _watch_flight_mode(self) -> None:
-        assert self._telemetry is not None
-        async for mode in self._telemetry.subscribe_flight_mode():
+        async for mode in self.link.flight_modes():
             if mode != self.flight_mode:
                 self.flight_mode = mode
                 self._notify()
 
     async def _watch_armed(self) -> None:
-        assert self._telemetry is not None
-        async for armed in self._telemetry.subscribe_armed():
+        async for armed in self.link.armed_states():
             if armed != self.armed:
                 self.armed = armed
                 if armed:
@@ -313,23 +262,20 @@ class Link:
                 self._notify()
 
     async def _watch_landed_state(self) -> None:
-        assert self._telemetry is not None
-        async for state in self._telemetry.subscribe_landed_state():
+        async for state in self.link.landed_states():
             if state != self.landed_state:
                 self.landed_state = state
                 self._notify()
 
     async def _watch_health(self) -> None:
-        assert self._telemetry is not None
-        async for health in self._telemetry.subscribe_health():
-            if health.is_local_position_ok != self.local_position_ok:
-                self.local_position_ok = health.is_local_position_ok
+        async for ok in self.link.local_position_health():
+            if ok != self.local_position_ok:
+                self.local_position_ok = ok
                 self._notify()
 
     async def _watch_battery(self) -> None:
-        assert self._telemetry is not None
-        async for battery in self._telemetry.subscribe_battery():
-            self.battery_pct = float(battery.remaining_percent)
+        async for level_pct in self.link.battery_levels():
+            self.battery_pct = float(level_pct)
 
     @contextlib.contextmanager
     def record_telemetry(self) -> Iterator[list[TelemetrySample]]:
@@ -366,26 +312,40 @@ class Link:
 
     def telemetry_age_s(self) -> float:
         """Age of the newest position sample [s] (infinite before the first one)."""
-        return math.inf if self.latest is None else time.monotonic() - self.latest.t_s
+        return math.inf if self.latest is None else self.local_clock.now() - self.latest.t_s
 
     def notify(self) -> None:
         """Wake the waits (:meth:`wait_until`): something they check has changed."""
         self._notify()
 
     @property
-    def system(self) -> System:
-        """The connected MAVSDK system (for plugins gcs opens beside the vehicle's own).
+    def link(self) -> VehicleLink:
+        """The connected link (MAVSDK's, or a simulated one).
 
         Raises
         ------
         VehicleError
             Not connected.
         """
-        return self._require(self._system)
+        return self._require(self._link)
+
+    @property
+    def system(self) -> Any:
+        """The connected MAVSDK system (for plugins gcs opens beside the vehicle's own).
+
+        Raises
+        ------
+        VehicleError
+            Not connected, or the link is not MAVSDK's.
+        """
+        system = getattr(self._link, "system", None)
+        if system is None:
+            raise VehicleError("not connected over MAVSDK")
+        return system
 
     async def _command(self, what: str, call: Callable[[], Awaitable[_T]]) -> _T:
-        """Run one MAVSDK command with the command timeout; errors become VehicleError."""
-        if self._system is None:
+        """Run one link command with the command timeout; a refusal becomes VehicleError."""
+        if self._link is None:
             raise VehicleError(f"{what}: not connected")
         try:
             async with asyncio.timeout(self.settings.command_timeout_s):
@@ -394,10 +354,8 @@ class Link:
             raise VehicleError(
                 f"{what}: no answer within {self.settings.command_timeout_s:g} s"
             ) from None
-        except MavsdkError as exc:
-            result = getattr(exc, "result", None)
-            name = getattr(result, "name", None) or str(exc)
-            raise VehicleError(f"{what} failed: {name}") from None
+        except CommandRefused as exc:
+            raise VehicleError(f"{what} failed: {exc.result}") from None
 
     @staticmethod
     def _require(plugin: _T | None) -> _T:

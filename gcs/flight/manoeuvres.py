@@ -13,16 +13,15 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-import time
 from collections.abc import Awaitable
 from typing import Any, TypeVar
 
 import numpy as np
-from mavsdk.asyncio import MavsdkError
-from mavsdk.asyncio.plugins.offboard import PositionNedYaw
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState
 
 from gcs.errors import VehicleError
+from gcs.flight.backend import CommandRefused
+from gcs.flight.clock import WALL_CLOCK, Clock
 from gcs.flight.fence import format_ned
 from gcs.flight.hover import SPEED_SPAN_S, is_settled
 from gcs.flight.link import TelemetrySample, sample_arrays
@@ -34,16 +33,17 @@ _log = logging.getLogger(__name__)
 _T = TypeVar("_T")
 
 
-async def sleep_until(deadline_s: float) -> None:
-    """Sleep until an absolute deadline on ``time.monotonic()``; yield once if it has passed.
+async def sleep_until(deadline_s: float, clock: Clock = WALL_CLOCK) -> None:
+    """Sleep until an absolute deadline on ``clock``; yield once if it has passed.
 
     Parameters
     ----------
     deadline_s : float
-        Absolute time on ``time.monotonic()`` [s].
+        Absolute time on ``clock`` [s].
+    clock : Clock
+        The local clock (the wall clock, ``time.monotonic()``, by default).
     """
-    delay_s = deadline_s - time.monotonic()
-    await asyncio.sleep(delay_s if delay_s > 0 else 0)
+    await clock.sleep(deadline_s - clock.now())
 
 
 def min_jerk(s: float) -> float:
@@ -141,23 +141,23 @@ class Manoeuvres(Watches):
                     f"{self.fence.arena_text()}; not taking off"
                 )
             self._require_inside("arming")
-        action = self._require(self._action)
+        link = self.link
         try:
             await self._command(
-                "set take-off altitude", lambda: action.set_takeoff_altitude(float(altitude_m))
+                "set take-off altitude", lambda: link.set_takeoff_altitude(float(altitude_m))
             )
         except VehicleError as exc:
             _log.warning("%s; taking off to the vehicle's default altitude", exc)
         self._arm_requested = True  # the fence watches from the arm command on
         try:
-            await self._command("arm", action.arm)
+            await self._command("arm", link.arm)
             await self._wait_until(
                 lambda: self.armed, self.settings.command_timeout_s, "armed state", in_control=False
             )
         except BaseException:
             self._arm_requested = self.armed
             raise
-        await self._command("take-off", action.takeoff)
+        await self._command("take-off", link.takeoff)
         tolerance_m = self.settings.settle_tolerance_m
         seen_takeoff_mode = [False]
 
@@ -204,14 +204,13 @@ class Manoeuvres(Watches):
         problem = self.fence.setpoint_problem(pos_ned_m)
         if problem is not None:
             raise VehicleError(f"fence: {problem}; not sent")
-        offboard = self._require(self._offboard)
+        link = self.link
         n, e, d = (float(x) for x in pos_ned_m)
         yaw = heading_deg(self.settings.yaw_deg if yaw_deg is None else yaw_deg)
-        setpoint = PositionNedYaw(n, e, d, yaw)
         try:
-            await offboard.set_position_ned(setpoint)
-        except MavsdkError as exc:
-            raise VehicleError(f"setpoint refused: {getattr(exc, 'result', exc)}") from None
+            await link.set_position_ned(n, e, d, yaw)
+        except CommandRefused as exc:
+            raise VehicleError(f"setpoint refused: {exc.result}") from None
         self.target_ned_m = np.array([n, e, d])
 
     async def start_offboard_at_current_position(self, preroll_s: float = 1.0) -> None:
@@ -238,16 +237,17 @@ class Manoeuvres(Watches):
         self._require_inside("starting offboard")
         hover_ned_m = self._hover_point(np.array(self.latest.pos_ned_m))
         period_s = 1.0 / self.settings.stream_rate_hz
-        t0 = time.monotonic()
+        clock = self.local_clock
+        t0 = clock.now()
         for i in range(max(1, math.ceil(preroll_s / period_s))):
-            await sleep_until(t0 + i * period_s)
+            await sleep_until(t0 + i * period_s, clock)
             breach = self.safety_problem()
             if breach is not None:
                 raise VehicleError(f"{breach} while starting offboard")
             await self.send_setpoint(hover_ned_m)
-        offboard = self._require(self._offboard)
+        link = self.link
         await self.send_setpoint(hover_ned_m)
-        await self._command("start offboard", offboard.start)
+        await self._command("start offboard", link.start_offboard)
         self._offboard_started = True
         await self._wait_until(
             lambda: self.flight_mode == FlightMode.OFFBOARD,
@@ -290,9 +290,10 @@ class Manoeuvres(Watches):
         rate_hz = self.settings.stream_rate_hz
         duration_s = 1.875 * distance_m / speed_m_s
         n_ticks = max(1, math.ceil(duration_s * rate_hz))
-        t0 = time.monotonic()
+        clock = self.local_clock
+        t0 = clock.now()
         for i in range(1, n_ticks + 1):
-            await sleep_until(t0 + i / rate_hz)
+            await sleep_until(t0 + i / rate_hz, clock)
             problem = self.control_problem()
             if problem is not None:
                 raise VehicleError(f"{problem} while moving to {format_ned(target)}")
@@ -371,7 +372,7 @@ class Manoeuvres(Watches):
         fit = self.clock_fit()
         with self.record_telemetry() as samples:
             # until a sample stamped duration_s after the vehicle's "now" (not its last sample)
-            end_s = float(fit.to_vehicle(time.monotonic())) + duration_s
+            end_s = float(fit.to_vehicle(self.local_clock.now())) + duration_s
             # twice the expected wall time: a simulator may slow down meanwhile (silence is the
             # watchdog's to catch, not the timeout's)
             await self._wait_until(

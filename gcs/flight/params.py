@@ -1,7 +1,8 @@
 """What a vehicle keeps in store: its parameters, the global origin and the geofence.
 
-Reads and writes through MAVSDK's Param, Telemetry, MavlinkDirect and Geofence plugins, each
-guarded by the command timeout of :class:`gcs.flight.link.Link`. What the geofence holds is
+Reads and writes through the vehicle's link (:class:`gcs.flight.backend.VehicleLink`; MAVSDK's
+Param, Telemetry, MavlinkDirect and Geofence plugins on the wire), each guarded by the command
+timeout of :class:`gcs.flight.link.Link`. What the geofence holds is
 decided in :mod:`gcs.flight.geofence`.
 
 :class:`Params` is one part of :class:`gcs.flight.vehicle.Vehicle`.
@@ -9,19 +10,8 @@ decided in :mod:`gcs.flight.geofence`.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
-
-from mavsdk.asyncio.plugins.geofence import (
-    FenceType,
-    GeofenceAsync,
-    GeofenceData,
-    Point,
-    Polygon,
-)
-from mavsdk.asyncio.plugins.mavlink_direct import MavlinkMessage
-from mavsdk.asyncio.plugins.param import ParamAsync
 
 from gcs.errors import VehicleError
 from gcs.flight.link import Link
@@ -46,21 +36,18 @@ class Params(Link):
         -------
         dict of str to int or None
         """
-        if self._system is None:
+        if self._link is None:
             raise VehicleError("reading parameters: not connected")
-        param = ParamAsync(self._system)
+        link = self._link
         values: dict[str, int | None] = {}
-        try:
-            for name in names:
-                try:
-                    values[name] = await self._command(
-                        f"read {name}", lambda name=name: param.get_param_int(name)
-                    )
-                except VehicleError as exc:
-                    _log.warning("%s", exc)
-                    values[name] = None
-        finally:
-            param.destroy()
+        for name in names:
+            try:
+                values[name] = await self._command(
+                    f"read {name}", lambda name=name: link.get_param_int(name)
+                )
+            except VehicleError as exc:
+                _log.warning("%s", exc)
+                values[name] = None
         return values
 
     async def set_params(self, values: dict[str, int | float]) -> None:
@@ -76,18 +63,15 @@ class Params(Link):
         VehicleError
             A parameter was refused or not answered.
         """
-        if self._system is None:
+        if self._link is None:
             raise VehicleError("setting parameters: not connected")
-        param = ParamAsync(self._system)
-        try:
-            for name, value in values.items():
-                if isinstance(value, int):
-                    call = lambda n=name, v=value: param.set_param_int(n, v)  # noqa: E731
-                else:
-                    call = lambda n=name, v=value: param.set_param_float(n, float(v))  # noqa: E731
-                await self._command(f"set {name}", call)
-        finally:
-            param.destroy()
+        link = self._link
+        for name, value in values.items():
+            if isinstance(value, int):
+                call = lambda n=name, v=value: link.set_param_int(n, v)  # noqa: E731
+            else:
+                call = lambda n=name, v=value: link.set_param_float(n, float(v))  # noqa: E731
+            await self._command(f"set {name}", call)
 
     async def read_float_param(self, name: str) -> float | None:
         """Read one float parameter of the autopilot; None if it does not answer.
@@ -101,16 +85,14 @@ class Params(Link):
         -------
         float or None
         """
-        if self._system is None:
+        if self._link is None:
             raise VehicleError("reading parameters: not connected")
-        param = ParamAsync(self._system)
+        link = self._link
         try:
-            return float(await self._command(f"read {name}", lambda: param.get_param_float(name)))
+            return float(await self._command(f"read {name}", lambda: link.get_param_float(name)))
         except VehicleError as exc:
             _log.warning("%s", exc)
             return None
-        finally:
-            param.destroy()
 
     async def read_all_params(self) -> dict[str, float | None]:
         """Read every parameter of the autopilot at once (one list request).
@@ -120,16 +102,10 @@ class Params(Link):
         dict of str to float or None
             Integer and float parameters by name.
         """
-        if self._system is None:
+        if self._link is None:
             raise VehicleError("reading parameters: not connected")
-        param = ParamAsync(self._system)
-        try:
-            found = await self._command("read all parameters", param.get_all_params)
-        finally:
-            param.destroy()
-        values: dict[str, float | None] = {p.name: float(p.value) for p in found.int_params}
-        values |= {p.name: float(p.value) for p in found.float_params}
-        return values
+        found = await self._command("read all parameters", self._link.get_all_params)
+        return dict(found)
 
     async def gps_global_origin(self) -> tuple[float, float, float]:
         """The global position of the local NED frame's origin (PX4's GPS_GLOBAL_ORIGIN).
@@ -144,9 +120,8 @@ class Params(Link):
         VehicleError
             Not answered, or not a finite position.
         """
-        telemetry = self._require(self._telemetry)
-        origin = await self._command("read the global origin", telemetry.get_gps_global_origin)
-        values = (origin.latitude_deg, origin.longitude_deg, origin.altitude_m)
+        link = self.link
+        values = await self._command("read the global origin", link.get_gps_global_origin)
         if not all(math.isfinite(float(x)) for x in values):
             raise VehicleError(f"read the global origin: not a position {values}")
         return (float(values[0]), float(values[1]), float(values[2]))
@@ -170,18 +145,10 @@ class Params(Link):
         VehicleError
             Not connected, or MAVSDK refused the message.
         """
-        direct = self._require(self._direct)
-        system = self._require(self._system)
-        fields = {
-            "target_system": await system.get_system_id(),
-            "latitude": round(lat_deg * 1e7),
-            "longitude": round(lon_deg * 1e7),
-            "altitude": round(alt_m * 1e3),
-            "time_usec": 0,
-        }
-        message = MavlinkMessage("SET_GPS_GLOBAL_ORIGIN", 0, 0, fields["target_system"], 0,
-                                 json.dumps(fields))  # fmt: skip
-        await self._command("set the global origin", lambda: direct.send_message(message))
+        link = self.link
+        await self._command(
+            "set the global origin", lambda: link.set_gps_global_origin(lat_deg, lon_deg, alt_m)
+        )
 
     async def upload_inclusion_polygon(self, vertices_deg: list[tuple[float, float]]) -> None:
         """Replace the autopilot's geofence by one inclusion polygon (MAVSDK's Geofence plugin).
@@ -196,12 +163,7 @@ class Params(Link):
         VehicleError
             The upload was refused or not answered.
         """
-        if self._system is None:
+        if self._link is None:
             raise VehicleError("geofence upload: not connected")
-        fence = GeofenceAsync(self._system)
-        points = [Point(lat, lon) for lat, lon in vertices_deg]
-        data = GeofenceData([Polygon(points, FenceType.INCLUSION)], [])
-        try:
-            await self._command("geofence upload", lambda: fence.upload_geofence(data))
-        finally:
-            fence.destroy()
+        link = self._link
+        await self._command("geofence upload", lambda: link.upload_inclusion_polygon(vertices_deg))

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import time
 from dataclasses import dataclass, field
 
 from gcs.errors import VehicleError
@@ -141,29 +140,26 @@ async def wait_ready_to_arm(vehicle: Vehicle, timeout_s: float) -> PrearmState:
     VehicleError
         Not ready within ``timeout_s`` (naming PX4's reasons), or the link was lost.
     """
-    from mavsdk.asyncio.plugins.events import EventsAsync
-    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
-
     state = PrearmState()
-    telemetry = TelemetryAsync(vehicle.system)
-    events = EventsAsync(vehicle.system)
+    link = vehicle.link
 
     async def watch_health() -> None:
-        async for health in telemetry.subscribe_health():
-            if health.is_armable != state.armable:
-                state.armable = health.is_armable
+        async for armable in link.armable_states():
+            if armable != state.armable:
+                state.armable = armable
                 vehicle.notify()
 
     async def watch_checks() -> None:
-        async for report in events.subscribe_health_and_arming_checks():
-            state.problems = [p.message for p in report.current_mode_intention.problems]
+        async for problems in link.arming_problems():
+            state.problems = list(problems)
 
     async def watch_texts() -> None:
-        async for status in telemetry.subscribe_status_text():
-            state.texts = [*state.texts[-19:], status.text.strip()]
+        async for text in link.status_texts():
+            state.texts = [*state.texts[-19:], text.strip()]
 
     tasks = [asyncio.create_task(w()) for w in (watch_health, watch_checks, watch_texts)]
-    started = time.monotonic()
+    clock = vehicle.local_clock
+    started = clock.now()
     try:
         await vehicle.wait_until(lambda: state.armable, timeout_s, "PX4's pre-arm checks")
     except VehicleError as exc:
@@ -176,7 +172,5 @@ async def wait_ready_to_arm(vehicle: Vehicle, timeout_s: float) -> PrearmState:
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
-        telemetry.destroy()
-        events.destroy()
-        state.waited_s = time.monotonic() - started
+        state.waited_s = clock.now() - started
     return state

@@ -9,7 +9,8 @@ whose time base is the vehicle's, and differently in every trial as the load cha
 Streaming (zero-order hold). Setpoint ``k`` holds for one ILC sample from vehicle time
 ``v0 + k t_ilc_s``. With ``stream_rate_hz = m / t_ilc_s`` the stream has ``m`` ticks per sample;
 tick ``i`` goes out at the local time of vehicle time ``v0 + i t_ilc_s / m`` through the current
-clock fit (an absolute deadline on ``time.monotonic()``, refitted about once a second) and
+clock fit (an absolute deadline on the local clock, ``time.monotonic()`` on the wire,
+refitted about once a second) and
 carries setpoint ``i // m``. The first tick of each sample is on the sample boundary, so the
 vehicle sees a true ZOH; the repeats keep MAVSDK's own 20 Hz re-send from firing in between (it
 is reset by every send). After the last setpoint the final one is repeated (hover) until a
@@ -36,7 +37,6 @@ the ILC tracking error (which needs the reference, unknown to this layer).
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -106,8 +106,9 @@ class TrialRecording:
     max_send_late_s : float
         Largest delay of a send after its deadline [s].
     t0_monotonic_s : float
-        The start on ``time.monotonic()`` [s] (CLOCK_MONOTONIC, comparable with other local
-        processes): where the clock fit put vehicle time v0.
+        The start on the local clock [s] (``time.monotonic()``, CLOCK_MONOTONIC, comparable
+        with other local processes; virtual time on a simulated link): where the clock fit
+        put vehicle time v0.
     t0_vehicle_s : float
         v0, the start in continuous vehicle time [s].
     clock : ClockFit or None
@@ -302,7 +303,8 @@ class TrialRun:
         fit = vehicle.clock_fit()
         with vehicle.record_telemetry() as samples:
             self.samples = samples
-            self.t0 = time.monotonic() + LEAD_TICKS / settings.stream_rate_hz
+            clock = vehicle.local_clock
+            self.t0 = clock.now() + LEAD_TICKS / settings.stream_rate_hz
             self.v0 = v0 = float(fit.to_vehicle(self.t0))
             v_end = v0 + n * self.t_ilc_s
             i = 0
@@ -310,11 +312,11 @@ class TrialRun:
                 if i % refit_ticks == 0:
                     fit = vehicle.clock_fit()
                 deadline_s = float(fit.to_local(v0 + i * tick_s))
-                await sleep_until(deadline_s)
+                await sleep_until(deadline_s, clock)
                 k = i // m
                 if k >= n and samples and samples[-1].t_vehicle_s >= v_end:
                     break  # y(N) is measured
-                issued_s = time.monotonic()
+                issued_s = clock.now()
                 kk = min(k, n - 1)
                 await vehicle.send_setpoint(sp[kk], None if yaw is None else yaw[kk])
                 if k < n and i % m == 0:

@@ -1,7 +1,16 @@
-"""One MAVSDK connection to a PX4 multirotor, flown by position setpoints in local NED.
+"""One connection to a PX4 multirotor, flown by position setpoints in local NED.
 
-:class:`Vehicle` is the one object the flight layer flies; it is made of rooms of one purpose,
-each a part of the class in its own module:
+:class:`Vehicle` is the one object the flight layer flies. It is built from two injected parts
+and rooms of one purpose:
+
+- the link (:class:`gcs.flight.backend.VehicleLink`): MAVSDK's (:mod:`gcs.flight.mavsdk_link`)
+  by default, chosen by the URL when connecting, or one given at construction (a simulated
+  link in the tests);
+- the local clock (:class:`gcs.flight.clock.Clock`: ``now``, ``sleep``): every receipt time,
+  deadline and wait of the flight layer reads it; the link's (the wall clock on the wire, the
+  virtual clock of a simulated link) unless one is given;
+
+and the rooms, each a part of the class in its own module:
 
 - :mod:`gcs.flight.link`: the connection, the command timeout and the mirror of the vehicle's
   state (the ``_watch_*`` coroutines), position samples on the vehicle's clock;
@@ -28,7 +37,8 @@ import math
 
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState
 
-from gcs.flight.clock import VehicleClock
+from gcs.flight.backend import VehicleLink
+from gcs.flight.clock import WALL_CLOCK, Clock, VehicleClock
 from gcs.flight.fence import EstimateMonitor, Fence
 from gcs.flight.landing import Landing
 from gcs.flight.params import Params
@@ -47,11 +57,26 @@ class Vehicle(Landing, Params):
     fence : Fence or None
         The arena and the limits watched while armed; without one the vehicle can be
         listened to but sends no setpoint.
+    link : VehicleLink or None
+        The link to fly through; None: the one the URL names when connecting (MAVSDK's).
+    clock : Clock or None
+        The local clock; None: the link's (the wall clock until connected).
     """
 
-    def __init__(self, settings: FlightSettings, fence: Fence | None = None) -> None:
+    def __init__(
+        self,
+        settings: FlightSettings,
+        fence: Fence | None = None,
+        *,
+        link: VehicleLink | None = None,
+        clock: Clock | None = None,
+    ) -> None:
         self.settings = settings
         self.fence = fence
+        self._link_given = link
+        self._link = None
+        self._clock_given = clock
+        self.local_clock = clock if clock is not None else WALL_CLOCK
         # the link and its mirror of the vehicle's state (link.py)
         self.url = None
         self.connected = False
@@ -66,8 +91,6 @@ class Vehicle(Landing, Params):
         self._changed = asyncio.Event()
         self._recorders = []
         self._tasks = []
-        self._mavsdk = self._system = None
-        self._action = self._offboard = self._telemetry = self._direct = None
         # the safety watches (watches.py)
         self.breach = None
         self._monitor = EstimateMonitor(fence) if fence is not None else None

@@ -16,7 +16,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import time
 from collections.abc import Callable
 
 from mavsdk.asyncio.plugins.telemetry import FlightMode
@@ -161,7 +160,8 @@ class Watches(Link):
         on a breach (unless ``stopping``: the emergency stop itself) and, with ``in_control``,
         on any :meth:`control_problem`.
         """
-        deadline_s = time.monotonic() + timeout_s
+        clock = self.local_clock
+        deadline_s = clock.now() + timeout_s
         while True:
             # problems first: a breach seen with the sample that also ends the wait ends it
             problem = self.control_problem() if in_control else None
@@ -173,7 +173,7 @@ class Watches(Link):
                 return
             if not self.connected:
                 raise VehicleError(f"link lost (no heartbeat for 3 s) while waiting for {what}")
-            remaining_s = deadline_s - time.monotonic()
+            remaining_s = deadline_s - clock.now()
             if remaining_s <= 0:
                 raise _WaitTimeout(f"{what} did not happen within {timeout_s:g} s")
             # Wake up at least at the telemetry-age limit so that silence is noticed.

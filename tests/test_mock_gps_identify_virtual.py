@@ -1,28 +1,35 @@
-"""End to end: ``gcs identify --mock`` on the mock-gps profile (a GPS-navigated vehicle)."""
+"""``gcs identify`` on mock-gps on the virtual clock:
+the flights of tests/test_mock_gps_identify_e2e.py in-process.
+
+The same commands, settings and checks against the simulated drone (tests/virtual.py) instead
+of the mock process over UDP; ``--mock`` starts a simulated drone of the same settings and seed.
+"""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 import yaml
 from synthetic import CI_FLIGHT
+from virtual import run_gcs, sim_mock
 
 from gcs.core.model import dc_gain
 from gcs.io.config import load_profile
 from gcs.io.rundir import RunDir
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
 pytestmark = pytest.mark.e2e
+
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 150
 
 
 def test_identify_mock_gps_settles_on_the_measured_hover_and_writes_a_profile(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+
+    sim_mock(monkeypatch)
     data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
     limits = {k: v for k, v in CI_FLIGHT.items() if k != "hover_measure_s"}  # GPS: measure 10 s
     data["flight"] = dict(data.get("flight") or {}, **limits)
@@ -30,14 +37,11 @@ def test_identify_mock_gps_settles_on_the_measured_hover_and_writes_a_profile(
     profile_path = tmp_path / "short.yaml"
     profile_path.write_text(yaml.safe_dump(data))
     out, run_path = tmp_path / "identified.yaml", tmp_path / "ident"
-    proc = subprocess.run(
-        [sys.executable, "-m", "gcs", "identify", "--mock", "--profile", profile_path,
-         "--mock-config", ROOT / "profiles" / "mock-gps.yaml", "--run", run_path, "--out", out],
-        cwd=ROOT, capture_output=True, text=True, timeout=TIMEOUT_S,
-        env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
+    code, text = run_gcs(
+        "identify", "--mock", "--profile", profile_path,
+         "--mock-config", ROOT / "profiles" / "mock-gps.yaml", "--run", run_path, "--out", out,
     )  # fmt: skip
-    text = proc.stdout + proc.stderr
-    assert proc.returncode == 0, text
+    assert code == 0, text
     assert "navigation: GPS (EKF2_GPS_CTRL 7" in text and "landed and disarmed" in text
     run = RunDir.open(run_path)
     assert run.complete_trials() == [0, 1]

@@ -1,27 +1,28 @@
-"""End to end: ``gcs fly`` flies the mock-gps profile (a GPS-navigated vehicle) through MAVSDK.
+"""The mock-gps profile on the virtual clock: the flights of tests/test_mock_gps_e2e.py in-process.
 
-The vehicle's estimate wanders by decimetres and the vehicle follows it: gcs must say it flies
-on GPS, derive its settle tolerances from the hover it measured (not the indoor 5 cm), fly and
-learn with the shipped profile; the mock's truth record shows what gcs recorded was the
-estimate, not the truth.
+The same commands, settings and checks against the simulated drone (tests/virtual.py) instead
+of the mock process over UDP; ``--mock`` starts a simulated drone of the same settings and seed.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 from synthetic import CI_FLIGHT
-from test_fly_e2e import finish, gcs
+from virtual import run_gcs
 
 from gcs.io.rundir import RunDir
 from gcs.io.settings import FlightSettings
-from gcs.mock.process import MockProcess
+from gcs.mock.config import load_mock_config
+from gcs.sim.drone import SimulatedDrone
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
 pytestmark = pytest.mark.e2e
+
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -37,12 +38,12 @@ def gps_ci_profile(tmp: Path) -> Path:
 
 
 def test_fly_mock_gps_settles_on_the_measured_hover_and_learns(tmp_path: Path) -> None:
-    run_path, stats_path = tmp_path / "run", tmp_path / "stats.json"
+    run_path = tmp_path / "run"
     mock_gps = ROOT / "profiles" / "mock-gps.yaml"
-    with MockProcess(mock_gps, seed=1, stats_path=stats_path) as mock:
+    with SimulatedDrone(load_mock_config(mock_gps), seed=1) as mock:
         short = ROOT / "trajectories" / "eight-short.yaml"
         options = ["--iter", 2, "--trajectory", short, "--profile", gps_ci_profile(tmp_path)]
-        code, out = finish(gcs("fly", "--connect", mock.url, "--run", run_path, *options))
+        code, out = run_gcs(*("fly", "--connect", mock.url, "--run", run_path, *options))
     assert code == 0, out
     assert "landed and disarmed" in out
     assert "navigation: GPS (EKF2_GPS_CTRL 7 (position, altitude, velocity)" in out, out
@@ -64,7 +65,7 @@ def test_fly_mock_gps_settles_on_the_measured_hover_and_learns(tmp_path: Path) -
     assert f"settle tolerances: {first['verdict']['tolerance_m']:.2f} m" in out, out
 
     # what gcs recorded is the estimate: the mock's truth plus its estimator error
-    truth = json.loads(stats_path.read_text())["estimator"]
+    truth = mock.stats()["estimator"]
     t_truth = np.array(truth["t_vehicle_s"])
     for j in (0, 1):
         record = run.read_trial(j)

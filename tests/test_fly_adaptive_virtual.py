@@ -1,30 +1,31 @@
-"""End to end: learning that knows its floor, flown on the mock drone through the real MAVSDK.
+"""``gcs fly`` adaptive on the virtual clock:
+the flights of tests/test_fly_adaptive_e2e.py in-process.
 
-``gcs fly`` with an adaptive profile (profiles/antx-adaptive.yaml) on the short eight: the
-repeat of trial 0, a decision record per learning step, a refreshed model written and used
-again by a resumed run, ``--until-converged``; and the flight layer's one hook for it (a trial
-source that says "no further trial") landing the vehicle early.
+The same commands, settings and checks against the simulated drone (tests/virtual.py) instead
+of the mock process over UDP; ``--mock`` starts a simulated drone of the same settings and seed.
 """
 
 from __future__ import annotations
 
-import asyncio
 import json
 from pathlib import Path
 
 import pytest
 import yaml
 from synthetic import CI_FLIGHT
-from test_fly_e2e import finish, gcs
+from virtual import fly_virtual, run_gcs, sim_mock
 
 from gcs.flight.campaign import CampaignPlan, FlightSession, Status, TrialStarted, fly_campaign
 from gcs.flight.fence import Fence
 from gcs.flight.trial import TrialRecording
 from gcs.io.rundir import RunDir
 from gcs.io.settings import FlightSettings
-from gcs.mock.process import MockProcess
+from gcs.mock.config import load_mock_config
+from gcs.sim.drone import SimulatedDrone
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
 pytestmark = pytest.mark.e2e
+
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = ROOT / "trajectories" / "eight-short.yaml"
 
@@ -45,12 +46,14 @@ def adaptive_ci_profile(tmp: Path) -> Path:
 
 
 def test_fly_adaptive_repeats_records_refreshes_resumes_and_stops_when_converged(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+
+    sim_mock(monkeypatch)
     run_path = tmp_path / "run"
     profile = adaptive_ci_profile(tmp_path)
     first = ["--iter", 3, "--trajectory", SHORT, "--profile", profile, "--run", run_path]
-    code, out = finish(gcs("fly", "--mock", "--seed", 3, *first))
+    code, out = run_gcs(*("fly", "--mock", "--seed", 3, *first))
     assert code == 0, out
     assert "trial 1 repeats trial 0 (identical setpoints, j = 0)" in out, out
     assert "trial 1 (j = 0, a repeat): e_pos" in out and "trial 2 (j = 1): e_pos" in out, out
@@ -71,7 +74,7 @@ def test_fly_adaptive_repeats_records_refreshes_resumes_and_stops_when_converged
 
     # resume: the next step starts from the refreshed model, read back from the run directory
     more = ["--resume", run_path, "--iter", 2, "--until-converged"]
-    code, out = finish(gcs("fly", "--mock", "--seed", 4, *more))
+    code, out = run_gcs(*("fly", "--mock", "--seed", 4, *more))
     assert code == 0, out
     assert run.read_learn_record(3)["models_from"] == "model-002.yaml"
     flown = run.complete_trials()
@@ -84,7 +87,7 @@ def test_fly_adaptive_repeats_records_refreshes_resumes_and_stops_when_converged
         assert "learning has not converged within --iter 2" in out, out
     assert "landed and disarmed" in out
 
-    code, out = finish(gcs("report", run_path, "--json"))
+    code, out = run_gcs(*("report", run_path, "--json"))
     assert code == 0, out
     assert json.loads(out)["run"]["seeds"] == [3, 4]  # the mock's seed of each session
     rows = json.loads(out)["rows"]
@@ -134,15 +137,15 @@ def test_a_source_that_says_no_further_trial_lands_the_vehicle_early(tmp_path: P
     )  # fmt: skip
     fence = Fence.around([[-3.0, 3.0], [-3.0, 3.0], [-3.0, 0.0]], settings, 3.0, 1.5)  # antx's
     source, events = StopAfter(0), []
-    with MockProcess(seed=0, stats_path=tmp_path / "stats.json") as mock:
+    with SimulatedDrone(load_mock_config(None), seed=0) as mock:
         campaign = fly_campaign(
             CampaignPlan(mock.url, 0, 3, 0.05, settings, fence), source, events.append
         )
-        asyncio.run(campaign)
+        fly_virtual(campaign)
     assert source.asked == [0] and source.recorded == [0]
     assert sum(isinstance(e, TrialStarted) for e in events) == 1
     texts = [e.text for e in events if isinstance(e, Status)]
     assert "no further trial after trial 0: enough for today" in texts
     assert texts[-2:] == ["landing", "landed and disarmed"]
-    final = json.loads((tmp_path / "stats.json").read_text())["modes"][-1]
+    final = mock.stats()["modes"][-1]
     assert final["armed"] is False

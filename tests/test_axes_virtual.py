@@ -1,5 +1,8 @@
-"""End to end: a climbing circle learned on three axes (north, east and down) on the mock
-drone through the real MAVSDK: e_pos, the 3-D e_pos and the down error fall."""
+"""Three-axis learning on the virtual clock: the flights of tests/test_axes_e2e.py in-process.
+
+The same commands, settings and checks against the simulated drone (tests/virtual.py) instead
+of the mock process over UDP; ``--mock`` starts a simulated drone of the same settings and seed.
+"""
 
 from __future__ import annotations
 
@@ -10,12 +13,15 @@ import numpy as np
 import pytest
 import yaml
 from synthetic import CI_FLIGHT, ROOT
-from test_fly_e2e import finish, gcs
+from virtual import run_gcs
 
 from gcs.io.rundir import RunDir
-from gcs.mock.process import MockProcess
+from gcs.mock.config import load_mock_config
+from gcs.sim.drone import SimulatedDrone
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
 pytestmark = pytest.mark.e2e
+
 
 #: One loop of a 0.8 m circle that climbs 0.5 m by mid-manoeuvre and comes back (about 8 s).
 HELIX = {
@@ -40,9 +46,9 @@ def test_a_helix_learned_on_three_axes_reduces_every_error(tmp_path: Path) -> No
     trajectory = tmp_path / "helix.yaml"
     trajectory.write_text(yaml.safe_dump(HELIX))
     run_path = tmp_path / "run"
-    with MockProcess(seed=0) as mock:
-        code, out = finish(
-            gcs(
+    with SimulatedDrone(load_mock_config(None), seed=0) as mock:
+        code, out = run_gcs(
+            *(
                 "fly",
                 "--connect",
                 mock.url,
@@ -67,7 +73,7 @@ def test_a_helix_learned_on_three_axes_reduces_every_error(tmp_path: Path) -> No
     assert np.max(np.abs(run.read_trial(1).sp_ned_m[:-1, 2] - ref[:-1, 2])) > 0.01
     header = (run_path / "estimate-000.csv").read_text().splitlines()[0]
     assert header.endswith("d_down_m,p_down_m2")
-    code, report = finish(gcs("report", run_path, "--json"))
+    code, report = run_gcs(*("report", run_path, "--json"))
     assert code == 0, report
     rows = json.loads(report)["rows"]
     assert [r["iteration"] for r in rows] == [0, 1]

@@ -1,16 +1,18 @@
-"""End to end: ``gcs identify --mock`` flies two short PRBS experiments and writes a profile."""
+"""``gcs identify`` on the virtual clock: the flights of tests/test_identify_e2e.py in-process.
+
+The same commands, settings and checks against the simulated drone (tests/virtual.py) instead
+of the mock process over UDP; ``--mock`` starts a simulated drone of the same settings and seed.
+"""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 from synthetic import CI_FLIGHT
+from virtual import run_gcs, sim_mock
 
 from gcs.core.model import dc_gain, simulate
 from gcs.core.pbsid import natural_frequency_damping
@@ -19,12 +21,18 @@ from gcs.io.rundir import RunDir
 from gcs.mock.config import load_mock_config
 from gcs.mock.physics import measure_axes, step_response
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
 pytestmark = pytest.mark.e2e
+
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 120
 
 
-def test_identify_mock_writes_a_profile_close_to_the_mock(tmp_path: Path) -> None:
+def test_identify_mock_writes_a_profile_close_to_the_mock(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+
+    sim_mock(monkeypatch)
     data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
     data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
     data["identification"]["duration_s"] = 15.0  # two 15 s experiments: about 50 s in all
@@ -39,14 +47,11 @@ def test_identify_mock_writes_a_profile_close_to_the_mock(tmp_path: Path) -> Non
     mock_path.write_text(yaml.safe_dump(mock))
     out = tmp_path / "identified.yaml"
     run_path = tmp_path / "ident"
-    proc = subprocess.run(
-        [sys.executable, "-m", "gcs", "identify", "--mock", "--profile", profile_path,
-         "--mock-config", mock_path, "--run", run_path, "--out", out],
-        cwd=ROOT, capture_output=True, text=True, timeout=TIMEOUT_S,
-        env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
+    code, text = run_gcs(
+        "identify", "--mock", "--profile", profile_path,
+         "--mock-config", mock_path, "--run", run_path, "--out", out,
     )  # fmt: skip
-    text = proc.stdout + proc.stderr
-    assert proc.returncode == 0, text
+    assert code == 0, text
     assert "landed and disarmed" in text
     assert "VAF [%]" in text  # the results table
     for axis in ("x", "y"):

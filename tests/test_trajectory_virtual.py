@@ -1,8 +1,8 @@
-"""End to end: trajectories of the user's own, flown on the mock drone through the real MAVSDK.
+"""The trajectory sources on the virtual clock:
+the flights of tests/test_trajectory_e2e.py in-process.
 
-A three-dimensional ``waypoints`` trajectory learns over two trials (north and east learned,
-down flown as the reference); a planner's ``samples`` CSV with a yaw column is flown as the
-file resampled onto the grid, every setpoint with its own yaw.
+The same commands, settings and checks against the simulated drone (tests/virtual.py) instead
+of the mock process over UDP; ``--mock`` starts a simulated drone of the same settings and seed.
 """
 
 from __future__ import annotations
@@ -14,13 +14,15 @@ import numpy as np
 import pytest
 import yaml
 from synthetic import ci_profile
-from test_fly_e2e import finish, fly_two_trials, gcs
+from virtual import fly_two_trials, run_gcs
 
 from gcs.core.trajectory_sources import SamplesShape, sample_samples
 from gcs.io.rundir import RunDir
 from gcs.io.samples_file import read_samples
-from gcs.mock.process import MockProcess
+from gcs.mock.config import load_mock_config
+from gcs.sim.drone import SimulatedDrone
 
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
 pytestmark = pytest.mark.e2e
 
 #: A short climbing triangle: 0.5 m of altitude gained on the way round (about 5 s of motion).
@@ -36,10 +38,11 @@ TRIANGLE = {
 def test_a_three_dimensional_waypoints_trajectory_learns_and_flies_down_as_the_reference(
     tmp_path: Path,
 ) -> None:
+
     trajectory = tmp_path / "triangle.yaml"
     trajectory.write_text(yaml.safe_dump(TRIANGLE))
     run_path = tmp_path / "run"
-    with MockProcess(seed=0) as mock:
+    with SimulatedDrone(load_mock_config(None), seed=0) as mock:
         code, out = fly_two_trials(tmp_path, trajectory, run_path, "--connect", mock.url)
     assert code == 0, out
     run = RunDir.open(run_path)
@@ -53,7 +56,7 @@ def test_a_three_dimensional_waypoints_trajectory_learns_and_flies_down_as_the_r
         # and the vehicle followed it: it climbed and came back
         assert np.ptp(record.pos_ned_m[:, 2]) > 0.3
         assert abs(record.pos_ned_m[-1, 2] - ref.pos_ned_m[-1, 2]) < 0.15
-    code, report = finish(gcs("report", run_path, "--json"))
+    code, report = run_gcs(*("report", run_path, "--json"))
     assert code == 0, report
     rows = json.loads(report)["rows"]
     assert [r["iteration"] for r in rows] == [0, 1]
@@ -74,10 +77,9 @@ def test_a_samples_csv_is_flown_as_the_file_resampled_to_the_grid(tmp_path: Path
         yaml.safe_dump({"name": "planner", "type": "samples", "file": "planner.csv"})
     )
     run_path = tmp_path / "run"
-    stats_path = tmp_path / "stats.json"
-    with MockProcess(seed=0, stats_path=stats_path) as mock:
-        code, out = finish(
-            gcs(
+    with SimulatedDrone(load_mock_config(None), seed=0) as mock:
+        code, out = run_gcs(
+            *(
                 "fly",
                 "--connect",
                 mock.url,
@@ -104,7 +106,7 @@ def test_a_samples_csv_is_flown_as_the_file_resampled_to_the_grid(tmp_path: Path
     assert np.ptp(record.pos_ned_m[:, 1]) > 0.5  # the vehicle flew it
     # the yaw: recorded with the reference, and every setpoint reached the vehicle with its own
     np.testing.assert_allclose(run.reference().yaw_rad, expected.yaw_rad, atol=1e-6)
-    sent = json.loads(stats_path.read_text())["setpoints"]
+    sent = mock.stats()["setpoints"]
     got = np.column_stack([sent[k] for k in ("north_m", "east_m", "down_m", "yaw_rad")])
     for k in range(expected.n_samples):
         near = np.all(np.abs(got[:, :3] - record.sp_ned_m[k]) < 1e-4, axis=1)

@@ -1,0 +1,287 @@
+"""The link to a vehicle over MAVSDK: :class:`gcs.flight.backend.VehicleLink` on the wire.
+
+:class:`MavsdkLink` owns the ``Mavsdk`` instance and its Action, Offboard, Telemetry and
+MavlinkDirect plugins (Param, Geofence and Events are opened per use). MAVSDK's errors become
+:class:`gcs.flight.backend.CommandRefused`; the C++ core's log goes to Python logging.
+
+Position samples: MAVSDK's ``position_velocity_ned`` has no time stamp, so LOCAL_POSITION_NED
+is read raw through MavlinkDirect (its ``time_boot_ms``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import AsyncIterator, Awaitable, Callable
+from typing import Any, TypeVar
+
+from mavsdk import LogLevel, log_subscribe
+from mavsdk.asyncio import (
+    ComponentType,
+    Configuration,
+    Mavsdk,
+    MavsdkConnectionError,
+    MavsdkError,
+    System,
+)
+from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync, MavlinkMessage
+from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
+from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync
+
+from gcs.flight.backend import CommandRefused, LinkUnreachable, PositionReport, VehicleLink
+from gcs.flight.clock import WALL_CLOCK, Clock
+
+__all__ = ["MavsdkLink"]
+
+_mavsdk_log = logging.getLogger("gcs.flight.mavsdk")
+_T = TypeVar("_T")
+
+_LOG_LEVELS = {
+    LogLevel.DEBUG: logging.DEBUG,
+    LogLevel.INFO: logging.INFO,
+    LogLevel.WARN: logging.WARNING,
+    LogLevel.ERROR: logging.ERROR,
+}
+
+
+#: MAVSDK's warnings that say nothing about the flight, logged at DEBUG instead: MAVSDK asks
+#: every autopilot for its COMPONENT_METADATA, and when the request fails (the mock and many
+#: vehicles do not serve it) its callback gets an empty message, compid 0, and MAVSDK warns.
+_HARMLESS = frozenset({"Unexpected component ID 0"})
+
+
+def route_mavsdk_log(level: LogLevel, message: str, file: str | None, line: int) -> bool:
+    """Send a line of the C++ core's log to Python logging instead of coloured stderr."""
+    logged = logging.DEBUG if message.strip() in _HARMLESS else _LOG_LEVELS.get(level, logging.INFO)
+    _mavsdk_log.log(logged, "%s", message)
+    return True
+
+
+async def _call(call: Callable[[], Awaitable[_T]]) -> _T:
+    """Run one MAVSDK call; its error becomes CommandRefused naming the result."""
+    try:
+        return await call()
+    except MavsdkError as exc:
+        result = getattr(exc, "result", None)
+        raise CommandRefused(getattr(result, "name", None) or str(exc)) from None
+
+
+class MavsdkLink(VehicleLink):
+    """A :class:`gcs.flight.backend.VehicleLink` over MAVSDK (real PX4, SITL, the mock)."""
+
+    clock: Clock = WALL_CLOCK
+
+    def __init__(self) -> None:
+        self._mavsdk: Mavsdk | None = None
+        self._system: System | None = None
+        self._action: ActionAsync | None = None
+        self._offboard: OffboardAsync | None = None
+        self._telemetry: TelemetryAsync | None = None
+        self._direct: MavlinkDirectAsync | None = None
+
+    async def connect(self, url: str, timeout_s: float) -> bool:
+        log_subscribe(route_mavsdk_log)
+        config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+        self._mavsdk = Mavsdk(config)
+        try:
+            await self._mavsdk.add_any_connection(url)
+            system = await self._mavsdk.first_autopilot(timeout_s)
+        except MavsdkConnectionError as exc:
+            raise LinkUnreachable(str(exc)) from None
+        if system is None:
+            return False
+        self._system = system
+        self._action = ActionAsync(system)
+        self._offboard = OffboardAsync(system)
+        self._telemetry = TelemetryAsync(system)
+        self._direct = MavlinkDirectAsync(system)
+        return True
+
+    async def close(self) -> None:
+        for plugin in (self._action, self._offboard, self._telemetry):
+            if plugin is not None:
+                plugin.destroy()
+        self._action = self._offboard = self._telemetry = self._direct = None
+        if self._mavsdk is not None:
+            self._mavsdk.destroy()
+            self._mavsdk = None
+        self._system = None
+
+    @property
+    def system(self) -> System:
+        """The connected MAVSDK system."""
+        return _need(self._system)
+
+    async def is_connected(self) -> bool:
+        return bool(await self.system.is_connected())
+
+    # -- streams
+    async def positions(self) -> AsyncIterator[PositionReport]:
+        async for message in _need(self._direct).subscribe_message("LOCAL_POSITION_NED"):
+            f = json.loads(message.fields_json)
+            yield PositionReport(
+                f["time_boot_ms"] / 1000.0,
+                (float(f["x"]), float(f["y"]), float(f["z"])),
+                (float(f["vx"]), float(f["vy"]), float(f["vz"])),
+            )
+
+    async def connection_states(self) -> AsyncIterator[bool]:
+        async for connected in self.system.is_connected_state():
+            yield bool(connected)
+
+    async def flight_modes(self) -> AsyncIterator[FlightMode]:
+        async for mode in _need(self._telemetry).subscribe_flight_mode():
+            yield mode
+
+    async def armed_states(self) -> AsyncIterator[bool]:
+        async for armed in _need(self._telemetry).subscribe_armed():
+            yield bool(armed)
+
+    async def landed_states(self) -> AsyncIterator[LandedState]:
+        async for state in _need(self._telemetry).subscribe_landed_state():
+            yield state
+
+    async def local_position_health(self) -> AsyncIterator[bool]:
+        async for health in _need(self._telemetry).subscribe_health():
+            yield bool(health.is_local_position_ok)
+
+    async def armable_states(self) -> AsyncIterator[bool]:
+        telemetry = TelemetryAsync(self.system)
+        try:
+            async for health in telemetry.subscribe_health():
+                yield bool(health.is_armable)
+        finally:
+            telemetry.destroy()
+
+    async def arming_problems(self) -> AsyncIterator[list[str]]:
+        from mavsdk.asyncio.plugins.events import EventsAsync
+
+        events = EventsAsync(self.system)
+        try:
+            async for report in events.subscribe_health_and_arming_checks():
+                yield [p.message for p in report.current_mode_intention.problems]
+        finally:
+            events.destroy()
+
+    async def status_texts(self) -> AsyncIterator[str]:
+        telemetry = TelemetryAsync(self.system)
+        try:
+            async for status in telemetry.subscribe_status_text():
+                yield status.text
+        finally:
+            telemetry.destroy()
+
+    async def battery_levels(self) -> AsyncIterator[float]:
+        async for battery in _need(self._telemetry).subscribe_battery():
+            yield float(battery.remaining_percent)
+
+    # -- commands
+    async def set_position_rate(self, rate_hz: float) -> None:
+        telemetry = _need(self._telemetry)
+        await _call(lambda: telemetry.set_rate_position_velocity_ned(rate_hz))
+
+    async def set_landed_state_rate(self, rate_hz: float) -> None:
+        telemetry = _need(self._telemetry)
+        await _call(lambda: telemetry.set_rate_landed_state(rate_hz))
+
+    async def set_takeoff_altitude(self, altitude_m: float) -> None:
+        action = _need(self._action)
+        await _call(lambda: action.set_takeoff_altitude(float(altitude_m)))
+
+    async def arm(self) -> None:
+        await _call(_need(self._action).arm)
+
+    async def disarm(self) -> None:
+        await _call(_need(self._action).disarm)
+
+    async def takeoff(self) -> None:
+        await _call(_need(self._action).takeoff)
+
+    async def land(self) -> None:
+        await _call(_need(self._action).land)
+
+    async def start_offboard(self) -> None:
+        await _call(_need(self._offboard).start)
+
+    async def stop_offboard(self) -> None:
+        await _call(_need(self._offboard).stop)
+
+    async def set_position_ned(
+        self, north_m: float, east_m: float, down_m: float, yaw_deg: float
+    ) -> None:
+        offboard = _need(self._offboard)
+        setpoint = PositionNedYaw(north_m, east_m, down_m, yaw_deg)
+        await _call(lambda: offboard.set_position_ned(setpoint))
+
+    # -- parameters, origin, geofence
+    async def _with_param(self, use: Callable[[Any], Awaitable[_T]]) -> _T:
+        from mavsdk.asyncio.plugins.param import ParamAsync
+
+        param = ParamAsync(self.system)
+        try:
+            return await _call(lambda: use(param))
+        finally:
+            param.destroy()
+
+    async def get_param_int(self, name: str) -> int:
+        return int(await self._with_param(lambda p: p.get_param_int(name)))
+
+    async def get_param_float(self, name: str) -> float:
+        return float(await self._with_param(lambda p: p.get_param_float(name)))
+
+    async def set_param_int(self, name: str, value: int) -> None:
+        await self._with_param(lambda p: p.set_param_int(name, int(value)))
+
+    async def set_param_float(self, name: str, value: float) -> None:
+        await self._with_param(lambda p: p.set_param_float(name, float(value)))
+
+    async def get_all_params(self) -> dict[str, float]:
+        found = await self._with_param(lambda p: p.get_all_params())
+        values = {p.name: float(p.value) for p in found.int_params}
+        return values | {p.name: float(p.value) for p in found.float_params}
+
+    async def get_gps_global_origin(self) -> tuple[float, float, float]:
+        origin = await _call(_need(self._telemetry).get_gps_global_origin)
+        return (origin.latitude_deg, origin.longitude_deg, origin.altitude_m)
+
+    async def set_gps_global_origin(self, lat_deg: float, lon_deg: float, alt_m: float) -> None:
+        direct = _need(self._direct)
+        target = await self.system.get_system_id()
+        fields = {
+            "target_system": target,
+            "latitude": round(lat_deg * 1e7),
+            "longitude": round(lon_deg * 1e7),
+            "altitude": round(alt_m * 1e3),
+            "time_usec": 0,
+        }
+        message = MavlinkMessage("SET_GPS_GLOBAL_ORIGIN", 0, 0, target, 0, json.dumps(fields))
+        await _call(lambda: direct.send_message(message))
+
+    async def upload_inclusion_polygon(self, vertices_deg: list[tuple[float, float]]) -> None:
+        from mavsdk.asyncio.plugins.geofence import (
+            FenceType,
+            GeofenceAsync,
+            GeofenceData,
+            Point,
+            Polygon,
+        )
+
+        fence = GeofenceAsync(self.system)
+        points = [Point(lat, lon) for lat, lon in vertices_deg]
+        data = GeofenceData([Polygon(points, FenceType.INCLUSION)], [])
+        try:
+            await _call(lambda: fence.upload_geofence(data))
+        finally:
+            fence.destroy()
+
+    def mocap_plugin(self) -> Any:
+        from mavsdk.plugins.mocap import Mocap
+
+        return Mocap(self.system._system)
+
+
+def _need(plugin: _T | None) -> _T:
+    if plugin is None:
+        raise CommandRefused("not connected")
+    return plugin

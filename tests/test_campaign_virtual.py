@@ -1,0 +1,169 @@
+"""The campaign on the virtual clock: tests/test_flight_e2e.py's flights in seconds.
+
+The same campaigns, sources and checks, flown in-process on the simulated drone
+(tests/virtual.py); the event times are the loop's virtual time. tests/test_flight_e2e.py keeps
+the take-off-to-landing flight on the wire (MAVSDK over UDP to the mock process).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_flight_e2e import (
+    FENCE,
+    SETTINGS,
+    T_ILC_S,
+    CircleSource,
+    _best_lag_correlation,
+)
+from virtual import fly_virtual
+
+from gcs.errors import TrialAborted, VehicleError
+from gcs.flight.campaign import (
+    CampaignPlan,
+    Status,
+    TrialFinished,
+    TrialProgress,
+    TrialStarted,
+    fly_campaign,
+)
+from gcs.flight.hover import SPEED_SPAN_S
+from gcs.mock.config import Faults, load_mock_config
+from gcs.sim.drone import SimulatedDrone
+
+# whole flights, on the virtual clock: with the e2e set, out of `make test-fast`
+pytestmark = pytest.mark.e2e
+
+
+def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
+    source = CircleSource()
+    events: list[object] = []
+    stamps: list[float] = []
+
+    def on_event(event: object) -> None:
+        events.append(event)
+        stamps.append(asyncio.get_running_loop().time())  # virtual time
+
+    with SimulatedDrone(seed=0) as drone:
+        fly_virtual(
+            fly_campaign(CampaignPlan(drone.url, 0, 2, T_ILC_S, SETTINGS, FENCE), source, on_event)
+        )
+    assert source.asked == [0, 1]
+    assert [j for j, _ in source.recorded] == [0, 1] and not source.incomplete
+    n = source.setpoints.shape[0]
+    for _, rec in source.recorded:
+        assert rec.complete and rec.abort_reason is None
+        assert rec.t_s.shape == (n + 1,) and rec.pos_ned_m.shape == (n + 1, 3)
+        assert rec.vel_ned_m_s.shape == (n + 1, 3) and rec.sent_s.shape == (n,)
+        assert rec.interpolated.shape == (n + 1,) and rec.interpolated_share < 0.05
+        assert np.all(np.isfinite(rec.pos_ned_m)) and np.all(np.isfinite(rec.sent_s))
+        np.testing.assert_allclose(rec.sent_s, rec.t_s[:-1], atol=SETTINGS.max_setpoint_late_s)
+        # the vehicle follows the circle, with the closed loop's lag
+        for axis in (0, 1):
+            lag, r = _best_lag_correlation(rec.pos_ned_m[1:, axis], rec.setpoints_ned_m[:, axis])
+            assert r > 0.9, (axis, lag, r)
+            assert 0 <= lag * T_ILC_S <= 1.5
+        assert np.max(np.abs(rec.pos_ned_m[:, 2] - rec.setpoints_ned_m[0, 2])) < 0.3
+    kinds = [type(e) for e in events]
+    assert kinds.count(TrialStarted) == 2 and kinds.count(TrialFinished) == 2
+    assert TrialProgress in kinds
+    texts = [e.text for e in events if isinstance(e, Status)]
+    assert texts[-1] == "landed and disarmed"
+    # each trial starts after holding the start point (the initial reset), not before
+    holds = [i for i, e in enumerate(events) if isinstance(e, Status) and "holding" in e.text]
+    starts = [i for i, e in enumerate(events) if isinstance(e, TrialStarted)]
+    assert len(holds) == 2 and all(h < s for h, s in zip(holds, starts, strict=True))
+    for h, s in zip(holds, starts, strict=True):
+        # (on virtual time exactly the hold: the float sum's last bit aside)
+        assert stamps[s] - stamps[h] >= SETTINGS.hover_before_trial_s - 1e-9
+    # the hover before trial 0 was measured (after a hold of its own), judged and handed over
+    (measuring,) = [i for i, t in enumerate(events) if getattr(t, "text", "").startswith("meas")]
+    assert measuring < holds[0]
+    assert stamps[holds[0]] - stamps[measuring] >= (
+        SETTINGS.hover_before_trial_s + SETTINGS.hover_measure_s - 1e-9
+    )
+    # recorded before take-off (fence, the vehicle's geofence), again once the hover was judged
+    before, session = source.sessions
+    assert not before.hovers and before.fence == FENCE and before.geofence is not None
+    assert before.geofence.ok and session.geofence == before.geofence
+    assert session.abort_reason is None
+    (hover,) = session.hovers
+    assert hover.verdict.ok and hover.why == "measurement" and hover.before_trial == 0
+    assert hover.stats.duration_s == pytest.approx(SETTINGS.hover_measure_s, abs=0.1)
+    assert session.tolerance_m >= SETTINGS.settle_tolerance_m
+    assert session.navigation.name == "GPS"  # the mock reports PX4's EKF2 defaults
+    assert hover.clock_rate == pytest.approx(1.0, abs=1e-3)
+    for _, rec in source.recorded:
+        assert rec.clock is not None and rec.clock.rate == pytest.approx(1.0, abs=1e-3)
+    assert drone.stats()["modes"][-1]["armed"] is False
+
+
+def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
+    source = CircleSource(duration_s=8.0)
+    events: list[object] = []
+    # 4 s after the first OFFBOARD plus what comes before trial 0: the hold and the hover
+    # measurement, the shortest settle (its window and 1 s of speed span) and the hold
+    loss_at_s = 4.0 + 2 * SETTINGS.hover_before_trial_s + SETTINGS.hover_measure_s
+    loss_at_s += SETTINGS.settle_time_s + SPEED_SPAN_S
+    config = tmp_path / "mock.yaml"  # a vehicle set up to land on a lost link
+    config.write_text("px4:\n  nav_dll_act: 3\n  com_dl_loss_t_s: 3.0\n")
+    faults = Faults(link_loss_at_s=loss_at_s)
+    with SimulatedDrone(load_mock_config(config), faults=faults) as drone:  # noqa: SIM117
+        with pytest.raises((TrialAborted, VehicleError)):
+            fly_virtual(
+                fly_campaign(
+                    CampaignPlan(drone.url, 0, 1, T_ILC_S, SETTINGS, FENCE), source, events.append
+                )
+            )
+    assert not source.recorded
+    assert len(source.incomplete) == 1
+    j, rec, reason = source.incomplete[0]
+    assert j == 0 and not rec.complete and rec.abort_reason
+    assert "telemetry" in reason or "link" in reason
+    measured = np.isfinite(rec.pos_ned_m[:, 0])
+    assert 0 < measured.sum() < len(measured)  # some of it, not all of it
+    assert any(isinstance(e, Status) and e.text.startswith("emergency stop") for e in events)
+    # The link is gone for good, so nothing we send arrives: the vehicle's own failsafes act.
+    # The offboard-loss failsafe (COM_OF_LOSS_T) holds, then the data-link-loss failsafe
+    # (COM_DL_LOSS_T, NAV_DLL_ACT = 3) lands, and the land detector disarms.
+    modes = drone.stats()["modes"]
+    last_offboard = max(i for i, m in enumerate(modes) if m["mode"] == "OFFBOARD" and m["armed"])
+    armed_modes = [m["mode"] for m in modes[last_offboard + 1 :] if m["armed"]]
+    assert [mode for mode, _ in itertools.groupby(armed_modes)] == ["HOLD", "LAND"], modes
+    assert modes[-1]["armed"] is False, modes
+
+
+def test_cancellation_mid_trial_lands_and_marks_incomplete(tmp_path: Path) -> None:
+    source = CircleSource(duration_s=6.0)
+    statuses: list[str] = []
+
+    async def fly_then_cancel() -> None:
+        in_trial = asyncio.Event()
+
+        def on_event(event: object) -> None:
+            if isinstance(event, TrialProgress) and event.k >= 20:
+                in_trial.set()
+            if isinstance(event, Status):
+                statuses.append(event.text)
+
+        task = asyncio.create_task(
+            fly_campaign(CampaignPlan(drone.url, 0, 2, T_ILC_S, SETTINGS, FENCE), source, on_event)
+        )
+        await in_trial.wait()
+        task.cancel()  # what Ctrl-C does to asyncio.run's main task
+        with pytest.raises(asyncio.CancelledError):
+            await task
+
+    with SimulatedDrone(seed=0) as drone:
+        fly_virtual(asyncio.wait_for(fly_then_cancel(), 40.0))
+    assert not source.recorded
+    assert len(source.incomplete) == 1
+    j, rec, reason = source.incomplete[0]
+    assert j == 0 and not rec.complete and "interrupted" in reason
+    assert np.isfinite(rec.pos_ned_m[:20]).all()
+    assert "emergency stop: landed and disarmed" in statuses
+    assert drone.stats()["modes"][-1]["armed"] is False
