@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 import pytest
-from test_fly_adaptive_e2e import SHORT, adaptive_ci_profile
+from test_fly_adaptive_virtual import SHORT, adaptive_ci_profile
 from test_fly_e2e import finish, gcs, wait_for_line
 
 from gcs.app.fly_view import mock_session_seed
