@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from gcs.app.source_worker import WorkerDied, WorkerSource
+from gcs.app.source_worker import WORKER_NICE, WorkerDied, WorkerSource
 from gcs.errors import TrajectoryError
 
 
@@ -28,7 +28,9 @@ class Source:
     def setpoints_for(self, j: int) -> np.ndarray:
         if j < 0:
             raise TrajectoryError(f"setpoints-{j:03d}.csv: no such trial; not flown")
-        return np.full((self.n, 3), float(os.getpid()))
+        sp = np.zeros((self.n, 3))
+        sp[:, 0], sp[:, 1] = os.getpid(), os.nice(0)
+        return sp
 
     def hover_point_for(self, j: int) -> np.ndarray:
         if self.events is not None:  # hold the call until the test says go
@@ -78,6 +80,7 @@ def test_calls_run_in_one_worker_process_and_callbacks_come_back_in_order() -> N
         assert sp.shape == (4, 3)
         pid = int(sp[0, 0])
         assert pid != os.getpid() and alive(pid)
+        assert sp[0, 1] == min(os.nice(0) + WORKER_NICE, 19)  # the flight process comes first
         assert source.record(0, None) is None
         assert seen == [("row", [0]), ("l", "learned from 0")]  # before record returned
         assert source.record(1, None) is None and source.record(2, None) == "enough after 2"

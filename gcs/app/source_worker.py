@@ -17,17 +17,21 @@ function that queues ``(kind, payload)`` for that). The calls run one at a time,
 they were made (one worker), so a session record asked for after an interrupt is written after
 the trial file the worker was writing then.
 
-The worker ignores SIGINT and SIGTERM: a Ctrl-C (sent to the whole process group by a
-terminal) must not kill it in the middle of writing a run file without the campaign knowing;
-the flight process's interrupt guard (:func:`gcs.flight.interrupts.run_guarded`) stays in
-charge and stops the vehicle, then :meth:`WorkerSource.close` lets the worker finish what it
-was asked and shuts it down, on every exit path (a ``with`` block). A worker that dies raises
+The worker runs :data:`WORKER_NICE` steps nicer than the flight process, so that on a busy
+machine its seconds of numerics do not take the CPU from the streams either (the hover between
+trials grows instead). The worker ignores SIGINT and SIGTERM: a Ctrl-C (sent to the whole
+process group by a terminal) must not kill it in the middle of writing a run file without the
+campaign knowing; the flight process's interrupt guard
+(:func:`gcs.flight.interrupts.run_guarded`) stays in charge and stops the vehicle, then
+:meth:`WorkerSource.close` lets the worker finish what it was asked and shuts it down, on every
+exit path (a ``with`` block). A worker that dies raises
 :class:`WorkerDied` (a bug, not bad input) at the next call.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
 import threading
 from collections.abc import Callable
@@ -40,7 +44,7 @@ import numpy as np
 from gcs.flight.campaign import FlightSession
 from gcs.flight.trial import TrialRecording
 
-__all__ = ["WorkerSource", "WorkerDied", "Notify"]
+__all__ = ["WorkerSource", "WorkerDied", "Notify", "WORKER_NICE"]
 
 Notify = Callable[[str, Any], None]
 """``notify(kind, payload)``: queue a callback for the flight process (worker side)."""
@@ -99,7 +103,7 @@ class WorkerSource:
         pool = ProcessPoolExecutor(
             max_workers=1,
             mp_context=multiprocessing.get_context("spawn"),
-            initializer=_ignore_interrupts,
+            initializer=_init_worker,
         )
         with _interrupts_ignored():  # the child starts with them ignored, before its imports
             self._built = pool.submit(_build, self.build, self.args)
@@ -215,11 +219,18 @@ class _interrupts_ignored:
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
+WORKER_NICE = 10
+"""How much nicer than the flight process the worker runs (where the OS has ``os.nice``): on a
+busy machine a learning step can wait, the next mocap frame cannot."""
 
-def _ignore_interrupts() -> None:
-    """Worker initializer: the flight process's interrupt guard is in charge, not a signal."""
+
+def _init_worker() -> None:
+    """Worker initializer: interrupts ignored (the flight process's guard is in charge), and a
+    lower CPU priority than the flight process."""
     for sig in _SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
+    if hasattr(os, "nice"):
+        os.nice(WORKER_NICE)
 
 
 def _build(build: Callable[..., Any], args: tuple[Any, ...]) -> None:
