@@ -19,21 +19,34 @@ and between them (from the end of a trial to the start of the next, after the la
 landing); the hover time between two trials (end of one trial to the start of the next); whether
 the flight completed (a stale mocap stream aborts it).
 
+``--ticker SECONDS`` measures the same without flying, in one process: a 120 Hz asyncio ticker
+(what the flight loop needs: a tick per mocap frame) beside a stand-in for a learning step
+(SECONDS of CPU time in pure-Python loops, as the model refresh is), called with
+``asyncio.to_thread`` on a trial source in this process (``thread``) or in its worker
+(``process``); per mode the share of the ticker's periods in which a tick came (one that
+catches up late fills no earlier period) and the largest gap between two ticks,
+alternated ``--pairs`` times.
+
 Usage: ``flock /tmp/gcs-live.lock .venv/bin/python benchmarks/between_trials.py [--pairs 1]
-[--load 1] [--iter 4]``. Prints one line per flight, then the medians per mode.
+[--load 1] [--iter 4] [--ticker 5]``. Prints one line per flight (or ticker run), then the
+medians per mode.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import contextlib
 import json
 import os
 import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,6 +55,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from flight_gaps import Gaps, gaps  # noqa: E402
 from synthetic import CI_FLIGHT  # noqa: E402
 
+from gcs.app.source_worker import WorkerSource  # noqa: E402
 from gcs.io.rundir import RunDir  # noqa: E402
 from gcs.mock.mocap.arena import ArenaOptions  # noqa: E402
 from gcs.mock.process import MockProcess  # noqa: E402
@@ -73,6 +87,48 @@ def child(mode: str, argv: list[str]) -> None:
     if mode == "thread":
         gcs.app.fly.WorkerSource = InProcess  # type: ignore[misc,assignment]
     app(argv, prog_name="gcs")
+
+
+class Busy:
+    """A trial source whose ``record`` is ``seconds`` of pure-Python loops (a learning step)."""
+
+    def __init__(self, seconds: float, notify=None) -> None:  # noqa: ANN001
+        self.seconds = seconds
+
+    def hover_point_for(self, j: int) -> np.ndarray:
+        return np.zeros(3)
+
+    def record(self, j: int, recording: object) -> None:
+        end = time.thread_time() + self.seconds
+        total = 0
+        while time.thread_time() < end:
+            for i in range(1000):
+                total += i * i
+
+
+def busy(seconds: float, *, notify) -> Busy:  # noqa: ANN001
+    return Busy(seconds)
+
+
+def ticker(mode: str, seconds: float, rate_hz: float = 120.0) -> tuple[float, float]:
+    """Share of the ticks that came and the largest gap [s], while the source is busy."""
+
+    async def run(source: object) -> tuple[float, float]:
+        ticks: list[float] = []
+        job = asyncio.ensure_future(asyncio.to_thread(source.record, 0, None))
+        period, t0 = 1.0 / rate_hz, time.monotonic()
+        while not job.done():
+            ticks.append(time.monotonic())
+            await asyncio.sleep(max(0.0, t0 + len(ticks) * period - time.monotonic()))
+        await job
+        slots = np.floor((np.asarray(ticks) - t0) * rate_hz)  # a catch-up tick fills no gap
+        return len(np.unique(slots)) / (slots[-1] + 1), float(max(np.diff(ticks)))
+
+    if mode == "thread":
+        return asyncio.run(run(Busy(seconds)))
+    with WorkerSource(busy, (seconds,)) as source:
+        source.hover_point_for(0)  # started and built before the measurement
+        return asyncio.run(run(source))
 
 
 def adaptive_profile(tmp: Path) -> Path:
@@ -129,15 +185,37 @@ def main() -> None:
     parser.add_argument("--load", type=int, default=1, help="CPU-burning processes beside")
     parser.add_argument("--iter", type=int, default=4)
     parser.add_argument("--child", choices=("thread", "process"))
+    parser.add_argument("--keep", help="keep the runs and the mock's records in a folder here")
+    parser.add_argument("--ticker", type=float, help="learning seconds beside a 120 Hz ticker")
     args, rest = parser.parse_known_args()
     if args.child is not None:
         child(args.child, [a for a in rest if a != "--"])
+        return
+    if args.ticker is not None:
+        print(f"load: {os.getloadavg()[0]:.1f} (1-min average) + {args.load} CPU burner(s)")
+        hogs = burners(args.load, TIMEOUT_S)
+        try:
+            for _ in range(args.pairs):
+                for mode in ("thread", "process"):
+                    share, gap = ticker(mode, args.ticker)
+                    print(
+                        f"ticker {mode:8}: {100 * share:5.1f} % of the 120 Hz periods ticked, "
+                        f"largest gap {ms(gap)} ms, beside {args.ticker:g} s of learning "
+                        f"[load {os.getloadavg()[0]:.1f}]",
+                        flush=True,
+                    )
+        finally:
+            for hog in hogs:
+                hog.kill()
+                hog.wait()
         return
     print(f"load: {os.getloadavg()[0]:.1f} (1-min average) + {args.load} CPU burner(s)")
     print("mode     seed  vision max gap [ms]  setpoint max gap [ms]  hover between trials [s]")
     print("                trial    between     trial    between")
     results: dict[str, list[Gaps]] = {"thread": [], "process": []}
-    with tempfile.TemporaryDirectory() as tmp:
+    keep = contextlib.nullcontext(tempfile.mkdtemp(dir=args.keep)) if args.keep else None
+    with keep or tempfile.TemporaryDirectory() as tmp:
+        print(f"runs in {tmp}" if args.keep else "", end="\n" if args.keep else "")
         for pair in range(args.pairs):
             for mode in ("thread", "process"):
                 seed = 10 + pair
