@@ -17,9 +17,10 @@ function that queues ``(kind, payload)`` for that). The calls run one at a time,
 they were made (one worker), so a session record asked for after an interrupt is written after
 the trial file the worker was writing then.
 
-The worker runs :data:`WORKER_NICE` steps nicer than the flight process, so that on a busy
-machine its seconds of numerics do not take the CPU from the streams either (the hover between
-trials grows instead). The worker ignores SIGINT and SIGTERM: a Ctrl-C (sent to the whole
+Once it has built the source (its imports: seconds of CPU, before take-off), the worker runs
+:data:`WORKER_NICE` steps nicer than the flight process, so that on a busy machine its seconds
+of numerics do not take the CPU from the streams either (the hover between trials grows
+instead). The worker ignores SIGINT and SIGTERM: a Ctrl-C (sent to the whole
 process group by a terminal) must not kill it in the middle of writing a run file without the
 campaign knowing; the flight process's interrupt guard
 (:func:`gcs.flight.interrupts.run_guarded`) stays in charge and stops the vehicle, then
@@ -225,12 +226,9 @@ busy machine a learning step can wait, the next mocap frame cannot."""
 
 
 def _init_worker() -> None:
-    """Worker initializer: interrupts ignored (the flight process's guard is in charge), and a
-    lower CPU priority than the flight process."""
+    """Worker initializer: interrupts ignored (the flight process's guard is in charge)."""
     for sig in _SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
-    if hasattr(os, "nice"):
-        os.nice(WORKER_NICE)
 
 
 def _build(build: Callable[..., Any], args: tuple[Any, ...]) -> None:
@@ -241,6 +239,8 @@ def _build(build: Callable[..., Any], args: tuple[Any, ...]) -> None:
         _notes.append((kind, payload))
 
     _source = build(*args, notify=notify)
+    if hasattr(os, "nice"):  # built (its imports done) at full speed, before the flight
+        os.nice(WORKER_NICE)
 
 
 def _run(name: str, args: tuple[Any, ...]) -> tuple[Any, list[tuple[str, Any]]]:
