@@ -27,9 +27,13 @@ the flight completed (a stale mocap stream aborts it).
 catches up late fills no earlier period) and the largest gap between two ticks,
 alternated ``--pairs`` times.
 
+``--no-stream-watch`` flies without gcs's own mocap stream watch (only a reader that ended
+stops the flight): on a loaded machine it can end a flight on the reader's delays before any
+learning, while the vehicle still receives the vision (tests/test_source_worker_e2e.py).
+
 Usage: ``flock /tmp/gcs-live.lock .venv/bin/python benchmarks/between_trials.py [--pairs 1]
-[--load 1] [--iter 4] [--ticker 5]``. Prints one line per flight (or ticker run), then the
-medians per mode.
+[--load 1] [--iter 4] [--ticker 5] [--no-stream-watch] [--keep DIR]``. Prints one line per
+flight (or ticker run), then the medians per mode.
 """
 
 from __future__ import annotations
@@ -79,13 +83,23 @@ class InProcess:
         pass
 
 
-def child(mode: str, argv: list[str]) -> None:
+def child(mode: str, watch: bool, argv: list[str]) -> None:
     """Run ``gcs`` with the trial source in a thread (``thread``) or its worker (``process``)."""
     import gcs.app.fly
+    import gcs.app.session
     from gcs.cli import app
+    from gcs.flight.mocap.link import MocapLink
+
+    class VehicleJudged(MocapLink):
+        """Without gcs's stream watch: only a reader that ended stops the flight."""
+
+        def problem(self) -> str | None:
+            return self.client.problem()
 
     if mode == "thread":
         gcs.app.fly.WorkerSource = InProcess  # type: ignore[misc,assignment]
+    if not watch:
+        gcs.app.session.MocapLink = VehicleJudged  # type: ignore[misc]
     app(argv, prog_name="gcs")
 
 
@@ -146,8 +160,11 @@ def burners(count: int, seconds: float) -> list[subprocess.Popen]:
     return [subprocess.Popen([sys.executable, "-c", code]) for _ in range(count)]
 
 
-def flight(tmp: Path, mode: str, seed: int, iterations: int, load: int) -> tuple[Gaps | None, str]:
+def flight(
+    tmp: Path, mode: str, seed: int, iterations: int, load: int, watch: bool
+) -> tuple[Gaps | None, str]:
     run_path = tmp / f"run-{mode}-{seed}"
+    watch = [] if watch else ["--no-stream-watch"]
     stats = tmp / f"stats-{mode}-{seed}.json"
     with MockProcess(config_path=INDOOR, seed=seed, stats_path=stats, arena=ArenaOptions()) as m:
         argv = [
@@ -158,7 +175,7 @@ def flight(tmp: Path, mode: str, seed: int, iterations: int, load: int) -> tuple
         hogs = burners(load, TIMEOUT_S)
         try:
             proc = subprocess.run(
-                [sys.executable, __file__, "--child", mode, "--", *argv],
+                [sys.executable, __file__, "--child", mode, *watch, "--", *argv],
                 cwd=ROOT, capture_output=True, text=True, timeout=TIMEOUT_S,
                 env={**os.environ, "COLUMNS": "200"},
             )  # fmt: skip
@@ -185,11 +202,16 @@ def main() -> None:
     parser.add_argument("--load", type=int, default=1, help="CPU-burning processes beside")
     parser.add_argument("--iter", type=int, default=4)
     parser.add_argument("--child", choices=("thread", "process"))
+    parser.add_argument(
+        "--no-stream-watch",
+        action="store_true",
+        help="fly without gcs's mocap stream watch (the vehicle's reception is measured)",
+    )
     parser.add_argument("--keep", help="keep the runs and the mock's records in a folder here")
     parser.add_argument("--ticker", type=float, help="learning seconds beside a 120 Hz ticker")
     args, rest = parser.parse_known_args()
     if args.child is not None:
-        child(args.child, [a for a in rest if a != "--"])
+        child(args.child, not args.no_stream_watch, [a for a in rest if a != "--"])
         return
     if args.ticker is not None:
         print(f"load: {os.getloadavg()[0]:.1f} (1-min average) + {args.load} CPU burner(s)")
@@ -219,7 +241,8 @@ def main() -> None:
         for pair in range(args.pairs):
             for mode in ("thread", "process"):
                 seed = 10 + pair
-                g, outcome = flight(Path(tmp), mode, seed, args.iter, args.load)
+                watch = not args.no_stream_watch
+                g, outcome = flight(Path(tmp), mode, seed, args.iter, args.load, watch)
                 if g is None:
                     print(f"{mode:8} {seed:4}  (no complete trial) {outcome}")
                     continue
