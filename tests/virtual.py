@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def run_gcs(*args: object) -> tuple[int, str]:
+    # wide enough that a temporary path (pytest-xdist adds popen-gwN/ to it) is never wrapped
     """``gcs ARGS`` in this process on virtual time: (exit code, output)."""
     runner = CliRunner()
     cwd = os.getcwd()
@@ -36,7 +37,7 @@ def run_gcs(*args: object) -> tuple[int, str]:
     try:
         with virtual_time():
             result = runner.invoke(
-                app, [str(a) for a in args], env={"COLUMNS": "120"}, catch_exceptions=False
+                app, [str(a) for a in args], env={"COLUMNS": "400"}, catch_exceptions=False
             )
     finally:
         os.chdir(cwd)
