@@ -29,13 +29,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def run_gcs(*args: object) -> tuple[int, str]:
-    # wide enough that a temporary path (pytest-xdist adds popen-gwN/ to it) is never wrapped
     """``gcs ARGS`` in this process on virtual time: (exit code, output)."""
     runner = CliRunner()
     cwd = os.getcwd()
     os.chdir(ROOT)  # as the subprocesses of the e2e tests: logs/ of the checkout
     try:
         with virtual_time():
+            # wide enough that no temporary path (pytest-xdist's are longer) is wrapped
             result = runner.invoke(
                 app, [str(a) for a in args], env={"COLUMNS": "400"}, catch_exceptions=False
             )
