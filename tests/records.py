@@ -47,6 +47,14 @@ def assert_scaled(
     assert_close(now, b, 0.0, rtol * np.broadcast_to(scale, b.shape), what)
 
 
+def printed_unit(x: object, digits: int) -> np.ndarray:
+    """One unit of the last of ``digits`` significant digits of each value (0 for 0)."""
+    a = np.abs(np.asarray(x, dtype=float))
+    with np.errstate(divide="ignore"):
+        exponent = np.floor(np.log10(np.where(a > 0, a, 1.0)))
+    return np.where(a > 0, 10.0 ** (exponent - (digits - 1)), 0.0)
+
+
 def split_numbers(text: str) -> tuple[list[str], list[float]]:
     """The text around its numbers, and the numbers."""
     return NUMBER.split(text), [float(m) for m in NUMBER.findall(text)]
