@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: setup test test-px4 fly fly-mocap lint bench clean
+.PHONY: setup test test-fast test-other-cpu test-px4 fly fly-mocap lint bench clean
 
 setup: $(VENV)/.installed
 
@@ -14,10 +14,31 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@
 
-# the real-firmware tests (tests/px4/) are part of it whenever a PX4 SITL build is there
-# (PX4_SITL_DIR, or the default in tests/px4/sitl.py; docs/px4-sitl.md)
+PYTEST := $(BIN)/python -m pytest -n 2 --dist worksteal -q
+FAST   := -m "not e2e and not px4"
+# the tests that compare numbers with records made on another machine (tests/records.py), and
+# those that hold a result bit for bit on one machine (workers vs one process, resumed vs not,
+# kept learner vs new): run again as on another CPU by test-other-cpu
+NUMERIC_TESTS := tests/test_trajectory_regression.py tests/test_learning_regression.py \
+	tests/test_montecarlo_dask.py tests/test_mock_estimator.py tests/test_mock_vertical.py \
+	tests/test_learner.py tests/test_update.py tests/test_estimators.py tests/test_model.py \
+	tests/test_study.py tests/test_montecarlo.py
+
+# the whole suite, then the numerical tests as on another CPU. The real-firmware tests
+# (tests/px4/) are part of it whenever a PX4 SITL build is there (PX4_SITL_DIR, or the default
+# in tests/px4/sitl.py; docs/px4-sitl.md)
 test: setup
-	$(BIN)/python -m pytest -n 2 --dist worksteal -q
+	$(PYTEST)
+	$(MAKE) --no-print-directory test-other-cpu
+
+# everything but the real-time flights and the real firmware
+test-fast: setup
+	$(PYTEST) $(FAST)
+
+# numpy without its SIMD dispatch and OpenBLAS on another kernel (tools/other_cpu.py checks that
+# both changed, or fails): the records of tests/data must hold there too (docs/results.md)
+test-other-cpu: setup
+	$(BIN)/python tools/other_cpu.py $(PYTEST) $(FAST) $(NUMERIC_TESTS)
 
 # the real-firmware tests alone
 test-px4: setup

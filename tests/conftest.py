@@ -1,17 +1,7 @@
-import os
 import sys
 from pathlib import Path
 
-# The bit-for-bit records of tests/data depend on OpenBLAS's kernel, which numpy and scipy pick
-# for the CPU when they load: an AVX-512 machine and an AVX2 one differ in the last bits of a
-# few results (the adaptive learning, the Monte Carlo tables). The tests pin the AVX2 kernel,
-# which every x86-64 machine of the last decade has, before anything loads numpy: in this
-# process and in the pytest-xdist and Dask workers it starts (they inherit the environment).
-# Set OPENBLAS_CORETYPE yourself to override it (the records then may not match).
-if "avx2" in (Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""):
-    os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
-
-import pytest  # noqa: E402
+import pytest
 
 # tests/synthetic.py is a helper module shared by several test files
 sys.path.insert(0, str(Path(__file__).parent))

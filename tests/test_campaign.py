@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 
 from gcs.errors import VehicleError
-from gcs.flight.campaign import FlightSession, _measure_hover, _settle, check_battery
+from gcs.flight.campaign import (
+    FlightSession,
+    check_battery,
+    measure_hover,
+    settle_at_start,
+)
 from gcs.flight.clock import VehicleClock
 from gcs.flight.link import TelemetrySample
 from gcs.flight.preflight import navigation_source
@@ -81,7 +86,7 @@ TARGET = np.array([0.0, 0.0, -1.5])
 
 def measure(position):  # type: ignore[no-untyped-def]
     vehicle, events = HoverVehicle(position), []
-    record = asyncio.run(_measure_hover(vehicle, TARGET, 0, SETTINGS, events.append))
+    record = asyncio.run(measure_hover(vehicle, TARGET, 0, SETTINGS, events.append))
     return vehicle, record, [e.text for e in events]
 
 
@@ -109,7 +114,7 @@ def test_a_settle_timeout_on_a_vehicle_that_hovers_widens_the_tolerances() -> No
     vehicle = HoverVehicle(lambda t: TARGET + [0.6, 0.0, 0.0])  # further off than measured
     session = FlightSession("udpin://", 0, navigation_source({}), (), 0.2, 0.1)
     events: list = []
-    record = asyncio.run(_settle(vehicle, TARGET, 3, session, SETTINGS, events.append))
+    record = asyncio.run(settle_at_start(vehicle, TARGET, 3, session, SETTINGS, events.append))
     assert record is not None and record.why == "settle timeout" and record.verdict.ok
     assert record.stats.duration_s == pytest.approx(SETTINGS.hover_measure_s, abs=0.05)
     (event,) = events
@@ -121,7 +126,7 @@ def test_a_settle_timeout_on_a_vehicle_that_oscillates_is_refused() -> None:
     vehicle = HoverVehicle(lambda t: TARGET + [0.3 * np.sin(2 * np.pi * t), 0.0, 0.0])
     session = FlightSession("udpin://", 0, navigation_source({}), (), 0.2, 0.1)
     with pytest.raises(VehicleError) as info:
-        asyncio.run(_settle(vehicle, TARGET, 3, session, SETTINGS, lambda e: None))
+        asyncio.run(settle_at_start(vehicle, TARGET, 3, session, SETTINGS, lambda e: None))
     message = str(info.value)
     assert message.startswith("the vehicle did not settle at the start point NED (0.00, 0.00, ")
     assert "of trial 3 within 20 s: it oscillates 0.29 m every 1.0 s (98 %" in message

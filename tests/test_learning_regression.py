@@ -1,11 +1,14 @@
-"""The learning of ``gcs learn`` / ``gcs fly`` and ``gcs montecarlo``'s tables, bit for bit as
-recorded (``tests/data/``) with the code before the public learning API existed.
+"""The learning of ``gcs learn`` / ``gcs fly`` and ``gcs montecarlo``'s tables as recorded
+(``tests/data/``) with the code before the public learning API existed, within the tolerances of
+docs/results.md's "Reproducibility" (the records were made on another CPU).
 
 The learning record holds every learned file of the cases of :mod:`learning_cases`: synthetic
 runs (smoother, K-ILC, mocap measurement, learning with history: floor, noise from the data,
 refresh, safeguard, robustness "auto", Table I noise) and two PX4 SITL runs learnt again trial by
 trial. The Monte Carlo records are ``gcs montecarlo --json`` of the default study, of a smaller
-one and of a small ``--adaptive`` comparison.
+one and of a small ``--adaptive`` comparison. Learned numbers agree within ``RTOL_LEARNED`` (of
+the largest value of their file), study rows within ``RTOL_STUDY``; the text of a learned JSON or
+YAML file around its numbers, and every decision in it, exactly.
 """
 
 from __future__ import annotations
@@ -16,19 +19,46 @@ from pathlib import Path
 import numpy as np
 import pytest
 from learning_cases import RECORD, learned
+from records import NUMBER, assert_close, assert_json_close, assert_text_close, printed_unit
 from typer.testing import CliRunner
 
 from gcs.cli import app
 
 DATA = Path(__file__).resolve().parent / "data"
+RTOL_LEARNED = 1e-9  # of a learned file's largest magnitude, after several trials
+RTOL_STUDY = 1e-12  # of a study's largest error norm
+CSV_DIGITS = 9  # significant digits of a run directory's CSV files (gcs.io.records)
 
 
-def test_learned_files_are_those_recorded_bit_for_bit() -> None:
-    recorded = np.load(RECORD)
+def test_learned_files_are_those_recorded() -> None:
     now = learned()
-    assert sorted(now) == sorted(recorded.files)
-    differ = [k for k in recorded.files if not np.array_equal(now[k], recorded[k])]
-    assert differ == []
+    with np.load(RECORD) as recorded:
+        assert sorted(now) == sorted(recorded.files)
+        for key in recorded.files:
+            b = recorded[key]
+            if b.dtype.kind == "U":  # a learned JSON or YAML file: full precision (repr)
+                text = str(b)
+                scale = max((abs(float(v)) for v in NUMBER.findall(text)), default=0.0)
+                assert_text_close(str(now[key]), text, 0.0, RTOL_LEARNED * scale, key)
+            else:  # setpoints (N, 3) or estimates (2, N, axes) read back from a CSV file
+                axis = 1 if key.split("/")[1].startswith("estimate") else 0
+                scale = np.max(np.abs(b), axis=axis, keepdims=True)
+                atol = RTOL_LEARNED * scale + printed_unit(b, CSV_DIGITS)
+                assert_close(now[key], b, 0.0, atol, key)
+
+
+def floats(doc: object) -> list[float]:
+    """Every float of a JSON document."""
+    if isinstance(doc, dict):
+        return [x for v in doc.values() for x in floats(v)]
+    if isinstance(doc, list):
+        return [x for v in doc for x in floats(v)]
+    return [doc] if isinstance(doc, float) else []
+
+
+def study_atol(doc: object) -> float:
+    """``RTOL_STUDY`` of the largest number of a study's JSON (error norms in metres)."""
+    return RTOL_STUDY * max(abs(x) for x in floats(doc))
 
 
 def _without_seconds(doc: object) -> object:
@@ -52,4 +82,5 @@ def test_montecarlo_tables_are_those_recorded(tmp_path: Path, record: str, args:
     result = CliRunner().invoke(app, ["montecarlo", *args, "--json", str(out)])
     assert result.exit_code == 0, result.output
     now = _without_seconds(json.loads(out.read_text()))
-    assert now == _without_seconds(json.loads((DATA / record).read_text()))
+    recorded = _without_seconds(json.loads((DATA / record).read_text()))
+    assert_json_close(now, recorded, 0.0, study_atol(recorded), record)

@@ -299,7 +299,7 @@ def test_estimator_faults_count_from_the_first_arming() -> None:
 
 
 def test_estimator_faults_are_passed_on_the_command_line() -> None:
-    from gcs.mock.cli import _estimator_faults
+    from gcs.mock.cli import estimator_faults
 
     faults = Faults(
         drift_start_s=1.0, drift_duration_s=None, drift_ned_m_s=(0.0, 3.0, 0.0),
@@ -312,7 +312,7 @@ def test_estimator_faults_are_passed_on_the_command_line() -> None:
         "--jump", "9.0:0.0:6.0:0.0",
     ]  # fmt: skip
     options = dict(zip(args[::2], args[1::2], strict=True))
-    back = _estimator_faults(options["--drift"], options["--divergence"], options["--jump"])
+    back = estimator_faults(options["--drift"], options["--divergence"], options["--jump"])
     assert Faults(**back) == faults
     with pytest.raises(ValueError, match="jump needs both"):
         Faults(jump_at_s=1.0)

@@ -9,7 +9,7 @@ import pytest
 
 from gcs.core import montecarlo as mc
 from gcs.core.learning import AdaptiveSettings
-from gcs.core.model import simulate
+from gcs.core.model import from_transfer_function, simulate
 from gcs.core.noise_model import drift_scale, estimate_disturbance
 from gcs.core.refresh import refresh_model
 from gcs.core.robustness import robustness_weight
@@ -28,21 +28,35 @@ def _estimate(model, uh: np.ndarray, yh: np.ndarray, adaptive: AdaptiveSettings)
     return estimate_disturbance(z, drift_scale(change), True, adaptive.drift_offset)
 
 
+def paper_signals(settings: mc.StudySettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sec. IV's reference yd(1..N), disturbance d(1..N) and first input U_0(0..N-1)."""
+    n, dt = settings.n_samples, settings.t_ilc_s
+    t_out, t_in = dt * np.arange(1, n + 1), dt * np.arange(n)
+    amp, omega = settings.reference_amp_m, settings.reference_omega_rad_s
+    d = settings.disturbance_amp_m * np.sin(settings.disturbance_omega_rad_s * t_out) ** 2
+    u0 = amp * np.sin(omega * t_in) if settings.u0 == "reference" else np.zeros(n)
+    return amp * np.sin(omega * t_out), d, u0
+
+
+def mass_spring_damper(wn: float, zeta: float, dt_s: float):
+    return from_transfer_function([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], 0.0, dt_s)
+
+
 def reference_norms(settings: mc.StudySettings, level: float, adaptive: AdaptiveSettings):
     """Run by run with the one-axis functions the learning step uses (no batching)."""
     n, dt = settings.n_samples, settings.t_ilc_s
     plants = mc.sample_plants(settings, level)
     p, r = plants.wn_rad_s.size, settings.repeats
-    yd, d, u0 = mc._signals(settings)
+    yd, d, u0 = paper_signals(settings)
     rng = mc._rng(settings, level, 1)
     noise = [rng.standard_normal((p * r, n)) for _ in range(settings.iterations + 1)]
     weights = UpdateWeights(settings.we, settings.wdu, settings.wu)
     refresh = replace(adaptive.refresh_settings(), delay_search=0)
     norms = np.zeros((p, r, settings.iterations + 1))
     for i in range(p):
-        plant = mc._msd_model(float(plants.wn_rad_s[i]), float(plants.zeta[i]), dt)
+        plant = mass_spring_damper(float(plants.wn_rad_s[i]), float(plants.zeta[i]), dt)
         for k in range(r):
-            model = mc._msd_model(settings.wn_rad_s, settings.zeta, dt)
+            model = mass_spring_damper(settings.wn_rad_s, settings.zeta, dt)
             u, us, ys = u0.copy(), [], []
             for j in range(settings.iterations + 1):
                 y_true = simulate(plant, u) + d

@@ -515,7 +515,7 @@ class _Campaign:
         session = self.session
         assert session is not None
         if number == 1:
-            record = await _measure_hover(vehicle, hover, j, settings, emit)
+            record = await measure_hover(vehicle, hover, j, settings, emit)
             v = record.verdict
             session = _with_hover(session, record, v.tolerance_m, v.speed_tolerance_m_s)
             await self.record_session(session, "recording the hover")
@@ -524,7 +524,7 @@ class _Campaign:
                     f"the vehicle does not hold the start point {format_ned(hover)}: it "
                     f"{record.verdict.reason}"
                 )
-        record = await _settle(vehicle, hover, j, session, settings, emit)
+        record = await settle_at_start(vehicle, hover, j, session, settings, emit)
         if record is not None:
             tolerances = widened(
                 session.tolerance_m, session.speed_tolerance_m_s, record.stats, settings
@@ -650,7 +650,7 @@ def run_campaign(
     run_guarded(fly_campaign(plan, source, on_event, mocap=mocap), on_repeat)
 
 
-async def _measure_hover(
+async def measure_hover(
     vehicle: Vehicle,
     target: np.ndarray,
     j: int,
@@ -682,7 +682,7 @@ async def _measure_hover(
     return record
 
 
-async def _settle(
+async def settle_at_start(
     vehicle: Vehicle,
     target: np.ndarray,
     j: int,

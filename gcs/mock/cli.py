@@ -447,7 +447,7 @@ def mock_command(
             gust_vn_m_s=parse_gust(gust)[2] if gust else 0.0,
             gust_ve_m_s=parse_gust(gust)[3] if gust else 0.0,
             clock_rate=clock_rate,
-            **_estimator_faults(drift, divergence, jump),
+            **estimator_faults(drift, divergence, jump),
         )
     except ValueError as exc:
         if isinstance(exc, GcsError):
@@ -503,7 +503,7 @@ def arena_options(
         raise typer.BadParameter(str(exc)) from None
 
 
-def _estimator_faults(
+def estimator_faults(
     drift: str | None, divergence: str | None, jump: str | None
 ) -> dict[str, object]:
     """The ``Faults`` fields of the estimator options (a duration of ``inf``: for good)."""
