@@ -285,7 +285,7 @@ class _Structure:
         # stage-wise order of the KKT system: u(t), x(d+1+t) and the dynamics' row t together
         self.stage_eq = np.repeat(np.arange(T), nx)
         self.stage_z = np.concatenate([np.arange(m), self.stage_eq])
-        self._kkt: tuple[sp.csc_matrix, _BandedLU] | None = None
+        self._kkt: tuple[_Triplets, _BandedLU] | None = None
 
     def problem(
         self, d_hat_m: np.ndarray, u_prev_m: np.ndarray, robust: RobustnessWeight | None
@@ -350,6 +350,15 @@ def _full_input(prob: _Problem, u_free: np.ndarray) -> np.ndarray:
     return np.concatenate([u_free, np.full(prob.r - 1, prob.y_final)])
 
 
+#: A sparse square matrix as triplets ``(rows, cols, values)`` and its size: ``K[i, j] = v``.
+_Triplets = tuple[np.ndarray, np.ndarray, np.ndarray, int]
+
+
+def _matvec(K: _Triplets, x: np.ndarray) -> np.ndarray:
+    i, j, v, n = K
+    return np.bincount(i, weights=v * x[j], minlength=n)
+
+
 class _BandedLU:
     """LU factorisation (LAPACK ``dgbtrf``, partial pivoting) of a square sparse matrix that is
     banded once its unknowns are put in stage-wise order: the KKT matrix of the update, whose
@@ -359,25 +368,22 @@ class _BandedLU:
 
     Parameters
     ----------
-    K : sparse matrix, shape (n, n)
-        The matrix (any sparse format).
+    K : tuple (rows, cols, values, n)
+        The matrix as triplets (no position twice).
     stage : ndarray, shape (n,)
         Stage (time step) of each unknown and row; the unknowns are ordered by it (stably).
     """
 
-    def __init__(self, K: sp.spmatrix, stage: np.ndarray) -> None:
-        n = K.shape[0]
+    def __init__(self, K: _Triplets, stage: np.ndarray) -> None:
+        rows, cols, values, n = K
         order = np.argsort(stage, kind="stable")
         inv = np.empty(n, dtype=np.intp)
         inv[order] = np.arange(n)
-        csr = sp.csr_matrix(K)
-        csr.sum_duplicates()
-        i = inv[np.repeat(np.arange(n), np.diff(csr.indptr))]
-        j = inv[csr.indices]
+        i, j = inv[rows], inv[cols]
         kl = int(np.max(i - j, initial=0))
         ku = int(np.max(j - i, initial=0))
         ab = np.zeros((2 * kl + ku + 1, n))
-        ab[kl + ku + i - j, j] = csr.data
+        ab[kl + ku + i - j, j] = values
         lu, piv, info = scipy.linalg.lapack.dgbtrf(ab, kl, ku, overwrite_ab=True)
         if info != 0:
             raise RuntimeError(f"banded LU of the input update's KKT matrix failed (info {info})")
@@ -393,23 +399,48 @@ class _BandedLU:
         return out
 
 
+def _kkt_triplets(P: sp.spmatrix, G: sp.spmatrix) -> _Triplets:
+    """``[P G'; G 0]`` as triplets."""
+    Pc, Gc = sp.coo_matrix(P), sp.coo_matrix(G)
+    Pc.sum_duplicates()
+    Gc.sum_duplicates()
+    nz = P.shape[0]
+    rows = np.concatenate([Pc.row, nz + Gc.row, Gc.col]).astype(np.intp)
+    cols = np.concatenate([Pc.col, Gc.col, nz + Gc.row]).astype(np.intp)
+    return rows, cols, np.concatenate([Pc.data, Gc.data, Gc.data]), nz + G.shape[0]
+
+
+def _with_rows(K: _Triplets, A: sp.csr_matrix, act: np.ndarray) -> _Triplets:
+    """``[K A_act'; A_act 0]``: the rows ``act`` of ``A`` (CSR, columns of the first block of
+    ``K``) added as equality constraints, their multipliers after ``K``'s unknowns."""
+    rows, cols, values, n = K
+    idx = np.flatnonzero(act)
+    count = np.diff(A.indptr)[idx]
+    new = n + np.repeat(np.arange(idx.size), count)
+    start = np.repeat(A.indptr[idx] - np.cumsum(count) + count, count)
+    pos = start + np.arange(int(count.sum()))
+    c, v = A.indices[pos].astype(np.intp), A.data[pos]
+    return (np.concatenate([rows, new, c]), np.concatenate([cols, c, new]),
+            np.concatenate([values, v, v]), n + idx.size)  # fmt: skip
+
+
 def _kkt_factor(
     P: sp.csc_matrix, G: sp.csc_matrix, stage_z: np.ndarray, stage_rows: np.ndarray
-) -> tuple[sp.csc_matrix, _BandedLU]:
+) -> tuple[_Triplets, _BandedLU]:
     """The KKT matrix ``[P G'; G 0]`` and its banded LU in stage-wise order (``stage_z`` of
     the unknowns, ``stage_rows`` of the rows of ``G``)."""
-    K = sp.bmat([[P, G.T], [G, None]], format="csr")
+    K = _kkt_triplets(P, G)
     return K, _BandedLU(K, np.concatenate([stage_z, stage_rows]))
 
 
 def _kkt_solve_factored(
-    K: sp.csr_matrix, lu: _BandedLU, q: np.ndarray, h: np.ndarray, nz: int
+    K: _Triplets, lu: _BandedLU, q: np.ndarray, h: np.ndarray, nz: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``K [z; nu] = [-q; h]`` with a factorised ``K``, plus one step of iterative
     refinement. Returns ``(z, nu)``; ``P z + q + G' nu = 0``."""
     rhs = np.concatenate([-q, h])
     sol = lu.solve(rhs)
-    sol += lu.solve(rhs - K @ sol)
+    sol += lu.solve(rhs - _matvec(K, sol))
     if not np.all(np.isfinite(sol)):
         raise RuntimeError("KKT factorisation of the input update produced NaN")
     return sol[:nz], sol[nz:]
@@ -661,20 +692,25 @@ def _active_set(
     n_eq, A_in, b_in = prob.G.shape[0], rows.A, rows.b
     scale = max(1.0, float(np.max(np.abs(b_in), initial=0.0)))
     act = _independent(rows, np.flatnonzero(act), prob.m)
+    base = _kkt_triplets(prob.P, prob.G)  # the KKT system without the limits, built once
+    A_csr = sp.csr_matrix(A_in)
+    A_csr.sum_duplicates()
     for _ in range(rounds):
-        G = sp.vstack([prob.G, A_in[act]], format="csc")
+        K = _with_rows(base, A_csr, act)
         h = np.concatenate([prob.h, b_in[act]])
-        stages = np.concatenate([prob.stage_eq, rows.stage[act]])
+        stage = np.concatenate([prob.stage_z, prob.stage_eq, rows.stage[act]])
         try:
-            z, nu = _kkt_solve(prob.P, prob.q, G, h, prob.stage_z, stages)
+            z, nu = _kkt_solve_factored(K, _BandedLU(K, stage), prob.q, h, prob.P.shape[0])
         except (RuntimeError, ValueError):
             return None
-        if np.max(np.abs(G @ z - h), initial=0.0) > 1e-10 * scale:
+        excess = A_csr @ z - b_in
+        residual = max(np.max(np.abs(prob.G @ z - prob.h), initial=0.0),
+                       np.max(np.abs(excess[act]), initial=0.0))  # fmt: skip
+        if residual > 1e-10 * scale:
             return None
         lam = np.zeros(act.size)
         lam[act] = nu[n_eq:]
         lam_tol = 1e-9 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
-        excess = A_in @ z - b_in
         violated = excess > 1e-10 * scale
         negative = lam < -lam_tol
         if not violated.any() and not negative.any():
