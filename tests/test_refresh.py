@@ -8,7 +8,6 @@ import scipy.signal
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs.core import refresh
 from gcs.core.model import from_transfer_function, markov_parameters, simulate
 from gcs.core.refresh import (
     RefreshSettings,
@@ -166,41 +165,35 @@ def _stable_tf(seed: int, order: int) -> tuple[np.ndarray, np.ndarray]:
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 10_000), order=st.integers(1, 4), delay=st.integers(0, 6))
 def test_simulate_tf_equals_dlsim_row_by_row_and_batched(seed, order, delay) -> None:
-    """One row (compiled difference equation) and many rows (impulse responses and an FFT)
-    both reproduce scipy.signal.dlsim of the same transfer function."""
+    """Row by row (compiled difference equation) and all rows at once (impulse responses and
+    an FFT) both reproduce scipy.signal.dlsim of the same transfer function."""
     b, a = _stable_tf(seed, order)
     u = excitation(seed, 2, 120)
     expected = np.array([_dlsim(b, a, delay, row) for row in u])
     scale = np.max(np.abs(expected))
-    one = simulate_tf(b[None], a[None], delay, u[None])[0]
-    np.testing.assert_allclose(one, expected, rtol=0, atol=1e-12 * scale)
-    many = refresh._LFILTER_ROWS + 3
-    batched = simulate_tf(np.tile(b, (many, 1)), np.tile(a, (many, 1)), delay,
-                          np.broadcast_to(u, (many, *u.shape)))  # fmt: skip
-    np.testing.assert_allclose(batched[-1], expected, rtol=0, atol=1e-12 * scale)
+    bb, ab = np.stack([b, 0.5 * b]), np.stack([a, a])
+    for rowwise in (True, False):
+        got = simulate_tf(bb, ab, delay, np.stack([u, u]), rowwise)
+        np.testing.assert_allclose(got[0], expected, rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(got[1], 0.5 * expected, rtol=0, atol=1e-12 * scale)
 
 
 @pytest.mark.parametrize("delay", [0, 5])
 def test_fit_recovers_a_known_iir_that_dlsim_confirms(delay) -> None:
     """Noiseless pairs of a known IIR: the fit started from another model reproduces the data
-    (checked by dlsim of the fitted coefficients) and recovers the coefficients; one row
-    alone and the same row in a batch above the row-by-row limit fit the same model."""
+    (checked by dlsim of the fitted coefficients) and recovers the coefficients, whether the
+    candidates are simulated row by row or all rows at once."""
     b_true, a_true = np.array([0.02, 0.015]), np.array([-1.6, 0.68])
     du = excitation(11, 3)
     dy = np.array([_dlsim(b_true, a_true, delay, row) for row in du])
     b0, a0 = np.array([[0.03, 0.01]]), np.array([[-1.5, 0.6]])
     mask = np.ones(du.shape, dtype=bool)
-    b, a, loss = fit_output_error(b0, a0, delay, du[None], dy[None], mask[None])
+    b, a, loss = fit_output_error(b0, a0, delay, du[None], dy[None], mask[None], rowwise=True)
     fitted = np.array([_dlsim(b[0], a[0], delay, row) for row in du])
     np.testing.assert_allclose(fitted, dy, rtol=0, atol=1e-8 * np.max(np.abs(dy)))
     np.testing.assert_allclose(np.concatenate([b[0], a[0]]), np.concatenate([b_true, a_true]),
                                rtol=1e-6, atol=1e-9)  # fmt: skip
     assert loss[0] <= 1e-12 * np.sum(dy * dy)
-    many = refresh._LFILTER_ROWS + 1
-    bb, ab, _ = fit_output_error(
-        np.tile(b0, (many, 1)), np.tile(a0, (many, 1)), delay,
-        np.broadcast_to(du, (many, *du.shape)), np.broadcast_to(dy, (many, *dy.shape)),
-        np.broadcast_to(mask, (many, *mask.shape)),
-    )  # fmt: skip
-    np.testing.assert_allclose(bb[-1], b[0], rtol=1e-7)
-    np.testing.assert_allclose(ab[-1], a[0], rtol=1e-7)
+    bb, ab, _ = fit_output_error(b0, a0, delay, du[None], dy[None], mask[None], rowwise=False)
+    np.testing.assert_allclose(bb[0], b[0], rtol=1e-7)
+    np.testing.assert_allclose(ab[0], a[0], rtol=1e-7)
