@@ -630,8 +630,11 @@ class _Rows:
 def _rows_of(A_in: sp.csc_matrix, b_in: np.ndarray, m: int) -> _Rows:
     csr = sp.csr_matrix(A_in)
     count = np.diff(csr.indptr)
-    if csr.shape[0] == 0 or np.any((count < 1) | (count > 2)):
+    if np.any((count < 1) | (count > 2)):
         raise ValueError("each limit row must involve one or two inputs")
+    if csr.shape[0] == 0:
+        empty = np.zeros(0, dtype=np.intp)
+        return _Rows(sp.csc_matrix(A_in), np.zeros(0), empty, np.zeros((0, 2), dtype=np.intp))
     first = csr.indices[csr.indptr[:-1]]
     last = csr.indices[csr.indptr[1:] - 1]
     stage = np.maximum(first, last).astype(np.intp)
