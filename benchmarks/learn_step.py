@@ -39,23 +39,42 @@ mock's vertical loop as ``gcs identify --axis z`` sees it), a reference that cli
 back, and a repeating vertical disturbance; constrained: the arena's floor and ceiling and
 the same step and deviation limits.
 
-Usage: ``python benchmarks/learn_step.py`` (all cases, each in a subprocess) or
+Lines with ``"baseline": "code"`` time :meth:`gcs.Learner.step` over every step of a run
+against the code of another commit (default ``e238ce6``, before the model refresh, the
+smoother, the simulation and the update's KKT solves were moved to compiled code), each in
+subprocesses of the same run, alternated (``--rounds`` of each): ``antx`` and
+``antx-adaptive`` (``Learner.from_profile``) on the default eight (``trajectories/eight.yaml``,
+N = 280, north and east), the vehicle the plants of ``tests/synthetic.py`` (10-20 % off the
+profile's model: the adaptive learner refreshes it) plus a repeatable drift and 2 mm of white
+noise, 8 trials; and the learner of the ``two_axes`` lines at N = 6000, free and constrained.
+``median_s`` / ``max_s``: median and largest step (the refresh included), medians over the
+rounds; ``ratio`` = baseline / this code; ``max_dev_m``: the largest difference of the learned
+setpoints between the two codes over every step. The other commit is checked out with
+``git worktree add --detach`` under the system's temporary directory (kept for later runs).
+
+Usage: ``python benchmarks/learn_step.py`` (all cases, each in a subprocess),
+``python benchmarks/learn_step.py --code [COMMIT] [--rounds R]`` (the lines against another
+commit only), or
 ``python benchmarks/learn_step.py --case N constrained|free [sparse|dense|learner|axes2|axes3]``.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+REPO = Path(__file__).resolve().parents[1]
+# the code under test: this tree, or another commit's checkout (the "code" lines)
+sys.path.insert(0, os.environ.get("GCS_BENCH_CODE", str(REPO)))
 
 from gcs import Box, Learner, LearnerSettings  # noqa: E402
 from gcs.core.model import (  # noqa: E402
@@ -293,6 +312,133 @@ def run_axes(n: int, constrained: bool, n_axes: int) -> dict:
     }
 
 
+CODE_CASES = ("antx", "antx-adaptive", "6000-free", "6000-constrained")
+BASELINE_COMMIT = "e238ce6"
+
+
+def _eight_run(profile: str, out: Path) -> dict:
+    """Every step of an 8-trial run of ``Learner.from_profile(profile)`` on the default eight."""
+    from gcs.core.trajectory_sources import sample_reference
+    from gcs.io.config import load_trajectory
+
+    dt = 0.05
+    ref = sample_reference(load_trajectory(REPO / "trajectories" / "eight.yaml").shape, dt)
+    ref = ref.pos_ned_m[:, :2]
+    plants = (
+        from_transfer_function([0.09, 2.2], [1, 1.6, 2.3], 0.25, dt),
+        from_transfer_function([0.07, 1.8], [1, 1.9, 1.85], 0.25, dt),
+    )
+    learner = Learner.from_profile(profile, ref)
+    n = ref.shape[0] - 1
+    t = np.arange(1, n + 1) * dt
+    rng = np.random.default_rng(0)
+    u = ref[:-1].copy()
+    times, sequence = [], []
+    for _ in range(TRIALS):
+        y = np.column_stack(
+            [ref[0, a] + simulate(plants[a], u[:, a] - ref[0, a]) + 0.05 * np.sin(0.7 * t) ** 2
+             for a in range(2)]
+        ) + rng.normal(0.0, 0.002, (n, 2))  # fmt: skip
+        t0 = time.perf_counter()
+        u = learner.step(u, y)
+        times.append(time.perf_counter() - t0)
+        sequence.append(u)
+    np.save(out, np.array(sequence))
+    return {"n": n, "steps_s": times, "methods": list(learner.last.methods)}
+
+
+def _n6000_run(constrained: bool, out: Path) -> dict:
+    """Every step of the ``two_axes`` learner (two axes, N = 6000)."""
+    n = AXES_N
+    model, yd, d_true, _, limits = scenario(n, constrained)
+    ref = np.vstack([[0.0, 0.0], np.column_stack(yd)])
+    arena, step, dev = None, None, None
+    if constrained:
+        arena = Box((limits[0].u_min_m, limits[0].u_max_m), (limits[1].u_min_m, limits[1].u_max_m),
+                    (-3.0, 0.0))  # fmt: skip
+        step, dev = limits[0].max_step_m, limits[0].max_deviation_m
+    settings = LearnerSettings(
+        models=(model, model), arena=arena, max_step_m=step, max_deviation_m=dev
+    )
+    rng = np.random.default_rng(1)
+    learner = Learner(settings, ref)
+    u = ref[:-1].copy()
+    times, sequence = [], []
+    for _ in range(TRIALS):
+        y = np.column_stack([simulate(model, u[:, a]) + d_true[a] for a in range(2)])
+        y += 0.005 * rng.standard_normal(y.shape)
+        t0 = time.perf_counter()
+        u = learner.step(u, y)
+        times.append(time.perf_counter() - t0)
+        sequence.append(u)
+    np.save(out, np.array(sequence))
+    return {"n": n, "steps_s": times, "methods": list(learner.last.methods)}
+
+
+def run_code_case(case: str, out: Path) -> dict:
+    """One case of the ``code`` lines with the code on ``sys.path``; setpoints to ``out``."""
+    if case.startswith("6000-"):
+        line = _n6000_run(case.endswith("constrained"), out)
+    else:
+        line = _eight_run(case, out)
+    import gcs
+
+    line |= {"case": case, "peak_mb": round(_rss_mb(), 1), "code": str(Path(gcs.__file__).parent)}
+    return line
+
+
+def _baseline_tree(commit: str) -> Path:
+    """A detached checkout of ``commit`` (made once, kept under the temporary directory)."""
+    sha = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", commit], check=True,
+                         capture_output=True, text=True).stdout.strip()  # fmt: skip
+    path = Path(tempfile.gettempdir()) / f"gcs-bench-{sha}"
+    if not (path / "gcs").is_dir():
+        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(path), sha],
+                       check=True, capture_output=True)  # fmt: skip
+    return path
+
+
+def run_code(commit: str, rounds: int) -> None:
+    """The ``code`` lines: this tree against ``commit``, alternated, ``rounds`` of each."""
+    base = _baseline_tree(commit)
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in CODE_CASES:
+            runs: dict[str, list[dict]] = {"new": [], "baseline": []}
+            for k in range(rounds):
+                for who, code in (("baseline", base), ("new", REPO)):
+                    out = Path(tmp) / f"{case}-{who}-{k}.npy"
+                    env = dict(os.environ, GCS_BENCH_CODE=str(code))
+                    cmd = [sys.executable, __file__, "--code-case", case, str(out)]
+                    text = subprocess.run(cmd, check=True, capture_output=True, text=True,
+                                          env=env).stdout  # fmt: skip
+                    line = json.loads(text.strip().splitlines()[-1])
+                    if Path(line["code"]).parent != code.resolve():
+                        raise RuntimeError(f"{who} ran {line['code']}, not {code}")
+                    runs[who].append(line | {"out": out})
+            summary = {}
+            for who, lines in runs.items():
+                summary[who] = {
+                    "median_s": statistics.median(statistics.median(x["steps_s"]) for x in lines),
+                    "max_s": statistics.median(max(x["steps_s"]) for x in lines),
+                    "peak_mb": max(x["peak_mb"] for x in lines),
+                }
+            dev = max(float(np.max(np.abs(np.load(a["out"]) - np.load(b["out"]))))
+                      for a, b in zip(runs["new"], runs["baseline"], strict=True))  # fmt: skip
+            new, old = summary["new"], summary["baseline"]
+            print(json.dumps({
+                "baseline": "code", "commit": commit, "case": case, "n": runs["new"][0]["n"],
+                "axes": 2, "rounds": rounds, "trials": TRIALS,
+                "median_s": round(new["median_s"], 5), "max_s": round(new["max_s"], 5),
+                "baseline_median_s": round(old["median_s"], 5),
+                "baseline_max_s": round(old["max_s"], 5),
+                "ratio": round(old["median_s"] / new["median_s"], 2),
+                "max_ratio": round(old["max_s"] / new["max_s"], 2),
+                "peak_mb": new["peak_mb"], "baseline_peak_mb": old["peak_mb"],
+                "max_dev_m": dev, "methods": runs["new"][-1]["methods"],
+                "baseline_methods": runs["baseline"][-1]["methods"], "memory": "ru_maxrss",
+            }), flush=True)  # fmt: skip
+
+
 def _subprocess(n: int, constrained: bool, kind: str) -> dict:
     cmd = [sys.executable, __file__, "--case", str(n), "constrained" if constrained else "free"]
     out = subprocess.run(cmd + [kind], check=True, capture_output=True, text=True).stdout
@@ -300,6 +446,18 @@ def _subprocess(n: int, constrained: bool, kind: str) -> dict:
 
 
 def main() -> None:
+    if len(sys.argv) == 4 and sys.argv[1] == "--code-case":
+        print(json.dumps(run_code_case(sys.argv[2], Path(sys.argv[3]))))
+        return
+    if len(sys.argv) >= 2 and sys.argv[1] == "--code":
+        args = sys.argv[2:]
+        rounds = 3
+        if "--rounds" in args:
+            i = args.index("--rounds")
+            rounds = int(args[i + 1])
+            del args[i : i + 2]
+        run_code(args[0] if args else BASELINE_COMMIT, rounds)
+        return
     if len(sys.argv) >= 4 and sys.argv[1] == "--case":
         n, constrained = int(sys.argv[2]), sys.argv[3] == "constrained"
         kind = sys.argv[4] if len(sys.argv) > 4 else "sparse"
@@ -329,6 +487,7 @@ def main() -> None:
         three["peak_ratio"] = round(three["peak_mb"] / two["peak_mb"], 2)
         print(json.dumps(two), flush=True)
         print(json.dumps(three), flush=True)
+    run_code(BASELINE_COMMIT, 3)
 
 
 if __name__ == "__main__":

@@ -216,7 +216,7 @@ def test_identity_plant_box_is_a_clip():
 # ---------------------------------------------------------------------------------------------
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=15, deadline=None)
 @given(
     seed=st.integers(0, 10_000),
     delay=st.integers(0, 5),
@@ -460,3 +460,90 @@ def test_dense_reference_helper_is_correct():
     grad = w.we * F[r - 1 :, :m].T @ (F @ u - yd + d_hat)[r - 1 :] + w.wdu * (u - u_prev)[:m]
     assert np.max(np.abs(grad)) < 1e-10
     assert scipy.linalg.norm(u) > 0
+
+
+# ---------------------------------------------------------------------------------------------
+# structure: the banded KKT solve and the active set kept across trials
+# ---------------------------------------------------------------------------------------------
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    delay=st.integers(0, 4),
+    order=st.integers(1, 4),
+    n=st.integers(8, 40),
+    extra=st.integers(0, 12),
+)
+def test_banded_kkt_solve_equals_dense_solve(seed, delay, order, n, extra):
+    """The stage-ordered banded LU solves the KKT system as a dense LU of it does, with or
+    without extra equality rows on the inputs (an active set of limits)."""
+    model = random_stable_model(seed, delay, order)
+    yd, d_hat, u_prev = signals(seed, n)
+    s = upd._Structure(model, yd, UpdateWeights(1.0, 0.01, 0.001))
+    prob = s.problem(d_hat, u_prev, None)
+    rng = np.random.default_rng(seed)
+    A_in, b_in = upd._inequalities(
+        prob, SetpointLimits(-1.0, 1.0, 0.3, 0.5) if extra else SetpointLimits()
+    )
+    rows = upd._rows_of(A_in, b_in, prob.m) if extra else None
+    act = np.zeros(A_in.shape[0], dtype=bool)
+    if extra:
+        act[rng.choice(A_in.shape[0], size=min(extra, A_in.shape[0]), replace=False)] = True
+        act = upd._independent(rows, np.flatnonzero(act), prob.m)
+    G = sp.vstack([prob.G, A_in[act]], format="csc")
+    h = np.concatenate([prob.h, b_in[act]])
+    stages = np.concatenate([prob.stage_eq, rows.stage[act] if extra else np.zeros(0, int)])
+    z, nu = upd._kkt_solve(prob.P, prob.q, G, h, prob.stage_z, stages)
+    K = sp.bmat([[prob.P, G.T], [G, None]]).toarray()
+    dense = np.linalg.solve(K, np.concatenate([-prob.q, h]))
+    scale = np.max(np.abs(dense))
+    np.testing.assert_allclose(np.concatenate([z, nu]), dense, rtol=0, atol=1e-9 * scale)
+    # the active rows kept are independent: the dense KKT matrix has full rank
+    assert np.linalg.matrix_rank(K) == K.shape[0]
+
+
+@settings(max_examples=20, deadline=None)
+@given(n_rows=st.integers(1, 40), seed=st.integers(0, 10_000))
+def test_independent_rows_form_a_full_rank_set(n_rows, seed):
+    """Any order of limit rows: the subset kept has full row rank, and adding any row left out
+    would lose it (it is a maximal independent subset)."""
+    n = 30
+    yd, d_hat, u_prev = signals(seed, n)
+    model = random_stable_model(seed, 1, 2)
+    prob = upd._Structure(model, yd, UpdateWeights()).problem(d_hat, u_prev, None)
+    A_in, b_in = upd._inequalities(prob, SetpointLimits(-1.0, 1.0, 0.3, 0.5))
+    rows = upd._rows_of(A_in, b_in, prob.m)
+    order = np.random.default_rng(seed).permutation(A_in.shape[0])[:n_rows]
+    keep = upd._independent(rows, order, prob.m)
+    dense = A_in.toarray()[:, : prob.m]
+    rank = np.linalg.matrix_rank(dense[keep])
+    assert rank == keep.sum()
+    for i in order[~keep[order]]:
+        assert np.linalg.matrix_rank(np.vstack([dense[keep], dense[i]])) == rank
+
+
+@settings(max_examples=5, deadline=None)
+@given(seed=st.integers(0, 10_000), trials=st.integers(2, 4))
+def test_kept_update_equals_a_fresh_clarabel_solve(seed, trials):
+    """Trials whose disturbance estimates drift: the kept update (active set of the last trial,
+    refined) and a fresh Clarabel solve give the same setpoints within Clarabel's tolerance."""
+    model = from_transfer_function([0.08, 1.94], [1, 1.752, 2.01], 0.25, 0.05)
+    n = 120
+    yd, d_hat, u_prev = signals(seed, n)
+    limits = SetpointLimits(-1.9, 2.0, 0.15, 0.5)
+    w = UpdateWeights()
+    kept = upd.InputUpdate(model, yd, w, limits)
+    rng = np.random.default_rng(seed)
+    methods = []
+    for _ in range(trials):
+        a = kept.solve(d_hat, u_prev)
+        b = next_input(model, yd, d_hat, u_prev, w, limits)
+        methods.append(a.method)
+        assert b.method == "clarabel"
+        np.testing.assert_allclose(a.u_m, b.u_m, rtol=0, atol=1e-7)
+        assert a.objective == pytest.approx(b.objective, rel=1e-9)
+        assert_within_limits(a.u_m, yd, relative_degree(model), limits, tol=1e-9)
+        u_prev = a.u_m
+        d_hat = d_hat + 0.05 * np.cumsum(rng.normal(size=n)) / np.sqrt(n)
+    assert methods[0] == "clarabel" and "active-set" in methods[1:]

@@ -20,9 +20,11 @@ Junkins, Optimal Estimation of Dynamic Systems, ch. 5) that Algorithm 1 speciali
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 
 __all__ = [
     "SmootherSettings",
@@ -114,8 +116,10 @@ class SmootherResult:
     d_filt: np.ndarray
 
 
+@functools.lru_cache(maxsize=32)
 def _forward_variances(n: int, q: float, r: float, p0: float) -> tuple[np.ndarray, np.ndarray]:
-    """Prior and posterior variances of the forward filter; they do not depend on data."""
+    """Prior and posterior variances of the forward filter; they do not depend on data
+    (kept for the next trial: read-only arrays)."""
     p_prior = np.empty(n)
     p_post = np.empty(n)
     p = p0
@@ -123,6 +127,8 @@ def _forward_variances(n: int, q: float, r: float, p0: float) -> tuple[np.ndarra
         p_prior[k] = p
         p_post[k] = p * r / (p + r)
         p = p_post[k] + q
+    p_prior.flags.writeable = False
+    p_post.flags.writeable = False
     return p_prior, p_post
 
 
@@ -150,22 +156,33 @@ def rts_smoother(z: np.ndarray, settings: SmootherSettings) -> SmootherResult:
     q, r = settings.q, settings.r
     p_prior, p_post = _forward_variances(n, q, r, settings.p0)
     gain = p_prior / (p_prior + r)
-    d_filt = np.empty_like(z)
-    d = np.full(z.shape[1:], settings.d0, dtype=float)
-    for k in range(n):
-        d = d + gain[k] * (z[k] - d)
-        d_filt[k] = d
-    d_hat = np.empty_like(z)
-    p_s = np.empty(n)
-    d_hat[-1] = d_filt[-1]
-    p_s[-1] = p_post[-1]
-    for k in range(n - 2, -1, -1):
-        p_next = p_post[k] + q
-        # P+(k) / P-(k+1); with p0 = q = 0 the estimate is exact and the gain is moot
-        g = p_post[k] / p_next if p_next > 0 else 0.0
-        # random walk: the prediction of d(k+1) is the filtered d(k)
-        d_hat[k] = d_filt[k] + g * (d_hat[k + 1] - d_filt[k])
-        p_s[k] = p_post[k] + g * g * (p_s[k + 1] - p_next)
+    # The two passes are first-order recursions with time-varying coefficients of modulus at
+    # most 1: bidiagonal systems, solved by LAPACK (no pivoting happens: |coefficient| <= 1).
+    # forward: d(k) - (1 - K(k)) d(k-1) = K(k) z(k), d(-1) = d0
+    zz = z if z.ndim == 2 else z[:, None]
+    rhs = gain[:, None] * zz
+    rhs[0] += (1.0 - gain[0]) * settings.d0
+    ab = np.ones((2, n))
+    ab[1, :-1] = -(1.0 - gain[1:])
+    d_filt = scipy.linalg.solve_banded((1, 0), ab, rhs, check_finite=False)
+    # backward: d_hat(k) - g(k) d_hat(k+1) = (1 - g(k)) d_filt(k), d_hat(N-1) = d_filt(N-1)
+    p_next = p_post[:-1] + q
+    # P+(k) / P-(k+1); with p0 = q = 0 the estimate is exact and the gain is moot
+    g = np.divide(p_post[:-1], p_next, out=np.zeros(n - 1), where=p_next > 0)
+    # random walk: the prediction of d(k+1) is the filtered d(k)
+    ab = np.ones((2, n))
+    ab[0, 1:] = -g
+    rhs = np.empty_like(d_filt)
+    rhs[:-1] = (1.0 - g)[:, None] * d_filt[:-1]
+    rhs[-1] = d_filt[-1]
+    # smoothed variance: p_s(k) - g^2 p_s(k+1) = P+(k) - g^2 P-(k+1), p_s(N-1) = P+(N-1)
+    ab_p = ab.copy()
+    ab_p[0, 1:] = -g * g
+    rhs_p = np.append(p_post[:-1] - g * g * p_next, p_post[-1])
+    d_hat = scipy.linalg.solve_banded((0, 1), ab, rhs, check_finite=False)
+    p_s = scipy.linalg.solve_banded((0, 1), ab_p, rhs_p, check_finite=False)
+    if z.ndim == 1:
+        d_filt, d_hat = d_filt[:, 0], d_hat[:, 0]
     return SmootherResult(d_hat=d_hat, p=p_s, d_filt=d_filt)
 
 

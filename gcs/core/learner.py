@@ -92,7 +92,8 @@ class LearnerStep:
 
     @property
     def methods(self) -> tuple[str, ...]:
-        """Solver path per axis: ``"direct"`` or ``"clarabel"`` (``"-"`` for a repeat)."""
+        """Solver path per axis: ``"direct"``, ``"clarabel"`` or ``"active-set"`` (``"-"`` for a
+        repeat)."""
         return tuple(u.method for u in self.updates) or ("-",) * len(self.models)
 
     @property

@@ -280,6 +280,10 @@ def lifted_matrix(model: DiscreteModel, n: int) -> np.ndarray:
 def simulate(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
     """Simulate from rest: outputs ``y(1) .. y(N)`` for inputs ``u(0) .. u(N-1)``.
 
+    The difference equation of the model's transfer function (``scipy.signal.lfilter``,
+    compiled): ``z^-d (b_1 + .. + b_n z^-(n-1)) / (1 + a_1 z^-1 + .. + a_n z^-n)`` with ``a``
+    the characteristic polynomial of ``A`` and ``b`` from the first ``n`` Markov parameters.
+
     Parameters
     ----------
     model : DiscreteModel
@@ -291,18 +295,16 @@ def simulate(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
     ndarray, same shape as ``u``
     """
     u = np.asarray(u, dtype=float)
-    squeeze = u.ndim == 1
-    U = u[:, None] if squeeze else u
-    N = U.shape[0]
-    d = model.delay_samples
-    x = np.zeros((model.order, U.shape[1]))
-    Y = np.zeros_like(U)
-    for k in range(N):
+    n = model.order
+    a = np.real(np.poly(model.A))  # det(zI - A) = z^n + a_1 z^(n-1) + ..
+    f = np.empty(n)  # Markov parameters without the delay
+    x = model.B[:, 0].copy()
+    for k in range(n):
+        f[k] = model.C[0] @ x
         x = model.A @ x
-        if k >= d:
-            x += model.B @ U[k - d][None, :]
-        Y[k] = model.C @ x
-    return Y[:, 0] if squeeze else Y
+    b = np.array([f[k] + a[1 : k + 1] @ f[k - 1 :: -1][:k] for k in range(n)])
+    num = np.concatenate([np.zeros(model.delay_samples), b])
+    return scipy.signal.lfilter(num, a, u, axis=0)
 
 
 def relative_degree(model: DiscreteModel, rtol: float = 1e-9) -> int:

@@ -34,6 +34,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 import scipy.fft
+import scipy.signal
 
 from gcs.core.model import DiscreteModel
 
@@ -246,12 +247,29 @@ def _causal_conv(h: np.ndarray, u: np.ndarray) -> np.ndarray:
     return scipy.fft.irfft(spec, nfft, axis=-1)[..., :n]
 
 
-def _iir(b: np.ndarray, a: np.ndarray, u: np.ndarray, delay: int) -> np.ndarray:
-    """``y = z^-delay (b_1 + b_2 z^-1 + ..) / A u`` along the last axis; b, a (M, n)."""
-    return _causal_conv(_impulse(b, a, delay, u.shape[-1]), u)
+def _iir(b: np.ndarray, a: np.ndarray, u: np.ndarray, delay: int, rowwise: bool) -> np.ndarray:
+    """``y = z^-delay (b_1 + b_2 z^-1 + ..) / A u`` along the last axis; b, a (M, n).
+
+    ``rowwise``: the difference equation row by row in compiled code (``scipy.signal.lfilter``,
+    tens of microseconds a row: the learner's refresh, one row); otherwise every row at once
+    through its impulse response (a Python loop over the samples shared by the rows, then an
+    FFT: the Monte Carlo study's many rows). The two agree to rounding.
+    """
+    m = b.shape[0]
+    if not rowwise:
+        return _causal_conv(_impulse(b, a, delay, u.shape[-1]), u)
+    out = np.empty(np.broadcast_shapes(u.shape, (m,) + (1,) * (u.ndim - 1)))
+    lead = np.zeros(delay)
+    for i in range(m):
+        num = np.concatenate([lead, b[i]])
+        den = np.concatenate([[1.0], a[i]])
+        out[i] = scipy.signal.lfilter(num, den, u[i] if u.shape[0] == m else u[0], axis=-1)
+    return out
 
 
-def simulate_tf(b: np.ndarray, a: np.ndarray, delay: int, u: np.ndarray) -> np.ndarray:
+def simulate_tf(
+    b: np.ndarray, a: np.ndarray, delay: int, u: np.ndarray, rowwise: bool = False
+) -> np.ndarray:
     """Outputs ``y(1..N)`` from rest for inputs ``u(0..N-1)``, one model per batch row.
 
     Parameters
@@ -262,12 +280,17 @@ def simulate_tf(b: np.ndarray, a: np.ndarray, delay: int, u: np.ndarray) -> np.n
         Input delay [samples].
     u : ndarray, shape (M, ..., N)
         Inputs.
+    rowwise : bool
+        Simulate row by row with ``scipy.signal.lfilter`` (compiled; fast for a few rows);
+        default: every row at once through its impulse response and an FFT (fast for many
+        rows). The two agree to rounding.
 
     Returns
     -------
     ndarray, shape like ``u``
     """
-    return _iir(np.asarray(b, float), np.asarray(a, float), np.asarray(u, float), int(delay))
+    b, a, u = np.asarray(b, float), np.asarray(a, float), np.asarray(u, float)
+    return _iir(b, a, u, int(delay), rowwise)
 
 
 def _shift(x: np.ndarray, s: int) -> np.ndarray:
@@ -279,20 +302,20 @@ def _shift(x: np.ndarray, s: int) -> np.ndarray:
 
 
 def _jacobian(
-    b: np.ndarray, a: np.ndarray, delay: int, du: np.ndarray
+    b: np.ndarray, a: np.ndarray, delay: int, du: np.ndarray, rowwise: bool
 ) -> tuple[np.ndarray, np.ndarray]:
     """Simulation and its Jacobian with respect to ``(b, a)``: (M, P, N), (M, P, N, 2n)."""
     n = b.shape[-1]
     e1 = np.zeros_like(b)
     e1[:, 0] = 1.0
-    w = _iir(e1, a, du, 0)  # w = du / A: numerator 1, no delay
+    w = _iir(e1, a, du, 0, rowwise)  # w = du / A: numerator 1, no delay
     y_hat = np.zeros_like(du)
     cols = []
     for i in range(n):
         col = _shift(w, delay + i)  # d y / d b_(i+1)
         cols.append(col)
         y_hat = y_hat + b[:, i].reshape((-1,) + (1,) * (du.ndim - 1)) * col
-    s = _iir(e1, a, y_hat, 0)
+    s = _iir(e1, a, y_hat, 0, rowwise)
     for i in range(n):
         cols.append(-_shift(s, i + 1))  # d y / d a_(i+1)
     return y_hat, np.stack(cols, axis=-1)
@@ -319,6 +342,7 @@ def fit_output_error(
     dy: np.ndarray,
     mask: np.ndarray,
     max_iter: int = 40,
+    rowwise: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Levenberg-Marquardt fit of ``dy = z^-d B/A du`` on the samples where ``mask`` is set.
 
@@ -336,6 +360,8 @@ def fit_output_error(
         Samples (and pairs) that enter the loss.
     max_iter : int
         Iterations.
+    rowwise : bool
+        How the candidates are simulated (see :func:`simulate_tf`).
 
     Returns
     -------
@@ -350,7 +376,7 @@ def fit_output_error(
     n = b.shape[-1]
 
     def loss_of(bb: np.ndarray, aa: np.ndarray) -> np.ndarray:
-        res = (simulate_tf(bb, aa, delay, du) - dy) * w
+        res = (simulate_tf(bb, aa, delay, du, rowwise) - dy) * w
         out = _sse(res)
         return np.where(np.isfinite(out), out, np.inf)
 
@@ -362,7 +388,7 @@ def fit_output_error(
         rows = np.flatnonzero(active)
         if rows.size == 0:
             break
-        y_hat, jac = _jacobian(b[rows], a[rows], delay, du[rows])
+        y_hat, jac = _jacobian(b[rows], a[rows], delay, du[rows], rowwise)
         wr = w[rows]
         res = ((y_hat - dy[rows]) * wr).reshape(rows.size, -1)
         jw = (jac * wr[..., None]).reshape(rows.size, -1, 2 * n)
@@ -372,7 +398,7 @@ def fit_output_error(
         lhs = jtj + mu[rows, None, None] * d[:, None, :] * np.eye(2 * n)
         step = -np.linalg.solve(lhs, jtr[..., None])[..., 0]
         bn, an = b[rows] + step[:, :n], a[rows] + step[:, n:]
-        res_new = (simulate_tf(bn, an, delay, du[rows]) - dy[rows]) * wr
+        res_new = (simulate_tf(bn, an, delay, du[rows], rowwise) - dy[rows]) * wr
         new = _sse(res_new)
         new = np.where(np.isfinite(new), new, np.inf)
         better = new < loss[rows]
@@ -469,6 +495,7 @@ def refresh_decision(
     noise_var_m2: np.ndarray,
     settings: RefreshSettings,
     band_gain2: float,
+    rowwise: bool = False,
 ) -> _Batch:
     """Batched refresh: fit, cross-validate and accept or keep, per batch row.
 
@@ -488,6 +515,9 @@ def refresh_decision(
         Thresholds and iterations.
     band_gain2 : float
         Learning band for :func:`model_change` (``W_du / W_e``).
+    rowwise : bool
+        How the candidates are simulated (see :func:`simulate_tf`): row by row for the
+        learner's one row, all rows at once (default) for the Monte Carlo study's many.
 
     Returns
     -------
@@ -498,7 +528,7 @@ def refresh_decision(
     du, dy = np.asarray(du, float), np.asarray(dy, float)
     m_rows, n_pairs, n = du.shape
     r = np.broadcast_to(np.asarray(noise_var_m2, float), (m_rows,))
-    pred = simulate_tf(b, a, delay, du)
+    pred = simulate_tf(b, a, delay, du, rowwise)
     snr_all = np.mean(pred * pred, axis=-1) / np.maximum(2.0 * r[:, None], 1e-300)
     use = snr_all >= settings.min_snr  # (M, P)
     newest = use[:, -1] if n_pairs else np.zeros(m_rows, bool)
@@ -520,7 +550,7 @@ def refresh_decision(
     valid = use[rows][:, :, None]
     dur, dyr, br, ar = du[rows], dy[rows], b[rows], a[rows]
     masks = [valid & (fold == f)[None, None, :] for f in (0, 1)]
-    res0 = (simulate_tf(br, ar, delay, dur) - dyr) * valid
+    res0 = (simulate_tf(br, ar, delay, dur, rowwise) - dyr) * valid
     cv_cur = _sse(res0)
     count = np.maximum(valid.sum(axis=(1, 2)) * n, 1)
     best_cv = np.full(rows.size, np.inf)
@@ -529,15 +559,15 @@ def refresh_decision(
     for d in range(max(0, delay - settings.delay_search), delay + settings.delay_search + 1):
         cv = np.zeros(rows.size)
         for f in (0, 1):
-            bf, af, _ = fit_output_error(br, ar, d, dur, dyr, masks[f], settings.max_iter)
-            held = _sse((simulate_tf(bf, af, d, dur) - dyr) * masks[1 - f])
+            bf, af, _ = fit_output_error(br, ar, d, dur, dyr, masks[f], settings.max_iter, rowwise)
+            held = _sse((simulate_tf(bf, af, d, dur, rowwise) - dyr) * masks[1 - f])
             ok = _stable(af, settings.stability_margin) & np.isfinite(held)
             cv += np.where(ok, held, np.inf)
         better = cv < best_cv
         if not np.any(better):
             continue
         bd, ad, _ = fit_output_error(
-            br, ar, d, dur, dyr, np.broadcast_to(valid, dur.shape), settings.max_iter
+            br, ar, d, dur, dyr, np.broadcast_to(valid, dur.shape), settings.max_iter, rowwise
         )
         best_cv = np.where(better, cv, best_cv)
         best_d = np.where(better, d, best_d)
@@ -609,7 +639,7 @@ def refresh_model(
                              float("nan"), float("nan"), float("nan"), 0, float("nan"))  # fmt: skip
     out = refresh_decision(
         b[None], a[None], current.delay_samples, current.dt_s, du[None], dy[None],
-        np.array([noise_var_m2]), settings, band_gain2,
+        np.array([noise_var_m2]), settings, band_gain2, rowwise=True,
     )  # fmt: skip
     model = current
     if out.accepted[0]:

@@ -22,9 +22,13 @@ Formulation (linear in ``N``): the decision vector is ``z = [u(0) .. u(N-r), x(d
 with ``d`` the model's input delay; the dynamics ``x(k+1) = A x(k) + B u(k-d)`` are banded
 equality constraints and the cost on the outputs is ``we (C x(k) - yd(k) + d_hat(k))^2``.
 Without limits (or when the unconstrained optimum already satisfies them) the equality
-constrained QP is solved through its sparse KKT system (``scipy.sparse.linalg.splu``, fill
-reducing ordering); with active limits the same QP plus linear inequalities goes to Clarabel
-(``ZeroConeT`` for the dynamics, ``NonnegativeConeT`` for the limits). See ``docs/update.md``.
+constrained QP is solved through its KKT system, which is banded once its unknowns are put in
+stage-wise order (``u(t)``, ``x(d+1+t)`` and the dynamics' multipliers of step ``t`` together):
+LAPACK's banded LU (``dgbtrf`` / ``dgbtrs``), linear in ``N``. With active limits the same QP
+plus linear inequalities goes to Clarabel (``ZeroConeT`` for the dynamics,
+``NonnegativeConeT`` for the limits) the first time; a kept :class:`InputUpdate` then starts
+the next trial from the active set of the last one (an active-set iteration on the banded KKT
+system, Clarabel again when it does not settle in a few rounds). See ``docs/update.md``.
 """
 
 from __future__ import annotations
@@ -37,7 +41,6 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from gcs.core.model import (
     DiscreteModel,
@@ -65,8 +68,10 @@ _FAST_PATH_TOL_M = 1e-9
 _ACTIVE_TOL_M = 1e-7
 #: Feasibility pre-check margin [m] (intervals emptier than this are infeasible).
 _FEAS_TOL_M = 1e-9
-#: Active-set refinement rounds after Clarabel (each one sparse KKT solve).
+#: Active-set refinement rounds after Clarabel (each one banded KKT solve).
 _POLISH_ROUNDS = 5
+#: Rounds of the active-set solve started from the last trial's active set before Clarabel.
+_WARM_ROUNDS = 8
 
 
 @dataclass(frozen=True)
@@ -163,7 +168,10 @@ class UpdateResult:
         the ``dU`` and ``U`` terms over all ``N`` inputs (the pinned tail included); computed
         from ``u_m`` by the same simulation for both methods.
     method : str
-        ``"direct"`` (sparse KKT factorisation) or ``"clarabel"``.
+        ``"direct"`` (no limit active: one banded KKT solve), ``"clarabel"`` (limits active,
+        Clarabel's interior point refined on its active set) or ``"active-set"`` (limits
+        active, the last trial's active set refined by banded KKT solves until the KKT
+        conditions hold; the same minimiser).
     active_constraints : int
         Number of inequality limits holding with equality (slack below 1e-7 m).
     """
@@ -193,6 +201,8 @@ class _Problem:
     G: sp.csc_matrix
     h: np.ndarray
     yd_u: np.ndarray  # reference aligned with the inputs, shape (N,)
+    stage_z: np.ndarray  # stage (time step) of each entry of z, shape (nz,)
+    stage_eq: np.ndarray  # stage of each row of G, shape (rows of G,)
 
 
 def _check_vector(name: str, value: object, n: int | None, exc: type[Exception]) -> np.ndarray:
@@ -272,7 +282,10 @@ class _Structure:
         self.G, self.h = G, h
         self.yd_u = reference_for_inputs(yd, r)
         self.f = markov_parameters(model, N)
-        self._kkt: tuple[sp.csc_matrix, spla.SuperLU] | None = None
+        # stage-wise order of the KKT system: u(t), x(d+1+t) and the dynamics' row t together
+        self.stage_eq = np.repeat(np.arange(T), nx)
+        self.stage_z = np.concatenate([np.arange(m), self.stage_eq])
+        self._kkt: tuple[_Triplets, _BandedLU] | None = None
 
     def problem(
         self, d_hat_m: np.ndarray, u_prev_m: np.ndarray, robust: RobustnessWeight | None
@@ -290,7 +303,8 @@ class _Structure:
             PR, qR = _robust_terms(robust, N, m, self.y_final)
             P, qU = sp.block_diag([self.PU + PR, self.PX], format="csc"), qU + qR
         q = np.concatenate([qU, qX.ravel()])
-        return _Problem(N, self.r, m, self.y_final, P, q, self.G, self.h, self.yd_u)
+        return _Problem(N, self.r, m, self.y_final, P, q, self.G, self.h, self.yd_u,
+                        self.stage_z, self.stage_eq)  # fmt: skip
 
     def solve_direct(self, prob: _Problem) -> np.ndarray:
         """Unconstrained optimum (equality-constrained QP); the free inputs. The KKT matrix
@@ -298,7 +312,7 @@ class _Structure:
         if prob.P is not self.P:
             return _solve_direct(prob)
         if self._kkt is None:
-            self._kkt = _kkt_factor(self.P, self.G)
+            self._kkt = _kkt_factor(self.P, self.G, prob.stage_z, prob.stage_eq)
         z, _ = _kkt_solve_factored(*self._kkt, prob.q, prob.h, self.P.shape[0])
         return z[: prob.m]
 
@@ -336,40 +350,120 @@ def _full_input(prob: _Problem, u_free: np.ndarray) -> np.ndarray:
     return np.concatenate([u_free, np.full(prob.r - 1, prob.y_final)])
 
 
-def _kkt_factor(P: sp.csc_matrix, G: sp.csc_matrix) -> tuple[sp.csc_matrix, spla.SuperLU]:
-    """The KKT matrix ``[P G'; G 0]`` and its sparse LU (COLAMD column ordering, which bounds
-    the fill whatever the row pivoting: the matrix is banded up to a permutation, so the cost
-    is linear in N)."""
-    K = sp.bmat([[P, G.T], [G, None]], format="csc")
-    return K, spla.splu(K, permc_spec="COLAMD")
+#: A sparse square matrix as triplets ``(rows, cols, values)`` and its size: ``K[i, j] = v``.
+_Triplets = tuple[np.ndarray, np.ndarray, np.ndarray, int]
+
+
+def _matvec(K: _Triplets, x: np.ndarray) -> np.ndarray:
+    i, j, v, n = K
+    return np.bincount(i, weights=v * x[j], minlength=n)
+
+
+class _BandedLU:
+    """LU factorisation (LAPACK ``dgbtrf``, partial pivoting) of a square sparse matrix that is
+    banded once its unknowns are put in stage-wise order: the KKT matrix of the update, whose
+    variables and rows of time step ``t`` couple only with those of ``t - 1`` and ``t + 1``
+    (and, with the robustness weight or a rate limit, a few steps further). Cost linear in N:
+    the factorisation ``O(n kl (kl + ku))``, a solve ``O(n (kl + ku))``.
+
+    Parameters
+    ----------
+    K : tuple (rows, cols, values, n)
+        The matrix as triplets (no position twice).
+    stage : ndarray, shape (n,)
+        Stage (time step) of each unknown and row; the unknowns are ordered by it (stably).
+    """
+
+    def __init__(self, K: _Triplets, stage: np.ndarray) -> None:
+        rows, cols, values, n = K
+        order = np.argsort(stage, kind="stable")
+        inv = np.empty(n, dtype=np.intp)
+        inv[order] = np.arange(n)
+        i, j = inv[rows], inv[cols]
+        kl = int(np.max(i - j, initial=0))
+        ku = int(np.max(j - i, initial=0))
+        ab = np.zeros((2 * kl + ku + 1, n))
+        ab[kl + ku + i - j, j] = values
+        lu, piv, info = scipy.linalg.lapack.dgbtrf(ab, kl, ku, overwrite_ab=True)
+        if info != 0:
+            raise RuntimeError(f"banded LU of the input update's KKT matrix failed (info {info})")
+        self.order, self.kl, self.ku, self._lu, self._piv = order, kl, ku, lu, piv
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """``K^-1 rhs`` for ``rhs`` of shape (n,)."""
+        x, info = scipy.linalg.lapack.dgbtrs(self._lu, self.kl, self.ku, rhs[self.order], self._piv)
+        if info != 0:
+            raise RuntimeError(f"banded solve of the input update's KKT system failed ({info})")
+        out = np.empty_like(x)
+        out[self.order] = x
+        return out
+
+
+def _kkt_triplets(P: sp.spmatrix, G: sp.spmatrix) -> _Triplets:
+    """``[P G'; G 0]`` as triplets."""
+    Pc, Gc = sp.coo_matrix(P), sp.coo_matrix(G)
+    Pc.sum_duplicates()
+    Gc.sum_duplicates()
+    nz = P.shape[0]
+    rows = np.concatenate([Pc.row, nz + Gc.row, Gc.col]).astype(np.intp)
+    cols = np.concatenate([Pc.col, Gc.col, nz + Gc.row]).astype(np.intp)
+    return rows, cols, np.concatenate([Pc.data, Gc.data, Gc.data]), nz + G.shape[0]
+
+
+def _with_rows(K: _Triplets, A: sp.csr_matrix, act: np.ndarray) -> _Triplets:
+    """``[K A_act'; A_act 0]``: the rows ``act`` of ``A`` (CSR, columns of the first block of
+    ``K``) added as equality constraints, their multipliers after ``K``'s unknowns."""
+    rows, cols, values, n = K
+    idx = np.flatnonzero(act)
+    count = np.diff(A.indptr)[idx]
+    new = n + np.repeat(np.arange(idx.size), count)
+    start = np.repeat(A.indptr[idx] - np.cumsum(count) + count, count)
+    pos = start + np.arange(int(count.sum()))
+    c, v = A.indices[pos].astype(np.intp), A.data[pos]
+    return (np.concatenate([rows, new, c]), np.concatenate([cols, c, new]),
+            np.concatenate([values, v, v]), n + idx.size)  # fmt: skip
+
+
+def _kkt_factor(
+    P: sp.csc_matrix, G: sp.csc_matrix, stage_z: np.ndarray, stage_rows: np.ndarray
+) -> tuple[_Triplets, _BandedLU]:
+    """The KKT matrix ``[P G'; G 0]`` and its banded LU in stage-wise order (``stage_z`` of
+    the unknowns, ``stage_rows`` of the rows of ``G``)."""
+    K = _kkt_triplets(P, G)
+    return K, _BandedLU(K, np.concatenate([stage_z, stage_rows]))
 
 
 def _kkt_solve_factored(
-    K: sp.csc_matrix, lu: spla.SuperLU, q: np.ndarray, h: np.ndarray, nz: int
+    K: _Triplets, lu: _BandedLU, q: np.ndarray, h: np.ndarray, nz: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``K [z; nu] = [-q; h]`` with a factorised ``K``, plus one step of iterative
     refinement. Returns ``(z, nu)``; ``P z + q + G' nu = 0``."""
     rhs = np.concatenate([-q, h])
     sol = lu.solve(rhs)
-    sol += lu.solve(rhs - K @ sol)
+    sol += lu.solve(rhs - _matvec(K, sol))
     if not np.all(np.isfinite(sol)):
         raise RuntimeError("KKT factorisation of the input update produced NaN")
     return sol[:nz], sol[nz:]
 
 
 def _kkt_solve(
-    P: sp.csc_matrix, q: np.ndarray, G: sp.csc_matrix, h: np.ndarray
+    P: sp.csc_matrix,
+    q: np.ndarray,
+    G: sp.csc_matrix,
+    h: np.ndarray,
+    stage_z: np.ndarray,
+    stage_rows: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``min 1/2 z'Pz + q'z s.t. G z = h`` via ``[P G'; G 0] [z; nu] = [-q; h]``.
 
     Returns ``(z, nu)``; ``P z + q + G' nu = 0``.
     """
-    return _kkt_solve_factored(*_kkt_factor(P, G), q, h, P.shape[0])
+    return _kkt_solve_factored(*_kkt_factor(P, G, stage_z, stage_rows), q, h, P.shape[0])
 
 
 def _solve_direct(prob: _Problem) -> np.ndarray:
     """Unconstrained optimum (equality-constrained QP); return the free inputs."""
-    z, _ = _kkt_solve(prob.P, prob.q, prob.G, prob.h)
+    z, _ = _kkt_solve(prob.P, prob.q, prob.G, prob.h, prob.stage_z, prob.stage_eq)
     return z[: prob.m]
 
 
@@ -518,6 +612,119 @@ def _solve_clarabel(
     return x[: prob.m], ("solved" if status == "Solved" else status), solution
 
 
+@dataclass(frozen=True)
+class _Rows:
+    """The limits' inequality rows ``A z <= b`` and their place in the problem.
+
+    Every row involves one input (a bound: an edge between ``u(t)`` and the fixed values) or
+    two consecutive ones (a rate limit: an edge between ``u(t-1)`` and ``u(t)``); a set of
+    rows held with equality is linearly independent exactly when these edges form a forest.
+    """
+
+    A: sp.csc_matrix  # (rows, nz)
+    b: np.ndarray  # (rows,)
+    stage: np.ndarray  # latest input sample of each row, (rows,)
+    ends: np.ndarray  # the two nodes of each row's edge, (rows, 2); node m is the fixed values
+
+
+def _rows_of(A_in: sp.csc_matrix, b_in: np.ndarray, m: int) -> _Rows:
+    csr = sp.csr_matrix(A_in)
+    count = np.diff(csr.indptr)
+    if np.any((count < 1) | (count > 2)):
+        raise ValueError("each limit row must involve one or two inputs")
+    if csr.shape[0] == 0:
+        empty = np.zeros(0, dtype=np.intp)
+        return _Rows(sp.csc_matrix(A_in), np.zeros(0), empty, np.zeros((0, 2), dtype=np.intp))
+    first = csr.indices[csr.indptr[:-1]]
+    last = csr.indices[csr.indptr[1:] - 1]
+    stage = np.maximum(first, last).astype(np.intp)
+    ends = np.column_stack([np.minimum(first, last), np.where(count == 2, stage, m)])
+    return _Rows(sp.csc_matrix(A_in), np.asarray(b_in, dtype=float), stage, ends)
+
+
+def _independent(rows: _Rows, order: np.ndarray, m: int) -> np.ndarray:
+    """Mask of the rows of ``order`` (taken in that order) whose edges do not close a cycle
+    with those taken before: a linearly independent subset (union-find over the inputs)."""
+    parent = list(range(m + 1))
+
+    def root(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    keep = np.zeros(rows.b.size, dtype=bool)
+    for i in order.tolist():
+        a, b = root(int(rows.ends[i, 0])), root(int(rows.ends[i, 1]))
+        if a != b:
+            parent[a] = b
+            keep[i] = True
+    return keep
+
+
+def _most_negative_per_run(rows: _Rows, lam: np.ndarray, negative: np.ndarray) -> np.ndarray:
+    """Mask of the row with the most negative multiplier in each run of consecutive samples
+    among the ``negative`` rows."""
+    neg = np.flatnonzero(negative)
+    out = np.zeros(lam.size, dtype=bool)
+    if neg.size == 0:
+        return out
+    neg = neg[np.argsort(rows.stage[neg], kind="stable")]
+    run = np.concatenate([[0], np.cumsum(np.diff(rows.stage[neg]) > 1)])
+    by_run = neg[np.lexsort((lam[neg], run))]  # by run, most negative first within a run
+    first = np.concatenate([[True], np.diff(run[np.lexsort((lam[neg], run))]) != 0])
+    out[by_run[first]] = True
+    return out
+
+
+def _active_set(
+    prob: _Problem, rows: _Rows, act: np.ndarray, rounds: int
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The QP's minimiser from a guess of its active set, or None.
+
+    The rows ``act`` (a linearly independent subset of them) become equalities and the
+    equality-constrained QP is solved through its KKT system (banded in stage-wise order);
+    then the violated rows are added (the most violated first, each while it keeps the set
+    independent) and, of each run of consecutive samples whose rows have negative
+    multipliers, the most negative dropped (dropping whole runs at once overshoots and can
+    cycle), for at most ``rounds`` rounds. A point
+    is returned (with its active set) only when it is primal feasible and its multipliers are
+    non-negative: it then satisfies the KKT conditions of the full problem to rounding, and
+    the problem being strictly convex, it is the minimiser.
+    """
+    n_eq, A_in, b_in = prob.G.shape[0], rows.A, rows.b
+    scale = max(1.0, float(np.max(np.abs(b_in), initial=0.0)))
+    act = _independent(rows, np.flatnonzero(act), prob.m)
+    base = _kkt_triplets(prob.P, prob.G)  # the KKT system without the limits, built once
+    A_csr = sp.csr_matrix(A_in)
+    A_csr.sum_duplicates()
+    for _ in range(rounds):
+        K = _with_rows(base, A_csr, act)
+        h = np.concatenate([prob.h, b_in[act]])
+        stage = np.concatenate([prob.stage_z, prob.stage_eq, rows.stage[act]])
+        try:
+            z, nu = _kkt_solve_factored(K, _BandedLU(K, stage), prob.q, h, prob.P.shape[0])
+        except (RuntimeError, ValueError):
+            return None
+        excess = A_csr @ z - b_in
+        residual = max(np.max(np.abs(prob.G @ z - prob.h), initial=0.0),
+                       np.max(np.abs(excess[act]), initial=0.0))  # fmt: skip
+        if residual > 1e-10 * scale:
+            return None
+        lam = np.zeros(act.size)
+        lam[act] = nu[n_eq:]
+        lam_tol = 1e-9 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
+        violated = excess > 1e-10 * scale
+        negative = lam < -lam_tol
+        if not violated.any() and not negative.any():
+            return z, act
+        new = np.flatnonzero(violated & ~act)
+        new = new[np.argsort(-excess[new], kind="stable")]
+        keep = act & ~_most_negative_per_run(rows, lam, negative)
+        act = _independent(rows, np.concatenate([np.flatnonzero(keep), new]), prob.m)
+    return None
+
+
 def _polish(
     prob: _Problem,
     A_in: sp.csc_matrix,
@@ -527,36 +734,15 @@ def _polish(
 ) -> np.ndarray:
     """Refine Clarabel's answer on its active set (as OSQP's polishing does).
 
-    The inequalities Clarabel finds active (dual above slack) become equalities and the
-    equality-constrained QP is solved through its KKT system; rows it then violates are added
-    and rows with negative multipliers dropped, for a few rounds. The refined point is kept
-    only when it is primal feasible and its multipliers are non-negative (it satisfies the KKT
-    conditions of the full problem to rounding); otherwise Clarabel's answer is returned.
+    The inequalities Clarabel finds active (dual above slack) start :func:`_active_set` for
+    a few rounds; its point is kept when it satisfies the KKT conditions of the full problem
+    to rounding, otherwise Clarabel's answer is returned.
     """
     n_eq = prob.G.shape[0]
     s = np.asarray(solution.s, dtype=float)[n_eq:]
     zd = np.asarray(solution.z, dtype=float)[n_eq:]
-    act = zd > s
-    scale = max(1.0, float(np.max(np.abs(b_in))))
-    for _ in range(_POLISH_ROUNDS):
-        G = sp.vstack([prob.G, A_in[act]], format="csc")
-        h = np.concatenate([prob.h, b_in[act]])
-        try:
-            z, nu = _kkt_solve(prob.P, prob.q, G, h)
-        except (RuntimeError, ValueError):
-            return x
-        if np.max(np.abs(G @ z - h), initial=0.0) > 1e-10 * scale:
-            return x
-        lam = np.zeros(act.size)
-        lam[act] = nu[n_eq:]
-        lam_tol = 1e-9 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
-        violated = A_in @ z > b_in + 1e-10 * scale
-        negative = lam < -lam_tol
-        if not violated.any() and not negative.any():
-            return z
-        # Weakly active rows Clarabel classified wrongly: add the violated, drop the negative.
-        act = (act | violated) & ~negative
-    return x
+    found = _active_set(prob, _rows_of(A_in, b_in, prob.m), zd > s, _POLISH_ROUNDS)
+    return x if found is None else found[0]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -588,10 +774,12 @@ class InputUpdate:
     """Eq. (8) of one axis for a fixed model, reference, weights and limits; one call per trial.
 
     What does not change between trials is built once: the QP's banded structure, the
-    factorisation of its KKT matrix, the Markov parameters, the limits' feasibility and their
-    inequality rows. :meth:`solve` then costs one linear term, two triangular solves and (when
-    a limit is active) one Clarabel solve. The results are those of :func:`next_input`, bit
-    for bit.
+    banded LU of its KKT matrix, the Markov parameters, the limits' feasibility and their
+    inequality rows. :meth:`solve` then costs one linear term and two banded triangular solves;
+    when a limit is active, the first time one Clarabel solve, later a few banded KKT
+    factorisations started from the last trial's active set (Clarabel when they do not
+    settle). The minimiser is that of :func:`next_input` (strictly convex QP): equal to
+    rounding when both find its active set (a fresh :func:`next_input` asks Clarabel).
 
     Parameters
     ----------
@@ -623,6 +811,8 @@ class InputUpdate:
         self.limits = limits
         self._feasible = False
         self._rows: tuple[sp.csc_matrix, np.ndarray] | None = None
+        self._limit_rows: _Rows | None = None
+        self._active: np.ndarray | None = None  # the limits active at the last solution
 
     @property
     def model(self) -> DiscreteModel:
@@ -661,9 +851,23 @@ class InputUpdate:
                 self._feasible = True
             if self._rows is None:
                 self._rows = _inequalities(prob, limits)
-            u_free, status, _ = _solve_clarabel(prob, limits, self._rows)
+                self._limit_rows = _rows_of(*self._rows, prob.m)
+            A_in, b_in = self._rows
+            found = None
+            if self._active is not None and self._limit_rows is not None:
+                # the last trial's active set, refined
+                found = _active_set(prob, self._limit_rows, self._active, _WARM_ROUNDS)
+            if found is not None:
+                z, self._active = found
+                u_free, method = z[: prob.m], "active-set"
+            else:
+                u_free, status, _ = _solve_clarabel(prob, limits, self._rows)
+                method = "clarabel"
+                z = np.zeros(prob.P.shape[0])
+                z[: prob.m] = u_free
+                scale = max(1.0, float(np.max(np.abs(b_in), initial=0.0)))
+                self._active = A_in @ z > b_in - _ACTIVE_TOL_M * scale
             u = _full_input(prob, u_free)
-            method = "clarabel"
         active = 0 if limits is None else _violations(u, prob, limits, _ACTIVE_TOL_M)
         dh = np.asarray(d_hat_m, dtype=float)
         up = np.asarray(u_prev_m, dtype=float)
