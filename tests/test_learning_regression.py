@@ -26,6 +26,10 @@ from gcs.cli import app
 
 DATA = Path(__file__).resolve().parent / "data"
 RTOL_LEARNED = 1e-9  # of a learned file's largest magnitude, after several trials
+#: the automatic robustness cutoff ("auto") learns from a model refreshed by an iterative fit that
+#: stops at a relative loss improvement of 1e-9: the model is determined to about 1e-10, and
+#: the cutoff and the smoother amplify that by up to 1e4 (docs/results.md, Reproducibility)
+RTOL_LEARNED_CASE = {"auto": 1e-6}
 RTOL_STUDY = 1e-12  # of a study's largest error norm
 CSV_DIGITS = 9  # significant digits of a run directory's CSV files (gcs.io.records)
 
@@ -36,14 +40,15 @@ def test_learned_files_are_those_recorded() -> None:
         assert sorted(now) == sorted(recorded.files)
         for key in recorded.files:
             b = recorded[key]
+            rtol = RTOL_LEARNED_CASE.get(key.split("/")[0], RTOL_LEARNED)
             if b.dtype.kind == "U":  # a learned JSON or YAML file: full precision (repr)
                 text = str(b)
                 scale = max((abs(float(v)) for v in NUMBER.findall(text)), default=0.0)
-                assert_text_close(str(now[key]), text, 0.0, RTOL_LEARNED * scale, key)
+                assert_text_close(str(now[key]), text, 0.0, rtol * scale, key)
             else:  # setpoints (N, 3) or estimates (2, N, axes) read back from a CSV file
                 axis = 1 if key.split("/")[1].startswith("estimate") else 0
                 scale = np.max(np.abs(b), axis=axis, keepdims=True)
-                atol = RTOL_LEARNED * scale + printed_unit(b, CSV_DIGITS)
+                atol = rtol * scale + printed_unit(b, CSV_DIGITS)
                 assert_close(now[key], b, 0.0, atol, key)
 
 
