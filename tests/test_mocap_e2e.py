@@ -68,7 +68,8 @@ def test_indoor_flight_on_mocap_only_forwards_vision_logs_it_and_learns(
     )  # fmt: skip
     assert code == 0, out
     assert "EKF2: EV_CTRL 11, HGT_REF 3, GPS_CTRL 0" in out, out
-    assert "north move went the right way" in out and "east move went the right way" in out
+    assert "the mocap moved with the vehicle's estimate" in out, out
+    assert "mocap check: the estimate followed +0.30 m north and +0.30 m east" in out, out
     run = RunDir.open(run_path)
     assert run.complete_trials() == [0, 1]
     for j in (0, 1):
@@ -92,7 +93,11 @@ def test_indoor_flight_on_mocap_only_forwards_vision_logs_it_and_learns(
     mocap = session["mocap"]
     assert mocap["forward"] and mocap["forwarded"] > 1000 and mocap["forward_failed"] == 0
     assert mocap["ekf2"]["EKF2_EV_CTRL"] == 11 and mocap["agreement_m"] < 0.05
-    assert [m["problem"] for m in mocap["moves"]] == [None, None]
+    check = mocap["moves"][-1]
+    assert [m["problem"] for m in mocap["moves"]] == [None] and check["following"] == "ok"
+    # the estimate is the fused mocap: it moves with the mocap, along each axis
+    for seen in check["mapping"]:
+        assert 0.9 < seen["gain"] < 1.1 and seen["angle_deg"] < 10, check
     code, report = gcs("report", run_path)
     assert code == 0 and "e_pos by mocap" in report and "the mocap by" in report
 
