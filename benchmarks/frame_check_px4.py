@@ -165,10 +165,14 @@ def main() -> None:
         return
     build = Px4Build(build_dir()[0])
     build.runnable()
-    plan = [0.0] * args.flights
+    wrong: list[float] = []
     for part in filter(None, args.wrong.split(",")):
         yaw, count = part.split(":")
-        plan += [float(yaw)] * int(count)
+        wrong += [float(yaw)] * int(count)
+    # the rotated rooms spread among the correct flights, so that all see the same load
+    plan = [0.0] * args.flights
+    for i, yaw in enumerate(wrong):
+        plan.insert(round((i + 0.5) * len(plan) / len(wrong)), yaw)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     flights: list[dict] = []
 
