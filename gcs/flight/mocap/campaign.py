@@ -213,6 +213,7 @@ async def check_moves(
     for attempt in (1, 2):
         check, used_m = await _frame_check(vehicle, mocap, settings, length_m)
         out.append(check.as_record())
+        note(f"mocap check: {_figures(check)}", check.problem is not None)
         if check.problem is not None:
             raise MocapError(f"pre-flight frame check: {check.problem}")
         longer_m = move_length(used_m, check.wander_m)
@@ -237,6 +238,18 @@ async def check_moves(
         note(f"mocap check: whether the vehicle follows {moves} was not judged: its hover "
              f"wandered {check.wander_m:.2f} m ({gains})", True)  # fmt: skip
     return out
+
+
+def _figures(check: FrameCheck) -> str:
+    """One line of the check's figures: gain/angle per axis of each fit, the wander."""
+
+    def pair(rs: tuple) -> str:
+        return ", ".join(f"{r.gain:.2f}/{r.angle_deg:.0f} deg" for r in rs)
+
+    size = max(abs(x) for x in check.cmd_ned_m[0])
+    return (f"{size:.2f} m moves; gain/angle N, E: estimate on command {pair(check.estimate)}, "
+            f"mocap on command {pair(check.mocap)}, mocap on estimate {pair(check.mapping)}; "
+            f"wander {check.wander_m:.3f} m; following {check.following}")  # fmt: skip
 
 
 async def _frame_check(

@@ -503,7 +503,12 @@ def frame_check(
     elif bad_map:
         i = bad_map[0]
         axis = ("north", "east")[i]
-        how = "mirrored" if mirrored else f"rotated {rotation:+.0f} deg"
+        if mirrored:
+            how = "mirrored"
+        elif abs(float(np.linalg.det(h))) < MIN_GAIN**2:
+            how = "out of the horizontal plane"
+        else:
+            how = f"rotated {rotation:+.0f} deg"
         problem = (
             f"the mocap saw the vehicle's {axis} motion {map_r[i].angle_deg:.0f} deg off "
             f"(gain {map_r[i].gain:.2f}, {how}) against its own "
