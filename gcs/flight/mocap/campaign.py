@@ -274,7 +274,10 @@ async def _frame_check(
             windows.append(await _window(vehicle, mocap, target, settings, what))
             cmds.append(target - home)
     t_e, est, t_m, moc, span = (np.concatenate(parts) for parts in zip(*windows, strict=True))
-    check = frame_check(t_e, est, t_m, moc, span.reshape(-1, 2), np.array(cmds))
+    try:
+        check = frame_check(t_e, est, t_m, moc, span.reshape(-1, 2), np.array(cmds))
+    except ValueError as exc:  # a window without samples of one source
+        raise MocapError(f"pre-flight frame check: could not judge the moves: {exc}") from exc
     return check, length_m
 
 
