@@ -12,8 +12,8 @@ gcs's NED = ``Q`` times the truth) changes depends on where the vehicle's headin
   or 180 degrees, ``north_axis`` set to the other horizontal axis) rotates position and heading
   alike: the vehicle flies every command correctly *in the rotated frame*. Nothing on board or
   in the mocap contradicts it (a rotation about gravity is unobservable without a heading
-  reference); what is wrong is only where the arena lies in the room. Flown on PX4 v1.16 SIH
-  (docs/mocap.md): no check here can catch it, and none does;
+  reference); what is wrong is only where the arena lies in the room. No check here can
+  catch it, and none pretends to (docs/mocap.md says what was flown of it on PX4 v1.16 SIH);
 - heading from the vehicle's own compass (the mock drone, or a vehicle with EKF2_MAG_TYPE on
   and no vision yaw): the position loop is rotated by ``Q``: at 180 degrees it pushes away
   from the setpoint, at 90 degrees it spirals out; the estimate then runs against the vehicle's
