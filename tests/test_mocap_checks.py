@@ -193,7 +193,7 @@ def scaled(params: tuple, t_s: np.ndarray, bound_m: float):
     return lambda t: k * swing(t) + slope(t)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(length=st.floats(0.2, 1.0), settle=settles, wander=wanders, frac=st.floats(0.0, 1.0))
 def test_a_wander_below_a_quarter_of_the_move_never_refuses_a_correct_mapping(
     length: float, settle: list[float], wander, frac: float
@@ -206,7 +206,7 @@ def test_a_wander_below_a_quarter_of_the_move_never_refuses_a_correct_mapping(
     assert check.following == "ok", check  # within the bound, the fit is never fooled
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(length=st.floats(0.2, 1.0), settle=settles, wander=wanders, frac=st.floats(0.0, 1.0))
 def test_every_wrong_mapping_is_refused_whatever_the_wander(
     length: float, settle: list[float], wander, frac: float
