@@ -493,7 +493,9 @@ def frame_check(
     bad_map = [
         i for i, r in enumerate(map_r) if r.gain < MIN_GAIN or r.angle_deg > MAX_MAPPING_ANGLE_DEG
     ]
-    if float(np.min(excitation)) < MIN_EXCITATION_M:
+    if float(np.min(excitation)) < MIN_EXCITATION_M and not conclusive:
+        following = "unjudged"  # too still to compare, but inside its own wander
+    elif float(np.min(excitation)) < MIN_EXCITATION_M:
         following = "failed"  # too still to compare with the mocap: it did not follow
         problem = (
             f"the vehicle estimate moved {float(np.min(excitation)):.3f} m (RMS) along one "
