@@ -35,7 +35,11 @@ mocap; and (2) whether the vehicle follows the commands in its own estimate. Bot
 - (1) the mocap regressed on the estimate, sample by sample (``mocap = c + d t + G est``):
   the hover's wander moves both alike, so it is excitation here, not noise; each horizontal
   column of ``G`` must point along its axis (within :data:`MAX_MAPPING_ANGLE_DEG`, gain at
-  least :data:`MIN_GAIN`). This is what refuses a wrong mapping, and wander cannot imitate it.
+  least :data:`MIN_GAIN`). This is what refuses a wrong mapping; wander cannot imitate it as
+  long as both sources are placed on one clock. Known limit: the estimate's samples carry
+  their receipt times, which a loaded machine delays by up to hundreds of milliseconds; on
+  PX4 SIH at load 8-20 that turned the wander into 10-45 degrees between the sources and a
+  false refusal (docs/mocap.md).
 - (2) the estimate regressed on the commanded displacement, with an offset and a drift term
   (the three home windows bracket the moves, so a slow linear drift of the hover cancels):
   the fitted displacement per commanded move must cover :data:`MIN_GAIN` of it within
