@@ -282,3 +282,22 @@ def test_frame_check_bad_inputs() -> None:
         frame_check(t_s, truth, t_s[t_s < spans[4, 0]], truth[t_s < spans[4, 0]], spans, cmds)
     with pytest.raises(ValueError, match="times for"):
         frame_check(t_s[:-1], truth, t_s, truth, spans, cmds)
+
+
+def test_forwarded_the_mapping_is_not_judged_and_following_still_is() -> None:
+    # gcs forwards the mocap: the estimate is the mapped mocap whatever the mapping, so (1) is
+    # not judged: a mocap whose receipt times lag by 0.4 s on a loaded machine, which (1)
+    # refuses, passes; a vehicle that does not follow is refused all the same
+    w = smooth_wander([0.15, 0.15, 0.0, 0.0], [3.0, 4.0, 9.0, 9.0], [0.0, 1.6, 0.0, 0.0], 0.0)
+    spans, cmds, t_s, truth = flight(0.6, [2.0] * 5, w)
+    judged = frame_check(t_s, truth, t_s + 0.4, truth @ QUARTER[2][1].T, spans, cmds)
+    assert judged.problem is not None and "mocap saw" in judged.problem
+    forwarded = frame_check(
+        t_s, truth, t_s + 0.4, truth @ QUARTER[2][1].T, spans, cmds, judge_mapping=False
+    )
+    assert forwarded.problem is None and forwarded.following == "ok", forwarded
+    assert forwarded.mapping == judged.mapping  # the figures are kept for the record
+    still = smooth_wander([0.005] * 4, [3.0, 4.0, 5.0, 7.0], [0.0, 1.0, 2.0, 3.0], 0.0)
+    spans, cmds, t_s, truth = flight(0.3, [2.0] * 5, still, -np.eye(3))
+    check = frame_check(t_s, truth, t_s, truth, spans, cmds, judge_mapping=False)
+    assert check.problem is not None and "did not follow" in check.problem

@@ -227,7 +227,11 @@ async def check_moves(
         f"{name} {r.gain:.2f} at {r.angle_deg:.0f} deg"
         for name, r in zip(axes, check.mapping, strict=True)
     )
-    note(f"mocap check: the mocap moved with the vehicle's estimate ({seen})")
+    if mocap.settings.forward:
+        note(f"mocap check: the estimate is the forwarded mocap, so the mapping is not judged "
+             f"in the air (the mocap on the estimate: {seen})")  # fmt: skip
+    else:
+        note(f"mocap check: the mocap moved with the vehicle's estimate ({seen})")
     pairs = enumerate(zip(check.cmd_ned_m, axes, strict=True))
     moves = " and ".join(f"{c[i]:+.2f} m {name}" for i, (c, name) in pairs)
     gains = ", ".join(f"{r.gain:.2f} at {r.angle_deg:.0f} deg" for r in check.estimate)
@@ -275,7 +279,10 @@ async def _frame_check(
             cmds.append(target - home)
     t_e, est, t_m, moc, span = (np.concatenate(parts) for parts in zip(*windows, strict=True))
     try:
-        check = frame_check(t_e, est, t_m, moc, span.reshape(-1, 2), np.array(cmds))
+        check = frame_check(
+            t_e, est, t_m, moc, span.reshape(-1, 2), np.array(cmds),
+            judge_mapping=not mocap.settings.forward,
+        )  # fmt: skip
     except ValueError as exc:  # a window without samples of one source
         raise MocapError(f"pre-flight frame check: could not judge the moves: {exc}") from exc
     return check, length_m

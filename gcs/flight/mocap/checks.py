@@ -39,7 +39,10 @@ mocap; and (2) whether the vehicle follows the commands in its own estimate. Bot
   long as both sources are placed on one clock. Known limit: the estimate's samples carry
   their receipt times, which a loaded machine delays by up to hundreds of milliseconds; on
   PX4 SIH at load 8-20 that turned the wander into 10-45 degrees between the sources and a
-  false refusal (docs/mocap.md).
+  false refusal (docs/mocap.md). When gcs itself forwards the mocap (``mocap.forward``, the
+  default) the estimate *is* the mapped mocap, so (1) can refuse no wrong mapping there, only
+  a right one on that timing: it is then computed for the record and not judged
+  (``judge_mapping=False``).
 - (2) the estimate regressed on the commanded displacement, with an offset and a drift term
   (the three home windows bracket the moves, so a slow linear drift of the hover cancels):
   the fitted displacement per commanded move must cover :data:`MIN_GAIN` of it within
@@ -408,6 +411,7 @@ def frame_check(
     mocap_ned_m: np.ndarray,
     windows_t_s: np.ndarray,
     cmd_ned_m: np.ndarray,
+    judge_mapping: bool = True,
 ) -> FrameCheck:
     """Judge the frame from hover windows at home and at commanded moves (module docstring).
 
@@ -427,6 +431,11 @@ def frame_check(
     cmd_ned_m : numpy.ndarray
         Commanded displacement from home during each window, shape (K, 3) [m]: zero at home.
         At least one window at home and one move; two windows at home or more add a drift term.
+    judge_mapping : bool
+        Judge (1), the mocap against the estimate. False when gcs forwards this mocap to the
+        vehicle: the estimate is then the mapped mocap under any mapping, so (1) can find no
+        wrong mapping and only a false one from the sources' receipt times on a loaded
+        machine; its figures are still computed for the record.
 
     Returns
     -------
@@ -497,7 +506,9 @@ def frame_check(
     bad_map = [
         i for i, r in enumerate(map_r) if r.gain < MIN_GAIN or r.angle_deg > MAX_MAPPING_ANGLE_DEG
     ]
-    if float(np.min(excitation)) < MIN_EXCITATION_M and not conclusive:
+    if not judge_mapping:
+        pass  # forwarded: (1) cannot tell a wrong mapping (module docstring); (2) alone
+    elif float(np.min(excitation)) < MIN_EXCITATION_M and not conclusive:
         following = "unjudged"  # too still to compare, but inside its own wander
     elif float(np.min(excitation)) < MIN_EXCITATION_M:
         following = "failed"  # too still to compare with the mocap: it did not follow
