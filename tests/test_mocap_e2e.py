@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -68,7 +69,8 @@ def test_indoor_flight_on_mocap_only_forwards_vision_logs_it_and_learns(
     )  # fmt: skip
     assert code == 0, out
     assert "EKF2: EV_CTRL 11, HGT_REF 3, GPS_CTRL 0" in out, out
-    assert "north move went the right way" in out and "east move went the right way" in out
+    assert "the mapping is not judged in the air" in out, out  # forwarded: (2) alone
+    assert "mocap check: the estimate followed +0.30 m north and +0.30 m east" in out, out
     run = RunDir.open(run_path)
     assert run.complete_trials() == [0, 1]
     for j in (0, 1):
@@ -92,7 +94,11 @@ def test_indoor_flight_on_mocap_only_forwards_vision_logs_it_and_learns(
     mocap = session["mocap"]
     assert mocap["forward"] and mocap["forwarded"] > 1000 and mocap["forward_failed"] == 0
     assert mocap["ekf2"]["EKF2_EV_CTRL"] == 11 and mocap["agreement_m"] < 0.05
-    assert [m["problem"] for m in mocap["moves"]] == [None, None]
+    check = mocap["moves"][-1]
+    assert [m["problem"] for m in mocap["moves"]] == [None] and check["following"] == "ok"
+    # the estimate is the fused mocap: it moves with the mocap, along each axis
+    for seen in check["mapping"]:
+        assert 0.9 < seen["gain"] < 1.1 and seen["angle_deg"] < 10, check
     code, report = gcs("report", run_path)
     assert code == 0 and "e_pos by mocap" in report and "the mocap by" in report
 
@@ -140,3 +146,52 @@ def test_a_mirrored_mapping_is_refused_before_anything_starts(tmp_path: Path, ti
     lines = [ln for ln in out.splitlines() if ln.strip()]
     assert len(lines) == 1 and "mocap.right_handed" in lines[0] and "mirrors" in lines[0]
     assert not run_path.exists()  # nothing created, nothing started, nothing flown
+
+
+#: The default mock (its own estimate, GPS-like wander) with an indoor PX4's EKF2 parameters:
+#: a vehicle whose vision another bridge feeds (``mocap.forward: false``).
+OWN_ESTIMATE = {
+    "px4": {"ekf2_gps_ctrl": 0, "ekf2_ev_ctrl": 11, "ekf2_hgt_ref": 3, "ekf2_ev_delay_ms": 5.0}
+}
+
+
+@pytest.mark.parametrize(
+    ("case", "room_yaw_deg", "mocap", "refusal"),
+    [
+        # gcs reads the mocap 180 deg off the frame the vehicle flies in: the frame check
+        ("another bridge, room 180 deg", 180.0, {"forward": False},
+         r"pre-flight frame check: the mocap saw the vehicle's north motion 1[78]\d deg off "
+         r"\(gain -1\.0\d, rotated [+-]1[78]\d deg\)"),
+        # Motive's Y-up read as Z-up: the vehicle's east motion shows vertical in the mocap
+        ("another bridge, wrong up axis", 0.0, {"forward": False, "up_axis": "+z"},
+         r"pre-flight frame check: the mocap saw the vehicle's east motion (8\d|9\d) deg off "
+         r"\(gain -?0\.\d\d, out of the horizontal plane\)"),
+        # gcs forwards the mocap 90 deg off to a vehicle with its own heading: the position
+        # loop turns, the estimate runs against the velocity, the fence's watch ends it
+        ("forwarded, room 90 deg", 90.0, {},
+         "the estimate contradicts itself while waiting for settling"),
+    ],
+)  # fmt: skip
+def test_a_wrong_mapping_is_refused_after_take_off_before_the_first_trial(
+    tmp_path: Path, tiny: Path, case: str, room_yaw_deg: float, mocap: dict, refusal: str
+) -> None:
+    run_path = tmp_path / "run"
+    stats = tmp_path / "stats.json"
+    config = INDOOR
+    if mocap.get("forward") is False:
+        config = tmp_path / "mock-own-estimate.yaml"
+        config.write_text(yaml.safe_dump(OWN_ESTIMATE))
+    arena = ArenaOptions(yaw_offset_deg=room_yaw_deg)
+    with MockProcess(config_path=config, seed=3, stats_path=stats, arena=arena) as mock:
+        code, out = gcs(
+            "fly", "--connect", mock.url, "--mocap", mock.mocap_url, "--trajectory", tiny,
+            "--profile", profile(tmp_path, **mocap), "--run", run_path,
+        )  # fmt: skip
+    assert code == 2, out
+    assert re.search(refusal, out.splitlines()[-1]), out
+    assert "trial 0 started" not in out and "landed and disarmed" in out, out
+    assert RunDir.open(run_path).complete_trials() == []
+    final = json.loads(stats.read_text())["modes"][-1]
+    assert final["armed"] is False
+    if "frame check" in refusal:  # the figures that refused it were said
+        assert "mocap check: 0.30 m moves; gain/angle N, E: estimate on command" in out, out

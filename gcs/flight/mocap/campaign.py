@@ -2,8 +2,9 @@
 
 Before arming: forward the mocap to the vehicle and judge its EKF2 settings
 (:func:`before_arming`), set a global origin and wait for the estimate to agree with the mocap
-(:func:`ready_to_arm`). After take-off: one small move per horizontal axis, out and back, seen
-the commanded way in both the estimate and the mocap (:func:`check_moves`). Around each trial:
+(:func:`ready_to_arm`). After take-off: the frame check, hover windows at home and after a
+small move along each horizontal axis, the mocap moving with the estimate and the estimate
+following the commands (:func:`check_moves`). Around each trial:
 a mocap sample past its end (:func:`wait_past_end`) and the trial's mocap cut onto its grid
 (:func:`with_mocap`).
 """
@@ -20,9 +21,9 @@ import numpy as np
 from gcs.errors import MocapError, VehicleError
 from gcs.flight.fence import format_ned
 from gcs.flight.mocap.checks import (
-    move_direction_problem,
+    FrameCheck,
+    frame_check,
     move_length,
-    moved_as_commanded,
     pose_agreement_problem,
     window_mean,
 )
@@ -177,11 +178,14 @@ async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> dict:
 async def check_moves(
     vehicle: Vehicle, mocap: MocapLink, settings: FlightSettings, note: Note
 ) -> list[dict]:
-    """A small move per horizontal axis, out and back, each the commanded way in both sources.
+    """The frame check: hover windows at home, a move north, home, a move east, home.
 
-    Each move must go the commanded way in the estimate and in the mocap (a mirrored or
-    swapped axis shows here, not in the eight). Positions are means over a window before and
-    after; the move stands out of the wander measured before it.
+    :func:`gcs.flight.mocap.checks.frame_check` judges them: the mocap must move with the
+    vehicle's estimate (a mapping that is not the vehicle's frame is refused at once), and the
+    estimate must follow the commanded moves. When it did not but the hover's wander is too
+    large for that to be conclusive, the check is flown once more with moves four times the
+    wander (at most 1 m); still unjudged, the flight goes on with a warning: the mapping was
+    judged, and a vehicle that wanders is not refused for it.
 
     Parameters
     ----------
@@ -197,64 +201,104 @@ async def check_moves(
     Returns
     -------
     list of dict
-        Each move: commanded, estimated and mocap displacement [m], wander [m], problem.
+        Each time the check was flown: its figures (:meth:`FrameCheck.as_record`).
 
     Raises
     ------
     MocapError
-        A move went the wrong way.
+        The mocap did not move with the estimate, or the vehicle did not follow.
     """
-    out = []
-    for axis, name in ((0, "north"), (1, "east")):
-        for attempt in (1, 2):
-            move = await _check_move(vehicle, mocap, settings, axis, name)
-            out.append(move)
-            step, problem = np.asarray(move["cmd_ned_m"]), move["problem"]
-            # both the estimate and the mocap saw the same wrong move: the vehicle wandered
-            # (it did not follow), which says nothing about the mapping: measured once more
-            wandered = problem is not None and not any(
-                moved_as_commanded(step, np.asarray(move[k]))
-                for k in ("est_delta_ned_m", "mocap_delta_ned_m")
-            )
-            if problem is None or not wandered or attempt == 2:
-                break
-            note(f"mocap check: {problem}; once more", True)
-        if problem is not None:
-            raise MocapError(f"pre-flight {name} move: {problem}")
-        wander = move["wander_m"]
-        note(f"mocap check: a {step[axis]:+.2f} m {name} move went the right way in "
-             f"the estimate and the mocap (hover wander {wander:.3f} m)")  # fmt: skip
+    out: list[dict] = []
+    length_m: float | None = None
+    for attempt in (1, 2):
+        check, used_m = await _frame_check(vehicle, mocap, settings, length_m)
+        out.append(check.as_record())
+        note(f"mocap check: {_figures(check)}", check.problem is not None)
+        if check.problem is not None:
+            raise MocapError(f"pre-flight frame check: {check.problem}")
+        longer_m = move_length(used_m, check.wander_m)
+        if check.following != "unjudged" or attempt == 2 or longer_m <= used_m:
+            break
+        note(f"mocap check: the hover wandered {check.wander_m:.2f} m, more than a quarter of "
+             f"the {used_m:.2f} m moves: once more with {longer_m:.2f} m moves", True)  # fmt: skip
+        length_m = longer_m
+    axes = ("north", "east")
+    seen = ", ".join(
+        f"{name} {r.gain:.2f} at {r.angle_deg:.0f} deg"
+        for name, r in zip(axes, check.mapping, strict=True)
+    )
+    if mocap.settings.forward:
+        note(f"mocap check: the estimate is the forwarded mocap, so the mapping is not judged "
+             f"in the air (the mocap on the estimate: {seen})")  # fmt: skip
+    else:
+        note(f"mocap check: the mocap moved with the vehicle's estimate ({seen})")
+    pairs = enumerate(zip(check.cmd_ned_m, axes, strict=True))
+    moves = " and ".join(f"{c[i]:+.2f} m {name}" for i, (c, name) in pairs)
+    gains = ", ".join(f"{r.gain:.2f} at {r.angle_deg:.0f} deg" for r in check.estimate)
+    if check.following == "ok":
+        note(f"mocap check: the estimate followed {moves} ({gains}; hover wander "
+             f"{check.wander_m:.3f} m)")  # fmt: skip
+    else:
+        note(f"mocap check: whether the vehicle follows {moves} was not judged: its hover "
+             f"wandered {check.wander_m:.2f} m ({gains})", True)  # fmt: skip
     return out
 
 
-async def _check_move(
-    vehicle: Vehicle, mocap: MocapLink, settings: FlightSettings, axis: int, name: str
-) -> dict:
-    """One move along ``axis`` and back, judged on averaged windows before and after it."""
+def _figures(check: FrameCheck) -> str:
+    """One line of the check's figures: gain/angle per axis of each fit, the wander."""
+
+    def pair(rs: tuple) -> str:
+        return ", ".join(f"{r.gain:.2f}/{r.angle_deg:.0f} deg" for r in rs)
+
+    size = max(abs(x) for x in check.cmd_ned_m[0])
+    return (f"{size:.2f} m moves; gain/angle N, E: estimate on command {pair(check.estimate)}, "
+            f"mocap on command {pair(check.mocap)}, mocap on estimate {pair(check.mapping)}; "
+            f"wander {check.wander_m:.3f} m; following {check.following}")  # fmt: skip
+
+
+async def _frame_check(
+    vehicle: Vehicle, mocap: MocapLink, settings: FlightSettings, length_m: float | None
+) -> tuple[FrameCheck, float]:
+    """Fly home, north, home, east, home with a hover window at each; judge them. The move is
+    ``length_m``, or the profile's lengthened to four times the first window's wander."""
     fence = vehicle.fence
     home = await vehicle.hold_position()
-    est0, moc0, wander = await _still_at(vehicle, mocap, home, settings, f"before the {name} check")
-    step = np.zeros(3)
-    step[axis] = move_length(mocap.settings.check_move_m, wander)
-    if fence is not None and fence.setpoint_problem(home + step) is not None:
-        step = -step  # the other way stays inside the arena
-    await vehicle.goto(home + step, settings.transit_speed_m_s)
-    est1, moc1, _ = await _still_at(vehicle, mocap, home + step, settings, f"the {name} check")
-    await vehicle.goto(home, settings.transit_speed_m_s)
-    return {"cmd_ned_m": step.tolist(), "est_delta_ned_m": (est1 - est0).tolist(),
-            "mocap_delta_ned_m": (moc1 - moc0).tolist(), "wander_m": wander,
-            "problem": move_direction_problem(step, est1 - est0, moc1 - moc0)}  # fmt: skip
+    first = await _window(vehicle, mocap, home, settings, "before the frame check")
+    if length_m is None:
+        _, wander = window_mean(first[3])
+        length_m = move_length(mocap.settings.check_move_m, wander)
+    windows, cmds = [first], [np.zeros(3)]
+    for axis, name in ((0, "north"), (1, "east")):
+        step = np.zeros(3)
+        step[axis] = length_m
+        if fence is not None and fence.setpoint_problem(home + step) is not None:
+            step = -step  # the other way stays inside the arena
+        for target, what in ((home + step, f"the {name} move"), (home, f"home after {name}")):
+            await vehicle.goto(target, settings.transit_speed_m_s)
+            windows.append(await _window(vehicle, mocap, target, settings, what))
+            cmds.append(target - home)
+    t_e, est, t_m, moc, span = (np.concatenate(parts) for parts in zip(*windows, strict=True))
+    try:
+        check = frame_check(
+            t_e, est, t_m, moc, span.reshape(-1, 2), np.array(cmds),
+            judge_mapping=not mocap.settings.forward,
+        )  # fmt: skip
+    except ValueError as exc:  # a window without samples of one source
+        raise MocapError(f"pre-flight frame check: could not judge the moves: {exc}") from exc
+    return check, length_m
 
 
-async def _still_at(
+async def _window(
     vehicle: Vehicle, mocap: MocapLink, target: np.ndarray, settings: FlightSettings, what: str
-) -> tuple[np.ndarray, np.ndarray, float]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Settle at ``target`` (or give up after the settle timeout), then hover a window: the
-    mean of the estimate, the mean of the mocap and the mocap's horizontal wander."""
+    estimate's times and positions, the mocap's (mapped to NED), and the window's span."""
     await vehicle.settle(target, settings.settle_tolerance_m, settings.settle_speed_m_s)
     samples = await vehicle.hold(MOVE_WINDOW_S, what)
     mocap.require_tracked()
-    est, _ = window_mean(np.array([s.pos_ned_m for s in samples]))
-    series = mocap.client.recent(MOVE_WINDOW_S)
-    moc, wander = window_mean(mocap.mapping.position_to_ned(series.pos_m[series.tracked]))
-    return est, moc, wander
+    t_e = np.array([s.t_s for s in samples])
+    est = np.array([s.pos_ned_m for s in samples], dtype=float).reshape(-1, 3)
+    series = mocap.client.recent(time.monotonic() - float(t_e[0]) + 0.1)
+    t_m = np.asarray(series.t_receipt_s, dtype=float)[series.tracked]
+    moc = mocap.mapping.position_to_ned(series.pos_m[series.tracked]).reshape(-1, 3)
+    return t_e, est, t_m, moc, np.array([t_e[0], t_e[-1]])

@@ -8,11 +8,13 @@ first seen (the room's origin under the vehicle at start, as a lab sets its grou
 origin once), and :class:`gcs.mock.mocap.server.NatNetServer` serves that as an OptiTrack rigid
 body: what a lab's Motive would stream while the vehicle flies.
 
-Between two 25 Hz states the position is carried forward with the state's velocity, so the
-mocap rate (120 Hz) sees a moving body rather than steps. The message carries latitude and
-longitude in 1e-7 degrees (about 1.1 cm north, 0.75 cm east at 47 degrees) and altitude in
-millimetres: the served pose has that resolution, coarser than a real mocap's sub-millimetre
-noise but far below the simulated vehicle's own wander (decimetres).
+Between two 25 Hz states the position is carried forward with the state's velocity (for at
+most 0.1 s), so the mocap rate (120 Hz) sees a moving body rather than steps; a state is
+served for up to 2 s (PX4 SITL's clock, and its vehicle, stop while the machine starves it).
+The message carries latitude and longitude in 1e-7 degrees (about 1.1 cm north, 0.75 cm
+east at 47 degrees) and altitude in millimetres: the served pose has that resolution, coarser
+than a real mocap's sub-millimetre noise but far below the simulated vehicle's own wander
+(decimetres).
 """
 
 from __future__ import annotations
@@ -84,10 +86,18 @@ class SihTruth:
     port : int
         UDP port to listen on (:func:`sih_display_port`).
     max_age_s : float
-        A state older than this is not served (the body counts as out of view) [s].
+        A state older than this is not served (the body counts as out of view) [s]. PX4 SITL's
+        clock stops while the machine starves it of CPU (0.5 s and more at a load average of
+        14-30 on 2 cores), and its simulated vehicle with it: the last state is then still
+        where the vehicle is, and a lab's Motive would go on streaming it. So the default
+        serves it for 2 s; a PX4 that has stopped for longer (or died) is out of view.
     """
 
-    def __init__(self, port: int, max_age_s: float = 0.5) -> None:
+    #: Longest time a state is carried forward with its velocity [s] (beyond, it is held:
+    #: PX4's own clock may have stopped, and its vehicle with it).
+    MAX_EXTRAPOLATION_S = 0.1
+
+    def __init__(self, port: int, max_age_s: float = 2.0) -> None:
         self.port = port
         self.max_age_s = max_age_s
         self.received = 0
@@ -216,4 +226,5 @@ class SihTruth:
         age_s = time.monotonic() - state.t_receipt_s
         if age_s > self.max_age_s:
             return None
-        return state.pos_ned_m + state.vel_ned_m_s * age_s, state.quat_wxyz
+        ahead_s = min(age_s, self.MAX_EXTRAPOLATION_S)
+        return state.pos_ned_m + state.vel_ned_m_s * ahead_s, state.quat_wxyz
