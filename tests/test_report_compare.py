@@ -45,8 +45,8 @@ def test_two_runs_side_by_side_with_what_differed(runs, tmp_path: Path, monkeypa
     assert "profile differs" in out and "antx-adaptive" in out
     assert "learning differs: profile.learning.adaptive" in out  # the adaptive section
     assert "different trajectories" not in out  # the same tiny eight
-    e = {(name, j): trial_errors(run.read_trial(j))[0]
-         for name, run in (("p", paper), ("a", adaptive)) for j in run.complete_trials()}  # fmt: skip
+    pairs = (("p", paper), ("a", adaptive))
+    e = {(n, j): trial_errors(r.read_trial(j))[0] for n, r in pairs for j in r.complete_trials()}
     rows = list(csv.reader(line for line in (tmp_path / "c.csv").open() if line[0] != "#"))
     # both runs are named "run" by make_run: each is named by its path instead
     assert rows[0] == ["trial", str(paper.path), str(adaptive.path)]

@@ -32,6 +32,7 @@ __all__ = [
     "check_vehicle",
     "live_progress",
     "learning_lines",
+    "sized_up_lines",
     "mock_session_seed",
     "resume_command",
     "say",
@@ -243,7 +244,7 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
         )  # fmt: skip
         lines.append(
             f"  trial {v['trial']}: {v['ratio']:.2f}x the floor ({1e3 * floor['epos_m']:.1f} mm "
-            f"± {1e3 * floor['scatter_m']:.1f}), z {v['z']:.1f}: {word}"
+            f"± {1e3 * floor['scatter_m']:.1f}), {_scatters(v['z'])}: {word}"
         )
     for line in decision_lines(record):  # the report has them all; live, what changed
         if line.startswith(("model kept", "estimate")):
@@ -251,6 +252,12 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
         style = {"safeguard": "yellow", "model refreshed": "cyan"}.get(line.split(":")[0], "dim")
         lines.append(f"  [{style}]{escape(line)}[/]")
     return lines
+
+
+def _scatters(z: float) -> str:
+    """The z statistic in words: how many scatters of one trial above (below) the floor."""
+    side = "above" if z >= 0 else "below"
+    return f"{abs(z):.1f} scatters {side} it (z = (e_pos - floor) / scatter = {z:.1f})"
 
 
 def check_vehicle(
@@ -401,6 +408,8 @@ def fly_with_display(
         )
         if plan.mocap is not None:
             console.print(f"checked: {plan.mocap.describe()}")
+        for line in sized_up_lines(plan, iterations):
+            console.print(escape(line), highlight=False)
         if not offline:
             check_vehicle(console, plan, connect, use_mock, mock_config, seed)
         return None
@@ -508,13 +517,25 @@ def fly_with_display(
             highlight=False,
             soft_wrap=True,
         )
-    from gcs.app.report import is_three_d, run_facts, run_learning, run_metrics, trial_clock_rates
+    from gcs.app.report import (
+        is_three_d,
+        run_facts,
+        run_learning,
+        run_metrics,
+        run_verdict,
+        trial_clock_rates,
+    )
+    from gcs.app.report_text import shows_step, table_legend
 
     title = run_facts(run).title()
     learning = run_learning(run)
     rates = trial_clock_rates(run)
     rows = run_metrics(run)
-    console.print(metrics_table(rows, title, rates, learning, console.width, is_three_d(run)))
+    three_d = is_three_d(run)
+    console.print(metrics_table(rows, title, rates, learning, console.width, three_d))
+    shown = shows_step(rows, rates, learning, console.width, three_d)
+    for line in table_legend(learning, shown) + run_verdict(rows, learning).lines():
+        console.print(escape(line), highlight=False)
     return run
 
 
@@ -532,3 +553,51 @@ def say(console: Console) -> Callable[[str], None]:
         Takes one line of text.
     """
     return lambda text: console.print(f"[dim]{escape(text)}[/]")
+
+
+def sized_up_lines(plan: FlyPlan, iterations: int) -> list[str]:
+    """What the flight asks of the vehicle, before it flies: the trial's duration, its peak
+    speed and acceleration against the profile's limits, the box it sweeps and its closest
+    distance to the arena's walls.
+
+    Parameters
+    ----------
+    plan : FlyPlan
+        The checked flight.
+    iterations : int
+        Trials to fly.
+
+    Returns
+    -------
+    list of str
+    """
+    import numpy as np
+
+    ref, prof = plan.reference, plan.profile
+    pos, vel, acc = ref.pos_ned_m, ref.vel_ned_m_s, ref.acc_ned_m_s2
+    duration = float(ref.t_s[-1] - ref.t_s[0])
+    speed_h = float(np.max(np.hypot(vel[:, 0], vel[:, 1])))
+    accel_h = float(np.max(np.hypot(acc[:, 0], acc[:, 1])))
+    speed_v, accel_v = float(np.max(np.abs(vel[:, 2]))), float(np.max(np.abs(acc[:, 2])))
+    lo, hi = pos.min(axis=0), pos.max(axis=0)
+    bounds = np.asarray(prof.arena.bounds(), dtype=float)  # (3, 2): low, high per axis
+    gaps = np.concatenate([pos - bounds[:, 0], bounds[:, 1] - pos], axis=1)
+    wall = ("the north minimum", "the east minimum", "the ceiling", "the north maximum",
+            "the east maximum", "the floor")  # fmt: skip
+    k, w = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
+    most = prof.learning.max_deviation_m
+    deviation = "learned setpoints stay inside the arena" + (
+        "" if most is None else f", at most {most:g} m from the reference"
+    )
+    return [
+        f"sized up: each trial flies {duration:.1f} s ({iterations} trials: "
+        f"{iterations * duration / 60:.1f} min of trajectory, plus take-off, hover and landing)",
+        f"sized up: peak speed {speed_h:.2f} m/s of {prof.max_speed_m_s:g} "
+        f"({100 * speed_h / prof.max_speed_m_s:.0f} %), acceleration {accel_h:.2f} m/s² of "
+        f"{prof.max_accel_m_s2:g} ({100 * accel_h / prof.max_accel_m_s2:.0f} %); vertical "
+        f"{speed_v:.2f} m/s of {prof.max_vertical_speed_m_s:g}, {accel_v:.2f} m/s² of "
+        f"{prof.max_vertical_accel_m_s2:g}",
+        f"sized up: the reference sweeps north {lo[0]:.2f}..{hi[0]:.2f}, east "
+        f"{lo[1]:.2f}..{hi[1]:.2f}, down {lo[2]:.2f}..{hi[2]:.2f} m; closest to the arena's "
+        f"walls {gaps[k, w]:.2f} m ({wall[w]}, at {ref.t_s[k]:.1f} s); {deviation}",
+    ]
