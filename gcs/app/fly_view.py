@@ -33,6 +33,8 @@ __all__ = [
     "live_progress",
     "learning_lines",
     "sized_up_lines",
+    "SegmentError",
+    "SEGMENT_S",
     "mock_session_seed",
     "resume_command",
     "say",
@@ -140,6 +142,68 @@ def resume_command(
     return shlex.join(args)
 
 
+#: Length of the trial segments the live error lines summarise [s of trial time].
+SEGMENT_S = 5.0
+
+
+class SegmentError:
+    """The live error of a trial, summarised per segment of ``segment_s`` of trial time.
+
+    Fed every :class:`TrialProgress` of a trial (about 10 per second), it returns a line
+    each time a segment is complete: the mean and largest horizontal distance between the
+    measured position and the setpoint in force over the segment. That distance includes
+    the closed loop's lag behind its setpoint, and on a learned trial the setpoints lead the
+    reference on purpose, so it is a live health indicator, not e_pos (which the trial's row
+    gives at its end).
+
+    Parameters
+    ----------
+    trial : int
+        The trial.
+    n_setpoints : int
+        Its setpoints N.
+    duration_s : float
+        Its length [s].
+    segment_s : float
+        Segment length [s].
+    """
+
+    def __init__(
+        self, trial: int, n_setpoints: int, duration_s: float, segment_s: float = SEGMENT_S
+    ) -> None:
+        self.trial, self.n = trial, n_setpoints
+        self.dt_s = duration_s / max(n_setpoints, 1)
+        self.every = max(1, round(segment_s / self.dt_s))
+        self.start_k, self.errors = 0, []
+
+    def add(self, k: int, err_m: float) -> str | None:
+        """Take one progress report; the segment's line when it is complete, else None.
+
+        Parameters
+        ----------
+        k : int
+            Setpoint index (N once the final hover has begun).
+        err_m : float
+            Live distance to the setpoint in force [m].
+
+        Returns
+        -------
+        str or None
+        """
+        if k < self.start_k or self.start_k >= self.n:  # the final hover reports k = N again
+            return None
+        self.errors.append(float(err_m))
+        if k < min(self.start_k + self.every, self.n):
+            return None
+        errors, t0, t1 = self.errors, self.start_k * self.dt_s, min(k, self.n) * self.dt_s
+        self.start_k, self.errors = k, []
+        return (
+            f"trial {self.trial} {t0:.1f}-{t1:.1f} s: distance to the setpoint in force mean "
+            f"{sum(errors) / len(errors):.3f} m, largest {max(errors):.3f} m "
+            f"({len(errors)} reports; lag included, not e_pos)"
+        )
+
+
 def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]:
     """A rich progress bar for a campaign and the event callback that drives it.
 
@@ -148,7 +212,8 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
     printed with its vehicle-time rate, and an incomplete trial in red. Use the progress as a
     context manager around the flight. When the console is not a terminal (a pipe, a file, a
     batch job) the bar is invisible: each trial's progress is then a plain line now and then
-    (:func:`gcs.app.progress.progress_lines`).
+    (:func:`gcs.app.progress.progress_lines`). On both, every :data:`SEGMENT_S` of a trial a
+    line gives the live error of that segment (:class:`SegmentError`).
 
     Parameters
     ----------
@@ -172,6 +237,7 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
     )
     task = progress.add_task("waiting", total=1, err="")
     plain: list[Callable[[int, int], None] | None] = [None]
+    segment: list[SegmentError | None] = [None]
 
     def on_event(event: object) -> None:
         if isinstance(event, Status) and event.warning:
@@ -189,6 +255,7 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
                 total=event.n_setpoints,
                 completed=0,
             )
+            segment[0] = SegmentError(event.trial, event.n_setpoints, event.duration_s)
             if not console.is_terminal:
                 plain[0] = progress_lines(
                     lambda line: console.print(line, markup=False, highlight=False),
@@ -199,6 +266,9 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
             progress.update(task, completed=event.k, err=f"error {event.err_m:.3f} m")
             if plain[0] is not None:
                 plain[0](event.k, event.n)
+            line = segment[0].add(event.k, event.err_m) if segment[0] is not None else None
+            if line is not None:
+                progress.console.print(f"[dim]{escape(line)}[/]", highlight=False)
         elif isinstance(event, TrialFinished) and not event.recording.complete:
             progress.console.print(f"[red]trial {event.trial} incomplete[/]")
         elif isinstance(event, TrialFinished):
