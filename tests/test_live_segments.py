@@ -25,7 +25,7 @@ def test_a_line_per_segment_with_its_mean_and_largest_error() -> None:
         taken = [k for k in ks if (k0 < k <= k1) or (k0 == 0 and k == 0)]
         mean, top = np.mean(err[taken]), np.max(err[taken])
         assert line.startswith(f"trial 4 {k0 * dt:.1f}-{k1 * dt:.1f} s: ")
-        assert f"mean {mean:.3f} m, largest {top:.3f} m ({len(taken)} reports" in line
+        assert f"mean {mean:.3f} m, largest {top:.3f} m from the setpoint in force" in line
 
 
 def test_the_live_view_prints_the_segments_while_the_trial_flies() -> None:
@@ -38,7 +38,7 @@ def test_the_live_view_prints_the_segments_while_the_trial_flies() -> None:
         for k in range(0, n + 1, 5):
             on_event(TrialProgress(2, k, n, 0.01 * (1 + k // 100)))
     text = out.getvalue()
-    segments = [line for line in text.splitlines() if "distance to the setpoint in force" in line]
+    segments = [line for line in text.splitlines() if "from the setpoint in force" in line]
     assert len(segments) == int(np.ceil(n * dt / SEGMENT_S)) == 3
     assert segments[0].startswith("trial 2 0.0-5.0 s:") and "largest 0.020 m" in segments[0]
     assert segments[-1].startswith("trial 2 10.0-12.0 s:")

@@ -198,9 +198,8 @@ class SegmentError:
         errors, t0, t1 = self.errors, self.start_k * self.dt_s, min(k, self.n) * self.dt_s
         self.start_k, self.errors = k, []
         return (
-            f"trial {self.trial} {t0:.1f}-{t1:.1f} s: distance to the setpoint in force mean "
-            f"{sum(errors) / len(errors):.3f} m, largest {max(errors):.3f} m "
-            f"({len(errors)} reports; lag included, not e_pos)"
+            f"trial {self.trial} {t0:.1f}-{t1:.1f} s: mean {sum(errors) / len(errors):.3f} m, "
+            f"largest {max(errors):.3f} m from the setpoint in force (lag included)"
         )
 
 
