@@ -517,6 +517,7 @@ def report(
         list[Path],
         typer.Argument(
             help="Run directory, e.g. logs/latest; two or more compare the runs side by side.",
+            metavar="RUN_DIR",
             show_default=False,
         ),
     ],
@@ -582,7 +583,8 @@ def report(
     """Show the learning table of a run and its verdict, or compare several runs.
 
     Example: gcs report logs/latest --plot plots/
-             gcs report logs/run-a logs/run-b --plot compare/
+
+    Compare: gcs report logs/run-a logs/run-b --plot compare/
     """
     from gcs.app.report_view import show_report
 
