@@ -513,7 +513,14 @@ logs/latest --json
 @app.command(epilog=REPORT_DETAILS)
 @one_line_errors
 def report(
-    run_dir: RunArgument,
+    run_dirs: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Run directory, e.g. logs/latest; two or more compare the runs side by side.",
+            metavar="RUN_DIR",
+            show_default=False,
+        ),
+    ],
     as_json: Annotated[
         bool,
         typer.Option(
@@ -526,8 +533,8 @@ def report(
     plot: Annotated[
         Path | None,
         typer.Option(
-            help="Write the figures here as PNG (created if missing): xy, position, setpoints, "
-            "error, epos, disturbance.",
+            help="Write the figures here (created if missing): xy, position, setpoints, "
+            "error, epos, disturbance; compared runs: compare-epos.",
             rich_help_panel=OUTPUT,
         ),
     ] = None,
@@ -547,14 +554,44 @@ def report(
             rich_help_panel=OUTPUT,
         ),
     ] = None,
+    figure_format: Annotated[
+        str,
+        typer.Option(
+            "--format",
+            help="Format of the --plot figures: png, svg or pdf.",
+            rich_help_panel=OUTPUT,
+        ),
+    ] = "png",
+    csv: Annotated[
+        Path | None,
+        typer.Option(
+            help="Write the table as CSV here (one line per trial, SI units); compared runs: "
+            "e_pos per trial and run.",
+            rich_help_panel=OUTPUT,
+        ),
+    ] = None,
+    export_setpoints: Annotated[
+        Path | None,
+        typer.Option(
+            "--export-setpoints",
+            help="Write the best learned trial's setpoints here as a samples CSV "
+            "(docs/trajectories.md): gcs fly --trajectory FILE flies them again.",
+            rich_help_panel=OUTPUT,
+        ),
+    ] = None,
 ) -> None:
-    """Show the learning table of a run: one row per complete trial, then what is missing.
+    """Show the learning table of a run and its verdict, or compare several runs.
 
     Example: gcs report logs/latest --plot plots/
+
+    Compare: gcs report logs/run-a logs/run-b --plot compare/
     """
     from gcs.app.report_view import show_report
 
-    show_report(console, err_console, run_dir, as_json, plot, html, iterations)
+    show_report(
+        console, err_console, run_dirs, as_json, plot, html, iterations, csv, figure_format,
+        export_setpoints,
+    )  # fmt: skip
 
 
 def run() -> None:  # pragma: no cover - console-script entry point alias

@@ -1323,6 +1323,94 @@ def _output_cases() -> Iterator[Case]:
         lambda ws: report(ws, "--iterations", "-1"),
         "--iterations",
     )
+    k = "output path: report exports"
+    yield Case(
+        k,
+        "report",
+        "--csv in a read-only directory",
+        lambda ws: report(ws, "--csv", str(ws.read_only(ws.file("ro/x", "").parent) / "t.csv")),
+        "not writable",
+    )
+    yield Case(
+        k,
+        "report",
+        "--csv is a directory",
+        lambda ws: report(ws, "--csv", str(ws.path)),
+        "is a directory",
+    )
+    yield Case(
+        k,
+        "report",
+        "--csv not a .csv",
+        lambda ws: report(ws, "--csv", str(ws.path / "table.txt")),
+        "must end in .csv",
+    )
+    yield Case(
+        k,
+        "report",
+        "--export-setpoints in a read-only directory",
+        lambda ws: report(
+            ws, "--export-setpoints", str(ws.read_only(ws.file("ro/x", "").parent) / "s.csv")
+        ),
+        "not writable",
+    )
+    yield Case(
+        k,
+        "report",
+        "--export-setpoints not a .csv",
+        lambda ws: report(ws, "--export-setpoints", str(ws.path / "s.yaml")),
+        "must end in .csv",
+    )
+    yield Case(
+        k,
+        "report",
+        "--export-setpoints of an identification run",
+        lambda ws: ["report", str(ws.run("ident")), "--export-setpoints", str(ws.path / "s.csv")],
+        "identification run",
+    )
+    yield Case(
+        k,
+        "report",
+        "--format not a figure format",
+        lambda ws: report(ws, "--plot", str(ws.path / "p"), "--format", "jpeg"),
+        "--format jpeg",
+    )
+    k = "options: report of several runs"
+
+    def second(ws: Workspace) -> str:
+        """A second copy of the learning run, beside the first."""
+        target = ws.path / "second" / "run"
+        shutil.copytree(ws.templates.get("learning"), target, symlinks=True)
+        return str(target)
+
+    yield Case(
+        k,
+        "report",
+        "--html with two runs",
+        lambda ws: [*report(ws), second(ws), "--html", str(ws.path / "r.html")],
+        "--html: reports one run",
+    )
+    yield Case(
+        k,
+        "report",
+        "--export-setpoints with two runs",
+        lambda ws: [*report(ws), second(ws), "--export-setpoints", str(ws.path / "s.csv")],
+        "--export-setpoints: reports one run",
+    )
+    yield Case(
+        k,
+        "report",
+        "compared with an identification run",
+        lambda ws: [*report(ws), str(ws.run("ident"))],
+        "only learning runs are compared",
+    )
+    yield Case(
+        k,
+        "report",
+        "compared with a missing run",
+        lambda ws: [*report(ws), str(ws.path / "no-such-run")],
+        "no-such-run",
+    )
     k = "output path: montecarlo"
     mc = ["montecarlo", "--plants", "2", "--repeats", "1", "--levels", "0.05"]
     yield Case(

@@ -50,6 +50,11 @@ def test_a_flight_off_a_terminal_says_each_trials_progress_in_plain_lines() -> N
         for k in range(1, 5):
             on_event(TrialProgress(trial=2, k=k, n=4, err_m=0.1))
     lines = [line for line in out.getvalue().splitlines() if line.strip()]
+    # the live error of the trial's one segment (tests/test_live_segments.py), then progress
+    assert [ln for ln in lines if "from the setpoint in force" in ln] == [
+        "trial 2 0.0-0.2 s: mean 0.100 m, largest 0.100 m from the setpoint in force (lag included)"
+    ]
+    lines = [ln for ln in lines if "from the setpoint in force" not in ln]
     assert lines[0].startswith("trial 2 started: 4 setpoints")
     # the first sample at once, the last at the end; nothing in between within 10 s
     assert [line.split(",")[0] for line in lines[1:]] == [

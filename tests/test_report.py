@@ -51,7 +51,7 @@ def test_missing_and_incomplete_trials_are_listed_not_dropped(tmp_path: Path) ->
     e0 = trial_errors(run.read_trial(0))[0]
     e2 = trial_errors(run.read_trial(2))[0]
     assert rows[2]["epos_pct"] == pytest.approx(100 * e2 / e0)
-    assert rows[2]["delta_pct"] is None
+    assert rows[2]["change_pct"] is None and "delta_pct" not in rows[2]
 
 
 @pytest.mark.parametrize(
@@ -235,7 +235,7 @@ def test_a_run_with_a_repeat_reports_trial_and_j_the_floor_verdicts_and_decision
     assert rows[0]["sp_rms_m"] == rows[1]["sp_rms_m"] == 0.0 and rows[2]["sp_rms_m"] > 0.5
     out = invoke("report", run.path).output
     for text in ("trial", "e/floor", "verdict", "learning step", "sp RMS [m]",
-                 "0 (repeat)", "next: repeat of 0", f"e_pos {1e3 * floor:.1f} mm",
+                 "0 (repeat)", "repeat of 0 next", f"e_pos {1e3 * floor:.1f} mm",
                  "after trial 2: model refreshed: north moved"):  # fmt: skip
         assert text in out, text
     moved = run.read_learn_record(2)["decision"]["axes"][0]["refresh"]["moved"]
@@ -314,7 +314,7 @@ def test_json_is_a_documented_document_with_the_run_and_rounded_numbers(tmp_path
                 make_adaptive_run(tmp_path / "b", trials=4, gust_m=0.01)):  # fmt: skip
         doc = json.loads(invoke("report", run.path, "--json").output)
         _validate(doc, schema)
-        assert (doc["format"], doc["version"]) == ("gcs-report", 2)
+        assert (doc["format"], doc["version"]) == ("gcs-report", 3)
         assert doc["run"]["run_id"] == "run" and doc["run"]["profile"] == run.profile().name
         for value in _floats(doc):
             assert len(repr(value).lstrip("-").replace(".", "").lstrip("0")) <= 13, value

@@ -23,7 +23,9 @@ def test_continue_while_trials_improve() -> None:
     d = safeguard(np.array([0.9, 0.1, 0.05]), history(3), 0.005, ARENA, SafeguardSettings())
     assert d.action == "continue" and d.anchor_trial == 2 and d.step == 1.0
     np.testing.assert_array_equal(d.anchor_ne_m, history(3)[2])
-    assert d.best_trial == 1
+    # the best so far is the newest; it was compared with the best earlier one
+    assert d.best_trial == 2 and d.best_epos_m == 0.05
+    assert d.compared_trial == 1 and d.compared_epos_m == 0.1
 
 
 def test_revert_to_the_best_trial_with_a_smaller_step() -> None:
@@ -34,6 +36,7 @@ def test_revert_to_the_best_trial_with_a_smaller_step() -> None:
     assert d.action == "revert" and d.anchor_trial == 2 and d.step == 0.4
     np.testing.assert_array_equal(d.anchor_ne_m, history(4)[2])
     assert "trial 2" in d.reason and d.as_dict()["action"] == "revert"
+    assert d.best_trial == d.compared_trial == 2
     # within the scatter: continue
     calm = safeguard(np.array([0.9, 0.03, 0.037]), history(3), 0.005, ARENA, s)
     assert calm.action == "continue"

@@ -38,14 +38,14 @@ def figure_png(fig: Any) -> bytes:
 
 
 def save_figure(fig: Any, path: Path) -> Path:
-    """Write a matplotlib figure as PNG atomically (temporary file + rename) and close it.
+    """Write a matplotlib figure (PNG, SVG, PDF) atomically (temporary file + rename), close it.
 
     Parameters
     ----------
     fig : matplotlib.figure.Figure
         The figure.
     path : Path
-        Destination (.png).
+        Destination; its extension is the format (.png, .svg, .pdf).
 
     Returns
     -------
@@ -53,7 +53,7 @@ def save_figure(fig: Any, path: Path) -> Path:
     """
     import matplotlib.pyplot as plt
 
-    tmp = path.with_name(f".{path.name}.tmp.png")
+    tmp = path.with_name(f".{path.name}.tmp{path.suffix or '.png'}")
     fig.tight_layout()
     fig.savefig(tmp, dpi=DPI)
     plt.close(fig)

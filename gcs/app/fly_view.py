@@ -32,6 +32,9 @@ __all__ = [
     "check_vehicle",
     "live_progress",
     "learning_lines",
+    "sized_up_lines",
+    "SegmentError",
+    "SEGMENT_S",
     "mock_session_seed",
     "resume_command",
     "say",
@@ -139,6 +142,67 @@ def resume_command(
     return shlex.join(args)
 
 
+#: Length of the trial segments the live error lines summarise [s of trial time].
+SEGMENT_S = 5.0
+
+
+class SegmentError:
+    """The live error of a trial, summarised per segment of ``segment_s`` of trial time.
+
+    Fed every :class:`TrialProgress` of a trial (about 10 per second), it returns a line
+    each time a segment is complete: the mean and largest horizontal distance between the
+    measured position and the setpoint in force over the segment. That distance includes
+    the closed loop's lag behind its setpoint, and on a learned trial the setpoints lead the
+    reference on purpose, so it is a live health indicator, not e_pos (which the trial's row
+    gives at its end).
+
+    Parameters
+    ----------
+    trial : int
+        The trial.
+    n_setpoints : int
+        Its setpoints N.
+    duration_s : float
+        Its length [s].
+    segment_s : float
+        Segment length [s].
+    """
+
+    def __init__(
+        self, trial: int, n_setpoints: int, duration_s: float, segment_s: float = SEGMENT_S
+    ) -> None:
+        self.trial, self.n = trial, n_setpoints
+        self.dt_s = duration_s / max(n_setpoints, 1)
+        self.every = max(1, round(segment_s / self.dt_s))
+        self.start_k, self.errors = 0, []
+
+    def add(self, k: int, err_m: float) -> str | None:
+        """Take one progress report; the segment's line when it is complete, else None.
+
+        Parameters
+        ----------
+        k : int
+            Setpoint index (N once the final hover has begun).
+        err_m : float
+            Live distance to the setpoint in force [m].
+
+        Returns
+        -------
+        str or None
+        """
+        if k < self.start_k or self.start_k >= self.n:  # the final hover reports k = N again
+            return None
+        self.errors.append(float(err_m))
+        if k < min(self.start_k + self.every, self.n):
+            return None
+        errors, t0, t1 = self.errors, self.start_k * self.dt_s, min(k, self.n) * self.dt_s
+        self.start_k, self.errors = k, []
+        return (
+            f"trial {self.trial} {t0:.1f}-{t1:.1f} s: mean {sum(errors) / len(errors):.3f} m, "
+            f"largest {max(errors):.3f} m from the setpoint in force (lag included)"
+        )
+
+
 def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]:
     """A rich progress bar for a campaign and the event callback that drives it.
 
@@ -147,7 +211,8 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
     printed with its vehicle-time rate, and an incomplete trial in red. Use the progress as a
     context manager around the flight. When the console is not a terminal (a pipe, a file, a
     batch job) the bar is invisible: each trial's progress is then a plain line now and then
-    (:func:`gcs.app.progress.progress_lines`).
+    (:func:`gcs.app.progress.progress_lines`). On both, every :data:`SEGMENT_S` of a trial a
+    line gives the live error of that segment (:class:`SegmentError`).
 
     Parameters
     ----------
@@ -171,6 +236,7 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
     )
     task = progress.add_task("waiting", total=1, err="")
     plain: list[Callable[[int, int], None] | None] = [None]
+    segment: list[SegmentError | None] = [None]
 
     def on_event(event: object) -> None:
         if isinstance(event, Status) and event.warning:
@@ -188,6 +254,7 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
                 total=event.n_setpoints,
                 completed=0,
             )
+            segment[0] = SegmentError(event.trial, event.n_setpoints, event.duration_s)
             if not console.is_terminal:
                 plain[0] = progress_lines(
                     lambda line: console.print(line, markup=False, highlight=False),
@@ -198,6 +265,9 @@ def live_progress(console: Console) -> tuple[Progress, Callable[[object], None]]
             progress.update(task, completed=event.k, err=f"error {event.err_m:.3f} m")
             if plain[0] is not None:
                 plain[0](event.k, event.n)
+            line = segment[0].add(event.k, event.err_m) if segment[0] is not None else None
+            if line is not None:
+                progress.console.print(f"[dim]{escape(line)}[/]", highlight=False)
         elif isinstance(event, TrialFinished) and not event.recording.complete:
             progress.console.print(f"[red]trial {event.trial} incomplete[/]")
         elif isinstance(event, TrialFinished):
@@ -243,7 +313,7 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
         )  # fmt: skip
         lines.append(
             f"  trial {v['trial']}: {v['ratio']:.2f}x the floor ({1e3 * floor['epos_m']:.1f} mm "
-            f"± {1e3 * floor['scatter_m']:.1f}), z {v['z']:.1f}: {word}"
+            f"± {1e3 * floor['scatter_m']:.1f}), {_scatters(v['z'])}: {word}"
         )
     for line in decision_lines(record):  # the report has them all; live, what changed
         if line.startswith(("model kept", "estimate")):
@@ -251,6 +321,12 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
         style = {"safeguard": "yellow", "model refreshed": "cyan"}.get(line.split(":")[0], "dim")
         lines.append(f"  [{style}]{escape(line)}[/]")
     return lines
+
+
+def _scatters(z: float) -> str:
+    """The z statistic in words: how many scatters of one trial above (below) the floor."""
+    side = "above" if z >= 0 else "below"
+    return f"{abs(z):.1f} scatters {side} it (z = (e_pos - floor) / scatter = {z:.1f})"
 
 
 def check_vehicle(
@@ -401,6 +477,8 @@ def fly_with_display(
         )
         if plan.mocap is not None:
             console.print(f"checked: {plan.mocap.describe()}")
+        for line in sized_up_lines(plan, iterations):
+            console.print(escape(line), highlight=False)
         if not offline:
             check_vehicle(console, plan, connect, use_mock, mock_config, seed)
         return None
@@ -508,13 +586,25 @@ def fly_with_display(
             highlight=False,
             soft_wrap=True,
         )
-    from gcs.app.report import is_three_d, run_facts, run_learning, run_metrics, trial_clock_rates
+    from gcs.app.report import (
+        is_three_d,
+        run_facts,
+        run_learning,
+        run_metrics,
+        run_verdict,
+        trial_clock_rates,
+    )
+    from gcs.app.report_text import shows_step, table_legend
 
     title = run_facts(run).title()
     learning = run_learning(run)
     rates = trial_clock_rates(run)
     rows = run_metrics(run)
-    console.print(metrics_table(rows, title, rates, learning, console.width, is_three_d(run)))
+    three_d = is_three_d(run)
+    console.print(metrics_table(rows, title, rates, learning, console.width, three_d))
+    shown = shows_step(rows, rates, learning, console.width, three_d)
+    for line in table_legend(learning, shown) + run_verdict(rows, learning).lines():
+        console.print(escape(line), highlight=False)
     return run
 
 
@@ -532,3 +622,51 @@ def say(console: Console) -> Callable[[str], None]:
         Takes one line of text.
     """
     return lambda text: console.print(f"[dim]{escape(text)}[/]")
+
+
+def sized_up_lines(plan: FlyPlan, iterations: int) -> list[str]:
+    """What the flight asks of the vehicle, before it flies: the trial's duration, its peak
+    speed and acceleration against the profile's limits, the box it sweeps and its closest
+    distance to the arena's walls.
+
+    Parameters
+    ----------
+    plan : FlyPlan
+        The checked flight.
+    iterations : int
+        Trials to fly.
+
+    Returns
+    -------
+    list of str
+    """
+    import numpy as np
+
+    ref, prof = plan.reference, plan.profile
+    pos, vel, acc = ref.pos_ned_m, ref.vel_ned_m_s, ref.acc_ned_m_s2
+    duration = float(ref.t_s[-1] - ref.t_s[0])
+    speed_h = float(np.max(np.hypot(vel[:, 0], vel[:, 1])))
+    accel_h = float(np.max(np.hypot(acc[:, 0], acc[:, 1])))
+    speed_v, accel_v = float(np.max(np.abs(vel[:, 2]))), float(np.max(np.abs(acc[:, 2])))
+    lo, hi = pos.min(axis=0), pos.max(axis=0)
+    bounds = np.asarray(prof.arena.bounds(), dtype=float)  # (3, 2): low, high per axis
+    gaps = np.concatenate([pos - bounds[:, 0], bounds[:, 1] - pos], axis=1)
+    wall = ("the north minimum", "the east minimum", "the ceiling", "the north maximum",
+            "the east maximum", "the floor")  # fmt: skip
+    k, w = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
+    most = prof.learning.max_deviation_m
+    deviation = "learned setpoints stay inside the arena" + (
+        "" if most is None else f", at most {most:g} m from the reference"
+    )
+    return [
+        f"sized up: each trial flies {duration:.1f} s ({iterations} trials: "
+        f"{iterations * duration / 60:.1f} min of trajectory, plus take-off, hover and landing)",
+        f"sized up: peak speed {speed_h:.2f} m/s of {prof.max_speed_m_s:g} "
+        f"({100 * speed_h / prof.max_speed_m_s:.0f} %), acceleration {accel_h:.2f} m/s² of "
+        f"{prof.max_accel_m_s2:g} ({100 * accel_h / prof.max_accel_m_s2:.0f} %); vertical "
+        f"{speed_v:.2f} m/s of {prof.max_vertical_speed_m_s:g}, {accel_v:.2f} m/s² of "
+        f"{prof.max_vertical_accel_m_s2:g}",
+        f"sized up: the reference sweeps north {lo[0]:.2f}..{hi[0]:.2f}, east "
+        f"{lo[1]:.2f}..{hi[1]:.2f}, down {lo[2]:.2f}..{hi[2]:.2f} m; closest to the arena's "
+        f"walls {gaps[k, w]:.2f} m ({wall[w]}, at {ref.t_s[k]:.1f} s); {deviation}",
+    ]

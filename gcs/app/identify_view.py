@@ -14,6 +14,7 @@ from rich.table import Table
 
 from gcs.app.identify import (
     AxisResult,
+    Experiments,
     create_identification_run,
     fly_identification,
     identified_profile_text,
@@ -23,13 +24,15 @@ from gcs.app.identify import (
     write_identification_plots,
     write_identified_profile,
 )
+from gcs.core.trajectory import Box
 from gcs.errors import PathError, RunLogError
 from gcs.io.atomic import write_once
 from gcs.io.config import Profile, load_profile
 from gcs.io.paths import check_new_dir, check_output_dir, check_output_file
 from gcs.io.rundir import RunDir
+from gcs.io.settings import IdentifySettings
 
-__all__ = ["results_table", "model_lines", "identify_with_display"]
+__all__ = ["results_table", "model_lines", "identify_with_display", "excitation_lines"]
 
 OUT_NAME = "identified.yaml"
 
@@ -233,6 +236,8 @@ def identify_with_display(
             )
             if mocap_plan is not None:
                 console.print(f"checked: {mocap_plan.describe()}")
+            for line in excitation_lines(experiments, settings, profile.t_ilc_s, profile.arena):
+                console.print(line, highlight=False)
             return None
         run_root, run_id = (logs, None) if run_path is None else (run_path.parent, run_path.name)
         run = create_identification_run(run_root, profile, settings, experiments, run_id)
@@ -297,3 +302,42 @@ def _check_target(out: Path | None, run_path: Path | None) -> None:
         RunDir.open(run_path).check_writable()
         return
     check_output_file(out, "--out")
+
+
+def excitation_lines(
+    experiments: Experiments, settings: IdentifySettings, t_ilc_s: float, arena: Box
+) -> list[str]:
+    """What identification asks of the vehicle, before it flies: the excitation's amplitude
+    per axis, the box both experiments sweep and its closest distance to the arena's walls,
+    and how long it flies.
+
+    Parameters
+    ----------
+    experiments : Experiments
+        From :func:`gcs.app.identify.plan_experiments`.
+    settings : IdentifySettings
+        The profile's identification settings.
+    t_ilc_s : float
+        Sample time [s].
+    arena : Box
+        The arena.
+
+    Returns
+    -------
+    list of str
+    """
+    sp = np.vstack(experiments.setpoints_ned_m)
+    lo, hi = sp.min(axis=0), sp.max(axis=0)
+    bounds = arena.bounds()
+    gap = float(min(np.min(lo - bounds[:, 0]), np.min(bounds[:, 1] - hi)))
+    n = settings.n_samples(t_ilc_s)
+    amplitudes = ", ".join(f"{settings.amplitude_for(a):g} m on {a}" for a in experiments.axes)
+    return [
+        f"sized up: {settings.excitation} of {amplitudes} about the hover point "
+        f"{np.round(experiments.center_ned_m, 2).tolist()}",
+        f"sized up: the setpoints sweep north {lo[0]:.2f}..{hi[0]:.2f}, east {lo[1]:.2f}.."
+        f"{hi[1]:.2f}, down {lo[2]:.2f}..{hi[2]:.2f} m; closest to the arena's walls "
+        f"{gap:.2f} m",
+        f"sized up: two experiments of {n * t_ilc_s:.1f} s each ({2 * n * t_ilc_s / 60:.1f} min "
+        "of excitation, plus take-off, settling between them and landing)",
+    ]

@@ -57,10 +57,13 @@ __all__ = [
     "parse_iterations",
     "choose_iterations",
     "complete_records",
+    "Verdict",
+    "run_verdict",
+    "VERDICT_FIT_TRIALS",
 ]
 
 #: The ``format`` and ``version`` fields of ``gcs report --json`` (docs/report.md).
-REPORT_FORMAT, REPORT_VERSION = "gcs-report", 2
+REPORT_FORMAT, REPORT_VERSION = "gcs-report", 3
 
 #: Significant digits of every number in the JSON document.
 JSON_DIGITS = 9
@@ -439,8 +442,8 @@ def trial_clock_rates(run: RunDir) -> dict[int, float | None]:
 
 #: The metric keys of a JSON row (null for a trial that is not complete).
 METRIC_KEYS = (
-    "epos_m", "epos_pct", "delta_pct", "change_pct", "max_err_m", "epos_3d_m", "rms_north_m",
-    "rms_east_m", "rms_down_m",
+    "epos_m", "epos_pct", "change_pct", "max_err_m", "epos_3d_m", "rms_north_m", "rms_east_m",
+    "rms_down_m",
 )  # fmt: skip
 
 
@@ -450,9 +453,11 @@ def metrics_json(
     entries: list[TrialEntry] | None = None,
     learning: RunLearning | None = None,
 ) -> list[dict]:
-    """One JSON object per trial: iteration, status, epos_m, epos_pct, delta_pct, change_pct,
-    max_err_m, epos_3d_m, rms_north_m, rms_east_m, rms_down_m (every key is defined in
-    docs/report.md).
+    """One JSON object per trial: iteration, status, epos_m, epos_pct, change_pct, max_err_m,
+    epos_3d_m, rms_north_m, rms_east_m, rms_down_m (every key is defined in docs/report.md).
+
+    Table IV's unsigned change (``IterationMetrics.delta_pct``) is not a key: ``change_pct``
+    carries the same number with its sign (version 3 of the document).
 
     Parameters
     ----------
@@ -478,8 +483,8 @@ def metrics_json(
     """
     changes = change_pct(rows)
     by_trial = {
-        r.iteration: {**asdict(r), "change_pct": changes[r.iteration], "status": "complete",
-                      "reason": None}
+        r.iteration: {**_without_delta(asdict(r)), "change_pct": changes[r.iteration],
+                      "status": "complete", "reason": None}
         for r in rows
     }  # fmt: skip
     for e in entries or []:
@@ -494,6 +499,11 @@ def metrics_json(
     if learning is not None:
         out = [_learning_json(row, learning) for row in out]
     return out
+
+
+def _without_delta(row: dict) -> dict:
+    row.pop("delta_pct", None)
+    return row
 
 
 def _learning_json(row: dict, learning: RunLearning) -> dict:
@@ -641,14 +651,220 @@ def report_document(
     Returns
     -------
     dict
-        ``format`` ("gcs-report"), ``version`` (2), ``run`` (:class:`RunFacts` as an
-        object) and ``rows`` (:func:`metrics_json`), numbers rounded (:func:`rounded`).
+        ``format`` ("gcs-report"), ``version`` (3), ``run`` (:class:`RunFacts` as an
+        object), ``verdict`` (:class:`Verdict` as an object, null for an identification
+        run) and ``rows`` (:func:`metrics_json`), numbers rounded (:func:`rounded`).
     """
+    verdict = run_verdict(rows, learning) if run.kind == "learning" else None
     return rounded(
         {
             "format": REPORT_FORMAT,
             "version": REPORT_VERSION,
             "run": asdict(run_facts(run)),
+            "verdict": None if verdict is None else verdict.as_dict(),
             "rows": metrics_json(rows, rates, entries, learning),
         }
+    )
+
+
+#: Trials (newest first) the estimate of the flights left is fitted on.
+VERDICT_FIT_TRIALS = 4
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The run in plain words: what was learned, how far above the floor, converged or not,
+    and how many flights are likely left.
+
+    Parameters
+    ----------
+    flights : int
+        Complete trials.
+    first_epos_m : float
+        e_pos of trial 0 (the reference flown as setpoints) [m].
+    best_trial : int
+        The complete trial with the smallest e_pos.
+    best_epos_m : float
+        Its e_pos [m].
+    best_updates : int
+        Learning updates before it (the paper's iteration j).
+    change_pct : float
+        100 (best - first) / first [%]: negative is better.
+    last_trial : int
+        The newest complete trial.
+    last_epos_m : float
+        Its e_pos [m].
+    floor_m : float or None
+        The floor, when the run measured one (repeats of trial 0) [m].
+    floor_ratio : float or None
+        best e_pos / floor.
+    floor_z : float or None
+        The best trial's z = (e_pos - floor) / scatter.
+    floor_z_max : float
+        The z of the verdict "at floor" (``learning.adaptive.floor_z``).
+    converged_trial : int or None
+        The first trial with the verdict "converged".
+    flights_left : int or None
+        Likely flights until "converged" (0 when converged); None when it cannot be estimated.
+    flights_left_how : str
+        How ``flights_left`` was estimated, or why it cannot be.
+    """
+
+    flights: int
+    first_epos_m: float
+    best_trial: int
+    best_epos_m: float
+    best_updates: int
+    change_pct: float
+    last_trial: int
+    last_epos_m: float
+    floor_m: float | None
+    floor_ratio: float | None
+    floor_z: float | None
+    floor_z_max: float
+    converged_trial: int | None
+    flights_left: int | None
+    flights_left_how: str
+
+    def lines(self) -> list[str]:
+        """The verdict as a few lines of plain words (terminal and HTML).
+
+        Returns
+        -------
+        list of str
+        """
+        flights = f"{self.flights} flight" + ("s" if self.flights != 1 else "")
+        updates = f"{self.best_updates} learning update" + ("s" if self.best_updates != 1 else "")
+        out = [
+            f"verdict: e_pos {_mm(self.first_epos_m)} at trial 0 -> {_mm(self.best_epos_m)} at "
+            f"trial {self.best_trial} ({self.change_pct:+.1f} %, after {updates}); "
+            f"{flights} in all"
+        ]
+        if self.last_trial != self.best_trial:
+            out.append(
+                f"verdict: the newest trial {self.last_trial} flew {_mm(self.last_epos_m)}, "
+                f"not the best"
+            )
+        if self.floor_m is None:
+            out.append(
+                "verdict: floor not measured (no repeat of trial 0: the paper's profile); how "
+                "close learning came to what the vehicle can repeat is unknown"
+            )
+        else:
+            out.append(
+                f"verdict: best e_pos {self.floor_ratio:.2f}x the floor of {_mm(self.floor_m)}: "
+                f"{_mm(self.best_epos_m - self.floor_m)} or {self.floor_z:.1f} scatters of one "
+                f"trial above it (z; 'at floor' from z <= {self.floor_z_max:g})"
+            )
+        if self.converged_trial is not None:
+            out.append(
+                f"verdict: converged at trial {self.converged_trial}: more flights cannot show "
+                "an improvement over the floor"
+            )
+        else:
+            left = "" if self.flights_left is None else f"likely {self.flights_left} more; "
+            out.append(f"verdict: not converged; {left}{self.flights_left_how}")
+        return out
+
+    def as_dict(self) -> dict:
+        """JSON-ready dictionary: the fields, and ``text`` (:meth:`lines`).
+
+        Returns
+        -------
+        dict
+        """
+        return {**asdict(self), "text": self.lines()}
+
+
+def _mm(value_m: float) -> str:
+    return f"{1e3 * value_m:.1f} mm"
+
+
+def run_verdict(rows: list[IterationMetrics], learning: RunLearning | None) -> Verdict:
+    """The verdict of a run from its Table IV rows and what learning says.
+
+    The flights left are estimated only where there is a level to converge to (a floor):
+    the excess of e_pos over the floor, ``e_j - floor``, of the newest
+    :data:`VERDICT_FIT_TRIALS` learned trials (trial 0 counts, repeats do not) is fitted
+    with a geometric decay ``c r^j`` (least squares on its logarithm); the flights until
+    the excess falls below ``floor_z`` scatters (the verdict "at floor"), plus one to
+    confirm it ("converged": two trials at the floor). Without a floor, with fewer than two
+    such trials, or with an excess that did not fall, it is not estimated and the reason is
+    said instead.
+
+    Parameters
+    ----------
+    rows : list of IterationMetrics
+        From :func:`run_metrics` (``iteration``: the trial number).
+    learning : RunLearning or None
+        From :func:`run_learning` (None: an identification run has no learning).
+
+    Returns
+    -------
+    Verdict
+    """
+    epos = {r.iteration: r.epos_m for r in rows}
+    best = min(epos, key=lambda t: (epos[t], t))
+    last = max(epos)
+    repeats = learning.repeats if learning is not None else 0
+    floor = learning.floor if learning is not None else None
+    verdicts = learning.trials if learning is not None else {}
+    v_best = verdicts[best].verdict if best in verdicts else None
+    converged = [t for t, tl in verdicts.items() if tl.verdict and tl.verdict.converged]
+    left, how = None, ""
+    if converged:
+        left, how = 0, "converged"
+    elif floor is None:
+        how = "the flights left cannot be estimated without a floor to converge to"
+    else:
+        v_last = verdicts[last].verdict
+        z_max = learning.floor_z if learning is not None else 2.0
+        if v_last is not None and v_last.at_floor:
+            left, how = 1, "the newest trial is at the floor: one more there confirms it"
+        else:
+            left, how = _flights_left(epos, repeats, floor, z_max)
+    return Verdict(
+        flights=len(epos),
+        first_epos_m=epos[0],
+        best_trial=best,
+        best_epos_m=epos[best],
+        best_updates=iteration_of(best, repeats),
+        change_pct=100.0 * (epos[best] - epos[0]) / epos[0],
+        last_trial=last,
+        last_epos_m=epos[last],
+        floor_m=None if floor is None else floor.epos_m,
+        floor_ratio=None if v_best is None else v_best.ratio,
+        floor_z=None if v_best is None else v_best.z,
+        floor_z_max=learning.floor_z if learning is not None else 2.0,
+        converged_trial=converged[0] if converged else None,
+        flights_left=left,
+        flights_left_how=how,
+    )
+
+
+def _flights_left(
+    epos: dict[int, float], repeats: int, floor: Floor, z_max: float
+) -> tuple[int | None, str]:
+    """Flights until converged from the geometric decay of the excess (see run_verdict)."""
+    learned = [t for t in sorted(epos) if repeat_of(t, repeats) is None]
+    fit = learned[-VERDICT_FIT_TRIALS:]
+    excess = np.array([epos[t] - floor.epos_m for t in fit])
+    if len(fit) < 2:
+        return None, "the flights left need two learned trials to estimate"
+    if np.any(excess <= 0):
+        return None, "the flights left cannot be estimated: e_pos scatters about the floor"
+    x = np.array([iteration_of(t, repeats) for t in fit], dtype=float)
+    slope = float(np.polyfit(x, np.log(excess), 1)[0])
+    rate = float(np.exp(slope))
+    span = "trials " + ", ".join(map(str, fit))
+    if rate >= 0.95:
+        return None, (
+            f"the flights left cannot be estimated: e_pos - floor did not fall over {span} "
+            f"({100 * (rate - 1):+.0f} % per flight)"
+        )
+    target = z_max * float(np.hypot(floor.scatter_m, floor.floor_scatter_m))
+    n = max(0, math.ceil(math.log(max(target, 1e-12) / excess[-1]) / math.log(rate)))
+    return n + 1, (
+        f"estimated from e_pos - floor falling {100 * (1 - rate):.0f} % per flight over "
+        f"{span} (a geometric fit), until z <= {z_max:g}, plus one flight to confirm"
     )

@@ -397,8 +397,9 @@ def write_plots(
     out_dir: Path,
     iterations: list[int] | None = None,
     progress: Callable[[int, int], None] | None = None,
+    figure_format: str = "png",
 ) -> list[Path]:
-    """Write the report's figures as PNG files ``<name>.png`` (see :func:`report_figures`).
+    """Write the report's figures as files ``<name>.<format>`` (see :func:`report_figures`).
 
     Parameters
     ----------
@@ -410,6 +411,8 @@ def write_plots(
         Trials to draw (default: 0, 1, 2 and the last).
     progress : callable, optional
         Told ``(done, total)`` figures as they are drawn.
+    figure_format : str
+        ``png``, ``svg`` or ``pdf``.
 
     Returns
     -------
@@ -419,7 +422,7 @@ def write_plots(
     figures = report_figures(run, chosen, progress)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    return [save_figure(fig, out_dir / f"{name}.png") for name, fig in figures.items()]
+    return [save_figure(fig, out_dir / f"{name}.{figure_format}") for name, fig in figures.items()]
 
 
 CAPTIONS = {

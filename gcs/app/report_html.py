@@ -14,11 +14,12 @@ from gcs.app.report import (
     run_facts,
     run_learning,
     run_metrics,
+    run_verdict,
     trial_clock_rates,
     trial_overview,
 )
 from gcs.app.report_figures import CAPTIONS, report_figures
-from gcs.app.report_text import report_notes, table_cells
+from gcs.app.report_text import report_notes, table_cells, table_legend
 from gcs.io.atomic import atomic_write_text
 from gcs.io.rundir import RunDir
 
@@ -29,7 +30,8 @@ _CSS = (
     "body{font-family:sans-serif;max-width:960px;margin:2em auto;color:#222}"
     "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;"
     "text-align:right}th{background:#eee}figure{margin:1.5em 0}img{max-width:100%}"
-    "figcaption{font-size:90%;color:#444}.meta td,td.words,th.words{text-align:left}"
+    "figcaption{font-size:90%;color:#444}.verdict{font-size:110%;margin:.3em 0}"
+    ".meta td,td.words,th.words{text-align:left}"
 )
 
 
@@ -78,6 +80,7 @@ def write_html(
     ]  # fmt: skip
     learning = run_learning(run) if run.kind == "learning" else None
     three_d = run.kind == "learning" and is_three_d(run)
+    verdict = run_verdict(rows, learning).lines() if learning is not None else []
     headers, cells = table_cells(rows, rates, learning, three_d, every_axis=True)
     # words read from the left, numbers from the right
     words = [' class="words"' if h in ("verdict", "learning step") else "" for h in headers]
@@ -86,6 +89,7 @@ def write_html(
         '<html lang="en"><head><meta charset="utf-8">',
         f"<title>gcs report: {e(run_info.title())}</title><style>{_CSS}</style></head><body>",
         f"<h1>gcs report: {e(run_info.run_id)}</h1>",
+        *(f'<p class="verdict">{e(line.removeprefix("verdict: "))}</p>' for line in verdict),
         '<table class="meta">'
         + "".join(f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in facts)
         + "</table>",
@@ -96,7 +100,7 @@ def write_html(
           for row in cells),
         "</table>",
     ]  # fmt: skip
-    notes = report_notes(run, trial_overview(run), learning)
+    notes = table_legend(learning) + report_notes(run, trial_overview(run), learning)
     if notes:
         parts.append("<ul>" + "".join(f"<li>{e(n)}</li>" for n in notes) + "</ul>")
     parts.append("<h2>Figures</h2>")

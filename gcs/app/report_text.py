@@ -36,6 +36,8 @@ __all__ = [
     "learning_notes",
     "session_lines",
     "report_notes",
+    "table_legend",
+    "shows_step",
 ]
 
 
@@ -57,6 +59,37 @@ def report_notes(run: RunDir, entries: list[TrialEntry], learning: RunLearning |
     """
     notes = learning_notes(learning) if learning is not None else []
     return notes + trial_notes(entries, aborted_attempts(run)) + session_lines(run)
+
+
+def table_legend(learning: RunLearning | None, shown: bool = True) -> list[str]:
+    """What the table's short words mean, one line under it (adaptive profiles only).
+
+    Parameters
+    ----------
+    learning : RunLearning or None
+        What learning says.
+    shown : bool
+        The table shows the learning step column (False: a narrow terminal left it out, and
+        the line says where its contents are).
+
+    Returns
+    -------
+    list of str
+        Empty where the table has no learning step column.
+    """
+    if learning is None or not learning.history:
+        return []
+    if not shown:
+        return [
+            "learning step: too wide for this terminal; each step is told below ('after "
+            "trial K: ...'), and a wider terminal or --html shows it as a column"
+        ]
+    return [
+        "learning step: 'from K, step s' fell back to the best trial K and took the fraction s "
+        "of the update (safeguard); 'model N 37 %' refreshed the north (N) or east (E) model, "
+        "which moved 37 %; 'repeat of 0 next' the next trial repeats trial 0 to measure the "
+        "floor (docs/report.md)"
+    ]
 
 
 def _num(value: Any) -> float:
@@ -206,7 +239,8 @@ def decision_lines(record: dict) -> list[str]:
     guard = decision.get("safeguard")
     if isinstance(guard, dict) and guard.get("action") == "revert":
         lines.append(
-            f"safeguard: trial {j} came out worse than trial {guard.get('best_trial')} "
+            f"safeguard: trial {j} came out worse than trial "
+            f"{guard.get('compared_trial', guard.get('best_trial'))} "
             f"(e_pos {1e3 * _num(guard.get('epos_m')):.1f} mm > "
             f"{1e3 * _num(guard.get('threshold_m')):.1f} mm): fell back to trial "
             f"{guard.get('anchor_trial')} with step {_num(guard.get('step')):g}"
@@ -355,12 +389,17 @@ def metrics_table(
         show_edge=False,
     )
     headers, cells = table_cells(rows, rates, learning, three_d)
+    if _drops_step(headers, cells, width):  # said in words below the table instead
+        at = headers.index("learning step")
+        headers, cells = headers[:at], [row[:at] for row in cells]
     natural = [max([len(h), *(len(row[i]) for row in cells)]) for i, h in enumerate(headers)]
     narrow = width is not None and sum(natural) + len(natural) - 1 > width
+    # "0 (repeat)" stays on one line wherever the table fits with it so
+    split_j = width is not None and _least_width(headers, cells, split_j=False) > width
     for i, header in enumerate(headers):
         column = [row[i] for row in cells]
         words = max(len(w) for w in header.split())
-        if header in ("learning step", "j"):
+        if header == "learning step" or (header == "j" and split_j):
             least = max([words, *(len(w) for c in column for w in c.split())])
         else:
             least = max([words, *map(len, column)])
@@ -375,6 +414,55 @@ def metrics_table(
     for row in cells:
         table.add_row(*row)
     return table
+
+
+def shows_step(
+    rows: list[IterationMetrics],
+    rates: dict[int, float | None] | None,
+    learning: RunLearning | None,
+    width: int | None,
+    three_d: bool = False,
+) -> bool:
+    """Whether :func:`metrics_table` at ``width`` shows the learning step column.
+
+    Parameters
+    ----------
+    rows, rates, learning, three_d
+        As for :func:`metrics_table`.
+    width : int or None
+        The console's width.
+
+    Returns
+    -------
+    bool
+    """
+    headers, cells = table_cells(rows, rates, learning, three_d)
+    return "learning step" in headers and not _drops_step(headers, cells, width)
+
+
+def _least_width(headers: list[str], cells: list[list[str]], split_j: bool = True) -> int:
+    """The narrowest the table gets: headers folded at spaces, one space between columns."""
+    least = []
+    for i, header in enumerate(headers):
+        column = [row[i] for row in cells]
+        words = max(len(w) for w in header.split())
+        split = header == "learning step" or (header == "j" and split_j)
+        least.append(
+            max([words, *((len(w) for c in column for w in c.split()) if split else
+                         map(len, column))])
+        )  # fmt: skip
+    return sum(least) + len(least) - 1
+
+
+def _drops_step(headers: list[str], cells: list[list[str]], width: int | None) -> bool:
+    """True when the learning step column would wrap a cell at ``width``: the table then
+    leaves it out and the lines below it ("after trial K: ...") say the same in words."""
+    if width is None or "learning step" not in headers:
+        return False
+    at = headers.index("learning step")
+    longest = max((len(row[at]) for row in cells), default=0)
+    rest = _least_width(headers[:at], [row[:at] for row in cells])
+    return rest + 1 + max(longest, len("learning")) > width
 
 
 def table_cells(
@@ -467,7 +555,7 @@ def _with_learning(cells: list[str], learning: RunLearning, trial: int) -> list[
     if t.record is not None:
         step = decision_summary(t.record)
     elif trial < learning.repeats:
-        step = "next: repeat of 0"
+        step = "repeat of 0 next"
     else:
         step = "-"
     j = f"{t.iteration} (repeat)" if t.repeat_of is not None else str(t.iteration)

@@ -156,7 +156,20 @@ def study(
     )
     target = out if out is not None else Path(f"study-{spec.name}")
     if check:
+        from gcs.app.study_cluster import machine_workers
+        from gcs.app.study_own import estimate_study
+
         err.print(size, highlight=False)
+        n = 1 if cluster.workers == 0 else cluster.workers or machine_workers()  # type: ignore[attr-defined]
+        if cluster.scheduler is None:  # type: ignore[attr-defined]
+            err.print(estimate_study(plan, n).line(), highlight=False)
+        else:
+            err.print(
+                "estimate: "
+                + estimate_study(plan, 1).line().removeprefix("estimate: ")
+                + " (one worker; divide by the scheduler's workers)",
+                highlight=False,
+            )
         return
     check_output_dir(target, "--out")
     document = definition_document(spec, plan)

@@ -32,6 +32,7 @@ from gcs.core.study import (
     StudySetting,
     Uncertainty,
     check_nominal,
+    fly_plant,
     recommend,
     run_chunk,
     summarise_setting,
@@ -51,6 +52,8 @@ __all__ = [
     "summarise_study",
     "study_document",
     "check_study_memory",
+    "StudyEstimate",
+    "estimate_study",
 ]
 
 
@@ -408,3 +411,74 @@ def study_document(definition: dict, plan: StudyPlan, outcome: StudyOutcome) -> 
             )
         ],
     }
+
+
+@dataclass(frozen=True)
+class StudyEstimate:
+    """How long a study will take, from one plant of each setting flown here.
+
+    Parameters
+    ----------
+    plant_s : tuple of float
+        Wall time of one plant (every iteration, the first level) per setting [s].
+    cpu_s : float
+        The whole study at that pace: each setting's time x levels x plants [s].
+    workers : int
+        Workers the study is shared among.
+    wall_s : float
+        ``cpu_s / workers`` [s]: the estimate, if the cores are free.
+    """
+
+    plant_s: tuple[float, ...]
+    cpu_s: float
+    workers: int
+    wall_s: float
+
+    def line(self) -> str:
+        """The estimate in words, saying how it was measured.
+
+        Returns
+        -------
+        str
+        """
+        each = ", ".join(f"{t:.2f}" for t in self.plant_s)
+        return (
+            f"estimate: about {_duration(self.wall_s)} on {self.workers} worker"
+            f"{'s' if self.workers != 1 else ''} ({_duration(self.cpu_s)} of computing); "
+            f"measured by flying one simulated plant of each setting here ({each} s) and "
+            "scaling by levels x plants; a loaded machine or a cluster's start-up adds to it"
+        )
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def estimate_study(plan: StudyPlan, workers: int) -> StudyEstimate:
+    """Time one plant of each setting (plant 0 at the first level, in this process) and scale.
+
+    Parameters
+    ----------
+    plan : StudyPlan
+        The study.
+    workers : int
+        Workers it will share the plants among (at least 1).
+
+    Returns
+    -------
+    StudyEstimate
+    """
+    import time
+
+    times = []
+    for setting in plan.settings:
+        start = time.perf_counter()
+        fly_plant(plan, setting, 0, 0)
+        times.append(time.perf_counter() - start)
+    cpu = sum(times) * len(plan.uncertainty.levels) * plan.plants
+    workers = max(1, int(workers))
+    return StudyEstimate(tuple(times), cpu, workers, cpu / workers)

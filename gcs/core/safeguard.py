@@ -71,8 +71,14 @@ class SafeguardDecision:
     epos_m : float
         e_pos of the newest trial [m].
     best_trial : int
-        Earlier trial with the smallest e_pos (the newest itself when it is the only one).
+        The trial with the smallest e_pos so far, the newest included (the earlier one on a
+        tie).
     best_epos_m : float
+        Its e_pos [m].
+    compared_trial : int
+        The earlier trial with the smallest e_pos, which the newest is compared with (the
+        newest itself when it is the only one); the anchor after a revert.
+    compared_epos_m : float
         Its e_pos [m].
     threshold_m : float
         ``e_best + k sqrt(2) sigma`` [m].
@@ -89,6 +95,8 @@ class SafeguardDecision:
     best_epos_m: float
     threshold_m: float
     reason: str
+    compared_trial: int = 0
+    compared_epos_m: float = float("nan")
 
     def as_dict(self) -> dict:
         """JSON-ready dictionary (without the anchor's setpoints)."""
@@ -99,6 +107,8 @@ class SafeguardDecision:
             "epos_m": self.epos_m,
             "best_trial": self.best_trial,
             "best_epos_m": self.best_epos_m,
+            "compared_trial": self.compared_trial,
+            "compared_epos_m": self.compared_epos_m,
             "threshold_m": self.threshold_m,
             "reason": self.reason,
         }
@@ -143,6 +153,7 @@ def safeguard(
     threshold = float(e[best] + settings.k_sigma * np.sqrt(2.0) * scatter_m)
     worse = e.size > 1 and e[newest] > threshold
     anchor = best if worse else newest
+    overall = int(np.argmin(e))
     (n_lo, n_hi), (e_lo, e_hi), _ = arena.bounds()
     anchor_ne = np.column_stack(
         [np.clip(sp[anchor, :, 0], n_lo, n_hi), np.clip(sp[anchor, :, 1], e_lo, e_hi)]
@@ -161,10 +172,12 @@ def safeguard(
         step=settings.step if worse else 1.0,
         anchor_ne_m=anchor_ne,
         epos_m=float(e[newest]),
-        best_trial=best,
-        best_epos_m=float(e[best]),
+        best_trial=overall,
+        best_epos_m=float(e[overall]),
         threshold_m=threshold,
         reason=reason,
+        compared_trial=best,
+        compared_epos_m=float(e[best]),
     )
 
 

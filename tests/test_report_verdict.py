@@ -1,0 +1,143 @@
+"""gcs report: the verdict in plain words, the JSON without a second change column, the
+safeguard's best trial, and the adaptive table at 80 columns."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from synthetic import make_adaptive_run, make_run
+from typer.testing import CliRunner
+
+from gcs.app.report import run_learning, run_metrics, run_verdict
+from gcs.app.report_html import write_html
+from gcs.cli import app
+from gcs.core.trials import trial_errors
+
+runner = CliRunner()
+SCHEMA = Path(__file__).resolve().parents[1] / "docs" / "report.schema.json"
+
+
+def invoke(*args: object, columns: int = 200):
+    return runner.invoke(app, [str(a) for a in args], env={"COLUMNS": str(columns)})
+
+
+@pytest.fixture(scope="module")
+def adaptive(tmp_path_factory: pytest.TempPathFactory):
+    return make_adaptive_run(tmp_path_factory.mktemp("adaptive"), trials=6, gust_m=0.01)
+
+
+@pytest.fixture(scope="module")
+def paper(tmp_path_factory: pytest.TempPathFactory):
+    return make_run(tmp_path_factory.mktemp("paper"), trials=3)
+
+
+def test_the_verdict_of_an_adaptive_run_against_its_trials(adaptive, monkeypatch) -> None:
+    import gcs.cli
+
+    monkeypatch.setattr(gcs.cli.console, "width", 200)
+    epos = {j: trial_errors(adaptive.read_trial(j))[0] for j in adaptive.complete_trials()}
+    best = min(epos, key=epos.get)
+    doc = json.loads(invoke("report", adaptive.path, "--json").output)
+    v = doc["verdict"]
+    assert v["flights"] == len(epos) == 6
+    assert v["best_trial"] == best and v["best_epos_m"] == pytest.approx(epos[best])
+    assert v["best_updates"] == best - 1  # one repeat of trial 0 before learning starts
+    assert v["change_pct"] == pytest.approx(100 * (epos[best] - epos[0]) / epos[0])
+    floor = adaptive.read_floor()["epos_m"]
+    assert v["floor_m"] == pytest.approx(floor)
+    assert v["floor_ratio"] == pytest.approx(epos[best] / floor)
+    # the flights left, independently: the geometric decay of e_pos - floor over the newest
+    # four learned trials (2..5), flights until z <= 2, plus one to confirm
+    learning = run_learning(adaptive)
+    row = {r["trial"]: r for r in doc["rows"]}
+    if v["converged_trial"] is None and not row[5]["at_floor"]:
+        x = np.array([1, 2, 3, 4], dtype=float)
+        excess = np.array([epos[t] - floor for t in (2, 3, 4, 5)])
+        rate = math.exp(np.polyfit(x, np.log(excess), 1)[0])
+        f = learning.floor
+        target = 2.0 * math.hypot(f.scatter_m, f.floor_scatter_m)
+        n = max(0, math.ceil(math.log(target / excess[-1]) / math.log(rate)))
+        assert v["flights_left"] == n + 1
+        assert "geometric fit" in v["flights_left_how"]
+    out = invoke("report", adaptive.path).output
+    for line in v["text"]:
+        assert line.replace("\n", " ")[:60] in out.replace("\n", " ")
+    assert f"-> {1e3 * epos[best]:.1f} mm at trial {best}" in out
+    assert "scatters of one trial above it" in out  # z said in words
+    html = write_html(adaptive, adaptive.path.parent / "r.html", [0, 5]).read_text()
+    assert 'class="verdict"' in html and f"{1e3 * epos[best]:.1f} mm at trial {best}" in html
+
+
+def test_a_run_without_a_floor_says_the_flights_left_cannot_be_estimated(paper) -> None:
+    doc = json.loads(invoke("report", paper.path, "--json").output)
+    v = doc["verdict"]
+    assert v["floor_m"] is None and v["flights_left"] is None
+    assert "without a floor" in v["flights_left_how"]
+    assert any("floor not measured" in line for line in v["text"])
+    # one change column: the signed one (Table IV's unsigned twin is gone, version 3)
+    assert doc["version"] == 3
+    assert all("delta_pct" not in r for r in doc["rows"])
+    e = [r["epos_m"] for r in doc["rows"]]
+    assert doc["rows"][1]["change_pct"] == pytest.approx(100 * (e[1] - e[0]) / e[0])
+
+
+def test_the_verdict_keys_are_in_the_schema_and_the_docs() -> None:
+    schema = json.loads(SCHEMA.read_text())
+    text = (SCHEMA.parent / "report.md").read_text()
+    keys = schema["properties"]["verdict"]["properties"]
+    for key in keys:
+        assert f"`{key}`" in text, key
+    assert "delta_pct" not in schema["properties"]["rows"]["items"]["properties"]
+
+
+def test_the_safeguard_records_the_best_trial_so_far(adaptive) -> None:
+    # learn-002 learned from trial 2, which was 4x better than every trial before it: the
+    # best so far is trial 2 (it used to say 0, the best of the trials before the newest)
+    epos = {j: trial_errors(adaptive.read_trial(j))[0] for j in adaptive.complete_trials()}
+    for j in range(2, 6):
+        guard = adaptive.read_learn_record(j)["decision"]["safeguard"]
+        so_far = {t: epos[t] for t in range(j + 1)}
+        earlier = {t: epos[t] for t in range(j)}
+        assert guard["best_trial"] == min(so_far, key=so_far.get)
+        assert guard["compared_trial"] == min(earlier, key=earlier.get)
+    assert epos[2] < 0.5 * epos[0]
+    assert adaptive.read_learn_record(2)["decision"]["safeguard"]["best_trial"] == 2
+
+
+def test_the_adaptive_table_fits_80_columns_and_explains_its_words(adaptive, monkeypatch) -> None:
+    import gcs.cli
+
+    # the console's width is fixed when it is made: set as a terminal of 80 columns would
+    monkeypatch.setattr(gcs.cli.console, "width", 80)
+    out = invoke("report", adaptive.path, columns=80).output
+    table = out.split("learning step:")[0]
+    assert max(len(line.rstrip()) for line in out.splitlines()) <= 80
+    # every trial on one line: "0 (repeat)" unbroken, no cell folded onto a second line
+    lines = [ln for ln in table.splitlines() if ln.strip()[:1].isdigit()]
+    assert len(lines) == 6 and "0 (repeat)" in lines[1]
+    # the learning step column did not fit: said where its contents are
+    assert "after trial 2: model refreshed" in out and "too wide for this terminal" in out
+    monkeypatch.setattr(gcs.cli.console, "width", 200)
+    wide = invoke("report", adaptive.path, columns=200).output
+    assert "repeat of 0 next" in wide and "'model N 37 %' refreshed the north (N)" in wide
+
+
+def test_the_first_learned_step_is_bounded_by_the_step_limit(adaptive) -> None:
+    # docs/update.md: the first setpoint's step is inherent to eq. (8) and bounded by
+    # learning.max_step_m from the hover point, u(-1) = the start
+    limit = adaptive.profile().learning.max_step_m
+    start = adaptive.reference().pos_ned_m[0, :2]
+    for j in range(2, 6):
+        sp = adaptive.read_setpoints(j)[:, :2]
+        steps = np.abs(np.diff(np.vstack([start, sp]), axis=0))
+        assert steps.max() <= limit + 1e-6
+
+
+def test_rows_and_verdict_agree_on_the_numbers(paper) -> None:
+    rows = run_metrics(paper)
+    v = run_verdict(rows, run_learning(paper))
+    assert v.first_epos_m == rows[0].epos_m and v.last_trial == rows[-1].iteration
