@@ -15,7 +15,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 PYTEST := $(BIN)/python -m pytest -n 2 --dist worksteal -q
-FAST   := -m "not e2e and not px4"
+FAST   := -m "not e2e and not px4 and not live"
 # the tests that compare numbers with records made on another machine (tests/records.py), and
 # those that hold a result bit for bit on one machine (workers vs one process, resumed vs not,
 # kept learner vs new): run again as on another CPU by test-other-cpu
@@ -31,7 +31,7 @@ test: setup
 	$(PYTEST)
 	$(MAKE) --no-print-directory test-other-cpu
 
-# everything but the real-time flights and the real firmware
+# everything but the real-time flights and servers and the real firmware
 test-fast: setup
 	$(PYTEST) $(FAST)
 

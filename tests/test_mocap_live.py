@@ -32,6 +32,8 @@ from gcs.mock.mocap.process import MocapServerProcess
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
 from gcs.mock.mocap.server import FaultWindow, NatNetServer
 
+# a real NatNet server and reader in real time (rates, stale and jump timing): out of test-fast
+pytestmark = pytest.mark.live
 ROOM = mapping_for("optitrack", yaw_offset_deg=30.0, origin_m=(0.5, 0.0, -0.25))
 LIMITS = HealthLimits()
 WAIT_S = 5.0  # longest wait for an event that should come within a fraction of a second

@@ -70,6 +70,7 @@ def test_nothing_is_tracked_before_a_pose_is_published_then_the_pose_in_room_axe
     np.testing.assert_allclose(got.pos_m[tracked][:, 1], 1.5, atol=1.5e-3)
 
 
+@pytest.mark.live  # frames lost to a fault window counted in real time
 def test_faults_start_at_the_first_offboard_and_show_as_an_untracked_body() -> None:
     fault = ArenaFault("occlusion", 0.3, 0.4)
     options = ArenaOptions(rate_hz=200.0, faults=(fault,), seed=2)
