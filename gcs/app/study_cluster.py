@@ -4,7 +4,9 @@ A study is a list of independent tasks (chunks of plants); each task's result de
 its arguments (its seeds are derived from the study's seed and the chunk's index), so the
 results are the same whatever the number of workers, their order of completion, or a worker
 that died and whose tasks the scheduler gave to another. ``workers = 0`` runs the tasks one
-after the other in this process, without Dask (for debugging and for the smallest studies).
+after the other in this process, without Dask (for debugging and for short studies:
+:func:`place` decides, for the commands' default, whether a local cluster would gain more than
+it costs to start).
 """
 
 from __future__ import annotations
@@ -52,7 +54,8 @@ class Cluster:
     scheduler : str or None
         Address of a running scheduler (``tcp://HOST:PORT``); None starts a LocalCluster.
     workers : int or None
-        LocalCluster size (one thread each); None: the cores this process may use; 0: no
+        LocalCluster size (one thread each); None: the cores this process may use (the
+        commands first resolve None with :func:`place`: a cluster only when it pays); 0: no
         Dask, the tasks run in this process.
     connect_timeout_s : float
         Seconds to wait for the scheduler.
