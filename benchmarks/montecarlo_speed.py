@@ -13,8 +13,15 @@ set before numpy is imported: on a 2-core machine shared with other jobs, OpenBL
 threads can be much slower than one (busy-waiting threads); both are reported. The machine's
 1-minute load average is recorded next to each line.
 
-Usage: ``python benchmarks/montecarlo_speed.py`` (all cases) or
-``python benchmarks/montecarlo_speed.py --case N [runs]``.
+``--placement [runs]`` times the command itself, start-up included: the default ``gcs
+montecarlo`` (which decides between this process and a local cluster, docs/studies.md), then
+``--workers 0`` and ``--workers 2``, interleaved, ``runs`` times each (default 3); it prints one
+JSON line per case (median and every wall time, the decision line of the default, whether its
+``--json`` rows equal those of ``--workers 0``) and one with the ratios to ``--workers 0``.
+
+Usage: ``python benchmarks/montecarlo_speed.py`` (all cases),
+``python benchmarks/montecarlo_speed.py --case N [runs]`` or
+``python benchmarks/montecarlo_speed.py --placement [runs]``.
 """
 
 from __future__ import annotations
@@ -61,7 +68,49 @@ def run_case(n: int, runs: int) -> dict:
     }
 
 
+PLACEMENTS = {"default": [], "workers 0": ["--workers", "0"], "workers 2": ["--workers", "2"]}
+
+
+def run_placements(runs: int) -> None:
+    import tempfile
+
+    times: dict[str, list[float]] = {name: [] for name in PLACEMENTS}
+    rows: dict[str, object] = {}
+    said = ""
+    with tempfile.TemporaryDirectory() as tmp:
+        for _ in range(runs):
+            for name, extra in PLACEMENTS.items():
+                out = Path(tmp) / f"{name.replace(' ', '-')}.json"
+                t0 = time.perf_counter()
+                done = subprocess.run(
+                    [sys.executable, "-m", "gcs", "montecarlo", *extra, "--json", str(out)],
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                    env=dict(os.environ, COLUMNS="200"),
+                )
+                times[name].append(time.perf_counter() - t0)
+                rows[name] = json.loads(out.read_text())
+                if name == "default":
+                    said = next(
+                        line for line in done.stderr.splitlines() if line.startswith(("in ", "on "))
+                    )
+    medians = {name: statistics.median(t) for name, t in times.items()}
+    for name, t in times.items():
+        line = {"case": f"gcs montecarlo ({name})", "median_s": round(medians[name], 2)}
+        line |= {"wall_s": [round(x, 2) for x in t], "load_avg_1min": round(os.getloadavg()[0], 2)}
+        if name == "default":
+            line |= {"decision": said, "rows_equal_workers_0": rows[name] == rows["workers 0"]}
+        print(json.dumps(line), flush=True)
+    base = medians["workers 0"]
+    ratios = {f"{name} / workers 0": round(m / base, 2) for name, m in medians.items()}
+    print(json.dumps({"runs": runs, **ratios}), flush=True)
+
+
 def main() -> None:
+    if len(sys.argv) >= 2 and sys.argv[1] == "--placement":
+        run_placements(int(sys.argv[2]) if len(sys.argv) > 2 else 3)
+        return
     if len(sys.argv) >= 3 and sys.argv[1] == "--case":
         runs = int(sys.argv[3]) if len(sys.argv) > 3 else 1
         print(json.dumps(run_case(int(sys.argv[2]), runs)), flush=True)

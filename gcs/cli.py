@@ -786,9 +786,12 @@ def montecarlo(
     docs/montecarlo.md. Plants whose learning diverged are counted and, unless
     --keep-diverged, left out of the statistics.
 
-    Every (level, algorithm) row is one task on Dask: a local cluster of one worker per core
-    by default, --workers N for another size (0: no Dask, in this process), --scheduler
-    tcp://HOST:PORT for a running cluster; the rows are the same on any of them.
+    Every (level, algorithm) row is one task: by default in this process when the study is
+    short, on a local Dask cluster of one worker per core when it is long enough to gain from
+    it (decided after timing its first task here; one line says which, and why;
+    docs/studies.md); --workers N for a local cluster of that size (0: no Dask, in this
+    process), --scheduler tcp://HOST:PORT for a running cluster; the rows are the same on any
+    of them.
 
     Example: gcs montecarlo --levels 0.05,0.1 --json montecarlo.json
 
@@ -819,7 +822,13 @@ def montecarlo(
     if json_path is not None:
         check_output_file(json_path, "--json")
     with track(err_console, "montecarlo", "tasks") as follow:
-        outcome = run_montecarlo(settings, adaptive, lambda label: follow, cluster)
+        outcome = run_montecarlo(
+            settings,
+            adaptive,
+            lambda label: follow,
+            cluster,  # type: ignore[arg-type]
+            lambda line: err_console.print(line, highlight=False),
+        )
     console.print(study_tables(outcome.rows, settings))
     for line in comparison_lines(outcome.comparison):
         console.print(line)

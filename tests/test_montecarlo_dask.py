@@ -12,10 +12,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from records import assert_json_close, assert_text_close
 from test_learning_regression import study_atol
 from typer.testing import CliRunner
 
+from gcs.app import study_cluster
+from gcs.app.study_cluster import Cluster, place
 from gcs.cli import app
 
 DATA = Path(__file__).parent / "data"
@@ -71,3 +74,63 @@ def test_a_scheduler_that_is_not_an_address_is_one_line() -> None:
         code, output = run_cli("montecarlo", "--scheduler", bad)
         assert code == 2 and "not a scheduler address" in output, output
         assert len(output.strip().splitlines()) == 1
+
+
+SMALL = ["montecarlo", "--levels", "0.05,0.4", "--plants", "6", "--repeats", "2", "--samples", "60"]
+
+
+def test_a_short_study_runs_here_by_default_with_the_rows_of_workers_0(tmp_path: Path) -> None:
+    rows, lines = {}, {}
+    for name, extra in (("default", []), ("0", ["--workers", "0"])):
+        out = tmp_path / f"mc-{name}.json"
+        code, output = run_cli(*SMALL, *extra, "--json", str(out))
+        assert code == 0, output
+        rows[name] = json.loads(out.read_text())
+        lines[name] = " ".join(output.split())
+    assert "in this process: the study is short (est. " in lines["default"]
+    assert "in this process (as asked)" in lines["0"]
+    assert rows["default"] == rows["0"]  # every bit
+
+
+def test_a_study_judged_long_moves_its_other_tasks_to_a_local_cluster(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a cluster that costs nothing: any saving pays, so the tasks after the first (timed here)
+    # go to a local cluster; the rows are still those of one process
+    monkeypatch.setattr(study_cluster, "LOCAL_CLUSTER_COST_S", 0.0)
+    monkeypatch.setattr(study_cluster, "machine_workers", lambda: 2)
+    out, here = tmp_path / "mc.json", tmp_path / "mc-0.json"
+    code, output = run_cli(*SMALL, "--json", str(out))
+    assert code == 0, output
+    assert "on a local Dask cluster of 2 workers: the study is long (est. " in " ".join(
+        output.split()
+    )
+    code, output = run_cli(*SMALL, "--workers", "0", "--json", str(here))
+    assert code == 0, output
+    assert json.loads(out.read_text()) == json.loads(here.read_text())
+
+
+def test_a_short_study_is_placed_here_and_a_long_one_on_a_cluster() -> None:
+    short = place(Cluster(), lambda: 3.0, tasks=8, cores=2, cluster_cost_s=14.0)
+    assert short.cluster.workers == 0 and short.estimate_s == 3.0
+    assert short.line.startswith("in this process: the study is short (est. 3.0 s")
+    long = place(Cluster(blas_threads=2), lambda: 100.0, tasks=8, cores=2, cluster_cost_s=14.0)
+    assert long.cluster == Cluster(workers=2, blas_threads=2)
+    assert long.line.startswith("on a local Dask cluster of 2 workers: the study is long")
+    # the saving (half of 30 s on two workers) is just above the cost, then just below
+    assert place(Cluster(), lambda: 30.0, 8, cores=2, cluster_cost_s=14.0).cluster.workers == 2
+    assert place(Cluster(), lambda: 26.0, 8, cores=2, cluster_cost_s=14.0).cluster.workers == 0
+    # no more workers than tasks; one core or one task: nothing to share
+    assert place(Cluster(), lambda: 1e4, 3, cores=8, cluster_cost_s=14.0).cluster.workers == 3
+    assert place(Cluster(), lambda: 1e4, 8, cores=1, cluster_cost_s=14.0).cluster.workers == 0
+    assert place(Cluster(), lambda: 1e4, 1, cores=8, cluster_cost_s=14.0).cluster.workers == 0
+
+
+def test_workers_and_scheduler_given_are_obeyed_without_an_estimate() -> None:
+    def never() -> float:
+        raise AssertionError("estimated although the options decided")
+
+    for given in (Cluster(workers=0), Cluster(workers=3), Cluster(scheduler="tcp://h:8786")):
+        placed = place(given, never, tasks=8, cores=2, cluster_cost_s=14.0)
+        assert placed.cluster == given and placed.estimate_s is None
+        assert placed.line == given.describe() + " (as asked)"

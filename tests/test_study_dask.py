@@ -212,3 +212,20 @@ def test_an_unreachable_scheduler_is_one_line(
     assert not out.exists()
     code, output = run_cli("montecarlo", "--plants", "2", "--repeats", "1", "--scheduler", address)
     assert code == 2 and "unreachable" in output and len(output.strip().splitlines()) == 1
+
+
+def test_a_short_study_runs_here_by_default_with_the_json_of_workers_0(
+    study_file: Path, tmp_path: Path
+) -> None:
+    documents = {}
+    for name, extra in (("default", []), ("0", ["--workers", "0"])):
+        out = tmp_path / name
+        code, output = run_cli("study", str(study_file), "--out", str(out), *extra)
+        assert code == 0, output
+        said = " ".join(output.split())
+        if name == "default":
+            assert "in this process: the study is short (est. " in said
+        else:
+            assert "in this process (as asked)" in said
+        documents[name] = (out / "study.json").read_bytes()
+    assert documents["default"] == documents["0"]

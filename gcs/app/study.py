@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
-from gcs.app.study_cluster import Cluster, Task, connect, run_tasks
+from gcs.app.study_cluster import Cluster, Task, connect, place, run_tasks
 from gcs.app.study_view import study_json
 from gcs.core.learning import AdaptiveSettings
 from gcs.core.montecarlo import (
@@ -33,6 +33,7 @@ __all__ = [
     "study_settings",
     "paper_row",
     "adaptive_level",
+    "estimate_adaptive_s",
     "run_montecarlo",
     "study_document",
 ]
@@ -156,18 +157,49 @@ def adaptive_level(
     return rows[0], comparison[0]
 
 
+def estimate_adaptive_s(settings: StudySettings) -> float:
+    """Computing time of the new options' tasks in this process, from a small unit [s].
+
+    One task of the new options on 2 plants x 1 repeat at the first level, timed here and
+    scaled by the study's plant-runs and levels: an upper bound (its fixed part, the
+    operators, is counted once per plant-run).
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The study.
+
+    Returns
+    -------
+    float
+    """
+    level = settings.levels[0]
+    unit = replace(settings, levels=(level,), plants=2, repeats=1)
+    start = time.perf_counter()
+    adaptive_level(unit, level, AdaptiveSettings(noise="data", refresh=True))
+    unit_s = time.perf_counter() - start
+    return len(settings.levels) * unit_s * settings.plants * settings.repeats / 2.0
+
+
 def run_montecarlo(
     settings: StudySettings,
     adaptive: bool,
     progress: Callable[[str], Progress],
     cluster: Cluster | None = None,
+    say: Callable[[str], None] | None = None,
 ) -> StudyOutcome:
     """Run the paper's study and, with ``adaptive``, the new options on the same plants.
 
     Every (level, algorithm) row of the paper's study, and every level of the new options, is
-    one task on Dask; each task draws its plants and noise from the seed and its level alone,
-    so the rows are those of :func:`gcs.core.montecarlo.run_study` and
-    :func:`gcs.core.montecarlo.compare_study`, bit for bit, on any cluster.
+    one task; each task draws its plants and noise from the seed and its level alone, so the
+    rows are those of :func:`gcs.core.montecarlo.run_study` and
+    :func:`gcs.core.montecarlo.compare_study`, bit for bit, wherever they run.
+
+    Where: ``--workers`` / ``--scheduler`` as given. Otherwise (``Cluster()``, neither
+    given) the first task runs here, timed; the rest of the study is estimated from it (the
+    paper's tasks alike; the new options' from :func:`estimate_adaptive_s`) and
+    :func:`gcs.app.study_cluster.place` decides whether a local cluster gains more than it
+    costs for the rest. ``say`` receives the decision in one line.
 
     Parameters
     ----------
@@ -179,7 +211,10 @@ def run_montecarlo(
     progress : callable
         ``progress(label)`` returns the callback that follows the tasks.
     cluster : Cluster, optional
-        Where to run; default: in this process.
+        Where to run; default: in this process. ``Cluster()`` (no workers, no scheduler):
+        decided as above.
+    say : callable, optional
+        Receives the line saying where the study runs and why.
 
     Returns
     -------
@@ -204,8 +239,27 @@ def run_montecarlo(
         follow(len(results), len(tasks))
 
     start = time.perf_counter()
-    with connect(cluster or Cluster(workers=0)) as client:
-        run_tasks(client, tasks, done)
+    cluster = cluster or Cluster(workers=0)
+    rest = tasks
+    if cluster.scheduler is None and cluster.workers is None:
+        run_tasks(None, tasks[:1], done)
+        first_s = time.perf_counter() - start
+        rest = tasks[1:]
+        paper_left = sum(1 for t in rest if t.fn is paper_row)
+
+        def estimate() -> float:
+            left = first_s * paper_left
+            return left + (estimate_adaptive_s(settings) if adaptive else 0.0)
+
+        placement = place(cluster, estimate, len(rest))
+        cluster = placement.cluster
+        line = placement.line
+    else:
+        line = place(cluster, lambda: 0.0, len(tasks)).line
+    with connect(cluster) as client:
+        if say is not None:
+            say(line)
+        run_tasks(client, rest, done)
     seconds = time.perf_counter() - start
     rows = [results[t.key] for t in tasks if t.fn is paper_row]
     comparison: list[ComparisonRow] = []

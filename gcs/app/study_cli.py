@@ -18,8 +18,9 @@ WorkersOption = Annotated[
     int | None,
     typer.Option(
         min=0,
-        help="Dask workers of the local cluster (one thread each); default one per core; "
-        "0: no Dask, in this process. Results do not depend on it.",
+        help="Dask workers of a local cluster (one thread each); 0: no Dask, in this process. "
+        "Default: in this process for a short study, one worker per core for a long one "
+        "(estimated first). Results do not depend on it.",
     ),
 ]
 SchedulerOption = Annotated[
@@ -101,9 +102,12 @@ def study(
     Written to the output directory: study.json (definition, summaries, every plant), one
     file per finished chunk, epos.png and tradeoff.png.
 
-    Runs on Dask: a local cluster of one worker per core by default, or --scheduler
-    tcp://HOST:PORT. Every chunk of plants is seeded from the study's seed and its index: the
-    results are the same, bit for bit, on any number of workers.
+    Runs in this process when the study is short, on a local Dask cluster of one worker per
+    core when it is long enough to gain from it (one plant of each setting is timed first; one
+    line says which, and why; docs/studies.md); --workers N for a local cluster of that size
+    (0: in this process), --scheduler tcp://HOST:PORT for a running cluster. Every chunk of
+    plants is seeded from the study's seed and its index: the results are the same, bit for
+    bit, on any number of workers.
 
     Example: gcs study study.yaml --out study-antx
 
@@ -133,6 +137,7 @@ def study(
         check_study_memory,
         definition_document,
         open_output,
+        place_study,
         run_study_chunks,
         study_document,
         summarise_study,
@@ -173,9 +178,11 @@ def study(
         return
     check_output_dir(target, "--out")
     document = definition_document(spec, plan)
-    with connect(cluster) as client:  # type: ignore[arg-type]
+    placement = place_study(plan, cluster, tasks)  # type: ignore[arg-type]
+    with connect(placement.cluster) as client:
         output = open_output(target, document)
-        err.print(f"{size}, {cluster.describe()}", highlight=False)  # type: ignore[attr-defined]
+        err.print(size, highlight=False)
+        err.print(placement.line, highlight=False)
         if output.resumed:
             err.print(f"resuming: {output.resumed} of {tasks} chunks already in {target}")
         try:

@@ -4,7 +4,9 @@ A study is a list of independent tasks (chunks of plants); each task's result de
 its arguments (its seeds are derived from the study's seed and the chunk's index), so the
 results are the same whatever the number of workers, their order of completion, or a worker
 that died and whose tasks the scheduler gave to another. ``workers = 0`` runs the tasks one
-after the other in this process, without Dask (for debugging and for the smallest studies).
+after the other in this process, without Dask (for debugging and for short studies:
+:func:`place` decides, for the commands' default, whether a local cluster would gain more than
+it costs to start).
 """
 
 from __future__ import annotations
@@ -15,17 +17,30 @@ import re
 import uuid
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from gcs.errors import ClusterError
 
-__all__ = ["Cluster", "Task", "check_scheduler", "machine_workers", "connect", "run_tasks"]
+__all__ = [
+    "Cluster",
+    "Placement",
+    "Task",
+    "check_scheduler",
+    "machine_workers",
+    "place",
+    "connect",
+    "run_tasks",
+]
 
 #: ``tcp://HOST:PORT`` or ``tls://HOST:PORT``; HOST a name, an IPv4 or a bracketed IPv6 address.
 _ADDRESS = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):([0-9]{1,5})$")
 #: Seconds to wait for a scheduler before saying it is unreachable.
 CONNECT_TIMEOUT_S = 10.0
+#: Seconds a LocalCluster costs before it computes anything: start the scheduler and the worker
+#: processes, import gcs and numpy in each, and close them (measured on a 2-core machine,
+#: docs/studies.md "In this process or on a local cluster").
+LOCAL_CLUSTER_COST_S = 14.0
 #: Times the scheduler may re-run a task whose worker died (Dask's own rescheduling aside).
 RETRIES = 2
 
@@ -39,7 +54,8 @@ class Cluster:
     scheduler : str or None
         Address of a running scheduler (``tcp://HOST:PORT``); None starts a LocalCluster.
     workers : int or None
-        LocalCluster size (one thread each); None: the cores this process may use; 0: no
+        LocalCluster size (one thread each); None: the cores this process may use (the
+        commands first resolve None with :func:`place`: a cluster only when it pays); 0: no
         Dask, the tasks run in this process.
     connect_timeout_s : float
         Seconds to wait for the scheduler.
@@ -83,6 +99,84 @@ class Task:
     key: str
     fn: Callable[..., Any]
     args: tuple
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where a study runs, and why, in one line.
+
+    Parameters
+    ----------
+    cluster : Cluster
+        Where it runs (``workers`` resolved: 0, or the local cluster's size).
+    line : str
+        The decision in words, for the command's output.
+    estimate_s : float or None
+        The study's estimated computing time in this process [s]; None when the options
+        decided (``--workers``, ``--scheduler``) and nothing was estimated.
+    """
+
+    cluster: Cluster
+    line: str
+    estimate_s: float | None = None
+
+
+def place(
+    cluster: Cluster,
+    estimate_s: Callable[[], float],
+    tasks: int,
+    cores: int | None = None,
+    cluster_cost_s: float | None = None,
+) -> Placement:
+    """In this process or on a local cluster: a cluster only when the study gains from it.
+
+    ``--workers`` or ``--scheduler`` given: obeyed, nothing estimated. Otherwise the study's
+    computing time in this process, ``T = estimate_s()``, decides: shared among
+    ``n = min(cores, tasks)`` local workers it would save ``T (1 - 1/n)``; a cluster starts only
+    when that saving is more than the cluster's own cost (``LOCAL_CLUSTER_COST_S``).
+
+    Parameters
+    ----------
+    cluster : Cluster
+        What the options describe.
+    estimate_s : callable
+        Returns the study's estimated computing time in this process [s] (called only when
+        the options leave the choice open).
+    tasks : int
+        Independent tasks of the study (no more workers than tasks are useful).
+    cores : int, optional
+        Cores this process may use; default :func:`machine_workers`.
+    cluster_cost_s : float, optional
+        A local cluster's start-up cost [s]; default ``LOCAL_CLUSTER_COST_S``.
+
+    Returns
+    -------
+    Placement
+    """
+    if cluster.scheduler is not None or cluster.workers is not None:
+        return Placement(cluster, cluster.describe() + " (as asked)")
+    cost = LOCAL_CLUSTER_COST_S if cluster_cost_s is None else cluster_cost_s
+    n = max(1, min(cores if cores is not None else machine_workers(), tasks))
+    total = float(estimate_s())
+    saving = total * (1.0 - 1.0 / n)
+    if n >= 2 and saving > cost:
+        local = replace(cluster, workers=n)
+        return Placement(
+            local,
+            f"{local.describe()}: the study is long (est. {total:.0f} s in this process; "
+            f"{n} workers save about {saving:.0f} s, a cluster costs about {cost:.0f} s to start)",
+            total,
+        )
+    why = (
+        f"{n} workers would save about {saving:.0f} s, a cluster costs about {cost:.0f} s to start"
+        if n >= 2
+        else "one core or one task: nothing to share"
+    )
+    return Placement(
+        replace(cluster, workers=0),
+        f"in this process: the study is short (est. {total:.1f} s; {why})",
+        total,
+    )
 
 
 def check_scheduler(url: str) -> str:

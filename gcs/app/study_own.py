@@ -25,7 +25,7 @@ from typing import Any
 
 from gcs import __version__, learner_settings
 from gcs.app.fly import flown_reference
-from gcs.app.study_cluster import Task, run_tasks
+from gcs.app.study_cluster import Cluster, Placement, Task, place, run_tasks
 from gcs.core.study import (
     SettingSummary,
     StudyPlan,
@@ -54,6 +54,7 @@ __all__ = [
     "check_study_memory",
     "StudyEstimate",
     "estimate_study",
+    "place_study",
 ]
 
 
@@ -456,6 +457,27 @@ def _duration(seconds: float) -> str:
     if seconds < 5400:
         return f"{seconds / 60:.1f} min"
     return f"{seconds / 3600:.1f} h"
+
+
+def place_study(plan: StudyPlan, cluster: Cluster, tasks: int) -> Placement:
+    """Where the study runs: the options' choice, else a local cluster only if it pays.
+
+    Parameters
+    ----------
+    plan : StudyPlan
+        The study.
+    cluster : Cluster
+        What ``--workers`` / ``--scheduler`` describe.
+    tasks : int
+        Its chunks (settings x levels x chunks).
+
+    Returns
+    -------
+    Placement
+        See :func:`gcs.app.study_cluster.place`; the estimate is :func:`estimate_study`'s
+        computing time (one plant of each setting flown here, scaled).
+    """
+    return place(cluster, lambda: estimate_study(plan, 1).cpu_s, tasks)
 
 
 def estimate_study(plan: StudyPlan, workers: int) -> StudyEstimate:
