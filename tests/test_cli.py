@@ -335,3 +335,17 @@ def test_shared_options_are_declared_once() -> None:
                    "--algorithm"):  # fmt: skip
         declared = re.findall(r'Option\(\s*"' + re.escape(option) + '"', source)
         assert len(declared) == 1, option
+
+
+def test_python_m_gcs_runs_the_command_only_as_the_main_module(monkeypatch, capsys) -> None:
+    # multiprocessing's "spawn" imports the parent's main module as __mp_main__ in a child:
+    # with `python -m gcs ...` that is gcs/__main__.py, which must then not run the command
+    import runpy
+    import sys
+
+    monkeypatch.setattr(sys, "argv", ["gcs", "--help"])
+    runpy.run_module("gcs.__main__", run_name="__mp_main__")  # no SystemExit: nothing ran
+    assert capsys.readouterr().out == ""
+    with pytest.raises(SystemExit) as exc:  # as the main module it is the command line
+        runpy.run_module("gcs.__main__", run_name="__main__")
+    assert exc.value.code == 0 and "Usage" in capsys.readouterr().out
