@@ -30,16 +30,22 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def run_gcs(*args: object) -> tuple[int, str]:
     """``gcs ARGS`` in this process on virtual time: (exit code, output)."""
+    from gcs import cli
+
     runner = CliRunner()
     cwd = os.getcwd()
     os.chdir(ROOT)  # as the subprocesses of the e2e tests: logs/ of the checkout
+    # wide enough that no temporary path (pytest-xdist's are longer) is wrapped; the command
+    # line's consoles read COLUMNS once, when gcs.cli is first imported, so set them here
+    widths = (cli.console.width, cli.err_console.width)
+    cli.console.width = cli.err_console.width = 400
     try:
         with virtual_time():
-            # wide enough that no temporary path (pytest-xdist's are longer) is wrapped
             result = runner.invoke(
                 app, [str(a) for a in args], env={"COLUMNS": "400"}, catch_exceptions=False
             )
     finally:
+        cli.console.width, cli.err_console.width = widths
         os.chdir(cwd)
     return result.exit_code, result.output
 
