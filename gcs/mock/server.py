@@ -40,17 +40,11 @@ from gcs.mock.missions import Missions
 from gcs.mock.mocap.arena import Arena, ArenaOptions, quat_from_euler
 from gcs.mock.streams import STREAMS
 from gcs.mock.transport import DatagramWriter
+from gcs.mock.truth import TruthRecord
 from gcs.mock.vehicle import Vehicle
 from gcs.mock.vision import _VISION_KEYS, Vision
 
-__all__ = ["MockServer", "TRUTH_PERIOD_S"]
-
-TRUTH_PERIOD_S = 0.02
-"""Period of the truth-and-error record in the statistics (vehicle time) [s]."""
-_TRUTH_KEYS = (
-    "t_vehicle_s", "north_m", "east_m", "down_m", "err_north_m", "err_east_m", "err_down_m",
-    "err_vn_m_s", "err_ve_m_s", "err_vd_m_s", "vn_m_s", "ve_m_s", "vd_m_s",
-)  # fmt: skip
+__all__ = ["MockServer"]
 
 
 class MockServer(Commands, Vision, Missions):
@@ -119,10 +113,7 @@ class MockServer(Commands, Vision, Missions):
         self.counts = {"rx": 0, "tx": 0, "rx_dropped": 0, "tx_dropped": 0, "steps": 0}
         self.max_lag_s = 0.0
         # the truth behind the estimate, every TRUTH_PERIOD_S of vehicle time (estimator on)
-        self._truth: dict[str, list[float]] | None = None
-        if self.vehicle.physics.estimator is not None:
-            self._truth = {key: [] for key in _TRUTH_KEYS}
-        self._truth_next_t = 0.0
+        self._truth = TruthRecord(self.vehicle.physics)
         # external vision received (ODOMETRY, VISION_POSITION_ESTIMATE), one row per message
         self._vision: dict[str, list[Any]] = {key: [] for key in _VISION_KEYS}
         self.arena: Arena | None = None
@@ -241,19 +232,7 @@ class MockServer(Commands, Vision, Missions):
     def _truth_stats(self) -> dict[str, Any] | None:
         """The estimator's truth record (None without an estimator)."""
         est = self.vehicle.physics.estimator
-        if self._truth is None or est is None:
-            return None
-        return {"period_s": TRUTH_PERIOD_S, "resets": est.resets, **self._truth}
-
-    def _record_truth(self) -> None:
-        ph = self.vehicle.physics
-        est = ph.estimator
-        if self._truth is None or est is None or ph.t_s < self._truth_next_t - 1e-9:
-            return
-        self._truth_next_t = ph.t_s + TRUTH_PERIOD_S
-        row = (ph.t_s, *ph.pos, *est.pos_err_m, *est.vel_err_m_s, *ph.vel)
-        for key, value in zip(_TRUTH_KEYS, row, strict=True):
-            self._truth[key].append(value)
+        return None if est is None else self._truth.stats(resets=est.resets)
 
     def _publish_truth(self) -> None:
         """Hand the arena the vehicle's true pose (its mocap serves it)."""
@@ -272,7 +251,7 @@ class MockServer(Commands, Vision, Missions):
         before = v.physics.t_s
         v.update(self._t(now))
         self._publish_truth()
-        self._record_truth()
+        self._truth.record()
         steps = int(round((v.physics.t_s - before) / v.physics.dt_s))
         self.counts["steps"] += steps
         if steps > 1:

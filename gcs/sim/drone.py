@@ -52,7 +52,7 @@ from gcs.flight.clock import LoopClock
 from gcs.mock.config import Faults, MockConfig
 from gcs.mock.estimator import injected_faults
 from gcs.mock.geofence import POLYGON_INCLUSION, FenceItem
-from gcs.mock.server import TRUTH_PERIOD_S
+from gcs.mock.truth import TruthRecord
 from gcs.mock.vehicle import (
     MAV_PARAM_TYPE_INT32,
     MavResult,
@@ -94,10 +94,6 @@ _RESULTS = {
     MavResult.UNSUPPORTED: "UNSUPPORTED",
     MavResult.FAILED: "FAILED",
 }
-_TRUTH_KEYS = (
-    "t_vehicle_s", "north_m", "east_m", "down_m", "err_north_m", "err_east_m", "err_down_m",
-    "err_vn_m_s", "err_ve_m_s", "err_vd_m_s", "vn_m_s", "ve_m_s", "vd_m_s",
-)  # fmt: skip
 _DRONES: dict[str, SimulatedDrone] = {}
 _NAMES = itertools.count(1)
 
@@ -165,10 +161,7 @@ class SimulatedDrone:
         self.fence_uploads = 0
         self.connections = 0
         # the truth behind the estimate, every TRUTH_PERIOD_S of vehicle time (as the mock's)
-        self._truth: dict[str, list[float]] | None = None
-        if self.vehicle.physics.estimator is not None:
-            self._truth = {key: [] for key in _TRUTH_KEYS}
-        self._truth_next_t = 0.0
+        self._truth = TruthRecord(self.vehicle.physics)
 
     @property
     def url(self) -> str:
@@ -232,26 +225,16 @@ class SimulatedDrone:
         """
         v = self.vehicle
         v.physics.wind_ne_m_s = self.faults.wind_ned_m_s(self.t_offboard())
-        if self._truth is None:
+        if self._truth.rows is None:
             v.update(t_s)
         else:  # step by step up to each record time, so the record is on the mock's grid
             ph = v.physics
             while ph.t_s + ph.dt_s <= t_s + 1e-9:
                 v.update(ph.t_s + ph.dt_s)
-                self._record_truth()
+                self._truth.record()
         while v.events:
             severity, text = v.events.pop(0)
             self.texts.append({"t_vehicle_s": v.t_s, "severity": severity, "text": text})
-
-    def _record_truth(self) -> None:
-        ph = self.vehicle.physics
-        est = ph.estimator
-        if self._truth is None or est is None or ph.t_s < self._truth_next_t - 1e-9:
-            return
-        self._truth_next_t = ph.t_s + TRUTH_PERIOD_S
-        row = (ph.t_s, *ph.pos, *est.pos_err_m, *est.vel_err_m_s, *ph.vel)
-        for key, value in zip(_TRUTH_KEYS, row, strict=True):
-            self._truth[key].append(value)
 
     def battery_pct(self) -> float:
         """Remaining charge as the mock reports it [%].
@@ -299,9 +282,7 @@ class SimulatedDrone:
             },
             "first_armed_vehicle_s": v.first_armed_t_s,
             "first_offboard_vehicle_s": v.first_offboard_t_s,
-            "estimator": None
-            if self._truth is None
-            else {"period_s": TRUTH_PERIOD_S, **self._truth},
+            "estimator": self._truth.stats(),
             "estimator_faults": [f.record() for f in v.faults],
         }
 
