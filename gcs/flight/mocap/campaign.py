@@ -20,6 +20,7 @@ import numpy as np
 
 from gcs.errors import MocapError, VehicleError
 from gcs.flight.fence import format_ned
+from gcs.flight.hover import hover_stats, widened
 from gcs.flight.mocap.checks import (
     FrameCheck,
     frame_check,
@@ -154,11 +155,16 @@ async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> dict:
     problem: list[str | None] = [None]
 
     def agree() -> bool:
+        # a stream that pauses before arming is waited for, as a disagreement is: the
+        # timeout names the last problem (in the air the stream's watch aborts at once)
         assert vehicle.latest is not None  # a healthy local position has samples
         est = np.asarray(vehicle.latest.pos_ned_m)
-        problem[0] = pose_agreement_problem(
-            est, mocap.require_tracked(), mocap.settings.agreement_m
-        )
+        try:
+            pos = mocap.require_tracked()
+        except MocapError as exc:
+            problem[0] = str(exc)
+            return False
+        problem[0] = pose_agreement_problem(est, pos, mocap.settings.agreement_m)
         return problem[0] is None
 
     try:
@@ -210,8 +216,11 @@ async def check_moves(
     """
     out: list[dict] = []
     length_m: float | None = None
+    tolerances: tuple[float, float] | None = None
     for attempt in (1, 2):
-        check, used_m = await _frame_check(vehicle, mocap, settings, length_m)
+        check, used_m, tolerances = await _frame_check(
+            vehicle, mocap, settings, length_m, tolerances
+        )
         out.append(check.as_record())
         note(f"mocap check: {_figures(check)}", check.problem is not None)
         if check.problem is not None:
@@ -257,13 +266,30 @@ def _figures(check: FrameCheck) -> str:
 
 
 async def _frame_check(
-    vehicle: Vehicle, mocap: MocapLink, settings: FlightSettings, length_m: float | None
-) -> tuple[FrameCheck, float]:
+    vehicle: Vehicle,
+    mocap: MocapLink,
+    settings: FlightSettings,
+    length_m: float | None,
+    tolerances: tuple[float, float] | None,
+) -> tuple[FrameCheck, float, tuple[float, float]]:
     """Fly home, north, home, east, home with a hover window at each; judge them. The move is
-    ``length_m``, or the profile's lengthened to four times the first window's wander."""
+    ``length_m``, or the profile's lengthened to four times the first window's wander.
+
+    The windows after the first settle within the tolerances of the first window's hover
+    (:func:`gcs.flight.hover.widened`, as a trial's start does after a loose hover): a vehicle
+    that wanders by decimetres never settles within the profile's few centimetres, and would
+    spend the whole settle timeout at every window. Those tolerances are returned for the
+    check flown once more."""
     fence = vehicle.fence
     home = await vehicle.hold_position()
-    first = await _window(vehicle, mocap, home, settings, "before the frame check")
+    floor = (settings.settle_tolerance_m, settings.settle_speed_m_s)
+    first = await _window(vehicle, mocap, home, settings, "before the frame check", tolerances)
+    if tolerances is None:
+        try:
+            stats = hover_stats(first[0], first[1], home)
+        except ValueError as exc:
+            raise MocapError(f"pre-flight frame check: cannot measure the hover: {exc}") from exc
+        tolerances = widened(*floor, stats, settings)
     if length_m is None:
         _, wander = window_mean(first[3])
         length_m = move_length(mocap.settings.check_move_m, wander)
@@ -275,7 +301,7 @@ async def _frame_check(
             step = -step  # the other way stays inside the arena
         for target, what in ((home + step, f"the {name} move"), (home, f"home after {name}")):
             await vehicle.goto(target, settings.transit_speed_m_s)
-            windows.append(await _window(vehicle, mocap, target, settings, what))
+            windows.append(await _window(vehicle, mocap, target, settings, what, tolerances))
             cmds.append(target - home)
     t_e, est, t_m, moc, span = (np.concatenate(parts) for parts in zip(*windows, strict=True))
     try:
@@ -285,15 +311,22 @@ async def _frame_check(
         )  # fmt: skip
     except ValueError as exc:  # a window without samples of one source
         raise MocapError(f"pre-flight frame check: could not judge the moves: {exc}") from exc
-    return check, length_m
+    return check, length_m, tolerances
 
 
 async def _window(
-    vehicle: Vehicle, mocap: MocapLink, target: np.ndarray, settings: FlightSettings, what: str
+    vehicle: Vehicle,
+    mocap: MocapLink,
+    target: np.ndarray,
+    settings: FlightSettings,
+    what: str,
+    tolerances: tuple[float, float] | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Settle at ``target`` (or give up after the settle timeout), then hover a window: the
-    estimate's times and positions, the mocap's (mapped to NED), and the window's span."""
-    await vehicle.settle(target, settings.settle_tolerance_m, settings.settle_speed_m_s)
+    """Settle at ``target`` within ``tolerances`` (distance [m], speed [m/s]; the profile's
+    when None) or give up after the settle timeout, then hover a window: the estimate's times
+    and positions, the mocap's (mapped to NED), and the window's span."""
+    tolerance_m, speed_m_s = tolerances or (settings.settle_tolerance_m, settings.settle_speed_m_s)
+    await vehicle.settle(target, tolerance_m, speed_m_s)
     samples = await vehicle.hold(MOVE_WINDOW_S, what)
     mocap.require_tracked()
     t_e = np.array([s.t_s for s in samples])

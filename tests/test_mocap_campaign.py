@@ -1,0 +1,118 @@
+"""The frame check as the campaign flies it (:mod:`gcs.flight.mocap.campaign`), against a
+vehicle and a mocap that replay a wandering hover: how long it waits at each window."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from types import SimpleNamespace
+
+import numpy as np
+
+from gcs.core.frames import mapping_for
+from gcs.flight.hover import hover_stats, widened
+from gcs.flight.link import TelemetrySample
+from gcs.flight.mocap.campaign import MOVE_WINDOW_S, check_moves
+from gcs.flight.mocap.client import MocapSample, series_of
+from gcs.io.settings import FlightSettings
+
+
+class WanderingVehicle:
+    """Follows every command at once and wanders around it by ``wander_m`` (seeded): what
+    the frame check sees of a vehicle that never settles within a few centimetres."""
+
+    def __init__(self, wander_m: float, seed: int, later_wander_m: float | None = None) -> None:
+        self.rng = np.random.default_rng(seed)
+        self.wander_m = wander_m
+        self.later_wander_m = wander_m if later_wander_m is None else later_wander_m
+        self.target = np.array([0.0, 0.0, -1.5])
+        self.fence = None
+        self.settles: list[tuple[float, float]] = []
+        self.samples: list[TelemetrySample] = []
+
+    async def hold_position(self) -> np.ndarray:
+        return self.target.copy()
+
+    async def goto(self, ned_m: np.ndarray, speed_m_s: float) -> None:
+        self.target = np.asarray(ned_m, dtype=float)
+
+    async def settle(self, ned_m: np.ndarray, tolerance_m: float, speed_m_s: float) -> bool:
+        self.settles.append((tolerance_m, speed_m_s))
+        return True
+
+    async def hold(self, duration_s: float, what: str) -> list[TelemetrySample]:
+        t0 = time.monotonic()
+        out = []
+        wander_m = self.later_wander_m if self.samples else self.wander_m
+        for k in range(int(duration_s * 50)):
+            pos = self.target + np.append(self.rng.normal(0, wander_m, 2), 0.0)
+            out.append(TelemetrySample(t0 + k / 50, tuple(pos), (0.0, 0.0, 0.0), k / 50))
+        self.samples += out
+        return out
+
+
+class Mirror:
+    """A mocap client that saw exactly what the vehicle estimated (NED, tracked)."""
+
+    def __init__(self, vehicle: WanderingVehicle) -> None:
+        self.vehicle = vehicle
+
+    def recent(self, duration_s: float) -> object:
+        return series_of([
+            MocapSample(i, s.t_s, s.t_s, True, s.pos_ned_m, (1.0, 0.0, 0.0, 0.0))
+            for i, s in enumerate(self.vehicle.samples)
+        ])  # fmt: skip
+
+
+def first_window_tolerances(
+    vehicle: WanderingVehicle, settings: FlightSettings
+) -> tuple[float, float]:
+    """The settle tolerances of the first window's hover, computed here from its samples."""
+    window = vehicle.samples[: round(MOVE_WINDOW_S * 50)]
+    t = np.array([s.t_s for s in window])
+    pos = np.array([s.pos_ned_m for s in window])
+    home = np.array([0.0, 0.0, -1.5])
+    floor = (settings.settle_tolerance_m, settings.settle_speed_m_s)
+    return widened(*floor, hover_stats(t, pos, home), settings)
+
+
+def test_the_windows_after_the_first_settle_within_the_first_hovers_tolerances() -> None:
+    vehicle = WanderingVehicle(wander_m=0.1, seed=4)
+    mocap = SimpleNamespace(
+        client=Mirror(vehicle),
+        mapping=mapping_for("ned"),
+        settings=SimpleNamespace(check_move_m=0.3, forward=True),
+        require_tracked=lambda: vehicle.target,
+    )
+    settings = FlightSettings()
+    lines: list[str] = []
+    records = asyncio.run(
+        check_moves(vehicle, mocap, settings, lambda text, warning=False: lines.append(text))
+    )
+    assert len(records) == 1, lines  # a 0.1 m wander: the first moves are long enough
+    first, *others = vehicle.settles
+    assert first == (settings.settle_tolerance_m, settings.settle_speed_m_s)
+    expected = first_window_tolerances(vehicle, settings)
+    assert expected[0] > 2 * settings.settle_tolerance_m  # the wander is what widened them
+    assert others == [expected] * 4
+
+
+def test_flown_once_more_the_check_keeps_the_tolerances_it_measured() -> None:
+    # calm in the first window, wandering by decimetres after: the first moves are too short
+    vehicle = WanderingVehicle(wander_m=0.02, seed=4, later_wander_m=0.3)
+    mocap = SimpleNamespace(
+        client=Mirror(vehicle),
+        mapping=mapping_for("ned"),
+        settings=SimpleNamespace(check_move_m=0.3, forward=True),
+        require_tracked=lambda: vehicle.target,
+    )
+    settings = FlightSettings()
+    lines: list[str] = []
+    records = asyncio.run(
+        check_moves(vehicle, mocap, settings, lambda text, warning=False: lines.append(text))
+    )
+    assert len(records) == 2, lines
+    assert any("once more" in line for line in lines), lines
+    first, *others = vehicle.settles
+    assert first == (settings.settle_tolerance_m, settings.settle_speed_m_s)
+    assert others == [first_window_tolerances(vehicle, settings)] * 9
