@@ -4,10 +4,10 @@ vehicle and a mocap that replay a wandering hover: how long it waits at each win
 from __future__ import annotations
 
 import asyncio
-import time
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from gcs.core.frames import mapping_for
 from gcs.flight.hover import hover_stats, widened
@@ -21,14 +21,19 @@ class WanderingVehicle:
     """Follows every command at once and wanders around it by ``wander_m`` (seeded): what
     the frame check sees of a vehicle that never settles within a few centimetres."""
 
-    def __init__(self, wander_m: float, seed: int, later_wander_m: float | None = None) -> None:
+    def __init__(
+        self, wander_m: float, seed: int, later_wander_m: float | None = None, follows: bool = True
+    ) -> None:
         self.rng = np.random.default_rng(seed)
+        self.follows = follows
+        self.home = np.array([0.0, 0.0, -1.5])
         self.wander_m = wander_m
         self.later_wander_m = wander_m if later_wander_m is None else later_wander_m
         self.target = np.array([0.0, 0.0, -1.5])
         self.fence = None
         self.settles: list[tuple[float, float]] = []
         self.samples: list[TelemetrySample] = []
+        self.t_s = 0.0  # its own clock: a window every 2 s whatever the machine
 
     async def hold_position(self) -> np.ndarray:
         return self.target.copy()
@@ -41,11 +46,12 @@ class WanderingVehicle:
         return True
 
     async def hold(self, duration_s: float, what: str) -> list[TelemetrySample]:
-        t0 = time.monotonic()
+        t0, self.t_s = self.t_s, self.t_s + duration_s + 0.5
         out = []
         wander_m = self.later_wander_m if self.samples else self.wander_m
         for k in range(int(duration_s * 50)):
-            pos = self.target + np.append(self.rng.normal(0, wander_m, 2), 0.0)
+            where = self.target if self.follows else self.home
+            pos = where + np.append(self.rng.normal(0, wander_m, 2), 0.0)
             out.append(TelemetrySample(t0 + k / 50, tuple(pos), (0.0, 0.0, 0.0), k / 50))
         self.samples += out
         return out
@@ -62,6 +68,11 @@ class Mirror:
             MocapSample(i, s.t_s, s.t_s, True, s.pos_ned_m, (1.0, 0.0, 0.0, 0.0))
             for i, s in enumerate(self.vehicle.samples)
         ])  # fmt: skip
+
+
+def note_to(lines: list[str]):  # type: ignore[no-untyped-def]
+    """A campaign's ``note`` that keeps the lines."""
+    return lambda text, warning=False: lines.append(text)
 
 
 def first_window_tolerances(
@@ -98,8 +109,9 @@ def test_the_windows_after_the_first_settle_within_the_first_hovers_tolerances()
 
 
 def test_flown_once_more_the_check_keeps_the_tolerances_it_measured() -> None:
-    # calm in the first window, wandering by decimetres after: the first moves are too short
-    vehicle = WanderingVehicle(wander_m=0.02, seed=4, later_wander_m=0.3)
+    # calm in the first window, wandering by decimetres after, and staying where it was: the
+    # following cannot be judged from the first moves
+    vehicle = WanderingVehicle(wander_m=0.02, seed=4, later_wander_m=0.3, follows=False)
     mocap = SimpleNamespace(
         client=Mirror(vehicle),
         mapping=mapping_for("ned"),
@@ -116,3 +128,34 @@ def test_flown_once_more_the_check_keeps_the_tolerances_it_measured() -> None:
     first, *others = vehicle.settles
     assert first == (settings.settle_tolerance_m, settings.settle_speed_m_s)
     assert others == [first_window_tolerances(vehicle, settings)] * 9
+
+
+def test_a_mapping_judged_along_one_direction_only_is_refused_after_the_second_check(
+    monkeypatch,
+) -> None:
+    from gcs.errors import MocapError
+    from gcs.flight.mocap import campaign
+    from gcs.flight.mocap.checks import FrameCheck, Response
+
+    ok = Response(1.0, 0.0)
+    unjudged = FrameCheck(
+        ((0.3, 0.0, 0.0), (0.0, 0.3, 0.0)), (ok, ok), (ok, ok), (ok, ok), 0.0, False, 0.2,
+        "unjudged", None, mapping_judged=False,
+    )  # fmt: skip
+    monkeypatch.setattr(campaign, "frame_check", lambda *args, **kwargs: unjudged)
+    for forward, refused in ((False, True), (True, False)):
+        vehicle = WanderingVehicle(wander_m=0.02, seed=4)
+        mocap = SimpleNamespace(
+            client=Mirror(vehicle),
+            mapping=mapping_for("ned"),
+            settings=SimpleNamespace(check_move_m=0.3, forward=forward),
+            require_tracked=lambda v=vehicle: v.target,
+        )
+        lines: list[str] = []
+        run = check_moves(vehicle, mocap, FlightSettings(), note_to(lines))
+        if refused:
+            with pytest.raises(MocapError, match="could not be judged"):
+                asyncio.run(run)
+        else:  # forwarded: the mapping is never judged in the air (docs/mocap.md)
+            assert len(asyncio.run(run)) == 2
+        assert any("once more" in line for line in lines), lines

@@ -217,7 +217,26 @@ def test_every_wrong_mapping_is_refused_whatever_the_wander(
     spans, cmds, t_s, truth = flight(length, settle, w)
     for name, q in QUARTER:
         check = frame_check(t_s, truth, t_s, truth @ q.T, spans, cmds)
-        assert check.problem is not None and "mocap saw" in check.problem, name
+        refused = check.problem is not None and "mocap saw" in check.problem
+        # or judged along one direction only: the campaign flies it again, then refuses
+        assert refused or not check.mapping_judged, name
+
+
+def test_a_motion_along_one_direction_is_judged_there_and_said_unjudged_across() -> None:
+    # found by the property above: a wander as large as the move that leaves the estimate
+    # moving along one direction only; the mapping was then not judged at all and a yaw of
+    # 90 deg passed as an unjudged following
+    length, settle = 0.25, [1.0, 3.0, 1.0, 1.0, 5.0]
+    wander = ([0.0, 1.0, 0.0, 0.0], [2.0, 8.0, 2.0, 2.0], [0.0, 0.0, 0.0, 0.0], 0.0)
+    spans, cmds, t_s, _ = flight(length, settle, lambda t: np.zeros((len(t), 3)))
+    spans, cmds, t_s, truth = flight(length, settle, scaled(wander, t_s, length))
+    right = frame_check(t_s, truth, t_s, truth, spans, cmds)
+    assert right.problem is None and not right.mapping_judged
+    assert right.following == "unjudged"
+    yaw = dict(QUARTER)["yaw +90"]
+    turned = frame_check(t_s, truth, t_s, truth @ yaw.T, spans, cmds)
+    assert turned.problem is not None and "90 deg off" in turned.problem, turned
+    assert not turned.mapping_judged and turned.as_record()["mapping_judged"] is False
 
 
 def test_the_incident_a_wandering_hover_is_not_refused_where_two_windows_were() -> None:

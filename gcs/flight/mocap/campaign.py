@@ -191,7 +191,9 @@ async def check_moves(
     estimate must follow the commanded moves. When it did not but the hover's wander is too
     large for that to be conclusive, the check is flown once more with moves four times the
     wander (at most 1 m); still unjudged, the flight goes on with a warning: the mapping was
-    judged, and a vehicle that wanders is not refused for it.
+    judged, and a vehicle that wanders is not refused for it. A mapping that could be judged
+    along one direction only (the estimate moved across it by less than a few centimetres)
+    is refused then: a mirror or a swap across that direction would not have shown.
 
     Parameters
     ----------
@@ -212,7 +214,8 @@ async def check_moves(
     Raises
     ------
     MocapError
-        The mocap did not move with the estimate, or the vehicle did not follow.
+        The mocap did not move with the estimate, the vehicle did not follow, or the mapping
+        could not be judged in both horizontal directions.
     """
     out: list[dict] = []
     length_m: float | None = None
@@ -231,6 +234,13 @@ async def check_moves(
         note(f"mocap check: the hover wandered {check.wander_m:.2f} m, more than a quarter of "
              f"the {used_m:.2f} m moves: once more with {longer_m:.2f} m moves", True)  # fmt: skip
         length_m = longer_m
+    if not mocap.settings.forward and not check.mapping_judged:
+        raise MocapError(
+            "pre-flight frame check: the mocap mapping could not be judged: over the check "
+            f"the vehicle moved along one direction only, inside a hover wander of "
+            f"{check.wander_m:.2f} m; a mirrored or swapped axis across it would not show. "
+            "Fly again in a calmer hover, or with longer moves (mocap.check_move_m)"
+        )
     axes = ("north", "east")
     seen = ", ".join(
         f"{name} {r.gain:.2f} at {r.angle_deg:.0f} deg"

@@ -318,6 +318,13 @@ class FrameCheck:
         but the wander is above a quarter of the shortest move: not conclusive).
     problem : str or None
         The reason to refuse the flight, or None.
+    mapping_judged : bool
+        Whether the mapping was judged in both horizontal directions. False when it was not
+        to be judged (``judge_mapping=False``), and when the estimate moved along one
+        direction only (less than :data:`MIN_EXCITATION_M` RMS across it) inside a wander
+        too large for the following to be judged: the mapping was then judged along that
+        direction alone, and a mirror or a swap across it cannot show (the campaign flies
+        the check once more with longer moves, then refuses).
     """
 
     cmd_ned_m: tuple[tuple[float, float, float], ...]
@@ -329,6 +336,7 @@ class FrameCheck:
     wander_m: float
     following: str
     problem: str | None
+    mapping_judged: bool = True
 
     def as_record(self) -> dict:
         """The figures as plain numbers (for the session record).
@@ -351,6 +359,7 @@ class FrameCheck:
             "wander_m": round(self.wander_m, 4),
             "following": self.following,
             "problem": self.problem,
+            "mapping_judged": self.mapping_judged,
         }
 
 
@@ -496,7 +505,7 @@ def frame_check(
     rotation = math.degrees(math.atan2(h[1, 0] - h[0, 1], h[0, 0] + h[1, 1]))
     mirrored = bool(np.linalg.det(h) < -(MIN_GAIN**2))
 
-    problem = None
+    problem, mapping_judged = None, judge_mapping
     failed = [
         i for i, r in enumerate(est_r) if r.gain < MIN_GAIN or r.angle_deg > MAX_FOLLOW_ANGLE_DEG
     ]
@@ -509,7 +518,20 @@ def frame_check(
     if not judge_mapping:
         pass  # forwarded: (1) cannot tell a wrong mapping (module docstring); (2) alone
     elif float(np.min(excitation)) < MIN_EXCITATION_M and not conclusive:
-        following = "unjudged"  # too still to compare, but inside its own wander
+        # too still across one direction to compare there, but inside its own wander: judge
+        # the mapping along the direction the estimate did move
+        following, mapping_judged = "unjudged", False
+        along = np.linalg.svd(est_h, full_matrices=False)[2][0]
+        seen = _response(g @ along, np.append(along, 0.0))
+        if seen.gain < MIN_GAIN or seen.angle_deg > MAX_MAPPING_ANGLE_DEG:
+            bearing = math.degrees(math.atan2(along[1], along[0])) % 180.0
+            problem = (
+                f"the mocap saw the vehicle's motion along {bearing:.0f} deg from north "
+                f"{seen.angle_deg:.0f} deg off (gain {seen.gain:.2f}) against its own "
+                "estimate: the mocap mapping (yaw_offset_deg, north_axis, up_axis, "
+                "handedness) is not the frame the vehicle flies in, or its estimate is not fed "
+                "by this mocap"
+            )
     elif float(np.min(excitation)) < MIN_EXCITATION_M:
         following = "failed"  # too still to compare with the mocap: it did not follow
         problem = (
@@ -541,5 +563,5 @@ def frame_check(
         )
     return FrameCheck(
         tuple(tuple(float(x) for x in cmd[m]) for m in moves),  # type: ignore[misc]
-        est_r, moc_r, map_r, rotation, mirrored, wander, following, problem,
+        est_r, moc_r, map_r, rotation, mirrored, wander, following, problem, mapping_judged,
     )  # fmt: skip
