@@ -36,7 +36,7 @@ import os
 import signal
 import threading
 from collections.abc import Callable
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
@@ -98,7 +98,15 @@ class WorkerSource:
         self.close()
 
     def start(self) -> None:
-        """Start the worker and have it build the source (returns before it is built)."""
+        """Start the worker and wait until it has built the source (a failed build raises at
+        the first call).
+
+        The worker's start-up (its imports and the build: seconds of CPU) is over before the
+        flight begins: overlapping the connection on a 2-core machine running PX4 SITL, it
+        delayed the connection by 2-3 s, and on the vision-only lab firmware gcs then set
+        PX4's global origin before EKF2 fused the first vision (the estimate 488 m down, the
+        origin's altitude; arming refused by the fence check).
+        """
         if self._pool is not None:
             return
         pool = ProcessPoolExecutor(
@@ -109,6 +117,7 @@ class WorkerSource:
         with _interrupts_ignored():  # the child starts with them ignored, before its imports
             self._built = pool.submit(_build, self.build, self.args)
         self._pool = pool
+        wait([self._built])
 
     def close(self) -> None:
         """Let the worker finish the calls made so far, then shut it down (idempotent)."""
