@@ -575,7 +575,9 @@ def report(
         typer.Option(
             "--export-setpoints",
             help="Write the best learned trial's setpoints here as a samples CSV "
-            "(docs/trajectories.md): gcs fly --trajectory FILE flies them again.",
+            "(docs/trajectories.md), for another stack to replay at t_ilc_s. As a gcs fly "
+            "--trajectory they are a reference and are usually refused: learned setpoints "
+            "step faster than a reference may (docs/report.md).",
             rich_help_panel=OUTPUT,
         ),
     ] = None,
