@@ -9,6 +9,9 @@ from hypothesis import strategies as st
 
 from gcs.core.floor import (
     Floor,
+    FloorDrift,
+    FloorVerdict,
+    floor_drift,
     floor_from_difference,
     floor_from_flights,
     floor_verdicts,
@@ -135,3 +138,35 @@ def test_floor_is_translation_invariant_and_scales(shift: float, scale: float, s
     assert g.epos_m == pytest.approx(scale * f.epos_m, rel=1e-9)
     assert g.scatter_m == pytest.approx(scale * f.scatter_m, rel=1e-6)
     assert g.effective_samples == pytest.approx(f.effective_samples, rel=1e-6)
+
+
+def verdict_row(at: list[bool], epos: list[float]) -> tuple:
+    return tuple(
+        FloorVerdict(j, e, e / 0.02, 0.0 if a else 3.0, a, False)
+        for j, (a, e) in enumerate(zip(at, epos, strict=True))
+    )
+
+
+def test_a_run_that_left_the_floor_it_reached_drifts() -> None:
+    at = [False, False, True, True, False, False]
+    epos = [0.9, 0.3, 0.021, 0.019, 0.05, 0.07]
+    assert floor_drift(verdict_row(at, epos)) == FloorDrift(2, 3, (4, 5))
+    assert floor_drift(verdict_row(at[:5], epos[:5])) is None  # one above: the scatter
+    assert floor_drift(verdict_row(at[:5], epos[:5]), newest=1) == FloorDrift(2, 3, (4,))
+    assert floor_drift(verdict_row([False] * 6, epos)) is None  # never reached: no drift
+    assert floor_drift(verdict_row([*at, True], [*epos, 0.02])) is None  # back at the floor
+
+
+@given(st.lists(st.tuples(st.booleans(), st.floats(0.001, 1.0)), min_size=0, max_size=12))
+def test_drift_is_the_newest_two_above_after_one_at_the_floor(rows) -> None:
+    at = [a for a, _ in rows]
+    epos = [e for _, e in rows]
+    drift = floor_drift(verdict_row(at, epos))
+    n = len(rows)
+    reached = [j for j in range(n - 2) if at[j]]
+    expected = n >= 3 and not at[-1] and not at[-2] and bool(reached)
+    assert (drift is not None) == expected
+    if drift is not None:
+        assert drift.reached_trial == reached[0] and drift.above == (n - 2, n - 1)
+        assert epos[drift.best_trial] == min(epos[j] for j in reached)
+        assert at[drift.best_trial]

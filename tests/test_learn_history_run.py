@@ -323,3 +323,28 @@ def test_the_live_table_says_each_decision_as_it_happens(tmp_path):
     assert "estimate" not in text  # the report has the weights; the live table what changed
     repeat = LearnOutcome(0, 1, run.path / "setpoints-001.csv", ("-", "-"), 0, 0, repeat_of=0)
     assert "trial 1 repeats trial 0" in learning_lines(repeat)[0]
+
+
+def test_the_live_table_says_when_learning_drifts_up_from_the_floor(tmp_path):
+    from gcs.app.fly_view import learning_lines
+    from gcs.app.learn import LearnOutcome
+
+    run = make_adaptive_run(tmp_path, trials=3)
+    record = run.read_learn_record(2)
+    verdicts = record["decision"]["verdicts"]
+    assert [v["trial"] for v in verdicts] == [0, 1, 2]
+    base = dict(verdicts[-1])
+    # trial 1 at the floor, then trials 2 and 3 above it: the newest two, after one at it
+    record["decision"]["verdicts"] = [
+        {**base, "trial": 0, "epos_m": 0.9, "z": 40.0, "at_floor": False},
+        {**base, "trial": 1, "epos_m": 0.02, "z": 0.5, "at_floor": True},
+        {**base, "trial": 2, "epos_m": 0.05, "z": 3.5, "at_floor": False},
+        {**base, "trial": 3, "epos_m": 0.06, "z": 4.0, "at_floor": False},
+    ]  # fmt: skip
+    outcome = LearnOutcome(3, 4, run.path / "setpoints-004.csv", ("direct",) * 2, 0, 3,
+                           record=record)  # fmt: skip
+    text = "\n".join(learning_lines(outcome))
+    assert "drifting up: trial 1 reached the floor, trials 2 and 3 are above it again" in text
+    assert "the best setpoints at the floor are trial 1's" in text
+    record["decision"]["verdicts"][-1]["at_floor"] = True  # back at the floor: no drift
+    assert "drifting" not in "\n".join(learning_lines(outcome))

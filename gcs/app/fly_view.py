@@ -21,6 +21,7 @@ from gcs.app.learn import LearnOutcome
 from gcs.app.progress import progress_lines
 from gcs.app.report_text import decision_lines, metrics_table
 from gcs.app.session import check_mock_config, check_url, vehicle_url
+from gcs.core.floor import FloorVerdict, floor_drift
 from gcs.core.metrics import IterationMetrics
 from gcs.core.trials import iteration_of, repeat_of
 from gcs.errors import GcsError
@@ -282,8 +283,10 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
     """What a learning step decided, for the live table (rich markup, escaped).
 
     The newest trial's verdict against the floor (e.g. "trial 6: 1.08x the floor, at the
-    floor"; "converged" in green), a safeguard's fall back, a refreshed model and how far it
-    moved, and what comes next; a repeat of trial 0 says so.
+    floor"; "converged" in green), a drift up from the floor once reached
+    (:func:`gcs.core.floor.floor_drift`, with the trial whose setpoints were best there), a
+    safeguard's fall back, a refreshed model and how far it moved, and what comes next; a
+    repeat of trial 0 says so.
 
     Parameters
     ----------
@@ -315,6 +318,14 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
             f"  trial {v['trial']}: {v['ratio']:.2f}x the floor ({1e3 * floor['epos_m']:.1f} mm "
             f"± {1e3 * floor['scatter_m']:.1f}), {_scatters(v['z'])}: {word}"
         )
+        drift = floor_drift(tuple(FloorVerdict(**d) for d in verdicts))
+        if drift is not None:
+            above = " and ".join(map(str, drift.above))
+            lines.append(
+                f"  [yellow]drifting up: trial {drift.reached_trial} reached the floor, trials "
+                f"{above} are above it again; the best setpoints at the floor are trial "
+                f"{drift.best_trial}'s[/]"
+            )
     for line in decision_lines(record):  # the report has them all; live, what changed
         if line.startswith(("model kept", "estimate")):
             continue

@@ -17,12 +17,19 @@ document's schema is in docs/report.md.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from gcs.core.floor import Floor, FloorVerdict, floor_from_flights, floor_verdicts, identical_groups
+from gcs.core.floor import (
+    Floor,
+    FloorVerdict,
+    floor_drift,
+    floor_from_flights,
+    floor_verdicts,
+    identical_groups,
+)
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trials import (
     iteration_of,
@@ -63,7 +70,7 @@ __all__ = [
 ]
 
 #: The ``format`` and ``version`` fields of ``gcs report --json`` (docs/report.md).
-REPORT_FORMAT, REPORT_VERSION = "gcs-report", 3
+REPORT_FORMAT, REPORT_VERSION = "gcs-report", 4
 
 #: Significant digits of every number in the JSON document.
 JSON_DIGITS = 9
@@ -708,6 +715,14 @@ class Verdict:
         Likely flights until "converged" (0 when converged); None when it cannot be estimated.
     flights_left_how : str
         How ``flights_left`` was estimated, or why it cannot be.
+    drift_trials : list of int
+        The newest trials, above the floor after an earlier trial reached it
+        (:func:`gcs.core.floor.floor_drift`); empty when learning did not drift up.
+    drift_reached_trial : int or None
+        The first trial at the floor, when it drifted.
+    drift_best_trial : int or None
+        The trial at the floor with the smallest e_pos, when it drifted: its setpoints are
+        the ones worth flying again.
     """
 
     flights: int
@@ -725,6 +740,9 @@ class Verdict:
     converged_trial: int | None
     flights_left: int | None
     flights_left_how: str
+    drift_trials: list[int] = field(default_factory=list)
+    drift_reached_trial: int | None = None
+    drift_best_trial: int | None = None
 
     def lines(self) -> list[str]:
         """The verdict as a few lines of plain words (terminal and HTML).
@@ -755,6 +773,13 @@ class Verdict:
                 f"verdict: best e_pos {self.floor_ratio:.2f}x the floor of {_mm(self.floor_m)}: "
                 f"{_mm(self.best_epos_m - self.floor_m)} or {self.floor_z:.1f} scatters of one "
                 f"trial above it (z; 'at floor' from z <= {self.floor_z_max:g})"
+            )
+        if self.drift_trials:
+            above = " and ".join(map(str, self.drift_trials))
+            out.append(
+                f"verdict: drifting up: trial {self.drift_reached_trial} reached the floor, and "
+                f"trials {above} are above it again; the best setpoints at the floor are trial "
+                f"{self.drift_best_trial}'s (docs/learning-floor.md)"
             )
         if self.converged_trial is not None:
             out.append(
@@ -839,7 +864,21 @@ def run_verdict(rows: list[IterationMetrics], learning: RunLearning | None) -> V
         converged_trial=converged[0] if converged else None,
         flights_left=left,
         flights_left_how=how,
+        **_drift_fields(verdicts),
     )
+
+
+def _drift_fields(trials: dict) -> dict:
+    """The verdict's drift fields from the trials' floor verdicts (none: no drift)."""
+    row = tuple(trials[t].verdict for t in sorted(trials) if trials[t].verdict is not None)
+    drift = floor_drift(row)
+    if drift is None:
+        return {}
+    return {
+        "drift_trials": list(drift.above),
+        "drift_reached_trial": drift.reached_trial,
+        "drift_best_trial": drift.best_trial,
+    }
 
 
 def _flights_left(

@@ -34,7 +34,13 @@ __all__ = [
     "identical_groups",
     "integrated_autocorrelation",
     "floor_verdicts",
+    "FloorDrift",
+    "floor_drift",
+    "DRIFT_TRIALS",
 ]
+
+#: Trials in a row above the floor, after one at it, that make a drift (:func:`floor_drift`).
+DRIFT_TRIALS = 2
 
 #: Setpoints closer than this count as identical [m].
 IDENTICAL_TOL_M = 1e-9
@@ -299,3 +305,56 @@ def floor_verdicts(
         ratio = float(ej / floor.epos_m) if floor.epos_m > 0 else float("inf")
         out.append(FloorVerdict(j, float(ej), ratio, float(z), at, bool(conv)))
     return tuple(out)
+
+
+@dataclass(frozen=True)
+class FloorDrift:
+    """Learning that left the floor it had reached.
+
+    Parameters
+    ----------
+    reached_trial : int
+        The first trial at the floor.
+    best_trial : int
+        The trial at the floor with the smallest e_pos: the setpoints worth flying again.
+    above : tuple of int
+        The newest trials, all after ``reached_trial``, each above the floor.
+    """
+
+    reached_trial: int
+    best_trial: int
+    above: tuple[int, ...]
+
+
+def floor_drift(
+    verdicts: tuple[FloorVerdict, ...], newest: int = DRIFT_TRIALS
+) -> FloorDrift | None:
+    """Whether learning has left the floor it reached.
+
+    A drift is ``newest`` trials in a row above the floor (``z > z_max``), the newest
+    included, after an earlier trial was at it. One trial at the floor is called above it by
+    chance with probability 1 - 0.977 under a Gaussian e_pos (``z_max = 2``), so two in a
+    row by chance about 5e-4 when the trials are independent: a rise, not the scatter.
+
+    Parameters
+    ----------
+    verdicts : tuple of FloorVerdict
+        One per trial, in trial order (:func:`floor_verdicts`).
+    newest : int
+        Trials in a row above the floor that make a drift (>= 1).
+
+    Returns
+    -------
+    FloorDrift or None
+        None while no trial reached the floor, or while one of the newest is at it.
+    """
+    if newest < 1:
+        raise ValueError(f"newest must be >= 1, got {newest}")
+    tail = verdicts[-newest:]
+    if len(tail) < newest or any(v.at_floor for v in tail):
+        return None
+    earlier = [v for v in verdicts[: len(verdicts) - newest] if v.at_floor]
+    if not earlier:
+        return None
+    best = min(earlier, key=lambda v: (v.epos_m, v.trial))
+    return FloorDrift(earlier[0].trial, best.trial, tuple(v.trial for v in tail))
