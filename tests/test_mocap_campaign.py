@@ -70,6 +70,16 @@ class Mirror:
         ])  # fmt: skip
 
 
+def mirrored_mocap(vehicle: WanderingVehicle, forward: bool) -> SimpleNamespace:
+    """The campaign's mocap link as the check uses it: the vehicle's own samples, in NED."""
+    return SimpleNamespace(
+        client=Mirror(vehicle),
+        mapping=mapping_for("ned"),
+        settings=SimpleNamespace(check_move_m=0.3, forward=forward),
+        require_tracked=lambda: vehicle.target,
+    )
+
+
 def note_to(lines: list[str]):  # type: ignore[no-untyped-def]
     """A campaign's ``note`` that keeps the lines."""
     return lambda text, warning=False: lines.append(text)
@@ -89,16 +99,10 @@ def first_window_tolerances(
 
 def test_the_windows_after_the_first_settle_within_the_first_hovers_tolerances() -> None:
     vehicle = WanderingVehicle(wander_m=0.1, seed=4)
-    mocap = SimpleNamespace(
-        client=Mirror(vehicle),
-        mapping=mapping_for("ned"),
-        settings=SimpleNamespace(check_move_m=0.3, forward=True),
-        require_tracked=lambda: vehicle.target,
-    )
     settings = FlightSettings()
     lines: list[str] = []
     records = asyncio.run(
-        check_moves(vehicle, mocap, settings, lambda text, warning=False: lines.append(text))
+        check_moves(vehicle, mirrored_mocap(vehicle, forward=True), settings, note_to(lines))
     )
     assert len(records) == 1, lines  # a 0.1 m wander: the first moves are long enough
     first, *others = vehicle.settles
@@ -112,16 +116,10 @@ def test_flown_once_more_the_check_keeps_the_tolerances_it_measured() -> None:
     # calm in the first window, wandering by decimetres after, and staying where it was: the
     # following cannot be judged from the first moves
     vehicle = WanderingVehicle(wander_m=0.02, seed=4, later_wander_m=0.3, follows=False)
-    mocap = SimpleNamespace(
-        client=Mirror(vehicle),
-        mapping=mapping_for("ned"),
-        settings=SimpleNamespace(check_move_m=0.3, forward=True),
-        require_tracked=lambda: vehicle.target,
-    )
     settings = FlightSettings()
     lines: list[str] = []
     records = asyncio.run(
-        check_moves(vehicle, mocap, settings, lambda text, warning=False: lines.append(text))
+        check_moves(vehicle, mirrored_mocap(vehicle, forward=True), settings, note_to(lines))
     )
     assert len(records) == 2, lines
     assert any("once more" in line for line in lines), lines
@@ -145,12 +143,7 @@ def test_a_mapping_judged_along_one_direction_only_is_refused_after_the_second_c
     monkeypatch.setattr(campaign, "frame_check", lambda *args, **kwargs: unjudged)
     for forward, refused in ((False, True), (True, False)):
         vehicle = WanderingVehicle(wander_m=0.02, seed=4)
-        mocap = SimpleNamespace(
-            client=Mirror(vehicle),
-            mapping=mapping_for("ned"),
-            settings=SimpleNamespace(check_move_m=0.3, forward=forward),
-            require_tracked=lambda v=vehicle: v.target,
-        )
+        mocap = mirrored_mocap(vehicle, forward)
         lines: list[str] = []
         run = check_moves(vehicle, mocap, FlightSettings(), note_to(lines))
         if refused:
