@@ -351,8 +351,9 @@ def fly(
             "--until-converged",
             help="Land as soon as learning has converged: two trials in a row at the floor "
             "(the repeat of trial 0 measures it), their mean within one trial's scatter of "
-            "it. --iter stays the most trials flown. Needs a profile with learning.adaptive "
-            "(antx-adaptive).",
+            "it; or as soon as it has left the floor it reached (two trials in a row above "
+            "it), saying which trial's setpoints to fly again with --again. --iter stays the "
+            "most trials flown. Needs a profile with learning.adaptive (antx-adaptive).",
             rich_help_panel=LEARNING,
         ),
     ] = False,
@@ -361,6 +362,19 @@ def fly(
         Path | None,
         typer.Option(
             help="Continue this run from its last complete trial.", rich_help_panel=OUTPUT
+        ),
+    ] = None,
+    again: Annotated[
+        int | None,
+        typer.Option(
+            "--again",
+            min=0,
+            metavar="TRIAL",
+            help="With --resume: the next trial flies this complete trial's setpoints again "
+            "instead of the ones learned for it (kept in the run's superseded/), e.g. the "
+            "best at the floor when learning drifted up from it; learning goes on from there.",
+            show_default=False,
+            rich_help_panel=OUTPUT,
         ),
     ] = None,
     logs: Logs = DEFAULT_LOGS,
@@ -408,6 +422,7 @@ def fly(
         until_converged=until_converged,
         mocap=mocap,
         offline=offline,
+        again=again,
     )
 
 

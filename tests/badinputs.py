@@ -1088,6 +1088,20 @@ def _resume_cases() -> Iterator[Case]:
         "at most one",
     )
 
+    k_again = "options: fly --again"
+    yield Case(
+        k_again, "fly", "--again without --resume", lambda ws: _fly(ws, "--again", "0"),
+        "give it with --resume",
+    )  # fmt: skip
+    yield Case(
+        k_again, "fly", "--again of a trial that was not flown",
+        lambda ws: resume(ws, None, "--again", "5"), "not a complete trial",
+    )  # fmt: skip
+    yield Case(
+        k_again, "fly", "--again of a negative trial", lambda ws: resume(ws, None, "--again", "-1"),
+        "--again",
+    )  # fmt: skip
+
     def read_only(ws: Workspace) -> list[str]:
         run = ws.run()
         ws.read_only(run)

@@ -12,10 +12,10 @@ from gcs.core.floor import (
     FloorDrift,
     FloorVerdict,
     floor_drift,
+    floor_flights,
     floor_from_difference,
     floor_from_flights,
     floor_verdicts,
-    identical_groups,
     integrated_autocorrelation,
 )
 
@@ -94,12 +94,14 @@ def test_nan_refused() -> None:
         floor_from_flights(x)
 
 
-def test_identical_groups() -> None:
+def test_floor_flights_are_trial_0_and_its_repeats_only() -> None:
     a, b = np.zeros((40, 2)), np.ones((40, 2))
-    sp = np.array([a, a, b, a + 1e-12, b + 1e-3, b])
-    assert identical_groups(sp) == [[0, 1, 3], [2, 5]]
+    assert floor_flights(np.array([a, a + 1e-12, a, b, a, b])) == [0, 1, 2]  # not 4: flown later
+    assert floor_flights(np.array([a, b, a, a])) == []  # no repeat right after trial 0
+    assert floor_flights(np.array([a, a + 1e-3])) == []  # not identical
+    assert floor_flights(np.array([a])) == []
     with pytest.raises(ValueError):
-        identical_groups(np.zeros((3, 2, 40)).transpose(0, 2, 1)[..., :1])
+        floor_flights(np.zeros((3, 2, 40)).transpose(0, 2, 1)[..., :1])
 
 
 def _floor(epos: float, scatter: float, flights: int = 2) -> Floor:

@@ -149,3 +149,56 @@ def test_a_source_that_says_no_further_trial_lands_the_vehicle_early(tmp_path: P
     assert texts[-2:] == ["landing", "landed and disarmed"]
     final = mock.stats()["modes"][-1]
     assert final["armed"] is False
+
+
+def test_fly_again_flies_an_earlier_trials_setpoints_and_until_converged_lands_on_a_drift(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--resume --again K`` flies trial K's setpoints byte for byte and keeps the learned
+    ones; flying the reference again twice after a trial at the floor is a drift up from it,
+    on which ``--until-converged`` lands and names the best trial at the floor."""
+    sim_mock(monkeypatch)
+    run_path = tmp_path / "run"
+    profile = adaptive_ci_profile(tmp_path)
+    first = ["--iter", 6, "--trajectory", SHORT, "--profile", profile, "--run", run_path]
+    code, out = run_gcs(*("fly", "--mock", "--seed", 3, *first))
+    assert code == 0, out
+    run = RunDir.open(run_path)
+    verdicts = run.read_learn_record(5)["decision"]["verdicts"]
+    at_floor = [v["trial"] for v in verdicts if v["at_floor"] and v["trial"] >= 2]
+    assert at_floor, verdicts  # the learned trials reached the floor: what a drift leaves
+    learned = (run_path / "setpoints-006.csv").read_bytes()
+
+    code, out = run_gcs(*("fly", "--mock", "--seed", 4, "--resume", run_path, "--iter", 1,
+                          "--again", 0))  # fmt: skip
+    assert code == 0, out
+    assert run.complete_trials() == [0, 1, 2, 3, 4, 5, 6]
+    assert (run_path / "setpoints-006.csv").read_bytes() == (
+        run_path / "setpoints-000.csv"
+    ).read_bytes()
+    assert (run_path / "superseded" / "setpoints-006-1.csv").read_bytes() == learned
+    assert run.again_of(6) == 0 and run.again_of(5) is None
+    assert run.read_learn_record(6)["learned_from"] == list(range(7))  # learning goes on
+
+    more = ["--resume", run_path, "--iter", 3, "--until-converged", "--again", 0]
+    code, out = run_gcs(*("fly", "--mock", "--seed", 5, *more))
+    assert code == 0, out
+    assert run.complete_trials() == list(range(8))  # landed after trial 7, not 9
+    verdicts = run.read_learn_record(7)["decision"]["verdicts"]
+    above = [v["trial"] for v in verdicts if not v["at_floor"]]
+    assert 6 in above and 7 in above, verdicts
+    best = min(
+        (v for v in verdicts if v["at_floor"] and v["trial"] < 6),
+        key=lambda v: (v["ratio"], v["trial"]),
+    )["trial"]
+    assert (
+        f"trials 6 and 7 are above it again; the best setpoints at the floor are trial {best}'s"
+    ) in out
+    assert f"--until-converged: landed, learning left the floor; to fly trial {best}'s" in out, out
+    assert f"--again {best}" in out and "landed and disarmed" in out
+
+    code, out = run_gcs(*("report", run_path))
+    assert code == 0, out
+    assert "trial 6: flew trial 0's setpoints again (gcs fly --again)" in out, out
+    assert "trial 7: flew trial 0's setpoints again" in out
+    assert f"--again {best} flies them again" in out

@@ -27,7 +27,10 @@ from gcs.app.fly import (
     RunSource,
     check_until_converged,
     converged_reason,
+    drift_reason,
     plan_fly,
+    record_drift,
+    start_run,
 )
 from gcs.app.learn import learn_run, models_in_use
 from gcs.app.session import flyable_setpoints
@@ -348,3 +351,34 @@ def test_the_live_table_says_when_learning_drifts_up_from_the_floor(tmp_path):
     assert "the best setpoints at the floor are trial 1's" in text
     record["decision"]["verdicts"][-1]["at_floor"] = True  # back at the floor: no drift
     assert "drifting" not in "\n".join(learning_lines(outcome))
+
+
+def test_again_is_refused_for_the_repeat_and_flies_as_the_trial_it_copies(tmp_path: Path) -> None:
+    run = make_adaptive_run(tmp_path / "a", trials=1)  # next: trial 1, the repeat of trial 0
+    with pytest.raises(RunLogError, match="trial 1, is a repeat of trial 0"):
+        plan_fly(None, None, None, resume=run.path, again=0)
+    run = make_adaptive_run(tmp_path / "b", trials=4)  # next: trial 4, learned
+    plan = plan_fly(None, None, None, resume=run.path, again=2)
+    assert (plan.first_trial, plan.again) == (4, 2)
+    assert run.again_of(4) is None  # planning moves nothing
+    start_run(plan)
+    assert run.again_of(4) == 2
+    assert np.array_equal(flyable_setpoints(run, 4), run.read_setpoints(2))
+
+
+def test_drift_reason_names_the_trials_above_and_the_best_at_the_floor() -> None:
+    def verdict(trial: int, epos_m: float, at_floor: bool) -> dict:
+        z = 0.0 if at_floor else 5.0
+        return dict(trial=trial, epos_m=epos_m, ratio=epos_m / 0.02, z=z, at_floor=at_floor,
+                    converged=False)  # fmt: skip
+
+    rows = [verdict(2, 0.05, False), verdict(3, 0.021, True), verdict(4, 0.019, True)]
+    record = {"decision": {"verdicts": rows}}
+    assert drift_reason(record) is None and record_drift(None) is None
+    rows += [verdict(5, 0.04, False)]
+    assert drift_reason(record) is None  # one trial above: the scatter
+    rows += [verdict(6, 0.05, False)]
+    assert drift_reason(record) == (
+        "drifting up: trial 3 reached the floor, trials 5 and 6 are above it again; the best "
+        "setpoints at the floor are trial 4's"
+    )

@@ -161,6 +161,6 @@ def test_a_run_that_drifts_up_from_the_floor_says_so_with_its_best_trial(adaptiv
     v = run_verdict(rows, replace(learning, trials=trials))
     assert (v.drift_trials, v.drift_reached_trial, v.drift_best_trial) == ([4, 5], 2, 3)
     text = "\n".join(v.lines())
-    assert "drifting up: trial 2 reached the floor, and trials 4 and 5 are above it again" in text
-    assert "the best setpoints at the floor are trial 3's" in text
+    assert "drifting up: trial 2 reached the floor, trials 4 and 5 are above it again" in text
+    assert "the best setpoints at the floor are trial 3's; gcs fly --resume <run> --again 3" in text
     assert v.as_dict()["drift_trials"] == [4, 5]

@@ -668,3 +668,55 @@ def test_a_repeat_is_trial_0_byte_for_byte(tmp_path):
     assert run.write_repeat(1).read_bytes() == (run.path / "setpoints-000.csv").read_bytes()
     with pytest.raises(RunLogError, match="cannot repeat"):
         run.write_repeat(0)
+
+
+def test_fly_again_puts_an_earlier_trials_setpoints_in_force_and_keeps_the_learned(
+    tmp_path: Path,
+) -> None:
+    from synthetic import fly_synthetic, make_run
+
+    from gcs.app.learn import learn_run
+
+    run = make_run(tmp_path, trials=3)  # trials 0..2 complete
+    learn_run(run)  # setpoints-003 learned
+    learned = (run.path / "setpoints-003.csv").read_bytes()
+    assert run.again_of(3) is None
+    run.fly_again(3, 1)
+    assert (run.path / "setpoints-003.csv").read_bytes() == (
+        run.path / "setpoints-001.csv"
+    ).read_bytes()
+    assert (run.path / "superseded" / "setpoints-003-1.csv").read_bytes() == learned
+    assert run.again_of(3) == 1
+    run.fly_again(3, 1)  # in force already: nothing moved, nothing added
+    assert sorted(p.name for p in (run.path / "superseded").iterdir()) == ["setpoints-003-1.csv"]
+    run.fly_again(3, 2)  # changed one's mind: trial 1's copy is kept too, the record says both
+    assert (run.path / "superseded" / "setpoints-003-2.csv").read_bytes() == (
+        run.path / "setpoints-001.csv"
+    ).read_bytes()
+    record = json.loads((run.path / "again-003.json").read_text())
+    assert [e["setpoints_of"] for e in record["again"]] == [1, 2] and run.again_of(3) == 2
+    fly_synthetic(run, 3)  # flown: its setpoints columns are trial 2's, as the file says
+    assert np.array_equal(run.read_trial(3).sp_ned_m[:-1], run.read_setpoints(2))
+    with pytest.raises(RunLogError, match="trial 3 is complete"):
+        run.fly_again(3, 0)
+    for k in (4, -1):
+        with pytest.raises(RunLogError, match=f"trial {k} is not a complete trial before"):
+            run.fly_again(4, k)
+    assert not tmp_files(run.path)
+
+
+def test_again_of_believes_its_record_only_while_those_setpoints_are_in_force(
+    tmp_path: Path,
+) -> None:
+    from synthetic import make_run
+
+    from gcs.app.learn import learn_run
+
+    run = make_run(tmp_path, trials=3)
+    learn_run(run)
+    text = json.dumps({"trial": 3, "again": [{"setpoints_of": 0, "superseded": None}]})
+    (run.path / "again-003.json").write_text(text)  # written, then interrupted before the swap
+    assert run.again_of(3) is None  # setpoints-003 is still the learned one
+    (run.path / "again-003.json").write_text(json.dumps({"trial": 3, "again": [{"x": 1}]}))
+    with pytest.raises(RunLogError, match="again-003.json: malformed record"):
+        run.again_of(3)

@@ -20,6 +20,7 @@ from gcs.app.learn import (
     differing_field,
     learn_run,
 )
+from gcs.app.report import drift_sentence
 from gcs.app.session import (
     MocapPlan,
     SessionRecorder,
@@ -30,6 +31,7 @@ from gcs.app.session import (
     to_record,
     trial_extra,
 )
+from gcs.core.floor import FloorDrift, FloorVerdict, floor_drift
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trajectory import (
     MAX_SAMPLES,
@@ -58,6 +60,9 @@ __all__ = [
     "converged_reason",
     "newest_record",
     "check_until_converged",
+    "check_again",
+    "drift_reason",
+    "record_drift",
 ]
 
 
@@ -87,6 +92,8 @@ class FlyPlan:
         Parent of new runs.
     mocap : MocapPlan or None
         The motion capture of the flight.
+    again : int or None
+        ``--again``: the complete trial whose setpoints the first trial flies again.
     """
 
     profile: Profile
@@ -99,6 +106,7 @@ class FlyPlan:
     run_path: Path | None
     logs: Path
     mocap: MocapPlan | None = None
+    again: int | None = None
 
 
 def plan_fly(
@@ -111,6 +119,7 @@ def plan_fly(
     until_converged: bool = False,
     mocap: str | None = None,
     use_mock: bool = False,
+    again: int | None = None,
 ) -> FlyPlan:
     """Validate everything a flight needs; nothing is created, moved or flown here.
 
@@ -140,13 +149,18 @@ def plan_fly(
         ``--mocap`` (see :func:`plan_mocap`).
     use_mock : bool
         The flight is on the mock drone.
+    again : int or None
+        ``--again K`` (with ``resume``): the next trial flies complete trial K's setpoints
+        instead of the learned ones (:func:`check_again`).
 
     Returns
     -------
     FlyPlan
     """
+    if again is not None and resume is None:
+        raise RunLogError("--again flies an earlier trial of a run again: give it with --resume")
     if resume is not None:
-        plan = _plan_resume(resume, profile_path, trajectory_path, algorithm, logs)
+        plan = _plan_resume(resume, profile_path, trajectory_path, algorithm, logs, again)
         if until_converged:
             check_until_converged(plan.profile, f"{resume}/manifest.json:profile")
         where = f"{plan.run.path}/manifest.json:profile" if plan.run else str(resume)
@@ -291,6 +305,7 @@ def _plan_resume(
     trajectory_path: Path | None,
     algorithm: str | None,
     logs: Path,
+    again: int | None = None,
 ) -> FlyPlan:
     run = RunDir.open(resume)
     run.require_kind("learning", "gcs fly --resume")
@@ -316,7 +331,9 @@ def _plan_resume(
     except TrajectoryError as exc:
         raise RunLogError(f"{run.path}/reference.csv: {exc}") from None
     first = run.next_trial()
-    if first > 0:
+    if again is not None:
+        check_again(run, profile, first, again)
+    elif first > 0:
         run.read_trial(first - 1)  # the trial the next setpoints were learned from
         if not (run.path / f"setpoints-{first:03d}.csv").exists():
             raise RunLogError(
@@ -324,9 +341,47 @@ def _plan_resume(
             )
     if profile.learning.history and first > 0:
         check_history(run, profile, first - 1)
-    flyable_setpoints(run, first)
+    flyable_setpoints(run, first if again is None else again)
     run.check_writable()
-    return FlyPlan(profile, trajectory, run.algorithm, settings, ref, first, run, None, logs)
+    return FlyPlan(
+        profile, trajectory, run.algorithm, settings, ref, first, run, None, logs, again=again
+    )
+
+
+def check_again(run: RunDir, profile: Profile, first: int, again: int) -> None:
+    """Refuse ``--again K`` unless trial K is a complete learned trial before the next one.
+
+    The next trial must be a learned one: the repeats of trial 0 measure the floor with
+    identical setpoints and are flown as they are.
+
+    Parameters
+    ----------
+    run : RunDir
+        The resumed learning run.
+    profile : Profile
+        Its profile.
+    first : int
+        The next trial.
+    again : int
+        ``--again``.
+
+    Raises
+    ------
+    RunLogError
+    """
+    repeats = profile.learning.repeats if profile.learning.history else 0
+    if first <= repeats:
+        what = "the first trial" if first == 0 else "a repeat of trial 0 (it measures the floor)"
+        raise RunLogError(
+            f"--again {again}: the next trial of {run.path}, trial {first}, is {what}; "
+            "it flies its own setpoints"
+        )
+    done = run.complete_trials()
+    if again not in done or again >= first:
+        raise RunLogError(
+            f"--again {again}: not a complete trial of {run.path} (complete: "
+            f"{', '.join(map(str, done))})"
+        )
 
 
 def check_until_converged(profile: Profile, where: str) -> None:
@@ -359,7 +414,8 @@ def check_until_converged(profile: Profile, where: str) -> None:
 
 
 def start_run(plan: FlyPlan) -> RunDir:
-    """The run to fly: the resumed one, or a new run directory created from the plan.
+    """The run to fly: the resumed one (its next trial set to fly an earlier trial's setpoints
+    with ``--again``), or a new run directory created from the plan.
 
     Parameters
     ----------
@@ -371,6 +427,8 @@ def start_run(plan: FlyPlan) -> RunDir:
     RunDir
     """
     if plan.run is not None:
+        if plan.again is not None:
+            plan.run.fly_again(plan.first_trial, plan.again)
         return plan.run
     if plan.run_path is not None:
         return RunDir.create(
@@ -432,7 +490,8 @@ class RunSource(SessionRecorder):
         Called with what each learning step did (:class:`gcs.app.learn.LearnOutcome`), after
         ``on_row``.
     until_converged : bool
-        Fly no further trial once the learning record says learning has converged.
+        Fly no further trial once the learning record says learning has converged, or has
+        left the floor it reached.
     mock_seed : int or None
         The mock drone's seed, kept in the session record (None on a real vehicle).
     """
@@ -487,8 +546,9 @@ class RunSource(SessionRecorder):
         Returns
         -------
         str or None
-            With ``until_converged``, why no further trial can help (the campaign lands);
-            else None.
+            With ``until_converged``, why no further trial can help (the campaign lands):
+            learning converged (:func:`converged_reason`) or left the floor it had reached
+            (:func:`drift_reason`); else None.
         """
         record = to_record(self.run, recording)
         extra = trial_extra(recording, self.session)
@@ -509,7 +569,9 @@ class RunSource(SessionRecorder):
             self.on_row(self.rows())
         if self.on_learn is not None:
             self.on_learn(outcome)
-        return converged_reason(outcome.record) if self.until_converged else None
+        if not self.until_converged:
+            return None
+        return converged_reason(outcome.record) or drift_reason(outcome.record)
 
     def record_incomplete(self, j: int, recording: TrialRecording, reason: str) -> None:
         """Write an interrupted trial, marked incomplete (never learned from).
@@ -574,6 +636,42 @@ def converged_reason(record: dict | None) -> str | None:
         f"({a['ratio']:.2f}x and {b['ratio']:.2f}x of {1e3 * floor['epos_m']:.1f} mm), their "
         f"mean within one scatter ({1e3 * floor['scatter_m']:.1f} mm) of it"
     )
+
+
+def drift_reason(record: dict | None) -> str | None:
+    """Why the next trials are unlikely to help: learning left the floor it had reached
+    (:func:`gcs.core.floor.floor_drift`), from a decision record; None when it did not.
+
+    Parameters
+    ----------
+    record : dict or None
+        A ``learn-JJJ.json`` record.
+
+    Returns
+    -------
+    str or None
+        E.g. "drifting up: trial 3 reached the floor, trials 5 and 6 are above it again; the
+        best setpoints at the floor are trial 4's".
+    """
+    drift = record_drift(record)
+    return None if drift is None else drift_sentence(drift)
+
+
+def record_drift(record: dict | None) -> FloorDrift | None:
+    """The drift up from the floor a decision record shows, or None.
+
+    Parameters
+    ----------
+    record : dict or None
+        A ``learn-JJJ.json`` record.
+
+    Returns
+    -------
+    FloorDrift or None
+    """
+    if record is None or not record["decision"]["verdicts"]:
+        return None
+    return floor_drift(tuple(FloorVerdict(**v) for v in record["decision"]["verdicts"]))
 
 
 def newest_record(run: RunDir) -> dict | None:

@@ -12,16 +12,18 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from gcs.app.fly import (
     FlyPlan,
     converged_reason,
+    drift_reason,
     fly_run,
     newest_record,
     plan_fly,
+    record_drift,
     start_run,
 )
 from gcs.app.learn import LearnOutcome
 from gcs.app.progress import progress_lines
+from gcs.app.report import drift_sentence
 from gcs.app.report_text import decision_lines, metrics_table
 from gcs.app.session import check_mock_config, check_url, vehicle_url
-from gcs.core.floor import FloorVerdict, floor_drift
 from gcs.core.metrics import IterationMetrics
 from gcs.core.trials import iteration_of, repeat_of
 from gcs.errors import GcsError
@@ -89,6 +91,7 @@ def resume_command(
     seed: int,
     iterations: int,
     until_converged: bool = False,
+    again: int | None = None,
 ) -> str:
     """The ``gcs fly --resume`` command that continues ``run_path`` with the same vehicle.
 
@@ -115,6 +118,8 @@ def resume_command(
         ``--iter`` of the command.
     until_converged : bool
         ``--until-converged``.
+    again : int or None
+        ``--again``: the trial whose setpoints the next trial flies again.
 
     Returns
     -------
@@ -140,6 +145,8 @@ def resume_command(
     args += ["--iter", str(iterations)]
     if until_converged:
         args.append("--until-converged")
+    if again is not None:
+        args += ["--again", str(again)]
     return shlex.join(args)
 
 
@@ -318,14 +325,9 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
             f"  trial {v['trial']}: {v['ratio']:.2f}x the floor ({1e3 * floor['epos_m']:.1f} mm "
             f"± {1e3 * floor['scatter_m']:.1f}), {_scatters(v['z'])}: {word}"
         )
-        drift = floor_drift(tuple(FloorVerdict(**d) for d in verdicts))
+        drift = record_drift(record)
         if drift is not None:
-            above = " and ".join(map(str, drift.above))
-            lines.append(
-                f"  [yellow]drifting up: trial {drift.reached_trial} reached the floor, trials "
-                f"{above} are above it again; the best setpoints at the floor are trial "
-                f"{drift.best_trial}'s[/]"
-            )
+            lines.append(f"  [yellow]{escape(drift_sentence(drift))}[/]")
     for line in decision_lines(record):  # the report has them all; live, what changed
         if line.startswith(("model kept", "estimate")):
             continue
@@ -410,6 +412,7 @@ def fly_with_display(
     until_converged: bool = False,
     mocap: str | None = None,
     offline: bool = False,
+    again: int | None = None,
 ) -> RunDir | None:
     """Validate everything, then set up (or resume) a run and fly it with a live display.
 
@@ -453,6 +456,8 @@ def fly_with_display(
     offline : bool
         With ``check_only``: connect to no vehicle (else its parameters are read and judged
         against the checklist, :func:`check_vehicle`).
+    again : int or None
+        ``--again K`` with ``resume``: the next trial flies trial K's setpoints again.
 
     Returns
     -------
@@ -461,7 +466,7 @@ def fly_with_display(
     """
     plan = plan_fly(
         profile_path, trajectory_path, algorithm, run_path, resume, logs, until_converged,
-        mocap, use_mock,
+        mocap, use_mock, again,
     )  # fmt: skip
     given_mock_config = mock_config
     if use_mock and mock_config is None and plan.mocap is not None and plan.mocap.source is None:
@@ -473,10 +478,14 @@ def fly_with_display(
     else:
         assert connect is not None
         check_url(connect)
-    if until_converged and plan.run is not None:
-        reason = converged_reason(newest_record(plan.run))
+    if until_converged and plan.run is not None and again is None:
+        record = newest_record(plan.run)
+        reason = converged_reason(record)
+        if reason is None and (reason := drift_reason(record)) is not None:
+            best = record_drift(record).best_trial  # type: ignore[union-attr]
+            reason += f" (--again {best} flies them)"
         if reason is not None:
-            console.print(f"{plan.run.path}: {reason}; nothing flown")
+            console.print(f"{plan.run.path}: {reason}; nothing flown", highlight=False)
             return plan.run
     if check_only:
         where = plan.run.path if plan.run is not None else (plan.run_path or plan.logs)
@@ -504,10 +513,10 @@ def fly_with_display(
             "run, and a resumed run never replays its gusts"
         )
 
-    def resume_hint(n: int) -> str:
+    def resume_hint(n: int, again: int | None = None) -> str:
         return resume_command(
             run.path, connect=connect, use_mock=use_mock, mock_config=given_mock_config,
-            mocap=mocap, seed=seed, iterations=n, until_converged=until_converged,
+            mocap=mocap, seed=seed, iterations=n, until_converged=until_converged, again=again,
         )  # fmt: skip
 
     console.print(f"run [bold]{run.path}[/] ({run.algorithm}), next trial {run.next_trial()}")
@@ -544,6 +553,13 @@ def fly_with_display(
     def on_learn(outcome: LearnOutcome) -> None:
         for line in learning_lines(outcome):
             progress.console.print(line, highlight=False)
+        drift = record_drift(outcome.record)
+        if drift is not None:
+            progress.console.print(
+                f"  [yellow]to fly them again: {escape(resume_hint(1, drift.best_trial))}[/]",
+                highlight=False,
+                soft_wrap=True,
+            )
 
     if not use_mock:  # said at once: a vehicle that is not there is silent until the timeout
         say(console)(
@@ -590,7 +606,15 @@ def fly_with_display(
             soft_wrap=True,
         )
         raise exc
-    if until_converged and converged_reason(newest_record(run)) is None:
+    drift = record_drift(newest_record(run))
+    if until_converged and drift is not None:
+        console.print(
+            f"--until-converged: landed, learning left the floor; to fly trial "
+            f"{drift.best_trial}'s setpoints again: {escape(resume_hint(1, drift.best_trial))}",
+            highlight=False,
+            soft_wrap=True,
+        )
+    elif until_converged and converged_reason(newest_record(run)) is None:
         console.print(
             f"--until-converged: learning has not converged within --iter {iterations}; "
             f"continue with: {escape(resume_hint(iterations))}",

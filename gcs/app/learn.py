@@ -29,7 +29,7 @@ import numpy as np
 
 from gcs.api import Learner, learner_settings
 from gcs.core.estimators import KilcState
-from gcs.core.floor import identical_groups
+from gcs.core.floor import floor_flights
 from gcs.core.learner import LearnerStep, Trial
 from gcs.core.model import DiscreteModel, relative_degree
 from gcs.core.trajectory import Reference, check_setpoints
@@ -419,8 +419,8 @@ def _floor_record(records: list[TrialRecord], step: LearnerStep) -> dict | None:
     floor = step.record.floor
     if floor is None:
         return None
-    groups = identical_groups(np.array([r.sp_ned_m[:-1, :2] for r in records]))
-    return {"trials": max(groups, key=len), **floor.as_dict()}
+    trials = floor_flights(np.array([r.sp_ned_m[:-1, :2] for r in records]))
+    return {"trials": trials, **floor.as_dict()}
 
 
 def _refreshed_profile(

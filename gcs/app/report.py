@@ -24,11 +24,12 @@ import numpy as np
 
 from gcs.core.floor import (
     Floor,
+    FloorDrift,
     FloorVerdict,
     floor_drift,
+    floor_flights,
     floor_from_flights,
     floor_verdicts,
-    identical_groups,
 )
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trials import (
@@ -53,6 +54,8 @@ __all__ = [
     "run_learning",
     "trial_overview",
     "aborted_attempts",
+    "flown_again",
+    "drift_sentence",
     "run_metrics",
     "is_three_d",
     "METRIC_KEYS",
@@ -243,6 +246,28 @@ def aborted_attempts(run: RunDir) -> dict[int, int]:
     return counts
 
 
+def flown_again(run: RunDir) -> dict[int, int]:
+    """Trials that flew an earlier trial's setpoints again (``gcs fly --again``).
+
+    Parameters
+    ----------
+    run : RunDir
+        The run directory.
+
+    Returns
+    -------
+    dict of int to int
+        The earlier trial by trial index.
+    """
+    out = {}
+    for p in sorted(run.path.glob("again-[0-9][0-9][0-9].json")):
+        j = int(p.stem.split("-")[1])
+        k = run.again_of(j)
+        if k is not None:
+            out[j] = k
+    return out
+
+
 def complete_records(run: RunDir, measurement: str | None = None) -> dict[int, TrialRecord]:
     """Every complete trial of ``run``, by index, measured as asked.
 
@@ -365,7 +390,7 @@ class RunLearning:
     repeats : int
         Repeats of trial 0.
     floor : Floor or None
-        The floor, from the largest group of complete trials flown with identical setpoints.
+        The floor, from trial 0 and its repeats (:func:`gcs.core.floor.floor_flights`).
     floor_trials : tuple of int
         The trials it was measured from.
     floor_z : float
@@ -408,9 +433,9 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
     order = sorted(records)
     floor, group, verdicts = None, (), {}
     if history and len(order) > 1:
-        groups = identical_groups(np.array([records[t].sp_ned_m[:-1, :2] for t in order]))
-        if groups:
-            group = tuple(order[i] for i in max(groups, key=len))
+        flights = floor_flights(np.array([records[t].sp_ned_m[:-1, :2] for t in order]))
+        if flights:
+            group = tuple(order[i] for i in flights)
             floor = floor_from_flights(np.array([records[t].pos_ned_m[1:, :2] for t in group]))
             epos_all = [trial_errors(records[t])[0] for t in order]
             found = floor_verdicts(np.array(epos_all), floor, ln.adaptive.floor_z)
@@ -775,11 +800,13 @@ class Verdict:
                 f"trial above it (z; 'at floor' from z <= {self.floor_z_max:g})"
             )
         if self.drift_trials:
-            above = " and ".join(map(str, self.drift_trials))
+            assert self.drift_reached_trial is not None and self.drift_best_trial is not None
+            drift = FloorDrift(
+                self.drift_reached_trial, self.drift_best_trial, tuple(self.drift_trials)
+            )
             out.append(
-                f"verdict: drifting up: trial {self.drift_reached_trial} reached the floor, and "
-                f"trials {above} are above it again; the best setpoints at the floor are trial "
-                f"{self.drift_best_trial}'s (docs/learning-floor.md)"
+                f"verdict: {drift_sentence(drift)}; gcs fly --resume <run> --again "
+                f"{drift.best_trial} flies them again (docs/learning-floor.md)"
             )
         if self.converged_trial is not None:
             out.append(
@@ -865,6 +892,28 @@ def run_verdict(rows: list[IterationMetrics], learning: RunLearning | None) -> V
         flights_left=left,
         flights_left_how=how,
         **_drift_fields(verdicts),
+    )
+
+
+def drift_sentence(drift: FloorDrift) -> str:
+    """A drift up from the floor in words, as the live lines, the landing and the verdict
+    say it.
+
+    Parameters
+    ----------
+    drift : FloorDrift
+        From :func:`gcs.core.floor.floor_drift`.
+
+    Returns
+    -------
+    str
+        E.g. "drifting up: trial 3 reached the floor, trials 5 and 6 are above it again;
+        the best setpoints at the floor are trial 4's".
+    """
+    above = " and ".join(map(str, drift.above))
+    return (
+        f"drifting up: trial {drift.reached_trial} reached the floor, trials {above} are above "
+        f"it again; the best setpoints at the floor are trial {drift.best_trial}'s"
     )
 
 

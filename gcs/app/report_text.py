@@ -18,6 +18,7 @@ from gcs.app.report import (
     TrialEntry,
     aborted_attempts,
     change_pct,
+    flown_again,
 )
 from gcs.core.floor import FloorVerdict
 from gcs.core.metrics import IterationMetrics
@@ -58,7 +59,8 @@ def report_notes(run: RunDir, entries: list[TrialEntry], learning: RunLearning |
     list of str
     """
     notes = learning_notes(learning) if learning is not None else []
-    return notes + trial_notes(entries, aborted_attempts(run)) + session_lines(run)
+    again = trial_notes(entries, aborted_attempts(run), flown_again(run))
+    return notes + again + session_lines(run)
 
 
 def table_legend(learning: RunLearning | None, shown: bool = True) -> list[str]:
@@ -98,9 +100,13 @@ def _num(value: Any) -> float:
     )
 
 
-def trial_notes(entries: list[TrialEntry], aborted: dict[int, int] | None = None) -> list[str]:
-    """One line per trial that is not in the table (missing or incomplete), and per trial
-    flown again after an incomplete attempt.
+def trial_notes(
+    entries: list[TrialEntry],
+    aborted: dict[int, int] | None = None,
+    again: dict[int, int] | None = None,
+) -> list[str]:
+    """One line per trial that is not in the table (missing or incomplete), per trial flown
+    again after an incomplete attempt, and per trial that flew an earlier one's setpoints.
 
     Parameters
     ----------
@@ -108,6 +114,8 @@ def trial_notes(entries: list[TrialEntry], aborted: dict[int, int] | None = None
         From :func:`trial_overview`.
     aborted : dict of int to int, optional
         Incomplete attempts kept in ``aborted/``, by trial (:func:`aborted_attempts`).
+    again : dict of int to int, optional
+        The earlier trial whose setpoints a trial flew again, by trial (:func:`flown_again`).
 
     Returns
     -------
@@ -121,6 +129,11 @@ def trial_notes(entries: list[TrialEntry], aborted: dict[int, int] | None = None
     for j, n in sorted((aborted or {}).items()):
         attempts = "attempt" if n == 1 else "attempts"
         out.append(f"trial {j}: {n} earlier incomplete {attempts} kept in aborted/")
+    for j, k in sorted((again or {}).items()):
+        out.append(
+            f"trial {j}: flew trial {k}'s setpoints again (gcs fly --again); the ones learned "
+            "for it are kept in superseded/"
+        )
     return out
 
 

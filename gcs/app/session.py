@@ -385,7 +385,8 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
     (j >= 1) must also keep the learning's limits (step per sample, deviation from the
     reference aligned by the models it was learned with; :func:`gcs.app.learn.check_learned`):
     the file on disk is what is flown, and it is checked as such, whoever wrote it. A repeat
-    of trial 0 must have trial 0's setpoints exactly.
+    of trial 0 must have trial 0's setpoints exactly; a trial that flies an earlier trial's
+    setpoints again (:meth:`gcs.io.rundir.RunDir.again_of`) is checked as that trial.
 
     Parameters
     ----------
@@ -410,6 +411,10 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
             f"outside the arena {arena}; not flown"
         )
     if run.kind != "learning" or j == 0:
+        return sp
+    again = run.again_of(j)
+    if again is not None:  # trial k's setpoints byte for byte: kept the limits k was flown with
+        flyable_setpoints(run, again)
         return sp
     repeats = profile.learning.repeats if profile.learning.history else 0
     if j <= repeats:

@@ -31,7 +31,7 @@ __all__ = [
     "FloorVerdict",
     "floor_from_flights",
     "floor_from_difference",
-    "identical_groups",
+    "floor_flights",
     "integrated_autocorrelation",
     "floor_verdicts",
     "FloorDrift",
@@ -210,33 +210,33 @@ def floor_from_difference(diff_ne_m: np.ndarray, source: str = "repeat") -> Floo
     return _floor(diff[None] / np.sqrt(2.0), 2, source)
 
 
-def identical_groups(setpoints_ne_m: np.ndarray, tol_m: float = IDENTICAL_TOL_M) -> list[list[int]]:
-    """Groups of trials flown with identical setpoints (two or more trials each).
+def floor_flights(setpoints_ne_m: np.ndarray, tol_m: float = IDENTICAL_TOL_M) -> list[int]:
+    """The flights that measure the floor: trial 0 and the trials right after it flown with
+    its setpoints (the repeats), when there are two or more.
+
+    A later flight of setpoints flown before (``gcs fly --again``) does not join them: the
+    floor is measured once, before learning starts, and the verdicts of every later trial
+    are taken against that one floor.
 
     Parameters
     ----------
     setpoints_ne_m : ndarray, shape (T, N, 2)
-        Setpoints of every trial [m].
+        Setpoints of every trial, in trial order [m].
     tol_m : float
         Largest difference that counts as identical [m].
 
     Returns
     -------
-    list of list of int
-        Trial indices of each group, in order of their first trial.
+    list of int
+        ``[0, 1, .., r]`` (``r >= 1``), or empty when trial 1 does not repeat trial 0.
     """
     sp = np.asarray(setpoints_ne_m, dtype=float)
     if sp.ndim != 3 or sp.shape[-1] != 2:
         raise ValueError(f"setpoints_ne_m must have shape (T, N, 2), got {sp.shape}")
-    groups: list[list[int]] = []
-    for i in range(sp.shape[0]):
-        for g in groups:
-            if np.max(np.abs(sp[i] - sp[g[0]])) <= tol_m:
-                g.append(i)
-                break
-        else:
-            groups.append([i])
-    return [g for g in groups if len(g) >= 2]
+    r = 0
+    while r + 1 < sp.shape[0] and np.max(np.abs(sp[r + 1] - sp[0])) <= tol_m:
+        r += 1
+    return list(range(r + 1)) if r >= 1 else []
 
 
 @dataclass(frozen=True)

@@ -32,10 +32,10 @@ from gcs.core.floor import (
     IDENTICAL_TOL_M,
     Floor,
     FloorVerdict,
+    floor_flights,
     floor_from_difference,
     floor_from_flights,
     floor_verdicts,
-    identical_groups,
 )
 from gcs.core.metrics import epos
 from gcs.core.model import DiscreteModel, relative_degree, simulate
@@ -517,11 +517,8 @@ UpdatesFor = Callable[[int, DiscreteModel], InputUpdate]
 def _floor_of(sp: np.ndarray, y: np.ndarray, given: Floor | None) -> Floor | None:
     if given is not None:
         return given
-    groups = identical_groups(sp)
-    if not groups:
-        return None
-    group = max(groups, key=len)
-    return floor_from_flights(y[group])
+    group = floor_flights(sp)
+    return floor_from_flights(y[group]) if group else None
 
 
 def _table1_estimate(
@@ -771,11 +768,10 @@ def _scatter(
 def _auto_cutoff(
     sp: np.ndarray, y: np.ndarray, ref: np.ndarray, axis: int, dt_s: float
 ) -> float | None:
-    """The data's cutoff for one axis from the largest group of identical trials, or None."""
-    groups = identical_groups(sp)
-    if not groups:
+    """The data's cutoff for one axis from the flights of the floor, or None."""
+    group = floor_flights(sp)
+    if not group:
         return None
-    group = max(groups, key=len)
     errors = ref[None, 1:, axis] - y[group, :, axis]
     cutoff = repeat_cutoff(errors, dt_s)
     return cutoff if cutoff < 0.9 * np.pi / dt_s else None

@@ -23,6 +23,8 @@ Layout of ``logs/<run-id>/`` (documented for users in docs/formats.md)::
                            navigation source, the hover measured before its first trial and
                            the settle tolerances derived from it
     aborted/               earlier incomplete attempts of a trial, kept when it is re-flown
+    again-JJJ.json         ``gcs fly --resume --again K``: trial JJJ flies trial K's setpoints
+                           instead of the learned ones, which are kept in ``superseded/``
 
 Every file is written atomically (temporary file in the same directory, then ``os.replace``),
 and a trial counts as complete only once its ``.json`` says so; it is written after the CSV. A
@@ -358,6 +360,99 @@ class RunDir(LearnLog):
         self._check_grid(path, table, self.n_samples)
         check_plausible(path, table[:, 2:5], SETPOINT_COLUMNS[2:5])
         return table[:, 2:5]
+
+    def fly_again(self, j: int, k: int) -> Path:
+        """Make trial j fly trial k's setpoints again instead of the ones learned for it.
+
+        The record ``again-JJJ.json`` is written first (each call appends an entry, so nothing
+        said before is lost), then the learned ``setpoints-JJJ.csv`` is moved to
+        ``superseded/setpoints-JJJ-N.csv`` and trial k's setpoints are written in its place.
+        An interruption between the two leaves trial j without setpoints, which learning
+        from trial j-1 again writes back (the same bytes); :meth:`again_of` believes the
+        record only while the setpoints in force are trial k's.
+
+        Parameters
+        ----------
+        j : int
+            The next trial (not flown to completion yet).
+        k : int
+            A complete trial before it.
+
+        Returns
+        -------
+        Path
+            The setpoints file of trial j.
+
+        Raises
+        ------
+        RunLogError
+            ``j`` complete, or ``k`` not a complete trial before it.
+        """
+        if j in self.complete_trials():
+            raise RunLogError(f"{self.path}: trial {j} is complete; its setpoints stay")
+        if not 0 <= k < j or k not in self.complete_trials():
+            raise RunLogError(f"{self.path}: trial {k} is not a complete trial before trial {j}")
+        sp = self.read_setpoints(k)
+        current = self._file("setpoints", j, "csv")
+        if current.exists() and np.array_equal(self.read_setpoints(j), sp):
+            return current  # in force already (an earlier --again, or learned identical)
+        superseded = self.path / "superseded"
+        superseded.mkdir(exist_ok=True)
+        n = 1
+        while (superseded / f"setpoints-{j:03d}-{n}.csv").exists():
+            n += 1
+        moved = superseded / f"setpoints-{j:03d}-{n}.csv"
+        entries = self._again_entries(j)
+        entries.append(
+            {
+                "setpoints_of": k,
+                "superseded": str(moved.relative_to(self.path)) if current.exists() else None,
+                "written_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            }
+        )
+        atomic_write_text(
+            self._file("again", j, "json"),
+            json.dumps({"trial": j, "again": entries}, indent=2) + "\n",
+        )
+        if current.exists():
+            os.replace(current, moved)
+        return self.write_setpoints(j, sp)
+
+    def again_of(self, j: int) -> int | None:
+        """The trial whose setpoints trial j flies again (``gcs fly --again``), or None.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        int or None
+            None when trial j flies the setpoints learned for it.
+        """
+        entries = self._again_entries(j)
+        if not entries or not self._file("setpoints", j, "csv").exists():
+            return None
+        k = entries[-1]["setpoints_of"]
+        same = np.array_equal(self.read_setpoints(j), self.read_setpoints(k))
+        return k if same else None
+
+    def _again_entries(self, j: int) -> list[dict[str, Any]]:
+        path = self._file("again", j, "json")
+        if not path.exists():
+            return []
+        try:
+            data = json.loads(path.read_text())
+            entries = data["again"]
+            if data["trial"] != j or not all(
+                isinstance(e["setpoints_of"], int) and 0 <= e["setpoints_of"] < j for e in entries
+            ):
+                raise ValueError("names another trial")
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            what = f"malformed record of setpoints flown again ({exc})"
+            raise RunLogError(f"{path}: {what}") from None
+        return list(entries)
 
     # ----------------------------------------------------------------- trials
     def statuses(self) -> list[TrialStatus]:
