@@ -47,12 +47,12 @@ def capture() -> Capture:
     log = mavutil.mavlink_connection(str(shared() / "data" / "px4-sih-offboard.tlog"))
     lpn, sp, params = [], [], {}
     types = ["LOCAL_POSITION_NED", "SET_POSITION_TARGET_LOCAL_NED", "PARAM_VALUE"]
-    while (msg := log.recv_match(type=types)) is not None:
+    while (msg := log.recv_match(type=types)) is not None:  # log.timestamp: tlog time of msg
         kind = msg.get_type()
         if kind == "LOCAL_POSITION_NED" and msg.get_srcSystem() == 1:
-            lpn.append((msg._timestamp, msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z))
+            lpn.append((log.timestamp, msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z))
         elif kind == "SET_POSITION_TARGET_LOCAL_NED":
-            sp.append((msg._timestamp, msg.x, msg.y, msg.z))
+            sp.append((log.timestamp, msg.x, msg.y, msg.z))
         elif kind == "PARAM_VALUE" and msg.param_type == 6:
             value = struct.unpack("<i", struct.pack("<f", msg.param_value))[0]
             params[msg.param_id.rstrip("\x00")] = value

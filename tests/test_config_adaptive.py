@@ -1,4 +1,4 @@
-"""Tests of the ``learning.adaptive`` profile section (gcs.io.config._adaptive)."""
+"""Tests of the ``learning.adaptive`` profile section, as gcs.io.config.load_profile reads it."""
 
 from __future__ import annotations
 

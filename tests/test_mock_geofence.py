@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from gcs.core.frames import ned_to_global as _ned_to_global
+from gcs.core import frames
 from gcs.mock.geofence import (
     ACCEPTED,
     ERROR,
@@ -28,7 +28,7 @@ FENCE = MAV_MISSION_TYPE_FENCE
 
 def ned_to_global(origin, pos_ned_m):
     """Latitude, longitude [deg] and altitude AMSL [m] of a local point, as the mock's GPS."""
-    lat, lon = _ned_to_global(origin[0], origin[1], pos_ned_m[0], pos_ned_m[1])
+    lat, lon = frames.ned_to_global(origin[0], origin[1], pos_ned_m[0], pos_ned_m[1])
     return lat, lon, origin[2] - pos_ned_m[2]
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from gcs.core import montecarlo as mc
 from gcs.core.estimators import kilc_init, kilc_update, rts_smoother
-from gcs.core.model import from_transfer_function, lifted_matrix, markov_parameters, simulate
+from gcs.core.model import from_transfer_function, lifted_matrix, simulate
 
 SMALL = mc.StudySettings(
     levels=(0.1,),
@@ -59,7 +59,7 @@ def _reference_norms(settings: mc.StudySettings, level: float, algorithm: str) -
             return m_y @ (yd - d_hat) + m_u @ u
 
     # the study's noise stream: one (P*R, N) draw per trial, trials in order
-    rng = mc._rng(settings, level, 1)
+    rng = mc.noise_generator(settings, level)
     noise = [rng.standard_normal((p * r, n)) for _ in range(settings.iterations + 1)]
     norms = np.zeros((p, r, settings.iterations + 1))
     for i in range(p):
@@ -111,13 +111,18 @@ def test_update_operator_equals_update_module() -> None:
         np.testing.assert_allclose(m_y @ (yd - d_hat) + m_u @ u, expected, atol=1e-8)
 
 
-def test_batched_markov_parameters_equal_model() -> None:
-    wn = np.array([1.8, 0.4, 3.1])
-    zeta = np.array([0.8, 0.1, 1.7])
-    f = mc._markov_batch(wn, zeta, 120, 0.01)
-    for i in range(3):
-        expected = markov_parameters(_msd(wn[i], zeta[i], 0.01), 120)
-        np.testing.assert_allclose(f[i], expected, rtol=1e-10, atol=1e-15)
+@pytest.mark.parametrize(("wn", "zeta"), [(1.8, 0.8), (0.4, 0.1), (3.1, 1.7)])
+def test_batched_plants_respond_as_their_models(wn: float, zeta: float) -> None:
+    # The batch's plants (Markov parameters of all of them from one batched matrix
+    # exponential) against each plant's own model, simulated trial by trial: around a
+    # well-damped, a lightly damped and an over-damped nominal, 120 samples, no noise.
+    settings = dataclasses.replace(
+        SMALL, levels=(0.2,), wn_rad_s=wn, zeta=zeta, n_samples=120, noise_std=0.0
+    )
+    plants = mc.sample_plants(settings, 0.2)
+    assert np.unique(plants.wn_rad_s).size == 3 and np.unique(plants.zeta).size == 3
+    batched = mc.error_norms(settings, 0.2, "kilc")
+    np.testing.assert_allclose(batched, _reference_norms(settings, 0.2, "kilc"), rtol=1e-10)
 
 
 @pytest.mark.parametrize("algorithm", mc.ALGORITHMS)

@@ -48,7 +48,7 @@ def reference_norms(settings: mc.StudySettings, level: float, adaptive: Adaptive
     plants = mc.sample_plants(settings, level)
     p, r = plants.wn_rad_s.size, settings.repeats
     yd, d, u0 = paper_signals(settings)
-    rng = mc._rng(settings, level, 1)
+    rng = mc.noise_generator(settings, level)
     noise = [rng.standard_normal((p * r, n)) for _ in range(settings.iterations + 1)]
     weights = UpdateWeights(settings.we, settings.wdu, settings.wu)
     refresh = replace(adaptive.refresh_settings(), delay_search=0)

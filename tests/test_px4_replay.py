@@ -42,8 +42,8 @@ def capture_window() -> tuple[list[tuple[float, bytes]], dict[str, bytes], list]
     while (msg := log.recv_match()) is not None:
         if msg.get_type() == "BAD_DATA" or msg.get_srcSystem() != 1:
             continue
-        t_first = msg._timestamp if t_first is None else t_first
-        offset = msg._timestamp - t_first
+        t_first = log.timestamp if t_first is None else t_first  # tlog time of msg
+        offset = log.timestamp - t_first
         if msg.get_type() == "PARAM_VALUE":
             params[msg.param_id.rstrip("\x00")] = bytes(msg.get_msgbuf())
         elif WINDOW_S[0] <= offset < WINDOW_S[1]:

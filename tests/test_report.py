@@ -363,8 +363,7 @@ def test_a_report_of_logs_latest_names_the_run_everywhere(tmp_path: Path) -> Non
     from gcs.io.rundir import RunDir
 
     for name, fig in report_figures(RunDir.open(latest), [0, 2]).items():
-        title = fig._suptitle.get_text() if fig._suptitle is not None else ""
-        assert title.count("run (smoother)") == 1, name
+        assert fig.get_suptitle().count("run (smoother)") == 1, name
     plt.close("all")
 
 

@@ -13,6 +13,7 @@ from synthetic import ROOT
 from gcs.app.study_own import build_plan, check_study_memory
 from gcs.core.model import from_transfer_function, markov_parameters, simulate
 from gcs.core.study import (
+    StudyPlan,
     Uncertainty,
     check_nominal,
     draw_plant,
@@ -66,24 +67,33 @@ def test_markov_plants_at_zero_spread_are_the_model(tmp_path: Path) -> None:
 
 
 def test_a_second_order_plant_moves_as_the_paper_draws_it() -> None:
-    # wn and zeta of wn^2 / (s^2 + 2 zeta wn s + wn^2) scaled: the drawn plant is that transfer
-    # function with the new wn and zeta, independently discretised, but for the sampling zero,
-    # which the draw keeps where the model has it (it moves by 0.02 % of the response here)
-    dt, wn, zeta = 0.01, 1.8, 0.8
+    # wn, zeta and the static gain of wn^2 / (s^2 + 2 zeta wn s + wn^2) scaled by the draws the
+    # plant reports: the drawn plant is that transfer function, independently discretised,
+    # but for the sampling zero, which the draw keeps where the model has it (it moves by
+    # 0.02 % of the response here)
+    dt, wn, zeta, n = 0.01, 1.8, 0.8, 200
     model = from_transfer_function([wn * wn], [1.0, 2 * zeta * wn, wn * wn], 0.0, dt)
-    u = Uncertainty(levels=(0.1,))
-    from gcs.core.study import _modal_perturb
-
-    b, a, draws = _modal_perturb(model, 0.1, u.bias, np.array([1.0, -0.5, 0.0]))
-    wn2, zeta2 = wn * 1.1, zeta * 0.95
-    ref = from_transfer_function([wn2 * wn2], [1.0, 2 * zeta2 * wn2, wn2 * wn2], 0.0, dt)
-    import scipy.signal
-
-    impulse = np.zeros(200)
+    plan = StudyPlan(np.zeros((n + 1, 2)), (model, model), Uncertainty(levels=(0.1,)), (),
+                     plants=50, iterations=1, seed=8, chunk_plants=1)  # fmt: skip
+    true = draw_plant(plan, 0, 0)
+    impulse = np.zeros((n, 2))
     impulse[0] = 1.0
-    got = scipy.signal.lfilter(b[1:], a, impulse)
-    np.testing.assert_allclose(got, markov_parameters(ref, 200), rtol=1e-3, atol=1e-12)
-    assert draws["wn"] == pytest.approx(0.1) and draws["zeta"] == pytest.approx(-0.05)
+    response = true.respond(impulse)
+    for axis, name in enumerate(("north", "east")):
+        d = true.draws[name]
+        assert min(abs(d["wn"]), abs(d["zeta"]), abs(d["gain"])) > 0.03  # all three moved
+        assert d["extra_delay_s"] == 0.0 and true.delay_samples[axis] == 0
+        wn2, zeta2, gain2 = wn * (1 + d["wn"]), zeta * (1 + d["zeta"]), 1 + d["gain"]
+        ref = from_transfer_function(
+            [gain2 * wn2 * wn2], [1.0, 2 * zeta2 * wn2, wn2 * wn2], 0.0, dt
+        )
+        np.testing.assert_allclose(response[:, axis], markov_parameters(ref, n), rtol=1e-3,
+                                   atol=1e-12)  # fmt: skip
+    # the draws are the level times a standard normal
+    draws = [draw_plant(plan, 0, i).draws for i in range(plan.plants)]
+    for key in ("wn", "zeta", "gain"):
+        spread = np.std([d[axis][key] for d in draws for axis in ("north", "east")])
+        assert 0.07 < spread < 0.13, key
 
 
 def test_results_do_not_depend_on_the_chunk_size(tmp_path: Path) -> None:

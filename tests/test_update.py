@@ -7,11 +7,11 @@ import clarabel
 import numpy as np
 import pytest
 import scipy.linalg
+import scipy.optimize
 import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs.core import update as upd
 from gcs.core.model import (
     DiscreteModel,
     from_transfer_function,
@@ -20,6 +20,7 @@ from gcs.core.model import (
     simulate,
 )
 from gcs.core.update import (
+    InputUpdate,
     SetpointLimits,
     UpdateResult,
     UpdateWeights,
@@ -84,8 +85,8 @@ def objective_eq8(model, u, yd, d_hat, u_prev, w: UpdateWeights) -> float:
     return float(w.we * e @ e + w.wdu * du @ du + w.wu * u @ u)
 
 
-def dense_clarabel_qp(model, yd, d_hat, u_prev, w, limits: SetpointLimits):
-    """Independent constrained solution: dense lifted QP in the free inputs, solved by Clarabel."""
+def dense_qp(model, yd, d_hat, u_prev, w: UpdateWeights):
+    """Eq. (8) as ``min 1/2 x'Hx + q'x`` in the free inputs ``x = u(0) .. u(N-r)``, dense."""
     n = yd.size
     r = relative_degree(model)
     m = n - r + 1
@@ -93,6 +94,11 @@ def dense_clarabel_qp(model, yd, d_hat, u_prev, w, limits: SetpointLimits):
     Fc = F[r - 1 :, :m]
     H = 2 * (w.we * Fc.T @ Fc + (w.wdu + w.wu) * np.eye(m))
     q = -2 * (w.we * Fc.T @ (yd - d_hat)[r - 1 :] + w.wdu * u_prev[:m])
+    return H, q
+
+
+def dense_limit_rows(yd, r: int, m: int, limits: SetpointLimits):
+    """The limits as dense rows ``A x <= b`` on the free inputs (the pinned tail a constant)."""
     yd_u = np.concatenate([yd[r - 1 :], np.full(r - 1, yd[-1])])[:m]
     rows, rhs = [], []
     eye = np.eye(m)
@@ -121,22 +127,66 @@ def dense_clarabel_qp(model, yd, d_hat, u_prev, w, limits: SetpointLimits):
         if r > 1:
             rows += [-eye[m - 1], eye[m - 1]]
             rhs += [s - yd[-1], s + yd[-1]]
-    A = sp.csc_matrix(np.array(rows))
+    return np.array(rows).reshape(-1, m), np.array(rhs)
+
+
+def dense_clarabel_qp(model, yd, d_hat, u_prev, w, limits: SetpointLimits):
+    """Independent constrained solution: dense lifted QP in the free inputs, solved by Clarabel."""
+    n = yd.size
+    r = relative_degree(model)
+    m = n - r + 1
+    H, q = dense_qp(model, yd, d_hat, u_prev, w)
+    A, b = dense_limit_rows(yd, r, m, limits)
     settings_ = clarabel.DefaultSettings()
     settings_.verbose = False
     settings_.tol_gap_abs = settings_.tol_gap_rel = settings_.tol_feas = 1e-10
     solver = clarabel.DefaultSolver(
         sp.triu(sp.csc_matrix(H), format="csc"),
         q,
-        A,
-        np.array(rhs),
-        [clarabel.NonnegativeConeT(len(rhs))],
+        sp.csc_matrix(A),
+        b,
+        [clarabel.NonnegativeConeT(b.size)],
         settings_,
     )
     sol = solver.solve()
     u = np.full(n, yd[-1])
     u[:m] = np.asarray(sol.x)
     return sol.status, u
+
+
+def kkt_violation(model, yd, d_hat, u_prev, w, limits: SetpointLimits, u) -> tuple[float, float]:
+    """How far ``u`` is from satisfying the KKT conditions of the dense QP: (stationarity,
+    infeasibility), each relative. Stationarity is the distance of the negative gradient from
+    the cone of the active rows (non-negative least squares, so the multipliers are >= 0).
+    The QP being strictly convex, a point with both near zero is its minimiser."""
+    r = relative_degree(model)
+    m = yd.size - r + 1
+    H, q = dense_qp(model, yd, d_hat, u_prev, w)
+    A, b = dense_limit_rows(yd, r, m, limits)
+    x = u[:m]
+    scale = max(1.0, float(np.max(np.abs(b), initial=0.0)))
+    slack = b - A @ x
+    active = slack <= 1e-7 * scale
+    grad = H @ x + q
+    if np.any(active):
+        _, residual = scipy.optimize.nnls(A[active].T, -grad, maxiter=50 * m)
+    else:  # (nnls aborts the process on a matrix without columns)
+        residual = float(np.linalg.norm(grad))
+    stationarity = residual / (np.linalg.norm(H @ x) + np.linalg.norm(q))
+    return float(stationarity), max(0.0, -float(np.min(slack, initial=0.0)) / scale)
+
+
+def binding_limits(u_free, yd, r: int) -> SetpointLimits:
+    """A box and a rate limit that the unconstrained optimum ``u_free`` violates, feasible:
+    the box holds the start (0) and the pinned end (``yd[-1]``), and the rate limit lets a
+    ramp from one to the other through."""
+    m = yd.size - r + 1
+    x, y_final = u_free[:m], float(yd[-1])
+    hi = max(float(np.quantile(x, 0.85)), y_final, 0.0)
+    lo = min(float(np.quantile(x, 0.15)), y_final, 0.0)
+    steps = np.abs(np.diff(np.concatenate([[0.0], x])))
+    step = max(0.7 * float(steps.max()), 2.0 * abs(y_final) / (m + 1), 2.0 * (hi - lo) / m)
+    return SetpointLimits(u_min_m=lo, u_max_m=hi, max_step_m=step)
 
 
 def assert_within_limits(u, yd, r, limits: SetpointLimits, tol=1e-7):
@@ -227,22 +277,36 @@ def test_identity_plant_box_is_a_clip():
     wdu=st.floats(1e-3, 1.0),
     wu=st.sampled_from([0.0, 1e-3, 0.05]),
 )
-def test_direct_equals_clarabel_and_dense(seed, delay, order, zero_cb, n, we, wdu, wu):
+def test_direct_and_clarabel_equal_dense_solutions(seed, delay, order, zero_cb, n, we, wdu, wu):
+    """Without limits the banded KKT solve is the dense normal equations' solution; with a box
+    and a rate limit that bind, Clarabel's answer (refined on its active set) satisfies the
+    KKT conditions of the dense constrained QP and is no worse than Clarabel on that dense QP
+    (whose interior point stops at its tolerance, up to 1e-5 m from the minimiser here)."""
     model = random_stable_model(seed, delay, order, zero_cb)
     yd, d_hat, u_prev = signals(seed, n)
     w = UpdateWeights(we=we, wdu=wdu, wu=wu)
     res = next_input(model, yd, d_hat, u_prev, w)
     assert res.method == "direct" and res.status == "solved"
-    # Clarabel on the same sparse QP, without limits.
-    prob = upd._build_problem(model, yd, d_hat, u_prev, w)
-    u_free, status, sol = upd._solve_clarabel(prob, None)
-    assert status == "solved" and sol.status == clarabel.SolverStatus.Solved
-    scale = max(1.0, float(np.max(np.abs(res.u_m))))
-    np.testing.assert_allclose(res.u_m[: prob.m], u_free, atol=1e-6 * scale)
     # Dense normal equations on the controllable problem.
     np.testing.assert_allclose(res.u_m, dense_reference(model, yd, d_hat, u_prev, w), atol=1e-8)
     assert res.objective == pytest.approx(
         objective_eq8(model, res.u_m, yd, d_hat, u_prev, w), rel=1e-9, abs=1e-12
+    )
+    # Clarabel on the sparse QP, with limits that bind.
+    r = relative_degree(model)
+    limits = binding_limits(res.u_m, yd, r)
+    con = next_input(model, yd, d_hat, u_prev, w, limits)
+    assert con.method == "clarabel" and con.status == "solved" and con.active_constraints > 0
+    assert_within_limits(con.u_m, yd, r, limits, tol=1e-9)
+    assert np.all(con.u_m[n - r + 1 :] == yd[-1])
+    stationarity, infeasibility = kkt_violation(model, yd, d_hat, u_prev, w, limits, con.u_m)
+    assert stationarity < 1e-10 and infeasibility < 1e-10
+    status, u_ref = dense_clarabel_qp(model, yd, d_hat, u_prev, w, limits)
+    assert status == clarabel.SolverStatus.Solved
+    ref_objective = objective_eq8(model, u_ref, yd, d_hat, u_prev, w)
+    assert res.objective <= con.objective <= ref_objective * (1 + 1e-9)
+    assert con.objective == pytest.approx(
+        objective_eq8(model, con.u_m, yd, d_hat, u_prev, w), rel=1e-9, abs=1e-12
     )
 
 
@@ -387,13 +451,28 @@ def test_step_too_small_to_reach_reference_is_infeasible(px4_model):
         )
 
 
-def test_clarabel_itself_detects_infeasibility(px4_model):
-    # Bypass the pre-check: Clarabel's own certificate is mapped to UpdateInfeasible.
+@pytest.mark.parametrize("fraction", [0.5, 0.999, 1.001, 2.0])
+def test_infeasible_exactly_when_an_independent_solver_certifies_it(px4_model, fraction):
+    # A 3 m jump from the start point in 36 steps (u(-1) = 0 .. the pinned u(35)): rate limits
+    # just below and just above 3/36 m. UpdateInfeasible, naming the limit, exactly when
+    # Clarabel on the dense QP certifies the limits infeasible; otherwise the minimiser.
     n = 40
     yd = np.full(n, 3.0)
-    prob = upd._build_problem(px4_model, yd, np.zeros(n), np.zeros(n), UpdateWeights())
-    with pytest.raises(UpdateInfeasible, match="Infeasible"):
-        upd._solve_clarabel(prob, SetpointLimits(max_step_m=0.05))
+    zero = np.zeros(n)
+    w = UpdateWeights()
+    m = n - relative_degree(px4_model) + 1
+    limits = SetpointLimits(max_step_m=fraction * 3.0 / (m + 1))
+    status, _ = dense_clarabel_qp(px4_model, yd, zero, zero, w, limits)
+    if fraction < 1.0:
+        assert status == clarabel.SolverStatus.PrimalInfeasible
+        with pytest.raises(UpdateInfeasible, match="max_step_m = .* cannot reach"):
+            next_input(px4_model, yd, zero, zero, w, limits)
+    else:
+        assert status == clarabel.SolverStatus.Solved
+        res = next_input(px4_model, yd, zero, zero, w, limits)
+        assert res.method == "clarabel" and res.active_constraints > 0
+        stationarity, infeasibility = kkt_violation(px4_model, yd, zero, zero, w, limits, res.u_m)
+        assert stationarity < 1e-10 and infeasibility < 1e-10
 
 
 def test_empty_box_rejected_at_construction():
@@ -462,6 +541,23 @@ def test_dense_reference_helper_is_correct():
     assert scipy.linalg.norm(u) > 0
 
 
+def test_kkt_helper_tells_the_minimiser_from_other_feasible_points(px4_model):
+    # Guard of the guard: the clipped unconstrained optimum is feasible but not the minimiser.
+    n = 60
+    yd, d_hat, u_prev = signals(8, n)
+    w = UpdateWeights()
+    limits = SetpointLimits(u_min_m=-1.6, u_max_m=1.7)
+    free = next_input(px4_model, yd, d_hat, u_prev, w)
+    clipped = np.clip(free.u_m, -1.6, 1.7)
+    stationarity, infeasibility = kkt_violation(px4_model, yd, d_hat, u_prev, w, limits, clipped)
+    assert infeasibility == 0.0 and stationarity > 1e-3
+    _, infeasibility = kkt_violation(px4_model, yd, d_hat, u_prev, w, limits, clipped + 0.01)
+    assert infeasibility > 1e-3
+    res = next_input(px4_model, yd, d_hat, u_prev, w, limits)
+    stationarity, infeasibility = kkt_violation(px4_model, yd, d_hat, u_prev, w, limits, res.u_m)
+    assert stationarity < 1e-10 and infeasibility < 1e-10
+
+
 # ---------------------------------------------------------------------------------------------
 # structure: the banded KKT solve and the active set kept across trials
 # ---------------------------------------------------------------------------------------------
@@ -473,54 +569,56 @@ def test_dense_reference_helper_is_correct():
     delay=st.integers(0, 4),
     order=st.integers(1, 4),
     n=st.integers(8, 40),
-    extra=st.integers(0, 12),
 )
-def test_banded_kkt_solve_equals_dense_solve(seed, delay, order, n, extra):
-    """The stage-ordered banded LU solves the KKT system as a dense LU of it does, with or
-    without extra equality rows on the inputs (an active set of limits)."""
+def test_kept_update_solves_on_its_active_set_to_the_exact_minimiser(seed, delay, order, n):
+    """A kept update asked the trial it has just solved again takes its active set (the limits
+    held with equality in the banded KKT system) and lands on the minimiser at once, to
+    rounding: the KKT conditions of the dense QP hold far tighter than Clarabel's tolerance.
+    The next trial, started from that active set, ends on its own minimiser too."""
     model = random_stable_model(seed, delay, order)
     yd, d_hat, u_prev = signals(seed, n)
-    s = upd._Structure(model, yd, UpdateWeights(1.0, 0.01, 0.001))
-    prob = s.problem(d_hat, u_prev, None)
-    rng = np.random.default_rng(seed)
-    A_in, b_in = upd._inequalities(
-        prob, SetpointLimits(-1.0, 1.0, 0.3, 0.5) if extra else SetpointLimits()
-    )
-    rows = upd._rows_of(A_in, b_in, prob.m) if extra else None
-    act = np.zeros(A_in.shape[0], dtype=bool)
-    if extra:
-        act[rng.choice(A_in.shape[0], size=min(extra, A_in.shape[0]), replace=False)] = True
-        act = upd._independent(rows, np.flatnonzero(act), prob.m)
-    G = sp.vstack([prob.G, A_in[act]], format="csc")
-    h = np.concatenate([prob.h, b_in[act]])
-    stages = np.concatenate([prob.stage_eq, rows.stage[act] if extra else np.zeros(0, int)])
-    z, nu = upd._kkt_solve(prob.P, prob.q, G, h, prob.stage_z, stages)
-    K = sp.bmat([[prob.P, G.T], [G, None]]).toarray()
-    dense = np.linalg.solve(K, np.concatenate([-prob.q, h]))
-    scale = np.max(np.abs(dense))
-    np.testing.assert_allclose(np.concatenate([z, nu]), dense, rtol=0, atol=1e-9 * scale)
-    # the active rows kept are independent: the dense KKT matrix has full rank
-    assert np.linalg.matrix_rank(K) == K.shape[0]
+    w = UpdateWeights(1.0, 0.01, 0.001)
+    r = relative_degree(model)
+    limits = binding_limits(next_input(model, yd, d_hat, u_prev, w).u_m, yd, r)
+    kept = InputUpdate(model, yd, w, limits)
+    first = kept.solve(d_hat, u_prev)
+    again = kept.solve(d_hat, u_prev)
+    assert first.method == "clarabel" and again.method == "active-set"
+    assert again.active_constraints == first.active_constraints > 0
+    scale = max(1.0, float(np.max(np.abs(first.u_m))))
+    np.testing.assert_allclose(again.u_m, first.u_m, rtol=0, atol=1e-9 * scale)
+    stationarity, infeasibility = kkt_violation(model, yd, d_hat, u_prev, w, limits, again.u_m)
+    assert stationarity < 1e-10 and infeasibility < 1e-10
+    # the next trial: the disturbance estimate moved, some limits let go and others bind
+    d_next = d_hat + 0.3 * np.sin(np.linspace(0.0, 3.0, n) + seed)
+    after = kept.solve(d_next, first.u_m)
+    stationarity, infeasibility = kkt_violation(model, yd, d_next, first.u_m, w, limits, after.u_m)
+    assert stationarity < 1e-10 and infeasibility < 1e-10
 
 
-@settings(max_examples=20, deadline=None)
-@given(n_rows=st.integers(1, 40), seed=st.integers(0, 10_000))
-def test_independent_rows_form_a_full_rank_set(n_rows, seed):
-    """Any order of limit rows: the subset kept has full row rank, and adding any row left out
-    would lose it (it is a maximal independent subset)."""
-    n = 30
-    yd, d_hat, u_prev = signals(seed, n)
-    model = random_stable_model(seed, 1, 2)
-    prob = upd._Structure(model, yd, UpdateWeights()).problem(d_hat, u_prev, None)
-    A_in, b_in = upd._inequalities(prob, SetpointLimits(-1.0, 1.0, 0.3, 0.5))
-    rows = upd._rows_of(A_in, b_in, prob.m)
-    order = np.random.default_rng(seed).permutation(A_in.shape[0])[:n_rows]
-    keep = upd._independent(rows, order, prob.m)
-    dense = A_in.toarray()[:, : prob.m]
-    rank = np.linalg.matrix_rank(dense[keep])
-    assert rank == keep.sum()
-    for i in order[~keep[order]]:
-        assert np.linalg.matrix_rank(np.vstack([dense[keep], dense[i]])) == rank
+def test_degenerate_active_set_is_solved_without_clarabel():
+    """More limits hold with equality than there are inputs: the reference climbs at the rate
+    limit and the optimum rides the deviation bound above it, so at every sample the bound
+    and the step into it are both active (``u(0)``: the bound and the step from the start
+    point). The kept update drops the dependent rows and solves on the rest; the optimum is
+    the bound itself (identity plant, ``Wdu = Wu = 0``: a clip of ``yd - d_hat``)."""
+    model = DiscreteModel(np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), 0.1, 0)
+    n, step, dev = 30, 0.1, 0.3
+    yd = step * np.arange(1, n + 1) - dev  # yd + dev climbs by exactly one step per sample
+    d_hat = np.full(n, -1.0)  # yd - d_hat lies above the deviation bound everywhere
+    u_prev = np.zeros(n)
+    w = UpdateWeights(we=1.0, wdu=0.0, wu=0.0)
+    limits = SetpointLimits(max_step_m=step, max_deviation_m=dev)
+    kept = InputUpdate(model, yd, w, limits)
+    methods = []
+    for _ in range(3):
+        res = kept.solve(d_hat, u_prev)
+        methods.append(res.method)
+        np.testing.assert_allclose(res.u_m, yd + dev, rtol=0, atol=1e-12)
+        assert res.active_constraints == 2 * n  # every bound and every step
+        stationarity, infeasibility = kkt_violation(model, yd, d_hat, u_prev, w, limits, res.u_m)
+        assert stationarity < 1e-10 and infeasibility < 1e-10
+    assert methods == ["clarabel", "active-set", "active-set"]
 
 
 @settings(max_examples=5, deadline=None)
@@ -533,7 +631,7 @@ def test_kept_update_equals_a_fresh_clarabel_solve(seed, trials):
     yd, d_hat, u_prev = signals(seed, n)
     limits = SetpointLimits(-1.9, 2.0, 0.15, 0.5)
     w = UpdateWeights()
-    kept = upd.InputUpdate(model, yd, w, limits)
+    kept = InputUpdate(model, yd, w, limits)
     rng = np.random.default_rng(seed)
     methods = []
     for _ in range(trials):

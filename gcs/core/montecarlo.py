@@ -47,6 +47,7 @@ __all__ = [
     "StudyRow",
     "PlantSample",
     "sample_plants",
+    "noise_generator",
     "update_operator",
     "error_norms",
     "run_study",
@@ -309,6 +310,32 @@ def sample_plants(settings: StudySettings, level: float) -> PlantSample:
     return PlantSample(wn, zeta, excluded)
 
 
+def noise_generator(settings: StudySettings, level: float) -> np.random.Generator:
+    """The generator of the output noise of one uncertainty level.
+
+    Every trial ``j = 0 .. iterations`` of the level, in order, draws
+    ``standard_normal((P * repeats, N))`` from it: row ``i * repeats + k`` is the noise of
+    plant ``i`` (of :func:`sample_plants`), repeat ``k``, and the measured output is
+    ``y = y_true + noise_std * draw``. Seeded by ``settings.seed`` and ``level`` only (a
+    stream apart from the plants'), so both algorithms, and :func:`adaptive_error_norms`,
+    see the same noise; a trial-by-trial rerun that draws the same way sees it too.
+
+    Parameters
+    ----------
+    settings : StudySettings
+        The seed (the draws' shapes follow from ``plants``, ``repeats`` and ``n_samples``).
+    level : float
+        Uncertainty level (fraction of the nominal values).
+
+    Returns
+    -------
+    numpy.random.Generator
+        A new generator at the start of the level's noise: unit standard deviation,
+        dimensionless (scaled by ``noise_std`` [m]).
+    """
+    return _rng(settings, level, 1)
+
+
 def _msd_model(wn: float, zeta: float, dt_s: float) -> DiscreteModel:
     return from_transfer_function([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], 0.0, dt_s)
 
@@ -400,7 +427,7 @@ def _simulate(
     f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
     nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)  # linear, not circular
     f_true_fft = np.fft.rfft(f_true, nfft, axis=-1)[:, None, :]
-    noise_rng = _rng(settings, level, 1)  # same stream for both algorithms
+    noise_rng = noise_generator(settings, level)  # same stream for both algorithms
     if algorithm == "smoother":
         # d_hat = S (y - F u) + s0 d0 and the update are fixed: fold them into two matrices,
         # u_next = c - y A_y + u A_u (row-vector form, trials along axis 0).
@@ -733,7 +760,7 @@ def _adaptive_simulate(
     f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
     nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)
     f_true_fft = np.fft.rfft(f_true, nfft, axis=-1)[:, None, :]
-    noise_rng = _rng(settings, level, 1)  # the paper's study's noise, draw for draw
+    noise_rng = noise_generator(settings, level)  # the paper's study's noise, draw for draw
     refresh_settings = replace(adaptive.refresh_settings(), delay_search=0)
     u_hist = np.zeros((runs, n_trials, n))
     y_hist = np.zeros((runs, n_trials, n))

@@ -105,6 +105,13 @@ class ChildProgram:
             raise ChildNotReady(why)
         return self.ready
 
+    @property
+    def returncode(self) -> int | None:
+        """Exit status of the program: None before :meth:`start` and while it runs; negative
+        when a signal ended it (``-signal.SIGKILL`` when :meth:`stop` had to kill it), as
+        :attr:`subprocess.Popen.returncode`."""
+        return None if self._proc is None else self._proc.poll()
+
     def send_signal(self, sig: int) -> None:
         """Send a signal to the running program.
 
