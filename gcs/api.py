@@ -14,7 +14,7 @@ import numpy as np
 from gcs.core import learner as _core
 from gcs.core.estimators import KilcState
 from gcs.core.floor import Floor
-from gcs.core.learning import AdaptiveSettings, LearnerSettings
+from gcs.core.learning import LearnerSettings
 from gcs.core.model import DiscreteModel
 from gcs.core.trajectory import Reference
 from gcs.io.config import Profile, load_profile
@@ -124,8 +124,7 @@ class Learner(_core.Learner):
         if isinstance(reference_m, Reference):
             ref = reference_m.pos_ned_m[:, settings.axes]
         ln = prof.learning
-        adaptive: AdaptiveSettings | None = ln.adaptive if ln.history else None
         return cls(
-            settings, ref, adaptive, ln.repeats if ln.history else 0,
+            settings, ref, ln.adaptive, ln.repeats,
             floor, models=models, kilc_states=kilc_states, history=history,
         )  # fmt: skip

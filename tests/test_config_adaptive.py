@@ -26,7 +26,7 @@ def with_adaptive(tmp_path: Path, section: object) -> Path:
 
 def test_antx_is_the_paper_and_antx_adaptive_differs_only_in_learning_adaptive() -> None:
     paper, adaptive = load_profile(ANTX), load_profile(ADAPTIVE)
-    assert paper.learning.adaptive == AdaptiveSettings() and paper.learning.adaptive.is_paper
+    assert paper.learning.adaptive is None and paper.learning.repeats == 0
     ad = adaptive.learning.adaptive
     assert ad.noise == "data" and ad.refresh and ad.safeguard and not ad.is_paper
     a, b = yaml.safe_load(ANTX.read_text()), yaml.safe_load(ADAPTIVE.read_text())

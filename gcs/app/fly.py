@@ -339,7 +339,7 @@ def _plan_resume(
             raise RunLogError(
                 f"{run.path}: no setpoints for trial {first}; run 'gcs learn {run.path}' first"
             )
-    if profile.learning.history and first > 0:
+    if profile.learning.adaptive is not None and first > 0:
         check_history(run, profile, first - 1)
     flyable_setpoints(run, first if again is None else again)
     run.check_writable()
@@ -369,7 +369,7 @@ def check_again(run: RunDir, profile: Profile, first: int, again: int) -> None:
     ------
     RunLogError
     """
-    repeats = profile.learning.repeats if profile.learning.history else 0
+    repeats = profile.learning.repeats
     if first <= repeats:
         what = "the first trial" if first == 0 else "a repeat of trial 0 (it measures the floor)"
         raise RunLogError(
@@ -401,7 +401,7 @@ def check_until_converged(profile: Profile, where: str) -> None:
     ------
     ProfileError
     """
-    if not profile.learning.history:
+    if profile.learning.adaptive is None:
         raise ProfileError(
             f"--until-converged: {where} has no learning.adaptive section, so nothing measures "
             "the floor that says when learning has converged (use profile antx-adaptive)"

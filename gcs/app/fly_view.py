@@ -524,7 +524,7 @@ def fly_with_display(
     progress, on_event = live_progress(console)
 
     ln = run.profile().learning
-    repeats = ln.repeats if ln.history else 0
+    repeats = ln.repeats
     from gcs.app.report import is_three_d
 
     three_d = is_three_d(run)
@@ -536,7 +536,7 @@ def fly_with_display(
             change = 100.0 * (r.epos_m - rows[-2].epos_m) / rows[-2].epos_m
             delta = f", {change:+.1f} % vs previous"
         which, base = f"trial {r.iteration}", "j=0"
-        if ln.history:  # the trial number and the paper's iteration j differ after a repeat
+        if ln.adaptive is not None:  # trial number and the paper's j differ after a repeat
             again = ", a repeat" if repeat_of(r.iteration, repeats) is not None else ""
             which += f" (j = {iteration_of(r.iteration, repeats)}{again})"
             base = "trial 0"

@@ -237,7 +237,7 @@ def learn_run(
     j = run.newest_complete()
     if j is None:
         raise RunLogError(f"{run.path}: no complete trial to learn from")
-    if profile.learning.history:
+    if profile.learning.adaptive is not None:
         return _learn_history(run, profile, j)
     record = run.measured_trial(j, profile.mocap.measurement)
     ref = run.reference()

@@ -31,6 +31,7 @@ from gcs.core.floor import (
     floor_from_flights,
     floor_verdicts,
 )
+from gcs.core.learning import AdaptiveSettings
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trials import (
     iteration_of,
@@ -428,7 +429,8 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
     records = complete_records(run) if records is None else records
     ref = run.reference().pos_ned_m
     ln = run.profile().learning
-    history = ln.history and run.kind == "learning"
+    history = ln.adaptive is not None and run.kind == "learning"
+    floor_z = (ln.adaptive or AdaptiveSettings()).floor_z
     repeats = ln.repeats if history else 0
     order = sorted(records)
     floor, group, verdicts = None, (), {}
@@ -438,7 +440,7 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
             group = tuple(order[i] for i in flights)
             floor = floor_from_flights(np.array([records[t].pos_ned_m[1:, :2] for t in group]))
             epos_all = [trial_errors(records[t])[0] for t in order]
-            found = floor_verdicts(np.array(epos_all), floor, ln.adaptive.floor_z)
+            found = floor_verdicts(np.array(epos_all), floor, floor_z)
             verdicts = {order[i]: v for i, v in enumerate(found)}
     learned = run.learn_records() if history else {}
     trials = {}
@@ -448,7 +450,7 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
             t, iteration_of(t, repeats), repeat_of(t, repeats), rms, largest,
             verdicts.get(t), learned.get(t),
         )  # fmt: skip
-    return RunLearning(history, repeats, floor, group, ln.adaptive.floor_z, trials)
+    return RunLearning(history, repeats, floor, group, floor_z, trials)
 
 
 def trial_clock_rates(run: RunDir) -> dict[int, float | None]:

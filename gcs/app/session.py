@@ -416,7 +416,7 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
     if again is not None:  # trial k's setpoints byte for byte: kept the limits k was flown with
         flyable_setpoints(run, again)
         return sp
-    repeats = profile.learning.repeats if profile.learning.history else 0
+    repeats = profile.learning.repeats
     if j <= repeats:
         if not np.array_equal(sp, run.read_setpoints(0)):
             raise TrajectoryError(
@@ -424,7 +424,7 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
                 "setpoints differ from setpoints-000.csv; not flown"
             )
         return sp
-    models = models_in_use(run, profile, j)[0] if profile.learning.history else None
+    models = models_in_use(run, profile, j)[0] if profile.learning.adaptive else None
     try:
         check_learned(sp, profile, run.reference(), models)
     except TrajectoryError as exc:

@@ -104,8 +104,8 @@ def build_plan(study: StudyDefinition) -> StudyPlan:
             StudySetting(
                 name=spec.name,
                 settings=learner_settings(spec.profile),
-                adaptive=learning.adaptive if learning.history else None,
-                repeats=learning.repeats if learning.history else 0,
+                adaptive=learning.adaptive,
+                repeats=learning.repeats,
                 source=spec.overrides,
             )
         )

@@ -213,14 +213,11 @@ class LearningConfig:
         Learned local NED axes (``learning.axes``): (0, 1) north and east (default, the
         paper's), or (0, 1, 2) with down (the profile then needs ``model_z``). Axes not
         learned are flown as the reference.
-    adaptive : AdaptiveSettings
-        Options beyond the paper (``learning.adaptive``); the default is the paper's method.
-    history : bool
-        True when the profile has a ``learning.adaptive`` section: ``gcs learn`` and
-        ``gcs fly`` then learn from every complete trial
-        (:func:`gcs.core.learning.plan_next_trial`) and record every decision and every
-        refreshed model in the run directory; False (no section): the paper's step on the
-        newest trial, exactly as before the section existed.
+    adaptive : AdaptiveSettings or None
+        Options beyond the paper (``learning.adaptive``): ``gcs learn`` and ``gcs fly`` then
+        learn from every complete trial (:func:`gcs.core.learning.plan_next_trial`) and
+        record every decision and every refreshed model in the run directory. None (no
+        section): the paper's step on the newest trial, exactly as before the section existed.
     repeats : int
         Flights of trial 0's setpoints after the first (``learning.adaptive.repeats``,
         default 1 in the section, 0 without it): identical flights measure the vehicle's
@@ -233,8 +230,7 @@ class LearningConfig:
     kilc: KilcSettings = field(default_factory=KilcSettings)
     max_step_m: float | None = None
     max_deviation_m: float | None = None
-    adaptive: AdaptiveSettings = field(default_factory=AdaptiveSettings)
-    history: bool = False
+    adaptive: AdaptiveSettings | None = None
     max_vertical_step_m: float | None = None
     max_vertical_deviation_m: float | None = None
     axes: tuple[int, ...] = (0, 1)
@@ -410,8 +406,7 @@ def _learning(f: _Fields) -> LearningConfig:
         kilc=settings["kilc"],
         max_step_m=max_step_m,
         max_deviation_m=max_deviation_m,
-        adaptive=_adaptive(adaptive),
-        history=history,
+        adaptive=_adaptive(adaptive) if history else None,
         repeats=repeats,
         max_vertical_step_m=vertical["step"],
         max_vertical_deviation_m=vertical["deviation"],
