@@ -396,6 +396,7 @@ def fly(
 
     Example: gcs fly --mock --iter 3
     """
+    from gcs.app.fly import FlyRequest
     from gcs.app.fly_view import fly_with_display
 
     _check_algorithm(algorithm)
@@ -405,25 +406,25 @@ def fly(
         raise typer.BadParameter("give at most one of --run and --resume")
     if resume is None:
         profile, trajectory = profile or DEFAULT_PROFILE, trajectory or DEFAULT_TRAJECTORY
-    fly_with_display(
-        console=console,
+    request = FlyRequest(
         iterations=iterations,
+        use_mock=mock,
         connect=connect,
         mock_config=_named(mock_config, "profile", "--mock-config"),
         seed=seed,
-        profile_path=_named(profile, "profile", "--profile"),
-        trajectory_path=_named(trajectory, "trajectory", "--trajectory"),
+        profile=_named(profile, "profile", "--profile"),
+        trajectory=_named(trajectory, "trajectory", "--trajectory"),
         algorithm=algorithm,
-        run_path=run_dir,
+        run=run_dir,
         resume=resume,
         logs=logs,
-        use_mock=mock,
         check_only=check,
+        offline=offline,
         until_converged=until_converged,
         mocap=mocap,
-        offline=offline,
         again=again,
     )
+    fly_with_display(console, request)
 
 
 LEARN_DETAILS = (

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gcs.app.fly import FlyRequest
 from gcs.app.fly_view import mock_session_seed, resume_command
 from gcs.io.paths import packaged_dir
 
@@ -23,21 +24,20 @@ def test_a_session_flies_its_seed_unless_an_earlier_session_flew_it() -> None:
 
 def test_the_resume_command_names_the_vehicle_as_the_session_did() -> None:
     run = Path("logs/run 1")
-    mock = resume_command(
-        run, connect=None, use_mock=True, mock_config=packaged_dir("profile") / "mock-gps.yaml",
-        mocap=None, seed=5, iterations=2,
-    )  # fmt: skip
+    gps = packaged_dir("profile") / "mock-gps.yaml"
+    mock = resume_command(run, FlyRequest(use_mock=True, mock_config=gps, seed=5), 2)
     assert shlex.split(mock) == [
         "gcs", "fly", "--resume", "logs/run 1", "--mock", "--mock-config", "mock-gps",
         "--seed", "5", "--iter", "2",
     ]  # fmt: skip
-    real = resume_command(
-        run, connect="udpin://0.0.0.0:14540", use_mock=False, mock_config=None,
-        mocap="optitrack://10.0.0.2/drone", seed=0, iterations=3, until_converged=True,
-    )  # fmt: skip
+    request = FlyRequest(
+        connect="udpin://0.0.0.0:14540", mocap="optitrack://10.0.0.2/drone", until_converged=True
+    )
+    real = resume_command(run, request, 3, again=4)
     assert shlex.split(real) == [
         "gcs", "fly", "--resume", "logs/run 1", "--connect", "udpin://0.0.0.0:14540",
         "--mocap", "optitrack://10.0.0.2/drone", "--iter", "3", "--until-converged",
+        "--again", "4",
     ]  # fmt: skip
 
 
@@ -47,8 +47,14 @@ def test_a_samples_file_is_a_trajectory_of_its_own(tmp_path: Path) -> None:
     root = Path(__file__).resolve().parents[1] / "trajectories"
     csv = tmp_path / "my racetrack.csv"
     csv.write_bytes((root / "racetrack.csv").read_bytes())
-    direct = plan_fly(packaged_dir("profile") / "antx.yaml", csv, None, logs=tmp_path)
-    wrapped = plan_fly(packaged_dir("profile") / "antx.yaml", root / "racetrack.yaml", None)
+    direct = plan_fly(
+        FlyRequest(profile=packaged_dir("profile") / "antx.yaml", trajectory=csv, logs=tmp_path)
+    )
+    wrapped = plan_fly(
+        FlyRequest(
+            profile=packaged_dir("profile") / "antx.yaml", trajectory=root / "racetrack.yaml"
+        )
+    )
     assert direct.trajectory.name == "my-racetrack"
     assert direct.trajectory.source == {
         "name": "my-racetrack", "type": "samples", "file": "my racetrack.csv"

@@ -24,6 +24,7 @@ from synthetic import (
 
 from gcs.api import Learner, learner_settings
 from gcs.app.fly import (
+    FlyRequest,
     RunSource,
     check_until_converged,
     converged_reason,
@@ -144,7 +145,7 @@ def test_learning_is_idempotent_and_an_interrupted_step_completes_with_the_same_
     (run.path / "learn-002.json").unlink()
     (run.path / "setpoints-003.csv").unlink()
     with pytest.raises(RunLogError, match="no setpoints for trial 3"):
-        plan_fly(None, None, None, resume=run.path)
+        plan_fly(FlyRequest(resume=run.path))
     learn_run(run)
     assert files(run.path) == before
 
@@ -356,9 +357,9 @@ def test_the_live_table_says_when_learning_drifts_up_from_the_floor(tmp_path):
 def test_again_is_refused_for_the_repeat_and_flies_as_the_trial_it_copies(tmp_path: Path) -> None:
     run = make_adaptive_run(tmp_path / "a", trials=1)  # next: trial 1, the repeat of trial 0
     with pytest.raises(RunLogError, match="trial 1, is a repeat of trial 0"):
-        plan_fly(None, None, None, resume=run.path, again=0)
+        plan_fly(FlyRequest(resume=run.path, again=0))
     run = make_adaptive_run(tmp_path / "b", trials=4)  # next: trial 4, learned
-    plan = plan_fly(None, None, None, resume=run.path, again=2)
+    plan = plan_fly(FlyRequest(resume=run.path, again=2))
     assert (plan.first_trial, plan.again) == (4, 2)
     assert run.again_of(4) is None  # planning moves nothing
     start_run(plan)

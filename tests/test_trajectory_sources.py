@@ -397,18 +397,18 @@ def test_a_reference_that_passes_the_check_respects_the_limits_on_its_grid(shape
 def test_a_constant_yaw_is_flown_and_a_varying_one_flown_per_setpoint(tmp_path):
     import yaml
 
-    from gcs.app.fly import plan_fly, start_run, trial_yaw_deg
+    from gcs.app.fly import FlyRequest, plan_fly, start_run, trial_yaw_deg
     from gcs.io.rundir import RunDir
 
     profile = ROOT / "profiles" / "antx.yaml"
     data = yaml.safe_load((ROOT / "trajectories" / "circle.yaml").read_text())
     held = tmp_path / "held.yaml"
     held.write_text(yaml.safe_dump(data))
-    plan = plan_fly(profile, held, None, logs=tmp_path / "logs")
+    plan = plan_fly(FlyRequest(profile=profile, trajectory=held, logs=tmp_path / "logs"))
     assert plan.settings.yaw_deg == 0.0 and trial_yaw_deg(plan.reference) is None
     turned = tmp_path / "turned.yaml"
     turned.write_text(yaml.safe_dump(dict(data, yaw_deg=90.0)))
-    plan = plan_fly(profile, turned, None, logs=tmp_path / "logs")
+    plan = plan_fly(FlyRequest(profile=profile, trajectory=turned, logs=tmp_path / "logs"))
     assert plan.settings.yaw_deg == pytest.approx(90.0)
     assert np.all(plan.reference.yaw_rad == np.pi / 2)
     np.testing.assert_allclose(trial_yaw_deg(plan.reference), 90.0)
@@ -418,7 +418,11 @@ def test_a_constant_yaw_is_flown_and_a_varying_one_flown_per_setpoint(tmp_path):
     (tmp_path / "p.csv").write_text("t_s,north_m,east_m,down_m,yaw_deg\n" + "\n".join(rows))
     samples = tmp_path / "s.yaml"
     samples.write_text(yaml.safe_dump({"name": "s", "type": "samples", "file": "p.csv"}))
-    plan = plan_fly(profile, samples, None, run_path=tmp_path / "run", logs=tmp_path / "logs")
+    plan = plan_fly(
+        FlyRequest(
+            profile=profile, trajectory=samples, run=tmp_path / "run", logs=tmp_path / "logs"
+        )
+    )
     yaw = trial_yaw_deg(plan.reference)
     assert yaw.shape == (plan.reference.n_samples,)
     assert plan.settings.yaw_deg == pytest.approx(0.0) and yaw.max() == pytest.approx(40.0)
@@ -429,7 +433,7 @@ def test_a_constant_yaw_is_flown_and_a_varying_one_flown_per_setpoint(tmp_path):
     rows = [f"{a:.1f},{0.2 * np.sin(np.pi * a / 4) ** 2:.6f},0,-1.5,{100 * a:g}" for a in t]
     (tmp_path / "p.csv").write_text("t_s,north_m,east_m,down_m,yaw_deg\n" + "\n".join(rows))
     with pytest.raises(TrajectoryError, match=r"yaw rate .* 90 deg/s .*max_yaw_rate_deg_s"):
-        plan_fly(profile, samples, None, logs=tmp_path / "logs")
+        plan_fly(FlyRequest(profile=profile, trajectory=samples, logs=tmp_path / "logs"))
     assert not (tmp_path / "logs").exists()
 
 
@@ -448,14 +452,16 @@ def test_the_yaw_rate_is_checked_on_the_flown_grid_through_a_wrap():
 def test_a_samples_run_resumes_from_its_recorded_reference(tmp_path):
     import shutil
 
-    from gcs.app.fly import plan_fly, start_run
+    from gcs.app.fly import FlyRequest, plan_fly, start_run
 
     shutil.copy(ROOT / "trajectories" / "racetrack.yaml", tmp_path)
     shutil.copy(ROOT / "trajectories" / "racetrack.csv", tmp_path)
     profile = ROOT / "profiles" / "antx.yaml"
-    plan = plan_fly(profile, tmp_path / "racetrack.yaml", None, run_path=tmp_path / "run")
+    plan = plan_fly(
+        FlyRequest(profile=profile, trajectory=tmp_path / "racetrack.yaml", run=tmp_path / "run")
+    )
     run = start_run(plan)
     (tmp_path / "racetrack.csv").unlink()  # the run does not need the planner's file again
-    again = plan_fly(None, None, None, resume=run.path)
+    again = plan_fly(FlyRequest(resume=run.path))
     assert again.trajectory.shape is None and again.trajectory.name == "racetrack"
     np.testing.assert_allclose(again.reference.pos_ned_m, plan.reference.pos_ned_m, atol=1e-9)

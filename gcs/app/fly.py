@@ -52,6 +52,7 @@ from gcs.io.settings import FlightSettings
 
 __all__ = [
     "FlyPlan",
+    "FlyRequest",
     "plan_fly",
     "start_run",
     "RunSource",
@@ -109,54 +110,90 @@ class FlyPlan:
     again: int | None = None
 
 
-def plan_fly(
-    profile_path: Path | None,
-    trajectory_path: Path | None,
-    algorithm: str | None,
-    run_path: Path | None = None,
-    resume: Path | None = None,
-    logs: Path = Path("logs"),
-    until_converged: bool = False,
-    mocap: str | None = None,
-    use_mock: bool = False,
-    again: int | None = None,
-) -> FlyPlan:
+@dataclass(frozen=True)
+class FlyRequest:
+    """``gcs fly`` as asked: its options, before anything is checked (:func:`plan_fly`).
+
+    Parameters
+    ----------
+    iterations : int
+        ``--iter``: trials to fly (the cap with ``until_converged``).
+    use_mock : bool
+        ``--mock``: fly the mock drone.
+    connect : str or None
+        ``--connect``: URL of a real vehicle or PX4 SITL.
+    mock_config : Path or None
+        ``--mock-config``: the mock's settings (None: the default).
+    seed : int
+        ``--seed``: the mock's gusts.
+    profile, trajectory : Path or None
+        Files of a new run (None: with ``resume``, the run's own; else required).
+    algorithm : str or None
+        ``--algorithm`` (default: the profile's, or the resumed run's).
+    run : Path or None
+        ``--run``: exact path of a new run.
+    resume : Path or None
+        ``--resume``: the run to continue.
+    logs : Path
+        ``--logs``: parent of new runs.
+    check_only : bool
+        ``--check``: validate and say what would be flown; nothing is created or flown.
+    offline : bool
+        ``--offline``: with ``check_only``, connect to no vehicle.
+    until_converged : bool
+        ``--until-converged``: land once learning has converged or left the floor; the
+        profile must measure the floor (:func:`check_until_converged`).
+    mocap : str or None
+        ``--mocap`` (:func:`gcs.app.session.plan_mocap`).
+    again : int or None
+        ``--again K`` (with ``resume``): the next trial flies complete trial K's setpoints
+        instead of the learned ones (:func:`check_again`).
+    """
+
+    iterations: int = 3
+    use_mock: bool = False
+    connect: str | None = None
+    mock_config: Path | None = None
+    seed: int = 0
+    profile: Path | None = None
+    trajectory: Path | None = None
+    algorithm: str | None = None
+    run: Path | None = None
+    resume: Path | None = None
+    logs: Path = Path("logs")
+    check_only: bool = False
+    offline: bool = False
+    until_converged: bool = False
+    mocap: str | None = None
+    again: int | None = None
+
+
+def plan_fly(request: FlyRequest) -> FlyPlan:
     """Validate everything a flight needs; nothing is created, moved or flown here.
 
     A new run: the profile (every section, flight settings included), the trajectory on the
     flown grid against the vehicle's limits and the arena, a dry first learning update (models
     and setpoint limits admit one), the run's path. A resumed run: the run directory (a
     learning run, writable, its manifest, reference, trial files and the next trial's
-    setpoints on their grid limits), and ``profile_path`` / ``trajectory_path``, if given,
-    must be the run's own.
+    setpoints on their grid limits), and the profile / trajectory, if given, must be the
+    run's own.
 
     Parameters
     ----------
-    profile_path, trajectory_path : Path or None
-        Files of a new run (None: with ``resume``, the run's own; else required).
-    algorithm : str or None
-        Learning algorithm (default: the profile's, or the resumed run's).
-    run_path : Path or None
-        Exact path of a new run.
-    resume : Path or None
-        Run to continue.
-    logs : Path
-        Parent of new runs.
-    until_converged : bool
-        ``--until-converged``: the profile must measure the floor (see
-        :func:`check_until_converged`).
-    mocap : str or None
-        ``--mocap`` (see :func:`plan_mocap`).
-    use_mock : bool
-        The flight is on the mock drone.
-    again : int or None
-        ``--again K`` (with ``resume``): the next trial flies complete trial K's setpoints
-        instead of the learned ones (:func:`check_again`).
+    request : FlyRequest
+        The command's options (the vehicle's are checked by the caller, which connects).
 
     Returns
     -------
     FlyPlan
     """
+    profile_path, trajectory_path = request.profile, request.trajectory
+    algorithm, run_path, resume, logs = (
+        request.algorithm, request.run, request.resume, request.logs
+    )  # fmt: skip
+    until_converged, mocap, use_mock, again = (
+        request.until_converged, request.mocap, request.use_mock, request.again
+    )  # fmt: skip
     if again is not None and resume is None:
         raise RunLogError("--again flies an earlier trial of a run again: give it with --resume")
     if resume is not None:

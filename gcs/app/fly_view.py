@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Collection
+from dataclasses import replace
 from pathlib import Path
 
 from rich.console import Console
@@ -11,6 +12,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from gcs.app.fly import (
     FlyPlan,
+    FlyRequest,
     converged_reason,
     drift_reason,
     fly_run,
@@ -82,16 +84,7 @@ def mock_session_seed(seed: int, session: int, used: Collection[int] = ()) -> in
 
 
 def resume_command(
-    run_path: Path,
-    *,
-    connect: str | None,
-    use_mock: bool,
-    mock_config: Path | None,
-    mocap: str | None,
-    seed: int,
-    iterations: int,
-    until_converged: bool = False,
-    again: int | None = None,
+    run_path: Path, request: FlyRequest, iterations: int, again: int | None = None
 ) -> str:
     """The ``gcs fly --resume`` command that continues ``run_path`` with the same vehicle.
 
@@ -104,20 +97,11 @@ def resume_command(
     ----------
     run_path : Path
         The run to continue.
-    connect : str or None
-        ``--connect`` of the session.
-    use_mock : bool
-        ``--mock`` of the session.
-    mock_config : Path or None
-        ``--mock-config`` as given (None: the default).
-    mocap : str or None
-        ``--mocap`` as given.
-    seed : int
-        ``--seed`` (only printed when it is not the default, 0).
+    request : FlyRequest
+        The session's options (``--mock-config`` as given: None for the default; ``--seed``
+        only printed when it is not the default, 0; ``--until-converged`` kept).
     iterations : int
         ``--iter`` of the command.
-    until_converged : bool
-        ``--until-converged``.
     again : int or None
         ``--again``: the trial whose setpoints the next trial flies again.
 
@@ -131,19 +115,20 @@ def resume_command(
     from gcs.io.paths import packaged_dir
 
     args = ["gcs", "fly", "--resume", str(run_path)]
-    if use_mock:
+    if request.use_mock:
         args.append("--mock")
-        if mock_config is not None:
-            packaged = mock_config.parent.resolve() == packaged_dir("profile").resolve()
-            args += ["--mock-config", mock_config.stem if packaged else str(mock_config)]
-        if seed != 0:
-            args += ["--seed", str(seed)]
-    elif connect is not None:
-        args += ["--connect", connect]
-    if mocap is not None:
-        args += ["--mocap", mocap]
+        if request.mock_config is not None:
+            config = request.mock_config
+            packaged = config.parent.resolve() == packaged_dir("profile").resolve()
+            args += ["--mock-config", config.stem if packaged else str(config)]
+        if request.seed != 0:
+            args += ["--seed", str(request.seed)]
+    elif request.connect is not None:
+        args += ["--connect", request.connect]
+    if request.mocap is not None:
+        args += ["--mocap", request.mocap]
     args += ["--iter", str(iterations)]
-    if until_converged:
+    if request.until_converged:
         args.append("--until-converged")
     if again is not None:
         args += ["--again", str(again)]
@@ -394,91 +379,44 @@ def check_vehicle(
         raise VehicleError(reason)
 
 
-def fly_with_display(
-    *,
-    console: Console,
-    iterations: int,
-    connect: str | None,
-    mock_config: Path | None,
-    seed: int,
-    profile_path: Path | None,
-    trajectory_path: Path | None,
-    algorithm: str | None,
-    run_path: Path | None,
-    resume: Path | None,
-    logs: Path,
-    use_mock: bool,
-    check_only: bool = False,
-    until_converged: bool = False,
-    mocap: str | None = None,
-    offline: bool = False,
-    again: int | None = None,
-) -> RunDir | None:
+def fly_with_display(console: Console, request: FlyRequest) -> RunDir | None:
     """Validate everything, then set up (or resume) a run and fly it with a live display.
 
     Nothing is created, moved or flown before every input has been checked
-    (:func:`gcs.app.fly.plan_fly`, the connection URL, the mock's settings).
+    (:func:`gcs.app.fly.plan_fly`, the connection URL, the mock's settings). With
+    ``request.check_only`` it says what would be flown and stops; with ``until_converged`` a
+    resumed run that has converged (or left the floor) already is not flown.
 
     Parameters
     ----------
     console : Console
         Terminal output.
-    iterations : int
-        Trials to fly.
-    connect : str or None
-        URL of a real vehicle.
-    mock_config : Path or None
-        Mock settings for ``use_mock``.
-    seed : int
-        Mock seed.
-    profile_path : Path or None
-        Profile of a new run; with ``resume``, must be the run's if given.
-    trajectory_path : Path or None
-        Trajectory of a new run; with ``resume``, must be the run's if given.
-    algorithm : str or None
-        Learning algorithm (default: the profile's, or the resumed run's).
-    run_path : Path or None
-        Exact path of a new run.
-    resume : Path or None
-        Run to continue.
-    logs : Path
-        Parent of new runs.
-    use_mock : bool
-        Fly the mock drone.
-    check_only : bool
-        Validate and say what would be flown, then stop: nothing is created or connected.
-    until_converged : bool
-        Land once learning has converged (``iterations`` stays the cap); a resumed run that
-        has converged already is not flown.
-    mocap : str or None
-        ``--mocap``: a URL, ``mock`` (the mock's arena), or None (the profile's
-        ``mocap.url``, if any).
-    offline : bool
-        With ``check_only``: connect to no vehicle (else its parameters are read and judged
-        against the checklist, :func:`check_vehicle`).
-    again : int or None
-        ``--again K`` with ``resume``: the next trial flies trial K's setpoints again.
+    request : FlyRequest
+        The command's options.
 
     Returns
     -------
     RunDir or None
         The run flown (None with ``check_only``).
     """
-    plan = plan_fly(
-        profile_path, trajectory_path, algorithm, run_path, resume, logs, until_converged,
-        mocap, use_mock, again,
-    )  # fmt: skip
+    plan = plan_fly(request)
+    mock_config = request.mock_config
     given_mock_config = mock_config
-    if use_mock and mock_config is None and plan.mocap is not None and plan.mocap.source is None:
+    if (
+        request.use_mock
+        and mock_config is None
+        and plan.mocap is not None
+        and plan.mocap.source is None
+    ):
         from gcs.io.paths import resolve_named
 
         mock_config = resolve_named("mock-mocap", "profile", "--mock-config")  # vision only
-    if use_mock:
+    if request.use_mock:
         check_mock_config(mock_config)
     else:
-        assert connect is not None
-        check_url(connect)
-    if until_converged and plan.run is not None and again is None:
+        assert request.connect is not None
+        check_url(request.connect)
+    if request.until_converged and plan.run is not None and request.again is None:
         record = newest_record(plan.run)
         reason = converged_reason(record)
         if reason is None and (reason := drift_reason(record)) is not None:
@@ -487,37 +425,37 @@ def fly_with_display(
         if reason is not None:
             console.print(f"{plan.run.path}: {reason}; nothing flown", highlight=False)
             return plan.run
-    if check_only:
+    if request.check_only:
         where = plan.run.path if plan.run is not None else (plan.run_path or plan.logs)
         console.print(
             f"checked: profile '{plan.profile.name}', trajectory '{plan.trajectory.name}' "
             f"({plan.reference.n_samples} samples of {plan.profile.t_ilc_s:g} s), "
-            f"{plan.algorithm}, trials {plan.first_trial}..{plan.first_trial + iterations - 1} "
+            f"{plan.algorithm}, trials {plan.first_trial}.."
+            f"{plan.first_trial + request.iterations - 1} "
             f"in {where}; nothing flown"
         )
         if plan.mocap is not None:
             console.print(f"checked: {plan.mocap.describe()}")
-        for line in sized_up_lines(plan, iterations):
+        for line in sized_up_lines(plan, request.iterations):
             console.print(escape(line), highlight=False)
-        if not offline:
-            check_vehicle(console, plan, connect, use_mock, mock_config, seed)
+        if not request.offline:
+            check_vehicle(
+                console, plan, request.connect, request.use_mock, mock_config, request.seed
+            )
         return None
     run = start_run(plan)
     settings = plan.settings
     earlier = run.sessions()
     used = {s["mock_seed"] for s in earlier if isinstance(s.get("mock_seed"), int)}
-    session_seed = mock_session_seed(seed, len(earlier) + 1, used)
-    if use_mock and session_seed != seed:
+    session_seed = mock_session_seed(request.seed, len(earlier) + 1, used)
+    if request.use_mock and session_seed != request.seed:
         say(console)(
-            f"mock seed {session_seed}: --seed {seed} was flown by an earlier session of this "
-            "run, and a resumed run never replays its gusts"
+            f"mock seed {session_seed}: --seed {request.seed} was flown by an earlier session of "
+            "this run, and a resumed run never replays its gusts"
         )
 
     def resume_hint(n: int, again: int | None = None) -> str:
-        return resume_command(
-            run.path, connect=connect, use_mock=use_mock, mock_config=given_mock_config,
-            mocap=mocap, seed=seed, iterations=n, until_converged=until_converged, again=again,
-        )  # fmt: skip
+        return resume_command(run.path, replace(request, mock_config=given_mock_config), n, again)
 
     console.print(f"run [bold]{run.path}[/] ({run.algorithm}), next trial {run.next_trial()}")
 
@@ -537,8 +475,8 @@ def fly_with_display(
             delta = f", {change:+.1f} % vs previous"
         which, base = f"trial {r.iteration}", "j=0"
         if ln.adaptive is not None:  # trial number and the paper's j differ after a repeat
-            again = ", a repeat" if repeat_of(r.iteration, repeats) is not None else ""
-            which += f" (j = {iteration_of(r.iteration, repeats)}{again})"
+            repeat = ", a repeat" if repeat_of(r.iteration, repeats) is not None else ""
+            which += f" (j = {iteration_of(r.iteration, repeats)}{repeat})"
             base = "trial 0"
         progress.console.print(
             f"{which}: e_pos {r.epos_m:.4f} m ({r.epos_pct:5.1f} % of {base}{delta}), "
@@ -561,14 +499,23 @@ def fly_with_display(
                 soft_wrap=True,
             )
 
-    if not use_mock:  # said at once: a vehicle that is not there is silent until the timeout
+    if (
+        not request.use_mock
+    ):  # said at once: a vehicle that is not there is silent until the timeout
         say(console)(
-            f"waiting up to {settings.connect_timeout_s:g} s for a vehicle on {connect} "
+            f"waiting up to {settings.connect_timeout_s:g} s for a vehicle on {request.connect} "
             "(flight.connect_timeout_s)"
         )
     try:
         with (
-            vehicle_url(connect, use_mock, mock_config, session_seed, say(console), plan.mocap) as (
+            vehicle_url(
+                request.connect,
+                request.use_mock,
+                mock_config,
+                session_seed,
+                say(console),
+                plan.mocap,
+            ) as (
                 url,
                 link,
             ),
@@ -577,17 +524,17 @@ def fly_with_display(
             fly_run(
                 url,
                 run,
-                iterations,
+                request.iterations,
                 settings,
                 on_event,
                 on_row,
                 on_learn,
-                until_converged,
+                request.until_converged,
                 mocap=link,
-                mock_seed=session_seed if use_mock else None,
+                mock_seed=session_seed if request.use_mock else None,
             )
     except KeyboardInterrupt:
-        left = max(1, iterations - (run.next_trial() - plan.first_trial))
+        left = max(1, request.iterations - (run.next_trial() - plan.first_trial))
         console.print(
             f"interrupted; completed trials are in {run.path}. "
             f"Continue with: {escape(resume_hint(left))}",
@@ -596,7 +543,7 @@ def fly_with_display(
         )
         raise
     except GcsError as exc:
-        left = max(1, iterations - (run.next_trial() - plan.first_trial))
+        left = max(1, request.iterations - (run.next_trial() - plan.first_trial))
         kept = f"completed trials are in {run.path}" if run.complete_trials() else (
             f"no trial was flown; the run is set up in {run.path}"
         )  # fmt: skip
@@ -607,17 +554,17 @@ def fly_with_display(
         )
         raise exc
     drift = record_drift(newest_record(run))
-    if until_converged and drift is not None:
+    if request.until_converged and drift is not None:
         console.print(
             f"--until-converged: landed, learning left the floor; to fly trial "
             f"{drift.best_trial}'s setpoints again: {escape(resume_hint(1, drift.best_trial))}",
             highlight=False,
             soft_wrap=True,
         )
-    elif until_converged and converged_reason(newest_record(run)) is None:
+    elif request.until_converged and converged_reason(newest_record(run)) is None:
         console.print(
-            f"--until-converged: learning has not converged within --iter {iterations}; "
-            f"continue with: {escape(resume_hint(iterations))}",
+            f"--until-converged: learning has not converged within --iter {request.iterations}; "
+            f"continue with: {escape(resume_hint(request.iterations))}",
             highlight=False,
             soft_wrap=True,
         )
