@@ -7,12 +7,15 @@ from __future__ import annotations
 import math
 import os
 import signal
+import socket
+import struct
 import threading
 import time
 from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs.core.frames import FrameMapping, mapping_for, quat_angle_rad
 from gcs.errors import MocapError
@@ -28,9 +31,11 @@ from gcs.flight.mocap.health import (
 )
 from gcs.io.mocap_samples import MocapSeries
 from gcs.io.mocap_source import MocapSource, parse_mocap_url
+from gcs.mock.mocap import natnet
 from gcs.mock.mocap.process import MocapServerProcess
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
-from gcs.mock.mocap.server import FaultWindow, NatNetServer
+from gcs.mock.mocap.server import CLOCK_HZ, FaultWindow, NatNetServer
+from gcs.mock.mocap.sih import sih_display_port
 
 # a real NatNet server and reader in real time (rates, stale and jump timing): out of test-fast
 pytestmark = pytest.mark.live
@@ -315,6 +320,115 @@ def test_server_program_and_its_ready_url() -> None:
     assert '"connects": 1' in mock.stderr_text
 
 
-def test_server_program_refuses_bad_options() -> None:
-    with pytest.raises(MocapError, match="--natnet must be one of"):
-        MocapServerProcess(["--natnet", "2.9"]).__enter__()
+def natnet_frames(url: str, count: int) -> list[bytes]:
+    """``count`` frames of the server at ``url`` as sent: a plain socket joined to its group
+    on the data port its ``NAT_SERVERINFO`` names (no library: the stamps are read too)."""
+    source = parse_mocap_url(url)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as cmd:
+        cmd.settimeout(WAIT_S)
+        cmd.sendto(natnet.packet(natnet.NAT_CONNECT, b""), (source.host, source.port))
+        info = cmd.recv(65535)
+    _, data_port, _ = struct.unpack_from("<QH?", info, 268)
+    group = ".".join(str(b) for b in info[279:283])
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(("0.0.0.0", data_port))
+        mreq = socket.inet_aton(group) + socket.inet_aton(source.interface_ip)
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, mreq)
+        sock.settimeout(WAIT_S)
+        return [sock.recv(65535) for _ in range(count)]
+
+
+def test_server_program_serves_the_pose_of_its_latency_before_and_stamps_it() -> None:
+    """``--latency-ms 40``: each NatNet 3.1 frame (read byte by byte) carries the circle as it
+    was 40 ms before the frame's instant (its timestamp, frames over the rate), and the
+    frame's own stamps put mid-exposure 40 ms before the data-received instant, so the
+    system latency a NatNet client computes (transmit - mid-exposure) is at least 40 ms."""
+    args = ["--rate", "100", "--natnet", "3.1", "--circle", "1:2", "--noise-mm", "0"]
+    with MocapServerProcess([*args, "--latency-ms", "40"]) as mock:
+        frames = natnet_frames(mock.url, 50)
+    room = mapping_for("optitrack")
+    circle = Circle(radius_m=1.0, period_s=2.0)
+    body = 4 + 4 + 4 + len(b"drone\0") + 4 + 5 * 12 + 4 + 4  # one marker set, one body
+    for data in frames:
+        assert natnet.message_id(data) == natnet.NAT_FRAMEOFDATA
+        _, x, y, z, *_, params = struct.unpack_from("<i3f4ffh", data, body)
+        t_s, exposure, received, transmit = struct.unpack_from("<dQQQ", data, len(data) - 38)
+        assert params & 1
+        pos = room.position_to_ned(np.array([x, y, z]))
+        np.testing.assert_allclose(pos, circle(t_s - 0.040)[0], atol=1e-5)
+        assert np.linalg.norm(pos - circle(t_s)[0]) > 0.1  # 3.1 m/s: 12.6 cm in 40 ms
+        assert (received - exposure) / CLOCK_HZ == pytest.approx(0.040, abs=1e-6)
+        assert 0.040 <= (transmit - exposure) / CLOCK_HZ < 1.0
+
+
+def _free_udp(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def test_server_program_serves_px4_sih_truth_as_it_was_its_latency_before() -> None:
+    """``--px4-sih N --latency-ms 40`` fed a synthetic SIH stream (25 Hz on N's display port, a
+    vehicle going north at 2 m/s, stamped with this machine's monotonic clock as it is sent):
+    each tracked frame shows the vehicle where it was at the frame's mid-exposure stamp, 40 ms
+    before the frame's instant. The receiver times states by their receipt, so the figure is
+    the median over the frames (a latency ignored would be 8 cm off)."""
+    instance = next(n for n in range(200, 300) if _free_udp(sih_display_port(n)))
+    speed, lat0, lon0, alt0 = 2.0, 47.397742, 8.545594, 488.0
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    stop = threading.Event()
+    t_first: list[float] = []
+
+    def stream() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+            while not stop.is_set():
+                now = time.monotonic()
+                t_first[:1] = t_first[:1] or [now]
+                lat = lat0 + math.degrees(speed * (now - t_first[0]) / 6_378_137.0)
+                msg = mav.hil_state_quaternion_encode(
+                    0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, round(lat * 1e7),
+                    round(lon0 * 1e7), round(alt0 * 1e3), round(speed * 100), 0, 0, 0, 0, 0, 0, 0,
+                )  # fmt: skip
+                out.sendto(msg.pack(mav), ("127.0.0.1", sih_display_port(instance)))
+                stop.wait(0.04)
+
+    args = ["--px4-sih", str(instance), "--rate", "100", "--natnet", "3.1", "--noise-mm", "0"]
+    with MocapServerProcess([*args, "--latency-ms", "40"]) as mock:
+        sender = threading.Thread(target=stream, daemon=True)
+        sender.start()
+        try:
+            frames = natnet_frames(mock.url, 150)
+        finally:
+            stop.set()
+            sender.join(WAIT_S)
+    room = mapping_for("optitrack")
+    body = 4 + 4 + 4 + len(b"drone\0") + 4 + 5 * 12 + 4 + 4  # one marker set, one body
+    errors = []
+    for data in frames:
+        if struct.unpack_from("<i", data, 8)[0] == 0:  # no marker set: not tracked (yet)
+            continue
+        _, x, y, z, *_, params = struct.unpack_from("<i3f4ffh", data, body)
+        assert params & 1
+        _, exposure, received, _ = struct.unpack_from("<dQQQ", data, len(data) - 38)
+        assert (received - exposure) / CLOCK_HZ == pytest.approx(0.040, abs=1e-6)
+        north = room.position_to_ned(np.array([x, y, z]))[0]
+        errors.append(north - speed * (exposure / CLOCK_HZ - t_first[0]))
+    assert len(errors) >= 100
+    assert abs(float(np.median(errors))) < 0.03 and max(map(abs, errors)) < 0.3
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--natnet", "2.9"], "--natnet must be one of"),
+        (["--latency-ms", "51"], "--latency-ms"),
+        (["--latency-ms", "-1"], "--latency-ms"),
+    ],
+)
+def test_server_program_refuses_bad_options(args: list[str], message: str) -> None:
+    with pytest.raises(MocapError, match=message):
+        MocapServerProcess(args).__enter__()

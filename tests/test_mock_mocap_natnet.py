@@ -1,15 +1,19 @@
-"""NatNet packets of the mock Motive, checked byte by byte against the documented layouts."""
+"""NatNet packets of the mock Motive, checked byte by byte against the documented layouts; the
+server's frames under a latency (pose and time stamps), stepped without real time."""
 
 from __future__ import annotations
 
+import math
 import struct
+import time
 
 import numpy as np
 import pytest
 
-from gcs.core.frames import matrix_to_quat, quat_angle_rad, quat_to_matrix
+from gcs.core.frames import mapping_for, matrix_to_quat, quat_angle_rad, quat_to_matrix
 from gcs.mock.mocap import natnet
-from gcs.mock.mocap.server import DEFAULT_MARKERS_M, solve_rigid_body
+from gcs.mock.mocap.scripted import Circle, in_room
+from gcs.mock.mocap.server import CLOCK_HZ, DEFAULT_MARKERS_M, NatNetServer, solve_rigid_body
 
 MODEL = natnet.RigidBodyModel("drone", 7, DEFAULT_MARKERS_M)
 STAMPS = natnet.FrameStamps(12.25, 1_000, 2_000, 3_000)
@@ -116,3 +120,49 @@ def test_solver_recovers_the_pose_exactly_without_noise_and_within_noise_with_it
     assert np.linalg.norm(p - pos) < 3e-3 and 2e-4 < err < 3e-3
     assert np.degrees(float(quat_angle_rad(qq, q))) < 3.0
     assert matrix_to_quat(quat_to_matrix(qq))[0] >= 0
+
+
+@pytest.mark.parametrize("latency_ms", [0.0, 8.0, 50.0])
+def test_each_frame_carries_the_circle_as_it_was_its_latency_before_and_stamps_it(
+    latency_ms: float,
+) -> None:
+    """The frame at server time t (frame k at 120 Hz: k / 120 s) shows the circle at
+    t - latency (analytic, in the room's axes; no noise: the solve is exact to float32), its
+    mid-exposure stamp is the latency before the frame's instant, its data-received stamp
+    the instant, its transmit stamp not earlier."""
+    latency = latency_ms / 1000.0
+    circle = Circle(radius_m=1.0, period_s=2.0)  # 3.1 m/s: 25 mm in 8 ms
+    room = mapping_for("optitrack", yaw_offset_deg=30.0)
+    epoch = time.monotonic() - 5.0  # the frames' instants lie in the past
+    server = NatNetServer(
+        in_room(circle, room), rate_hz=120.0, noise_m=0.0, latency_s=latency, epoch_s=epoch
+    )
+    try:
+        for k in range(240):
+            server.send_frame(k, epoch + k / 120.0)
+    finally:
+        server.close()
+    frames = list(server.sent)
+    assert [f.frame_number for f in frames] == list(range(240))
+    for f in frames:
+        assert f.t_s == pytest.approx(f.frame_number / 120.0, abs=1e-9)
+        pos, quat = circle(f.t_s - latency)
+        np.testing.assert_allclose(room.position_to_ned(np.array(f.pos_m)), pos, atol=2e-6)
+        assert float(quat_angle_rad(room.attitude_to_ned(np.array(f.quat_wxyz)), quat)) < 1e-5
+        if latency > 0:  # the latency is visible: the circle now is elsewhere
+            now_pos, _ = circle(f.t_s)
+            assert np.linalg.norm(now_pos - pos) > 0.9 * math.pi * latency
+        stamps = f.stamps
+        assert stamps.timestamp_s == pytest.approx(f.t_s, abs=1e-9)
+        assert stamps.mid_exposure_ticks / CLOCK_HZ == pytest.approx(
+            epoch + f.t_s - latency, abs=1e-6
+        )
+        assert stamps.data_received_ticks / CLOCK_HZ == pytest.approx(epoch + f.t_s, abs=1e-6)
+        system_latency_s = (stamps.transmit_ticks - stamps.mid_exposure_ticks) / CLOCK_HZ
+        assert system_latency_s >= latency
+
+
+def test_a_negative_or_absurd_latency_is_refused() -> None:
+    for latency_s in (-0.001, 1.5, math.nan):
+        with pytest.raises(ValueError, match="latency_s"):
+            NatNetServer(lambda t: None, latency_s=latency_s)

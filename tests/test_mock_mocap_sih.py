@@ -1,19 +1,27 @@
-"""The lab rig's receiver: PX4 SIH's HIL_STATE_QUATERNION over UDP to a NED pose."""
+"""The lab rig's receiver: PX4 SIH's HIL_STATE_QUATERNION over UDP to a NED pose, served as it
+was at the time asked (interpolated between the states around it, carried forward past the
+newest), and through the mock Motive with a latency."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import socket
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
+from gcs.core.frames import quat_angle_rad
+from gcs.mock.mocap.server import CLOCK_HZ, NatNetServer
 from gcs.mock.mocap.sih import SIH_DISPLAY_PORT, SihTruth, sih_display_port
 
 LAT0, LON0, ALT0 = 47.397742, 8.545594, 488.0
 R = 6_378_137.0
+# 1e-7 deg of latitude and longitude (1.1 cm, 0.75 cm) and 1 mm of altitude in the message
+RESOLUTION_M = 0.02
 
 
 def free_port() -> int:
@@ -22,16 +30,78 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def state(mav: mavlink2.MAVLink, north: float, east: float, up: float, vn: float = 0.0) -> bytes:
+def yaw_quat(yaw_rad: float) -> list[float]:
+    return [math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2)]
+
+
+def state(
+    mav: mavlink2.MAVLink,
+    north: float,
+    east: float,
+    up: float,
+    vn: float = 0.0,
+    ve: float = 0.0,
+    vd: float = 0.0,
+    yaw_rad: float = math.radians(30.0),
+) -> bytes:
     lat = LAT0 + math.degrees(north / R)
     lon = LON0 + math.degrees(east / (R * math.cos(math.radians(LAT0))))
-    half = math.radians(30.0) / 2  # yaw 30 deg
     msg = mav.hil_state_quaternion_encode(
-        0, [math.cos(half), 0.0, 0.0, math.sin(half)], 0.0, 0.0, 0.0,
+        0, yaw_quat(yaw_rad), 0.0, 0.0, 0.0,
         round(lat * 1e7), round(lon * 1e7), round((ALT0 + up) * 1e3),
-        round(vn * 100), 0, 0, 0, 0, 0, 0, 0,
+        round(vn * 100), round(ve * 100), round(vd * 100), 0, 0, 0, 0, 0,
     )  # fmt: skip
     return msg.pack(mav)
+
+
+class Spiral:
+    """The synthetic vehicle: a climbing circle from the origin, nose along its path, a state
+    every 40 ms of its time (PX4 SIH's 25 Hz)."""
+
+    radius_m = 3.0
+    period_s = 3.0
+    climb_m_s = 0.5
+    step_s = 0.04
+
+    def truth(self, tau: float) -> tuple[np.ndarray, float]:
+        """Position from the first state [m, NED] and heading [rad] at time ``tau``."""
+        phi = 2 * math.pi * tau / self.period_s
+        pos = [
+            self.radius_m * (math.cos(phi) - 1),
+            self.radius_m * math.sin(phi),
+            -self.climb_m_s * tau,
+        ]
+        return np.array(pos), phi + math.pi / 2
+
+    def velocity(self, tau: float) -> np.ndarray:
+        phi = 2 * math.pi * tau / self.period_s
+        w = 2 * math.pi / self.period_s
+        return np.array(
+            [-self.radius_m * w * math.sin(phi), self.radius_m * w * math.cos(phi), -self.climb_m_s]
+        )
+
+    def message(self, mav: mavlink2.MAVLink, i: int) -> bytes:
+        tau = i * self.step_s
+        (north, east, down), yaw = self.truth(tau)
+        vn, ve, vd = self.velocity(tau)
+        return state(mav, north, east, -down, vn, ve, vd, yaw)
+
+
+@contextlib.contextmanager
+def streamed(count: int, epoch_s: float = 0.0) -> Iterator[tuple[SihTruth, Spiral]]:
+    """A SihTruth that has received ``count`` states of the spiral over loopback."""
+    port = free_port()
+    spiral = Spiral()
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    with (
+        SihTruth(port, max_age_s=0.5, epoch_s=epoch_s) as truth,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out,
+    ):
+        for i in range(count):
+            out.sendto(spiral.message(mav, i), ("127.0.0.1", port))
+        assert truth.wait_received(count, 5.0)
+        assert len(truth.states) == count
+        yield truth, spiral
 
 
 def test_instance_ports() -> None:
@@ -47,22 +117,85 @@ def test_states_become_ned_poses_from_the_first_one_carried_forward_with_their_v
         SihTruth(port, max_age_s=0.5) as truth,
         socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out,
     ):
-        assert truth(0.0) is None  # nothing yet: out of view
+        assert truth(time.monotonic()) is None  # nothing yet: out of view
         out.sendto(state(mav, 0.0, 0.0, 0.0), ("127.0.0.1", port))
         assert truth.wait_first(5.0)
         sent = time.monotonic()
         out.sendto(state(mav, 2.0, -1.0, 1.5, vn=1.0), ("127.0.0.1", port))
         assert truth.wait_received(2, 5.0)
-        pose = truth(0.0)
+        now = time.monotonic()
+        pose = truth(now)  # epoch 0: the time asked is the monotonic clock's
         assert pose is not None
         pos, quat = pose
-        age = time.monotonic() - truth.latest.t_receipt_s
-        # 1e-7 deg resolution: about 1 cm
+        age = now - truth.latest.t_receipt_s
         ahead = min(age, SihTruth.MAX_EXTRAPOLATION_S)  # then held: PX4's clock may stop
-        np.testing.assert_allclose(pos, [2.0 + ahead, -1.0, -1.5], atol=0.02)
+        np.testing.assert_allclose(pos, [2.0 + ahead, -1.0, -1.5], atol=RESOLUTION_M)
         assert time.monotonic() - sent < 5.0
         np.testing.assert_allclose(
             quat, [math.cos(math.radians(15)), 0, 0, math.sin(math.radians(15))], atol=1e-6
         )
         truth.max_age_s = 0.0
-        assert truth(0.0) is None  # too old: out of view
+        assert truth(time.monotonic()) is None  # too old: out of view
+
+
+def test_a_time_between_two_states_is_served_as_the_truth_was_then() -> None:
+    """Between the receipts of states i and i+1, a fraction w of the way: the spiral at
+    (i + w) x 40 ms of its own time, within the message's resolution and the chord's sag
+    (2.6 mm here), while the states are 25 cm apart."""
+    with streamed(12) as (truth, spiral):
+        receipts = [s.t_receipt_s for s in truth.states]
+        assert all(b > a for a, b in zip(receipts, receipts[1:], strict=False))
+        checked = 0
+        for i in range(len(receipts) - 1):
+            for w in (0.0, 0.25, 0.5, 0.9):
+                t = receipts[i] + w * (receipts[i + 1] - receipts[i])
+                pose = truth.pose_at(t)
+                assert pose is not None
+                pos, yaw = spiral.truth((i + w) * spiral.step_s)
+                np.testing.assert_allclose(pose[0], pos, atol=RESOLUTION_M)
+                assert quat_angle_rad(pose[1], np.array(yaw_quat(yaw))) < 1e-4
+                checked += 1
+        assert checked == 44
+
+
+def test_past_the_newest_state_it_is_carried_forward_with_its_velocity_for_at_most_0_1_s() -> None:
+    with streamed(5) as (truth, spiral):
+        newest = truth.states[-1].t_receipt_s
+        pos4, yaw4 = spiral.truth(4 * spiral.step_s)
+        v4 = spiral.velocity(4 * spiral.step_s)
+        for ahead, carried in ((0.03, 0.03), (0.08, 0.08), (0.3, 0.1), (0.5, 0.1)):
+            pose = truth.pose_at(newest + ahead)
+            assert pose is not None
+            np.testing.assert_allclose(pose[0], pos4 + v4 * carried, atol=RESOLUTION_M)
+            assert quat_angle_rad(pose[1], np.array(yaw_quat(yaw4))) < 1e-4
+        assert truth.pose_at(newest + 0.51) is None  # older than max_age_s: out of view
+        assert truth.pose_at(truth.states[0].t_receipt_s - 1e-3) is None  # before the first
+
+
+def test_the_server_serves_the_truth_as_it_was_its_latency_before_each_frame() -> None:
+    """The rig's wiring: the server and the receiver share an epoch; the frame at t carries
+    the pose at t - 30 ms (between two states: the spiral then), and its mid-exposure stamp
+    is 30 ms before the frame's instant."""
+    latency = 0.03
+    epoch = time.monotonic() - 10.0  # server time 0, ten seconds ago
+    points = [(i, w) for i in range(7) for w in (0.2, 0.7)]  # state i, a fraction w to i+1
+    with streamed(8, epoch_s=epoch) as (truth, spiral):
+        receipts = [s.t_receipt_s for s in truth.states]
+        server = NatNetServer(truth, noise_m=0.0, latency_s=latency, epoch_s=epoch)
+        try:
+            for k, (i, w) in enumerate(points):
+                t_grid = receipts[i] + w * (receipts[i + 1] - receipts[i]) + latency
+                server.send_frame(k, t_grid)
+        finally:
+            server.close()
+    frames = list(server.sent)
+    assert len(frames) == len(points)
+    for frame, (i, w) in zip(frames, points, strict=True):
+        pos, _ = spiral.truth((i + w) * spiral.step_s)
+        np.testing.assert_allclose(frame.pos_m, pos, atol=RESOLUTION_M)
+        assert frame.t_pose_s == pytest.approx(frame.t_s - latency, abs=1e-9)
+        exposure_s = frame.stamps.mid_exposure_ticks / CLOCK_HZ
+        assert exposure_s == pytest.approx(epoch + frame.t_s - latency, abs=1e-6)
+        assert frame.stamps.data_received_ticks / CLOCK_HZ == pytest.approx(
+            epoch + frame.t_s, abs=1e-6
+        )

@@ -4,7 +4,9 @@ flying with ``--mocap`` as a lab would (gcs forwards the mocap to PX4 as vision)
 
 The rig: PX4 SIH streams its true state as HIL_STATE_QUATERNION on its display link (UDP
 19410+N); ``python -m gcs.mock.mocap --px4-sih N`` (:mod:`gcs.mock.mocap.sih`) receives it and
-serves it over NatNet at 120 Hz, in Motive's axes, from a process of its own.
+serves it over NatNet in Motive's axes, from a process of its own, under the lab's conditions
+(:class:`LabConditions`: frame rate, latency, marker noise, the room's heading; by default
+120 Hz, no latency, 0.2 mm, 0 deg), PX4's EKF2_EV_DELAY set to the latency where a test says so.
 Every wait is on an event: gcs's own output lines, its exit, PX4's heartbeat and landed state.
 """
 
@@ -18,6 +20,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import pytest
@@ -44,12 +47,58 @@ LANDED = 1  # MAV_LANDED_STATE_ON_GROUND
 FLY_TIMEOUT_S = 240.0
 
 
+@dataclass(frozen=True)
+class LabConditions:
+    """The lab's motion capture as the rig serves it, and what PX4 is told of it.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Frame rate [Hz] (the mock Motive's ``--rate``, 50-360).
+    latency_ms : float
+        Time from the vehicle's motion to the frame [ms] (``--latency-ms``, 0-50).
+    noise_mm : float
+        Marker noise, 1 sigma per axis [mm] (``--noise-mm``).
+    yaw_offset_deg : float
+        Heading of the room's north axis against gcs's mapping [deg] (``--yaw-offset-deg``).
+    match_ev_delay : bool
+        Set PX4's EKF2_EV_DELAY to ``latency_ms`` (a lab that measured its latency and told
+        PX4: gcs stamps each pose on arrival, so the mocap's own latency is what is left);
+        False leaves it at 0, PX4's default.
+    """
+
+    rate_hz: float = 120.0
+    latency_ms: float = 0.0
+    noise_mm: float = 0.2
+    yaw_offset_deg: float = 0.0
+    match_ev_delay: bool = False
+
+    def rig_args(self, instance: int) -> list[str]:
+        """The options of ``python -m gcs.mock.mocap`` serving PX4 instance ``instance``."""
+        return [
+            "--px4-sih", str(instance), "--rate", f"{self.rate_hz:g}",
+            "--latency-ms", f"{self.latency_ms:g}", "--noise-mm", f"{self.noise_mm:g}",
+            "--yaw-offset-deg", f"{self.yaw_offset_deg:g}",
+        ]  # fmt: skip
+
+    def px4_params(self, **overrides: float) -> dict[str, float]:
+        """:data:`LAB_PARAMS` with ``overrides``, EKF2_EV_DELAY the latency if it is to match."""
+        params = {**LAB_PARAMS, **overrides}
+        if self.match_ev_delay:
+            params["EKF2_EV_DELAY"] = self.latency_ms
+        return params
+
+
 @contextlib.contextmanager
-def lab_rig(vehicle: Px4Sitl) -> Iterator[MocapServerProcess]:
+def lab_rig(
+    vehicle: Px4Sitl, conditions: LabConditions | None = None
+) -> Iterator[MocapServerProcess]:
     """The lab's OptiTrack around ``vehicle``: ``python -m gcs.mock.mocap --px4-sih N``, its
-    SIH ground truth served over NatNet (a process of its own, as Motive runs on its own PC)."""
+    SIH ground truth served over NatNet under ``conditions`` (default :class:`LabConditions`)
+    from a process of its own, as Motive runs on its own PC."""
     assert vehicle.instance is not None
-    with MocapServerProcess(["--px4-sih", str(vehicle.instance)]) as rig:
+    args = (conditions or LabConditions()).rig_args(vehicle.instance)
+    with MocapServerProcess(args) as rig:
         yield rig
 
 
@@ -123,19 +172,27 @@ def tiny(tmp_path: Path) -> Path:
 
 
 @pytest.fixture
-def lab_px4(px4_factory) -> Px4Sitl:
-    """PX4 set up for motion capture (not ready for take-off until vision arrives)."""
-    return px4_factory(params=LAB_PARAMS, ready=STARTED_LINE)
+def lab_conditions() -> LabConditions:
+    """The lab's mocap conditions; a test sets its own with
+    ``@pytest.mark.parametrize("lab_conditions", [LabConditions(...)])``."""
+    return LabConditions()
+
+
+@pytest.fixture
+def lab_px4(px4_factory, lab_conditions: LabConditions) -> Px4Sitl:
+    """PX4 set up for motion capture under ``lab_conditions`` (not ready for take-off until
+    vision arrives)."""
+    return px4_factory(params=lab_conditions.px4_params(), ready=STARTED_LINE)
 
 
 def test_lab_flight_arms_first_time_flies_two_trials_on_mocap_and_lands(
-    lab_px4: Px4Sitl, tmp_path: Path, tiny: Path, px4_figures: dict
+    lab_px4: Px4Sitl, lab_conditions: LabConditions, tmp_path: Path, tiny: Path, px4_figures: dict
 ) -> None:
     """gcs fly --mocap on a fresh PX4 set up for vision only: arms on the first attempt (after
     setting the global origin and waiting for PX4's pre-arm checks), two trials measured by
     the mocap, landed and disarmed."""
     run_path = tmp_path / "run"
-    with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
+    with lab_rig(lab_px4, lab_conditions) as server, lab_px4.monitor() as mon:
         gcs = Gcs(
             "fly", "--connect", lab_px4.url, "--mocap", server.url, "--iter", 2,
             "--trajectory", tiny, "--profile", lab_profile(tmp_path), "--run", run_path,
@@ -166,16 +223,16 @@ def test_lab_flight_arms_first_time_flies_two_trials_on_mocap_and_lands(
 
 
 def test_mocap_lost_mid_trial_gcs_aborts_and_the_vehicle_lands_and_disarms(
-    px4_factory, tmp_path: Path, tiny: Path, px4_figures: dict
+    px4_factory, lab_conditions: LabConditions, tmp_path: Path, tiny: Path, px4_figures: dict
 ) -> None:
     """The rig stops serving as trial 0 starts: gcs names the mocap and stops; PX4, with no
     vision left, lands (gcs's landing and PX4's own failsafe) and disarms on the ground. The
     barometer is fused as a second height source (EKF2_BARO_CTRL 1, the height reference still
     vision): without it PX4 has no height once vision is gone, descends blind and never
     detects its landing (flown: still armed, "in air", 60 s later)."""
-    lab_px4 = px4_factory(params={**LAB_PARAMS, "EKF2_BARO_CTRL": 1}, ready=STARTED_LINE)
+    lab_px4 = px4_factory(params=lab_conditions.px4_params(EKF2_BARO_CTRL=1), ready=STARTED_LINE)
     run_path = tmp_path / "run"
-    with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
+    with lab_rig(lab_px4, lab_conditions) as server, lab_px4.monitor() as mon:
         gcs = Gcs(
             "fly", "--connect", lab_px4.url, "--mocap", server.url, "--iter", 1,
             "--trajectory", tiny, "--profile", lab_profile(tmp_path, check_move_m=0.0),
@@ -202,12 +259,12 @@ def test_mocap_lost_mid_trial_gcs_aborts_and_the_vehicle_lands_and_disarms(
 
 
 def test_a_mirrored_mapping_is_refused_before_take_off(
-    lab_px4: Px4Sitl, tmp_path: Path, tiny: Path, px4_figures: dict
+    lab_px4: Px4Sitl, lab_conditions: LabConditions, tmp_path: Path, tiny: Path, px4_figures: dict
 ) -> None:
     """A left-handed (mirrored) mocap mapping: one line naming the field, exit 2, nothing
     created, and the vehicle never armed."""
     run_path = tmp_path / "run"
-    with lab_rig(lab_px4) as server, lab_px4.monitor() as mon:
+    with lab_rig(lab_px4, lab_conditions) as server, lab_px4.monitor() as mon:
         gcs = Gcs(
             "fly", "--connect", lab_px4.url, "--mocap", server.url, "--trajectory", tiny,
             "--profile", lab_profile(tmp_path, right_handed=False), "--run", run_path,
@@ -222,7 +279,7 @@ def test_a_mirrored_mapping_is_refused_before_take_off(
 
 
 def test_a_room_rotated_180_deg_is_flown_rotated_and_the_frame_check_cannot_tell(
-    lab_px4: Px4Sitl, tmp_path: Path, tiny: Path, px4_figures: dict
+    lab_px4: Px4Sitl, lab_conditions: LabConditions, tmp_path: Path, tiny: Path, px4_figures: dict
 ) -> None:
     """The lab's mocap rotated 180 deg about up against gcs's mapping (a wrong yaw_offset_deg),
     forwarded to PX4 whose only heading is the vision: position and heading are rotated alike,
@@ -232,7 +289,8 @@ def test_a_room_rotated_180_deg_is_flown_rotated_and_the_frame_check_cannot_tell
     a compass (docs/mocap.md, which check refuses what). Flown until the check's verdict; the
     vehicle then lands."""
     run_path = tmp_path / "run"
-    with MocapServerProcess(["--px4-sih", str(lab_px4.instance), "--yaw-offset-deg", "180"]) as rig:
+    rotated = replace(lab_conditions, yaw_offset_deg=lab_conditions.yaw_offset_deg + 180.0)
+    with lab_rig(lab_px4, rotated) as rig:
         gcs = Gcs(
             "fly", "--connect", lab_px4.url, "--mocap", rig.url, "--iter", 1,
             "--trajectory", tiny, "--profile", lab_profile(tmp_path), "--run", run_path,

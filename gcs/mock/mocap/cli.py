@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import signal
 import sys
+import time
 from typing import Annotated
 
 import typer
@@ -85,6 +86,16 @@ def mocap_command(
     yaw_offset_deg: Annotated[
         float, typer.Option("--yaw-offset-deg", help="Heading of the room's north axis, deg.")
     ] = 0.0,
+    latency_ms: Annotated[
+        float,
+        typer.Option(
+            "--latency-ms",
+            min=0.0,
+            max=50.0,
+            help="Time from the body's motion to the frame, ms: each frame shows the body as "
+            "it was this long before.",
+        ),
+    ] = 0.0,
     circle: Annotated[
         str | None,
         typer.Option("--circle", help="Fly RADIUS:PERIOD (m, s) around (0, 0, -1) NED."),
@@ -122,6 +133,18 @@ def mocap_command(
     the start of the program. SIGTERM or Ctrl-C stops it and prints its counters (JSON) on
     stderr.
 
+    ``--latency-ms`` is the time from the body's motion to the frame: each frame carries the
+    pose of that long before (never extrapolated to now), and its mid-exposure stamp is that
+    much older than the frame's instant, so the system latency a NatNet client computes
+    (transmit minus mid-exposure) shows it. OptiTrack's "Latency Measurements" page (NatNet
+    SDK) defines that system latency and puts the camera's own part, for a PrimeX 41, at
+    2.78 ms at 360 Hz up to 5.56 ms at 180 Hz and below. PX4's "Using Vision or Motion
+    Capture Systems" page (v1.16) sets EKF2_EV_DELAY (0-300 ms) to the gap between a
+    measurement's timestamp and its capture, zero only with true capture stamps and time
+    synchronisation, else tuned by hand since the delays of the whole mocap-to-PX4 chain are
+    specific to each set-up. The range, 0-50 ms, spans a Motive alone up to such a chain, as
+    far as gcs's pre-flight check accepts for EKF2_EV_DELAY.
+
     Examples:
 
         python -m gcs.mock.mocap --rate 240 --circle 1:6
@@ -152,6 +175,8 @@ def mocap_command(
         Named convention of the room's axes.
     yaw_offset_deg : float
         Heading of the room's north axis [deg].
+    latency_ms : float
+        Time from the body's motion to the frame [ms].
     circle : str or None
         ``RADIUS:PERIOD`` of a circle, or None to hover.
     occlusion, dropout, freeze, jump : list of str or None
@@ -168,9 +193,10 @@ def mocap_command(
             "jump": jump or [],
         }
     )
+    epoch_s = time.monotonic()  # server time 0, shared with the ground truth's receipt clock
     sih = None
     if px4_sih is not None:
-        truth = sih = SihTruth(sih_display_port(px4_sih)).start()
+        truth = sih = SihTruth(sih_display_port(px4_sih), epoch_s=epoch_s).start()
     elif circle is None:
         truth = Hover()
     else:
@@ -188,6 +214,8 @@ def mocap_command(
         faults=faults,
         seed=seed,
         command_port=port,
+        latency_s=latency_ms / 1000.0,
+        epoch_s=epoch_s,
     )
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: server.stop())

@@ -13,17 +13,27 @@ the sockets bound to their destination port). The data socket is bound with ``SO
 so that a client on the same machine can bind the same port, as beside a real Motive.
 
 Each frame, at ``rate_hz`` on a grid of the monotonic clock, the true pose comes from
-``pose_fn(t_s)`` in the system's own axes (Motive: Y up); the rigid body's markers are placed
-with it, each gets Gaussian noise of ``noise_m`` per axis, and the pose is solved back from the
-noisy markers (least squares, as Motive's rigid-body solver does), which also gives the mean
-marker error of the frame. Faults (:class:`FaultWindow`) act on top: an occlusion clears the
-tracking-valid flag, a dropout sends nothing, a freeze repeats the last datagram byte for
-byte, a jump offsets the solved position.
+``pose_fn(t_s - latency_s)`` in the system's own axes (Motive: Y up); the rigid body's markers
+are placed with it, each gets Gaussian noise of ``noise_m`` per axis, and the pose is solved
+back from the noisy markers (least squares, as Motive's rigid-body solver does), which also
+gives the mean marker error of the frame. Faults (:class:`FaultWindow`) act on top: an
+occlusion clears the tracking-valid flag, a dropout sends nothing, a freeze repeats the last
+datagram byte for byte, a jump offsets the solved position.
+
+Latency (``latency_s``): the time from the body's motion to the frame. The frame due at server
+time ``t`` carries the pose ``pose_fn(t - latency_s)``: the body as it was, not extrapolated to
+now (a scripted trajectory at that time; PX4's ground truth interpolated between the states
+around it, :mod:`gcs.mock.mocap.sih`). A pose function that only knows the present (the mock
+drone's arena) must be served without latency.
 
 Time stamps: the frame's ``timestamp`` counts frames over the rate since the first frame (as
 Motive's does); the high-resolution stamps are this machine's monotonic clock in ticks of
-:data:`CLOCK_HZ` (mid-exposure and data-received = the frame's instant on the grid, transmit =
-the moment of sending), so a client on this machine can measure its latency against them.
+:data:`CLOCK_HZ`: mid-exposure = the instant the pose shows (the frame's instant on the grid
+minus the latency), data-received = the frame's instant on the grid, transmit = the moment of
+sending. Motive's system latency, transmit minus mid-exposure (NatNet SDK's sample client and
+OptiTrack's "Latency Measurements" page), is then the latency plus the sending's own delay, so
+a client on this machine can measure it against them. (gcs's client, libmotioncapture's Python
+binding, reads none of these stamps.)
 """
 
 from __future__ import annotations
@@ -53,6 +63,7 @@ __all__ = [
     "FaultWindow",
     "NatNetServer",
     "SentFrame",
+    "frame_stamps",
     "solve_rigid_body",
 ]
 
@@ -159,7 +170,11 @@ class SentFrame:
     frame_number : int
         NatNet frame number.
     t_s : float
-        Server time of the frame (the instant the pose was taken) [s].
+        Server time of the frame (its instant on the rate grid) [s].
+    t_pose_s : float
+        Server time whose pose the frame carries: ``t_s`` minus the latency [s].
+    stamps : natnet.FrameStamps
+        The frame's time stamps as sent.
     t_send_s : float
         ``time.monotonic()`` just before the datagram left.
     tracked : bool
@@ -174,11 +189,46 @@ class SentFrame:
 
     frame_number: int
     t_s: float
+    t_pose_s: float
+    stamps: natnet.FrameStamps
     t_send_s: float
     tracked: bool
     pos_m: tuple[float, float, float]
     quat_wxyz: tuple[float, float, float, float]
     true_pos_m: tuple[float, float, float]
+
+
+def frame_stamps(
+    frame_number: int, rate_hz: float, t_grid_s: float, latency_s: float, t_transmit_s: float
+) -> natnet.FrameStamps:
+    """The time stamps of a frame, as Motive fills them.
+
+    Parameters
+    ----------
+    frame_number : int
+        Frame number (frames since the first).
+    rate_hz : float
+        Frame rate [Hz].
+    t_grid_s : float
+        The frame's instant on the rate grid, ``time.monotonic()`` [s].
+    latency_s : float
+        Time from the body's motion to the frame [s].
+    t_transmit_s : float
+        ``time.monotonic()`` as the frame is sent [s].
+
+    Returns
+    -------
+    natnet.FrameStamps
+        ``timestamp`` = frame number over the rate; mid-exposure = ``t_grid_s - latency_s``
+        (the instant the pose shows), data received = ``t_grid_s``, transmit =
+        ``t_transmit_s``, in ticks of :data:`CLOCK_HZ`.
+    """
+    return natnet.FrameStamps(
+        timestamp_s=frame_number / rate_hz,
+        mid_exposure_ticks=round((t_grid_s - latency_s) * CLOCK_HZ),
+        data_received_ticks=round(t_grid_s * CLOCK_HZ),
+        transmit_ticks=round(t_transmit_s * CLOCK_HZ),
+    )
 
 
 def solve_rigid_body(
@@ -229,7 +279,8 @@ class NatNetServer:
     ----------
     pose_fn : callable
         ``pose_fn(t_s) -> (pos_m, quat_wxyz)`` in the system's own axes, or None when the
-        body is out of view; ``t_s`` is server time (:meth:`now_s`).
+        body is out of view; ``t_s`` is the server time (:meth:`now_s`) whose pose is wanted:
+        the frame's instant minus ``latency_s``.
     body_name : str
         Rigid body name in the model definitions.
     body_id : int
@@ -254,6 +305,13 @@ class NatNetServer:
         Rigid body markers in its own frame, shape (M, 3) [m].
     history : int
         How many :class:`SentFrame` records :attr:`sent` keeps.
+    latency_s : float
+        Time from the body's motion to the frame [s], >= 0: each frame carries the pose of
+        ``latency_s`` before its instant, and its mid-exposure stamp says so.
+    epoch_s : float or None
+        ``time.monotonic()`` at server time 0; None: when the server is created. A pose
+        function on the monotonic clock (:class:`gcs.mock.mocap.sih.SihTruth`) is given the
+        same epoch.
 
     Attributes
     ----------
@@ -280,17 +338,22 @@ class NatNetServer:
         multicast_group: str = "239.255.42.99",
         markers_m: np.ndarray = DEFAULT_MARKERS_M,
         history: int = 20_000,
+        latency_s: float = 0.0,
+        epoch_s: float | None = None,
     ) -> None:
         if not 1.0 <= rate_hz <= 1000.0:
             raise ValueError(f"rate_hz must be within 1..1000, got {rate_hz}")
         if noise_m < 0 or not math.isfinite(noise_m):
             raise ValueError(f"noise_m must be finite and >= 0, got {noise_m}")
+        if not 0.0 <= latency_s <= 1.0:
+            raise ValueError(f"latency_s must be within 0..1 s, got {latency_s}")
         self.pose_fn = pose_fn
         self.model = natnet.RigidBodyModel(body_name, body_id, markers_m)
         self.rate_hz = float(rate_hz)
         self.version = tuple(version)
         natnet.server_info(self.version, (0, 0, 0, 0), CLOCK_HZ, 0, None)  # validates version
         self.noise_m = float(noise_m)
+        self.latency_s = float(latency_s)
         self.multicast_group = multicast_group
         self.host = host
         self.sent: deque[SentFrame] = deque(maxlen=history)
@@ -301,7 +364,7 @@ class NatNetServer:
         self._thread: threading.Thread | None = None
         self._stats = _Stats()
         self._last_datagram: bytes | None = None
-        self._t0 = time.monotonic()
+        self._t0 = time.monotonic() if epoch_s is None else float(epoch_s)
         self._cmd = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._data = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
@@ -324,6 +387,11 @@ class NatNetServer:
         return (
             f"optitrack://{self.host}:{self.command_port}/{self.model.name}?interface={self.host}"
         )
+
+    @property
+    def epoch_s(self) -> float:
+        """``time.monotonic()`` at server time 0 [s]."""
+        return self._t0
 
     def now_s(self) -> float:
         """Server time [s]: monotonic seconds since the server was created.
@@ -411,7 +479,7 @@ class NatNetServer:
                 self._answer_command()
             now = time.monotonic()
             if now >= due and not self._stop.is_set():
-                self._frame(k, due)
+                self.send_frame(k, due)
                 # after a stall of more than a period, skip the frames already missed
                 k = max(k + 1, math.floor((now - self._t0) / period))
 
@@ -467,7 +535,18 @@ class NatNetServer:
         state = natnet.RigidBodyState(True, solved_pos, solved_q, error, markers)
         return state, (float(pos[0]), float(pos[1]), float(pos[2]))
 
-    def _frame(self, k: int, t_grid: float) -> None:
+    def send_frame(self, k: int, t_grid: float) -> None:
+        """Build frame ``k`` due at ``t_grid`` and send it (what :meth:`serve` does on its
+        grid; called directly, it steps the server without waiting for real time).
+
+        Parameters
+        ----------
+        k : int
+            Frame number.
+        t_grid : float
+            The frame's instant, ``time.monotonic()`` [s]; its server time sets the faults and,
+            minus the latency, the pose.
+        """
         t_s = t_grid - self._t0
         self._stats.frames += 1
         faults = self._active(t_s)
@@ -476,18 +555,13 @@ class NatNetServer:
         if "freeze" in faults and self._last_datagram is not None:
             self._send(self._last_datagram, None)
             return
-        state, true_pos = self._measure(t_s, faults.get("jump"))
+        t_pose = t_s - self.latency_s
+        state, true_pos = self._measure(t_pose, faults.get("jump"))
         if "occlusion" in faults:
             state = natnet.RigidBodyState(
                 False, np.zeros(3), np.array([1.0, 0, 0, 0]), 0.0, state.markers_m
             )
-        grid_ticks = int(t_grid * CLOCK_HZ)
-        stamps = natnet.FrameStamps(
-            timestamp_s=k / self.rate_hz,
-            mid_exposure_ticks=grid_ticks,
-            data_received_ticks=grid_ticks,
-            transmit_ticks=int(time.monotonic() * CLOCK_HZ),
-        )
+        stamps = frame_stamps(k, self.rate_hz, t_grid, self.latency_s, time.monotonic())
         datagram = natnet.frame_of_data(self.version, k, [self.model], [state], stamps)
         self._last_datagram = datagram
         self._send(
@@ -495,6 +569,8 @@ class NatNetServer:
             SentFrame(
                 frame_number=k,
                 t_s=t_s,
+                t_pose_s=t_pose,
+                stamps=stamps,
                 t_send_s=math.nan,
                 tracked=state.tracked,
                 pos_m=tuple(float(v) for v in np.float32(state.pos_m)),

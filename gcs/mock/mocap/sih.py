@@ -3,14 +3,20 @@
 PX4 SITL with the built-in SIH physics streams the simulated vehicle's true state as MAVLink
 ``HIL_STATE_QUATERNION`` (25 Hz) on its display link: PX4 instance ``N`` sends it to UDP port
 ``19410 + N`` on 127.0.0.1 (``px4-rc.mavlink``). :class:`SihTruth` listens there and keeps the
-newest state; :func:`sih_pose_ned` turns it into a NED pose relative to where the vehicle was
-first seen (the room's origin under the vehicle at start, as a lab sets its ground plane and
-origin once), and :class:`gcs.mock.mocap.server.NatNetServer` serves that as an OptiTrack rigid
-body: what a lab's Motive would stream while the vehicle flies.
+last states with their receipt times; it turns each into a NED pose relative to where the
+vehicle was first seen (the room's origin under the vehicle at start, as a lab sets its ground
+plane and origin once), and :class:`gcs.mock.mocap.server.NatNetServer` serves that as an
+OptiTrack rigid body: what a lab's Motive would stream while the vehicle flies.
 
-Between two 25 Hz states the position is carried forward with the state's velocity (for at
-most 0.1 s), so the mocap rate (120 Hz) sees a moving body rather than steps; a state is
-served for up to 2 s (PX4 SITL's clock, and its vehicle, stop while the machine starves it).
+The served pose. Asked for time ``t`` (the frame's instant minus the rig's latency, on the
+receipt clock), :class:`SihTruth` gives the truth as it was at ``t``: interpolated between the
+two states received around ``t`` (position linearly, attitude along the shortest rotation;
+states are 40 ms apart), never extrapolated past a newer state. Only when ``t`` is newer than
+the newest state is that state carried forward with its velocity (for at most 0.1 s: beyond,
+it is held), so the mocap rate (120 Hz) sees a moving body rather than steps; a state is served
+for up to 2 s (PX4 SITL's clock, and its vehicle, stop while the machine starves it). Before
+the first state, or older than the states kept, the body is out of view.
+
 The message carries latitude and longitude in 1e-7 degrees (about 1.1 cm north, 0.75 cm
 east at 47 degrees) and altitude in millimetres: the served pose has that resolution, coarser
 than a real mocap's sub-millimetre noise but far below the simulated vehicle's own wander
@@ -23,12 +29,13 @@ import math
 import socket
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-__all__ = ["SIH_DISPLAY_PORT", "SihState", "SihTruth", "sih_display_port"]
+__all__ = ["SIH_DISPLAY_PORT", "SihState", "SihTruth", "pose_between", "sih_display_port"]
 
 #: UDP port PX4 instance 0 sends the SIH display stream to (instance N: this + N).
 SIH_DISPLAY_PORT = 19410
@@ -74,6 +81,59 @@ class SihState:
     quat_wxyz: np.ndarray
 
 
+def _slerp(q0: np.ndarray, q1: np.ndarray, w: float) -> np.ndarray:
+    """The attitude a fraction ``w`` of the way from ``q0`` to ``q1`` (shortest rotation)."""
+    dot = float(np.dot(q0, q1))
+    if dot < 0.0:
+        q1, dot = -q1, -dot
+    if dot > 0.9995:  # nearly equal: the chord is the arc
+        q = q0 + w * (q1 - q0)
+    else:
+        theta = math.acos(dot)
+        q = (math.sin((1.0 - w) * theta) * q0 + math.sin(w * theta) * q1) / math.sin(theta)
+    return q / np.linalg.norm(q)
+
+
+def pose_between(
+    states: tuple[SihState, ...] | list[SihState],
+    t_s: float,
+    max_age_s: float,
+    max_extrapolation_s: float,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The pose at ``t_s`` from states in order of receipt (see the module's docstring).
+
+    Parameters
+    ----------
+    states : sequence of SihState
+        States, oldest first.
+    t_s : float
+        Time on the receipt clock [s].
+    max_age_s : float
+        A newest state older than this at ``t_s`` is not served [s].
+    max_extrapolation_s : float
+        Longest time the newest state is carried forward with its velocity [s].
+
+    Returns
+    -------
+    tuple of numpy.ndarray or None
+        Position (3,) [m, NED] and attitude ``w, x, y, z`` (4,); None before the first state,
+        or when the newest is older than ``max_age_s``.
+    """
+    if not states or t_s < states[0].t_receipt_s:
+        return None
+    newest = states[-1]
+    if t_s >= newest.t_receipt_s:
+        age_s = t_s - newest.t_receipt_s
+        if age_s > max_age_s:
+            return None
+        ahead_s = min(age_s, max_extrapolation_s)
+        return newest.pos_ned_m + newest.vel_ned_m_s * ahead_s, newest.quat_wxyz
+    after = next(i for i, s in enumerate(states) if s.t_receipt_s > t_s)
+    a, b = states[after - 1], states[after]
+    w = (t_s - a.t_receipt_s) / (b.t_receipt_s - a.t_receipt_s)
+    return a.pos_ned_m + w * (b.pos_ned_m - a.pos_ned_m), _slerp(a.quat_wxyz, b.quat_wxyz, w)
+
+
 class SihTruth:
     """Receives PX4 SIH's ``HIL_STATE_QUATERNION`` on 127.0.0.1 in a thread.
 
@@ -91,18 +151,25 @@ class SihTruth:
         14-30 on 2 cores), and its simulated vehicle with it: the last state is then still
         where the vehicle is, and a lab's Motive would go on streaming it. So the default
         serves it for 2 s; a PX4 that has stopped for longer (or died) is out of view.
+    epoch_s : float
+        ``time.monotonic()`` at time 0 of the calls (the server's epoch,
+        :attr:`gcs.mock.mocap.server.NatNetServer.epoch_s`); 0: calls take monotonic time.
     """
 
     #: Longest time a state is carried forward with its velocity [s] (beyond, it is held:
     #: PX4's own clock may have stopped, and its vehicle with it).
     MAX_EXTRAPOLATION_S = 0.1
+    #: States kept (25 Hz: 2.6 s, far more than any latency of the rig looks back).
+    HISTORY = 64
 
-    def __init__(self, port: int, max_age_s: float = 2.0) -> None:
+    def __init__(self, port: int, max_age_s: float = 2.0, epoch_s: float = 0.0) -> None:
         self.port = port
         self.max_age_s = max_age_s
+        self.epoch_s = epoch_s
         self.received = 0
         self._ref: tuple[float, float, float] | None = None
-        self._latest: SihState | None = None
+        self._states: deque[SihState] = deque(maxlen=self.HISTORY)
+        self._lock = threading.Lock()
         self._first = threading.Event()
         self._cond = threading.Condition()
         self._stop = threading.Event()
@@ -173,7 +240,14 @@ class SihTruth:
     @property
     def latest(self) -> SihState | None:
         """The newest state, or None before the first."""
-        return self._latest
+        with self._lock:
+            return self._states[-1] if self._states else None
+
+    @property
+    def states(self) -> tuple[SihState, ...]:
+        """The states kept (at most :attr:`HISTORY`), oldest first."""
+        with self._lock:
+            return tuple(self._states)
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -194,37 +268,46 @@ class SihTruth:
         lat0, lon0, alt0 = self._ref
         north = math.radians(lat - lat0) * _EARTH_RADIUS_M
         east = math.radians(lon - lon0) * _EARTH_RADIUS_M * math.cos(math.radians(lat0))
-        self._latest = SihState(
+        state = SihState(
             t_receipt_s=t_s,
             pos_ned_m=np.array([north, east, alt0 - alt]),
             vel_ned_m_s=np.array([msg.vx, msg.vy, msg.vz], dtype=float) * 0.01,
             quat_wxyz=np.asarray(msg.attitude_quaternion, dtype=float),
         )
+        with self._lock:
+            self._states.append(state)
         with self._cond:
             self.received += 1
             self._cond.notify_all()
         self._first.set()
 
-    def __call__(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """The pose now, in NED (``t_s``, the server's time, is not needed: the newest state
-        is carried forward with its velocity to this moment).
+    def pose_at(self, t_mono_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The pose as it was at ``t_mono_s`` (see the module's docstring).
 
         Parameters
         ----------
-        t_s : float
-            Server time [s] (unused).
+        t_mono_s : float
+            ``time.monotonic()`` of the pose wanted [s].
 
         Returns
         -------
         tuple of numpy.ndarray or None
             Position (3,) [m, NED] and attitude ``w, x, y, z`` (4,); None before the first
-            state or when the newest is older than ``max_age_s``.
+            state, before the oldest kept, or when the newest is older than ``max_age_s``.
         """
-        state = self._latest
-        if state is None:
-            return None
-        age_s = time.monotonic() - state.t_receipt_s
-        if age_s > self.max_age_s:
-            return None
-        ahead_s = min(age_s, self.MAX_EXTRAPOLATION_S)
-        return state.pos_ned_m + state.vel_ned_m_s * ahead_s, state.quat_wxyz
+        return pose_between(self.states, t_mono_s, self.max_age_s, self.MAX_EXTRAPOLATION_S)
+
+    def __call__(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The pose at ``t_s`` after :attr:`epoch_s`, in NED (:meth:`pose_at`).
+
+        Parameters
+        ----------
+        t_s : float
+            Server time of the pose wanted (the frame's instant minus the latency) [s].
+
+        Returns
+        -------
+        tuple of numpy.ndarray or None
+            Position (3,) [m, NED] and attitude ``w, x, y, z`` (4,), or None (out of view).
+        """
+        return self.pose_at(self.epoch_s + t_s)
