@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import signal
 import socket
 import struct
@@ -181,13 +182,17 @@ def test_frozen_stream_is_reported(hover) -> None:
 def test_jump_is_reported(hover) -> None:
     server, client = hover
     first = client.wait_until(lambda s: s.tracked, WAIT_S)
-    server.add_fault(FaultWindow("jump", server.now_s() + 0.05, 0.05, (0.3, 0.0, 0.0)))
+    # 1.5 m: beyond what the vehicle can move (10 m/s, 30 m/s^2) in any receipt interval up
+    # to 0.13 s, so that a reader descheduled for a few tens of milliseconds on a loaded
+    # machine (the interval the jump is judged over) still sees it as a jump
+    server.add_fault(FaultWindow("jump", server.now_s() + 0.05, 0.1, (1.5, 0.0, 0.0)))
     jumped = client.wait_until(
-        lambda s: s.tracked and abs(s.pos_m[0] - first.pos_m[0]) > 0.2, WAIT_S
+        lambda s: s.tracked and abs(s.pos_m[0] - first.pos_m[0]) > 1.0, WAIT_S
     )
     assert jump_problem(_until(client, jumped.seq - 1), LIMITS) is None
     reason = jump_problem(_until(client, jumped.seq), LIMITS)
-    assert reason is not None and reason.startswith("mocap position jumped 0.3")
+    found = re.match(r"mocap position jumped (\d+\.\d+) m", reason or "")
+    assert found is not None and abs(float(found[1]) - 1.5) < 0.01, reason  # 0.2 mm noise
 
 
 def test_server_that_stops_leaves_the_reader_blocked_and_the_stream_stale(hover) -> None:
