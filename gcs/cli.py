@@ -712,6 +712,7 @@ def identify(
 
     Example: gcs identify --mock --out profiles/mock-identified.yaml --plot plots/
     """
+    from gcs.app.identify import IdentifyRequest
     from gcs.app.identify_view import identify_with_display
 
     if sum((mock, connect is not None, from_log is not None)) != 1:
@@ -720,10 +721,9 @@ def identify(
         raise typer.BadParameter("must be x, y, z, both or all", param_hint="--axis")
     if from_log is not None and (run_dir is not None or mock_config is not None):
         raise typer.BadParameter("--run and --mock-config need a flight, not --from-log")
-    identify_with_display(
-        console=console,
-        err_console=err_console,
-        profile_path=_named(profile, "profile", "--profile"),
+    request = IdentifyRequest(
+        profile=_named(profile, "profile", "--profile"),
+        default_profile=_named(DEFAULT_PROFILE, "profile", "--profile"),
         axis=axis,
         out=out,
         from_log=from_log,
@@ -733,11 +733,11 @@ def identify(
         use_mock=mock,
         mock_config=_named(mock_config, "profile", "--mock-config"),
         logs=logs,
-        run_path=run_dir,
-        default_profile=_named(DEFAULT_PROFILE, "profile", "--profile"),
+        run=run_dir,
         check_only=check,
         mocap=mocap,
     )
+    identify_with_display(console, err_console, request)
 
 
 @app.command()

@@ -65,6 +65,7 @@ from gcs.io.rundir import RunDir
 from gcs.io.settings import AXES, FlightSettings, IdentifySettings
 
 __all__ = [
+    "IdentifyRequest",
     "Experiments",
     "plan_experiments",
     "create_identification_run",
@@ -77,6 +78,60 @@ __all__ = [
     "write_identified_profile",
     "write_identification_plots",
 ]
+
+
+@dataclass(frozen=True)
+class IdentifyRequest:
+    """``gcs identify`` as asked: its options, before anything is checked.
+
+    Parameters
+    ----------
+    profile : Path or None
+        Input profile; None: ``default_profile`` when flying, the run's profile offline.
+    default_profile : Path or None
+        Profile used when flying without ``profile``.
+    axis : str or None
+        ``x``, ``y``, ``z``, ``both`` or ``all``; None: both when flying, the run's axes
+        offline.
+    out : Path or None
+        Output profile; None writes ``identified.yaml`` in the run directory.
+    from_log : Path or None
+        Identification run directory to identify from offline (nothing is flown).
+    plot : Path or None
+        Directory for the validation and Bode PNGs.
+    seed : int or None
+        Excitation seed (overrides the profile's); also the mock drone's seed.
+    connect : str or None
+        URL of a real vehicle.
+    use_mock : bool
+        Fly the mock drone.
+    mock_config : Path or None
+        Mock drone settings.
+    logs : Path
+        Parent of the new identification run.
+    run : Path or None
+        Exact path of the new run.
+    check_only : bool
+        Validate and say what would be done, then stop: nothing is created, flown or written.
+    mocap : str or None
+        ``--mocap``: a URL, ``mock`` (the mock's arena) or None (the profile's ``mocap.url``).
+    """
+
+    profile: Path | None = None
+    default_profile: Path | None = None
+    axis: str | None = None
+    out: Path | None = None
+    from_log: Path | None = None
+    plot: Path | None = None
+    seed: int | None = None
+    connect: str | None = None
+    use_mock: bool = False
+    mock_config: Path | None = None
+    logs: Path = Path("logs")
+    run: Path | None = None
+    check_only: bool = False
+    mocap: str | None = None
+
 
 #: Run-directory algorithm name and trajectory type of identification runs.
 ALGORITHM = "identify"

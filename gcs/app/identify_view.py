@@ -15,6 +15,7 @@ from rich.table import Table
 from gcs.app.identify import (
     AxisResult,
     Experiments,
+    IdentifyRequest,
     create_identification_run,
     fly_identification,
     identified_profile_text,
@@ -117,23 +118,7 @@ def model_lines(results: Sequence[AxisResult]) -> list[str]:
 
 
 def identify_with_display(
-    *,
-    console: Console,
-    err_console: Console,
-    profile_path: Path | None,
-    axis: str | None,
-    out: Path | None,
-    from_log: Path | None,
-    plot: Path | None,
-    seed: int | None,
-    connect: str | None,
-    use_mock: bool,
-    mock_config: Path | None,
-    logs: Path,
-    run_path: Path | None,
-    default_profile: Path,
-    check_only: bool = False,
-    mocap: str | None = None,
+    console: Console, err_console: Console, request: IdentifyRequest
 ) -> Path | None:
     """Fly the two experiments (or read them), identify, print, write profile and plots.
 
@@ -147,40 +132,21 @@ def identify_with_display(
         Terminal output.
     err_console : Console
         Where "wrote ..." lines go.
-    profile_path : Path or None
-        Input profile; None: ``default_profile`` when flying, the run's profile offline.
-    axis : str or None
-        ``x``, ``y`` or ``both``; None: both when flying, the run's axes offline.
-    out : Path or None
-        Output profile; None writes ``identified.yaml`` in the run directory.
-    from_log : Path or None
-        Identification run directory to identify from offline (nothing is flown).
-    plot : Path or None
-        Directory for the validation and Bode PNGs.
-    seed : int or None
-        Excitation seed (overrides the profile's); also the mock drone's seed.
-    connect : str or None
-        URL of a real vehicle.
-    use_mock : bool
-        Fly the mock drone.
-    mock_config : Path or None
-        Mock drone settings.
-    logs : Path
-        Parent of the new identification run.
-    run_path : Path or None
-        Exact path of the new run.
-    default_profile : Path
-        Profile used when flying without ``profile_path``.
-    check_only : bool
-        Validate and say what would be done, then stop: nothing is created, flown or written.
-    mocap : str or None
-        ``--mocap``: a URL, ``mock`` (the mock's arena) or None (the profile's ``mocap.url``).
+    request : IdentifyRequest
+        The command's options.
 
     Returns
     -------
     Path or None
         The profile written (None with ``check_only``).
     """
+    profile_path, axis, out, from_log, plot, seed = (
+        request.profile, request.axis, request.out, request.from_log, request.plot, request.seed
+    )  # fmt: skip
+    connect, use_mock, mock_config, logs, run_path = (
+        request.connect, request.use_mock, request.mock_config, request.logs, request.run
+    )  # fmt: skip
+    check_only, mocap = request.check_only, request.mocap
     if plot is not None:
         check_output_dir(plot, "--plot")
     if from_log is not None:
@@ -205,7 +171,8 @@ def identify_with_display(
         from gcs.app.fly_view import live_progress, say
         from gcs.app.session import check_mock_config, check_url, plan_mocap, vehicle_url
 
-        path = profile_path or default_profile
+        path = profile_path or request.default_profile
+        assert path is not None
         profile, where = load_profile(path), str(path)
         settings = profile.identification
         if seed is not None:
