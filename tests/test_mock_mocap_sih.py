@@ -16,7 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs.core.frames import quat_angle_rad
 from gcs.mock.mocap.server import CLOCK_HZ, NatNetServer
-from gcs.mock.mocap.sih import SIH_DISPLAY_PORT, SihTruth, sih_display_port
+from gcs.mock.mocap.sih import SIH_DISPLAY_PORT, SihTruth, sih_display_port, state_time
 
 LAT0, LON0, ALT0 = 47.397742, 8.545594, 488.0
 R = 6_378_137.0
@@ -127,7 +127,7 @@ def test_states_become_ned_poses_from_the_first_one_carried_forward_with_their_v
         pose = truth(now)  # epoch 0: the time asked is the monotonic clock's
         assert pose is not None
         pos, quat = pose
-        age = now - truth.latest.t_receipt_s
+        age = now - truth.latest.t_s
         ahead = min(age, SihTruth.MAX_EXTRAPOLATION_S)  # then held: PX4's clock may stop
         np.testing.assert_allclose(pos, [2.0 + ahead, -1.0, -1.5], atol=RESOLUTION_M)
         assert time.monotonic() - sent < 5.0
@@ -143,7 +143,7 @@ def test_a_time_between_two_states_is_served_as_the_truth_was_then() -> None:
     (i + w) x 40 ms of its own time, within the message's resolution and the chord's sag
     (2.6 mm here), while the states are 25 cm apart."""
     with streamed(12) as (truth, spiral):
-        receipts = [s.t_receipt_s for s in truth.states]
+        receipts = [s.t_s for s in truth.states]
         assert all(b > a for a, b in zip(receipts, receipts[1:], strict=False))
         checked = 0
         for i in range(len(receipts) - 1):
@@ -160,16 +160,17 @@ def test_a_time_between_two_states_is_served_as_the_truth_was_then() -> None:
 
 def test_past_the_newest_state_it_is_carried_forward_with_its_velocity_for_at_most_0_1_s() -> None:
     with streamed(5) as (truth, spiral):
-        newest = truth.states[-1].t_receipt_s
+        newest = truth.states[-1].t_s
         pos4, yaw4 = spiral.truth(4 * spiral.step_s)
         v4 = spiral.velocity(4 * spiral.step_s)
-        for ahead, carried in ((0.03, 0.03), (0.08, 0.08), (0.3, 0.1), (0.5, 0.1)):
+        most = SihTruth.MAX_EXTRAPOLATION_S
+        for ahead, carried in ((0.03, 0.03), (0.05, 0.05), (0.3, most), (0.5, most)):
             pose = truth.pose_at(newest + ahead)
             assert pose is not None
             np.testing.assert_allclose(pose[0], pos4 + v4 * carried, atol=RESOLUTION_M)
             assert quat_angle_rad(pose[1], np.array(yaw_quat(yaw4))) < 1e-4
         assert truth.pose_at(newest + 0.51) is None  # older than max_age_s: out of view
-        assert truth.pose_at(truth.states[0].t_receipt_s - 1e-3) is None  # before the first
+        assert truth.pose_at(truth.states[0].t_s - 1e-3) is None  # before the first
 
 
 def test_the_server_serves_the_truth_as_it_was_its_latency_before_each_frame() -> None:
@@ -180,7 +181,7 @@ def test_the_server_serves_the_truth_as_it_was_its_latency_before_each_frame() -
     epoch = time.monotonic() - 10.0  # server time 0, ten seconds ago
     points = [(i, w) for i in range(7) for w in (0.2, 0.7)]  # state i, a fraction w to i+1
     with streamed(8, epoch_s=epoch) as (truth, spiral):
-        receipts = [s.t_receipt_s for s in truth.states]
+        receipts = [s.t_s for s in truth.states]
         server = NatNetServer(truth, noise_m=0.0, latency_s=latency, epoch_s=epoch)
         try:
             for k, (i, w) in enumerate(points):
@@ -199,3 +200,21 @@ def test_the_server_serves_the_truth_as_it_was_its_latency_before_each_frame() -
         assert frame.stamps.data_received_ticks / CLOCK_HZ == pytest.approx(
             epoch + frame.t_s, abs=1e-6
         )
+
+
+def test_a_state_that_arrives_late_is_dated_near_when_it_was_made() -> None:
+    """States made every 40 ms; state 10 reaches the rig 50 ms late and 11 on time. Dated at
+    their receipts, the served body would jump by its speed times 50 ms; dated by
+    state_time, state 10 is 5 ms late (a tenth), and a stop of 0.5 s restarts the clock."""
+    period = 0.04
+    made = [k * period for k in range(20)]
+    receipts = [t + (0.05 if k == 10 else 0.0) for k, t in enumerate(made)]
+    dated: list[float] = []
+    for k, r in enumerate(receipts):
+        dated.append(state_time(dated[-1] if dated else None, r, period if k else None))
+    assert dated[:10] == pytest.approx(made[:10], abs=1e-12)
+    assert dated[10] - made[10] == pytest.approx(0.1 * 0.05, abs=1e-12)
+    assert max(abs(d - m) for d, m in zip(dated[11:], made[11:], strict=True)) < 0.005
+    assert all(b > a for a, b in zip(dated, dated[1:], strict=False))
+    assert state_time(dated[-1], dated[-1] + period + 0.5, period) == dated[-1] + period + 0.5
+    assert state_time(None, 3.0, period) == 3.0 and state_time(1.0, 3.0, None) == 3.0

@@ -10,12 +10,21 @@ OptiTrack rigid body: what a lab's Motive would stream while the vehicle flies.
 
 The served pose. Asked for time ``t`` (the frame's instant minus the rig's latency, on the
 receipt clock), :class:`SihTruth` gives the truth as it was at ``t``: interpolated between the
-two states received around ``t`` (position linearly, attitude along the shortest rotation;
+two states made around ``t`` (position linearly, attitude along the shortest rotation;
 states are 40 ms apart), never extrapolated past a newer state. Only when ``t`` is newer than
-the newest state is that state carried forward with its velocity (for at most 0.1 s: beyond,
+the newest state is that state carried forward with its velocity (for at most 60 ms: beyond,
 it is held), so the mocap rate (120 Hz) sees a moving body rather than steps; a state is served
 for up to 2 s (PX4 SITL's clock, and its vehicle, stop while the machine starves it). Before
 the first state, or older than the states kept, the body is out of view.
+
+When a state was made. The message's ``time_usec`` is 0 in PX4 v1.16 SIH's display stream, so
+the receipt is the only clock, and on a loaded machine a state can reach the rig tens of
+milliseconds late (PX4 or the rig descheduled). Taken as made at its receipt, such a state
+would move the served body by its speed times the delay in one frame: 0.125 m at 2.5 m/s and
+50 ms, a jump no vehicle makes, which gcs's mocap watch rightly refuses. So each state's time
+is its predecessor's plus the stream's mean interval, pulled a tenth of the way toward its
+receipt (:func:`state_time`): a late state moves the body by a tenth of that; a receipt more
+than 0.2 s after the prediction (PX4 stopped) restarts the clock there.
 
 The message carries latitude and longitude in 1e-7 degrees (about 1.1 cm north, 0.75 cm
 east at 47 degrees) and altitude in millimetres: the served pose has that resolution, coarser
@@ -35,7 +44,14 @@ from dataclasses import dataclass
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-__all__ = ["SIH_DISPLAY_PORT", "SihState", "SihTruth", "pose_between", "sih_display_port"]
+__all__ = [
+    "SIH_DISPLAY_PORT",
+    "SihState",
+    "SihTruth",
+    "pose_between",
+    "sih_display_port",
+    "state_time",
+]
 
 #: UDP port PX4 instance 0 sends the SIH display stream to (instance N: this + N).
 SIH_DISPLAY_PORT = 19410
@@ -59,12 +75,50 @@ def sih_display_port(instance: int) -> int:
     return SIH_DISPLAY_PORT + instance
 
 
+def state_time(
+    previous_s: float | None,
+    receipt_s: float,
+    period_s: float | None,
+    gain: float = 0.1,
+    resync_s: float = 0.2,
+) -> float:
+    """When a state was made, on the receipt clock (see the module's docstring).
+
+    Parameters
+    ----------
+    previous_s : float or None
+        The previous state's time [s]; None for the first state.
+    receipt_s : float
+        This state's receipt [s].
+    period_s : float or None
+        The stream's mean interval between states [s]; None while unknown.
+    gain : float
+        Fraction of the way from the prediction to the receipt, in (0, 1].
+    resync_s : float
+        A receipt this much later than the prediction restarts the clock at the receipt [s].
+
+    Returns
+    -------
+    float
+        The state's time [s]: the receipt for the first state, without a period or after a
+        stop; else ``previous + period + gain (receipt - previous - period)``.
+    """
+    if previous_s is None or period_s is None:
+        return receipt_s
+    predicted = previous_s + period_s
+    if receipt_s - predicted > resync_s:
+        return receipt_s
+    return predicted + gain * (receipt_s - predicted)
+
+
 @dataclass(frozen=True)
 class SihState:
     """One ground-truth state, relative to the first one seen.
 
     Parameters
     ----------
+    t_s : float
+        When it was made, on the receipt clock (:func:`state_time`) [s].
     t_receipt_s : float
         Receipt time on ``time.monotonic()`` [s].
     pos_ned_m : numpy.ndarray
@@ -75,6 +129,7 @@ class SihState:
         Attitude FRD to NED, shape (4,).
     """
 
+    t_s: float
     t_receipt_s: float
     pos_ned_m: np.ndarray
     vel_ned_m_s: np.ndarray
@@ -100,14 +155,14 @@ def pose_between(
     max_age_s: float,
     max_extrapolation_s: float,
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The pose at ``t_s`` from states in order of receipt (see the module's docstring).
+    """The pose at ``t_s`` from states in order (see the module's docstring).
 
     Parameters
     ----------
     states : sequence of SihState
         States, oldest first.
     t_s : float
-        Time on the receipt clock [s].
+        Time on the receipt clock, as the states' ``t_s`` [s].
     max_age_s : float
         A newest state older than this at ``t_s`` is not served [s].
     max_extrapolation_s : float
@@ -119,18 +174,18 @@ def pose_between(
         Position (3,) [m, NED] and attitude ``w, x, y, z`` (4,); None before the first state,
         or when the newest is older than ``max_age_s``.
     """
-    if not states or t_s < states[0].t_receipt_s:
+    if not states or t_s < states[0].t_s:
         return None
     newest = states[-1]
-    if t_s >= newest.t_receipt_s:
-        age_s = t_s - newest.t_receipt_s
+    if t_s >= newest.t_s:
+        age_s = t_s - newest.t_s
         if age_s > max_age_s:
             return None
         ahead_s = min(age_s, max_extrapolation_s)
         return newest.pos_ned_m + newest.vel_ned_m_s * ahead_s, newest.quat_wxyz
-    after = next(i for i, s in enumerate(states) if s.t_receipt_s > t_s)
+    after = next(i for i, s in enumerate(states) if s.t_s > t_s)
     a, b = states[after - 1], states[after]
-    w = (t_s - a.t_receipt_s) / (b.t_receipt_s - a.t_receipt_s)
+    w = (t_s - a.t_s) / (b.t_s - a.t_s)
     return a.pos_ned_m + w * (b.pos_ned_m - a.pos_ned_m), _slerp(a.quat_wxyz, b.quat_wxyz, w)
 
 
@@ -157,10 +212,13 @@ class SihTruth:
     """
 
     #: Longest time a state is carried forward with its velocity [s] (beyond, it is held:
-    #: PX4's own clock may have stopped, and its vehicle with it).
-    MAX_EXTRAPOLATION_S = 0.1
+    #: PX4's own clock may have stopped, and its vehicle with it): one and a half intervals,
+    #: so that a stream that stopped and resumes moves the body by little more than one.
+    MAX_EXTRAPOLATION_S = 0.06
     #: States kept (25 Hz: 2.6 s, far more than any latency of the rig looks back).
     HISTORY = 64
+    #: A receipt this much later than predicted restarts the states' clock (PX4 stopped) [s].
+    RESYNC_S = 0.2
 
     def __init__(self, port: int, max_age_s: float = 2.0, epoch_s: float = 0.0) -> None:
         self.port = port
@@ -169,6 +227,7 @@ class SihTruth:
         self.received = 0
         self._ref: tuple[float, float, float] | None = None
         self._states: deque[SihState] = deque(maxlen=self.HISTORY)
+        self._intervals: deque[float] = deque(maxlen=self.HISTORY)
         self._lock = threading.Lock()
         self._first = threading.Event()
         self._cond = threading.Condition()
@@ -268,7 +327,13 @@ class SihTruth:
         lat0, lon0, alt0 = self._ref
         north = math.radians(lat - lat0) * _EARTH_RADIUS_M
         east = math.radians(lon - lon0) * _EARTH_RADIUS_M * math.cos(math.radians(lat0))
+        with self._lock:
+            previous = self._states[-1] if self._states else None
+            if previous is not None and t_s - previous.t_receipt_s <= self.RESYNC_S:
+                self._intervals.append(t_s - previous.t_receipt_s)  # a stop is no interval
+            period = sum(self._intervals) / len(self._intervals) if self._intervals else None
         state = SihState(
+            t_s=state_time(None if previous is None else previous.t_s, t_s, period),
             t_receipt_s=t_s,
             pos_ned_m=np.array([north, east, alt0 - alt]),
             vel_ned_m_s=np.array([msg.vx, msg.vy, msg.vz], dtype=float) * 0.01,
