@@ -72,3 +72,18 @@ def test_without_a_clock_fit_nothing_is_placed() -> None:
 
     result = trial_mocap(mocap(), MOTIVE, replace(recording(0.0), clock=None))
     assert np.all(np.isnan(result.pos_ned_m)) and result.lag_s is None
+
+
+def test_a_gap_the_watch_lets_a_trial_fly_through_is_interpolated_across() -> None:
+    """0.3 s untracked: NaN with the grid's own 0.1 s, on the grid (linear across the gap, within
+    the circle's sag over 0.3 s) with the 0.4 s a stale-stream watch allows."""
+    series, rec = mocap(gap=(1.0, 1.3)), recording(0.0)
+    assert np.isnan(trial_mocap(series, MOTIVE, rec).pos_ned_m).any()
+    result = trial_mocap(series, MOTIVE, rec, max_gap_s=0.4)
+    assert np.all(np.isfinite(result.pos_ned_m))
+    t = rec.t_s
+    inside = (t > 1.0) & (t < 1.3)
+    outside = (t < 1.0 - 0.01) | (t > 1.3 + 0.01)
+    np.testing.assert_allclose(result.pos_ned_m[outside], circle_ned(t[outside]), atol=2e-4)
+    error = np.abs(result.pos_ned_m[inside] - circle_ned(t[inside])).max()
+    assert 1e-3 < error < 0.05, error  # the chord across the gap, not the circle

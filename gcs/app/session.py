@@ -319,8 +319,9 @@ def trial_extra(recording: TrialRecording, session: int | None) -> dict[str, Any
         None if unknown), ``clock_latency_p50_s`` (median receipt delay above the
         clock fit), ``t0_vehicle_s`` (the trial's k = 0 on the vehicle's clock: time since
         boot for PX4, to find the trial in its own log), ``session``; with motion capture
-        also ``mocap_lag_s`` (how far the estimate lags the mocap), ``mocap_samples`` and
-        ``mocap_tracked_share``.
+        also ``mocap_lag_s`` (how far the estimate lags the mocap), ``mocap_samples``,
+        ``mocap_tracked_share`` and ``mocap_max_gap_s`` (the longest interval between tracked
+        samples, interpolated across on the grid up to the watch's limits).
     """
     clock = recording.clock
     offset = np.abs(recording.sent_s - recording.t_s[:-1])
@@ -331,6 +332,7 @@ def trial_extra(recording: TrialRecording, session: int | None) -> dict[str, Any
             "mocap_lag_s": recording.mocap.lag_s,
             "mocap_samples": len(series),
             "mocap_tracked_share": float(np.mean(series.tracked)) if len(series) else None,
+            "mocap_max_gap_s": _largest_gap(series.t_receipt_s[series.tracked]),
         }
     return mocap | {
         "max_send_late_s": recording.max_send_late_s,
@@ -340,6 +342,10 @@ def trial_extra(recording: TrialRecording, session: int | None) -> dict[str, Any
         "clock_latency_p50_s": None if clock is None else clock.latency_p50_s,
         "session": session,
     }
+
+
+def _largest_gap(t_s: np.ndarray) -> float | None:
+    return float(np.max(np.diff(t_s))) if t_s.size >= 2 else None
 
 
 def session_record(session: FlightSession) -> dict[str, Any]:

@@ -159,7 +159,8 @@ class MocapTrial:
         Raw samples received during the trial (system axes, receipt times).
     pos_ned_m : numpy.ndarray
         Mocap position on the trial's grid, shape (N+1, 3) [m, NED]; NaN where no tracked
-        samples bracket the grid time within :data:`gcs.flight.mocap.link.GRID_MAX_GAP_S`.
+        samples bracket the grid time within the longest gap the watch allows
+        (:func:`gcs.flight.mocap.link.trial_mocap`).
     lag_s : float or None
         How far the vehicle's estimate lags behind the mocap [s] (None: not measurable).
     """

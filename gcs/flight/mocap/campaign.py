@@ -61,7 +61,8 @@ def with_mocap(recording: TrialRecording, mocap: MocapLink | None) -> TrialRecor
     """
     if mocap is None:
         return recording
-    return replace(recording, mocap=trial_mocap(mocap.drain(), mocap.mapping, recording))
+    on_grid = trial_mocap(mocap.drain(), mocap.mapping, recording, mocap.max_gap_s)
+    return replace(recording, mocap=on_grid)
 
 
 def wait_past_end(mocap: MocapLink, recording: TrialRecording) -> None:

@@ -149,6 +149,12 @@ class MocapLink:
         now = time.monotonic()
         return stream_problem(self.client.recent(HEALTH_WINDOW_S, now), now, self.limits)
 
+    @property
+    def max_gap_s(self) -> float:
+        """The longest gap between tracked samples the watch lets a trial fly through [s]:
+        no frames for up to ``max_age_s``, or the body untracked for up to ``max_occluded_s``."""
+        return max(self.limits.max_age_s, self.limits.max_occluded_s)
+
     def latest_ned(self) -> np.ndarray | None:
         """The newest tracked position in NED, or None if the newest sample is untracked.
 
@@ -224,12 +230,18 @@ class MocapLink:
 
 
 def trial_mocap(
-    series: MocapSeries, mapping: FrameMapping, recording: TrialRecording
+    series: MocapSeries,
+    mapping: FrameMapping,
+    recording: TrialRecording,
+    max_gap_s: float = GRID_MAX_GAP_S,
 ) -> MocapTrial:
     """A trial's raw mocap on its grid, and the estimate's lag behind it.
 
     Receipt times go to the trial's vehicle time through the trial's own clock fit
-    (``recording.clock``), the clock the grid and the estimate are on.
+    (``recording.clock``), the clock the grid and the estimate are on. A grid time between
+    tracked samples further apart than ``max_gap_s`` is left NaN; the campaign passes the
+    longest gap its watch lets a trial fly through (:meth:`MocapLink.max_gap_s`), so that
+    every trial the watch let finish is on the grid.
 
     Parameters
     ----------
@@ -239,6 +251,8 @@ def trial_mocap(
         System axes to NED.
     recording : TrialRecording
         The trial (grid, clock fit, raw estimate).
+    max_gap_s : float
+        Longest interval between tracked samples interpolated across [s].
 
     Returns
     -------
@@ -254,7 +268,7 @@ def trial_mocap(
     ned = mapping.position_to_ned(series.pos_m[tracked])
     order = np.argsort(t_rel, kind="stable")
     t_rel, ned = t_rel[order], ned[order]
-    pos, gap = align_to_grid(t_rel, ned, grid, GRID_MAX_GAP_S)
+    pos, gap = align_to_grid(t_rel, ned, grid, max_gap_s)
     pos[gap] = np.nan
     lag = estimate_lag_s(t_rel, ned[:, :2], recording.raw_t_s, recording.raw_pos_ned_m[:, :2])
     return MocapTrial(series, pos, lag)
