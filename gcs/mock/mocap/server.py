@@ -270,6 +270,8 @@ class _Stats:
     connects: int = 0
     modeldef_requests: int = 0
     clients: set[tuple[str, int]] = field(default_factory=set)
+    last_send_s: float = math.nan
+    max_send_gap_s: float = 0.0
 
 
 class NatNetServer:
@@ -413,8 +415,10 @@ class NatNetServer:
         with self._lock:
             self._faults.append(fault)
 
-    def stats(self) -> dict[str, int]:
-        """Counters: frames due, datagrams sent, connects, model-definition requests, clients.
+    def stats(self) -> dict[str, float]:
+        """Counters: frames due, datagrams sent, connects, model-definition requests, clients,
+        and the longest interval between two datagrams sent (``max_send_gap_s``: a stall of
+        the server itself, as against one of its receiver).
 
         Returns
         -------
@@ -427,6 +431,7 @@ class NatNetServer:
             "connects": s.connects,
             "modeldef_requests": s.modeldef_requests,
             "clients": len(s.clients),
+            "max_send_gap_s": round(s.max_send_gap_s, 4),
         }
 
     def start(self) -> NatNetServer:
@@ -586,5 +591,9 @@ class NatNetServer:
         except OSError:
             return
         self._stats.sent += 1
+        if self._stats.sent > 1:
+            gap = t_send - self._stats.last_send_s
+            self._stats.max_send_gap_s = max(self._stats.max_send_gap_s, gap)
+        self._stats.last_send_s = t_send
         if record is not None:
             self.sent.append(dataclasses.replace(record, t_send_s=t_send))
