@@ -14,7 +14,6 @@ from gcs.app.fly import (
     FlyPlan,
     FlyRequest,
     converged_reason,
-    drift_reason,
     fly_run,
     newest_record,
     plan_fly,
@@ -418,10 +417,12 @@ def fly_with_display(console: Console, request: FlyRequest) -> RunDir | None:
         check_url(request.connect)
     if request.until_converged and plan.run is not None and request.again is None:
         record = newest_record(plan.run)
-        reason = converged_reason(record)
-        if reason is None and (reason := drift_reason(record)) is not None:
-            best = record_drift(record).best_trial  # type: ignore[union-attr]
-            reason += f" (--again {best} flies them)"
+        drift = record_drift(record)
+        reason = converged_reason(record) or (
+            None
+            if drift is None
+            else f"{drift_sentence(drift)} (--again {drift.best_trial} flies them)"
+        )
         if reason is not None:
             console.print(f"{plan.run.path}: {reason}; nothing flown", highlight=False)
             return plan.run
@@ -553,7 +554,8 @@ def fly_with_display(console: Console, request: FlyRequest) -> RunDir | None:
             soft_wrap=True,
         )
         raise exc
-    drift = record_drift(newest_record(run))
+    newest = newest_record(run)
+    drift = record_drift(newest)
     if request.until_converged and drift is not None:
         console.print(
             f"--until-converged: landed, learning left the floor; to fly trial "
@@ -561,7 +563,7 @@ def fly_with_display(console: Console, request: FlyRequest) -> RunDir | None:
             highlight=False,
             soft_wrap=True,
         )
-    elif request.until_converged and converged_reason(newest_record(run)) is None:
+    elif request.until_converged and converged_reason(newest) is None:
         console.print(
             f"--until-converged: learning has not converged within --iter {request.iterations}; "
             f"continue with: {escape(resume_hint(request.iterations))}",

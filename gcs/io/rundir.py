@@ -85,6 +85,7 @@ from gcs.io.records import (
     csv_text,
     json_safe,
     read_csv,
+    read_json,
     status_from_json,
 )
 
@@ -442,17 +443,18 @@ class RunDir(LearnLog):
         path = self._file("again", j, "json")
         if not path.exists():
             return []
+        what = "record of setpoints flown again"
+        data = read_json(path, what)
         try:
-            data = json.loads(path.read_text())
-            entries = data["again"]
-            if data["trial"] != j or not all(
+            entries = list(data["again"])
+            ok = data["trial"] == j and all(
                 isinstance(e["setpoints_of"], int) and 0 <= e["setpoints_of"] < j for e in entries
-            ):
-                raise ValueError("names another trial")
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            what = f"malformed record of setpoints flown again ({exc})"
-            raise RunLogError(f"{path}: {what}") from None
-        return list(entries)
+            )
+        except (KeyError, TypeError) as exc:
+            raise RunLogError(f"{path}: malformed {what} (no {exc})") from None
+        if not ok:
+            raise RunLogError(f"{path}: malformed {what} (names another trial)")
+        return entries
 
     # ----------------------------------------------------------------- trials
     def statuses(self) -> list[TrialStatus]:
