@@ -131,3 +131,28 @@ def test_a_settle_timeout_on_a_vehicle_that_oscillates_is_refused() -> None:
     assert message.startswith("the vehicle did not settle at the start point NED (0.00, 0.00, ")
     assert "of trial 3 within 20 s: it oscillates 0.29 m every 1.0 s (98 %" in message
     assert "\n" not in message
+
+
+def test_a_settle_timeout_on_a_vehicle_still_approaching_measures_it_again() -> None:
+    # 0.5 m/s towards the point until 0.4 s into the first measurement after the timeout
+    arrival = 100.0 + SETTINGS.settle_timeout_s + 0.4
+
+    def position(t: float) -> np.ndarray:
+        return TARGET + [0.1 + 0.5 * max(arrival - t, 0.0), 0.0, 0.0]
+
+    vehicle = HoverVehicle(position)
+    session = FlightSession("udpin://", 0, navigation_source({}), (), 0.05, 0.1)
+    events: list = []
+    record = asyncio.run(settle_at_start(vehicle, TARGET, 3, session, SETTINGS, events.append))
+    assert vehicle.holds == [SETTINGS.hover_measure_s]  # judged again once, then flown on
+    assert record is not None and record.verdict.ok and record.why == "settle timeout"
+    assert events[0].warning and "flying on with tolerances" in events[0].text
+
+
+def test_a_settle_timeout_on_a_vehicle_approaching_for_ever_is_refused_after_two_more() -> None:
+    vehicle = HoverVehicle(lambda t: TARGET + [max(60.0 - 0.5 * (t - 100.0), 0.0), 0.0, 0.0])
+    session = FlightSession("udpin://", 0, navigation_source({}), (), 0.2, 0.1)
+    with pytest.raises(VehicleError) as info:
+        asyncio.run(settle_at_start(vehicle, TARGET, 3, session, SETTINGS, lambda e: None))
+    assert vehicle.holds == [SETTINGS.hover_measure_s] * 2
+    assert "within 20 s: it is still approaching the point at 0.50 m/s" in str(info.value)

@@ -660,11 +660,8 @@ async def measure_hover(
                 "to settle"))  # fmt: skip
     if hold_s > 0:
         await vehicle.hold(hold_s, "the hold before the hover measurement")
-    for _ in range(3):
-        samples = await vehicle.hold(measure_s, "the hover measurement")
-        record = _judge(samples, target, j, "measurement", vehicle, settings)
-        if record.verdict.kind != "approaching":
-            break
+    samples = await vehicle.hold(measure_s, "the hover measurement")
+    record = await _judge_arrived(samples, target, j, "measurement", vehicle, settings)
     emit(
         Status(
             f"hover at the start point: {record.stats.describe()}", warning=not record.verdict.ok
@@ -684,12 +681,16 @@ async def settle_at_start(
     settings: FlightSettings,
     emit: EventCallback,
 ) -> HoverRecord | None:
-    """Settle at the start point; judge the hover if that times out (None when it settled)."""
+    """Settle at the start point; judge the hover if that times out (None when it settled).
+
+    A hover still approaching the point when the settle times out is measured again, as in
+    :func:`measure_hover`: a vehicle that wanders by decimetres can be on its way back.
+    """
     with vehicle.record_telemetry() as samples:
         if await vehicle.settle(target, session.tolerance_m, session.speed_tolerance_m_s):
             return None
         recent = _last(samples, settings.hover_measure_s)
-    record = _judge(recent, target, j, "settle timeout", vehicle, settings)
+    record = await _judge_arrived(recent, target, j, "settle timeout", vehicle, settings)
     if not record.verdict.ok:
         raise VehicleError(
             f"the vehicle did not settle at the start point {format_ned(target)} of trial {j} "
@@ -707,6 +708,24 @@ async def settle_at_start(
             warning=True,
         )
     )
+    return record
+
+
+async def _judge_arrived(
+    samples: list[TelemetrySample],
+    target: np.ndarray,
+    j: int,
+    why: str,
+    vehicle: Vehicle,
+    settings: FlightSettings,
+) -> HoverRecord:
+    """Judge a hover; while it is still approaching the point, measure it again (twice at most)."""
+    record = _judge(samples, target, j, why, vehicle, settings)
+    for _ in range(2):
+        if record.verdict.kind != "approaching":
+            break
+        samples = await vehicle.hold(settings.hover_measure_s, "the hover measurement")
+        record = _judge(samples, target, j, why, vehicle, settings)
     return record
 
 
