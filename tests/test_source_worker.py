@@ -9,6 +9,7 @@ import multiprocessing
 import os
 import signal
 import threading
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -146,3 +147,37 @@ def test_start_returns_once_the_source_is_built(tmp_path) -> None:
     with WorkerSource(touching, (str(marker),)) as source:
         built_by = int(marker.read_text())  # before any call
         assert built_by == worker_pid(source) != os.getpid()
+
+
+def test_the_worker_ends_when_the_flight_process_is_killed() -> None:
+    # a SIGKILLed gcs left its worker (and multiprocessing's resource tracker) running, holding
+    # gcs's output open: whoever read it (a terminal's pipe, a test) waited for ever
+    import subprocess
+    import sys
+
+    here = str(Path(__file__).resolve().parent)
+    script = (
+        f"import sys, signal; sys.path.insert(0, {here!r})\n"
+        "from test_source_worker import build, worker_pid\n"
+        "from gcs.app.source_worker import WorkerSource\n"
+        "source = WorkerSource(build, (1,))\n"
+        "source.start()\n"
+        "print(worker_pid(source), flush=True)\n"
+        "signal.pause()\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    pid = int(proc.stdout.readline())
+    assert running(pid)
+    proc.kill()
+    proc.communicate(timeout=30)  # the output closes once every process holding it ended
+    assert not running(pid)
+
+
+def running(pid: int) -> bool:
+    """Whether ``pid`` runs: an ended process not yet reaped by init is a zombie (Linux)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return False
+    return state != "Z"

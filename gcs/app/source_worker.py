@@ -31,6 +31,7 @@ exit path (a ``with`` block). A worker that dies raises
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
 import os
 import signal
@@ -113,6 +114,7 @@ class WorkerSource:
             max_workers=1,
             mp_context=multiprocessing.get_context("spawn"),
             initializer=_init_worker,
+            initargs=(os.getpid(),),
         )
         with _interrupts_ignored():  # the child starts with them ignored, before its imports
             self._built = pool.submit(_build, self.build, self.args)
@@ -234,20 +236,62 @@ WORKER_NICE = 10
 busy machine a learning step can wait, the next mocap frame cannot."""
 
 
-def _init_worker() -> None:
-    """Worker initializer: interrupts ignored (the flight process's guard is in charge)."""
+def _init_worker(parent_pid: int) -> None:
+    """Worker initializer: interrupts ignored (the flight process's guard is in charge), and
+    the worker ends with the flight process (:func:`_on_parent_death`)."""
     for sig in _SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
+    signal.signal(_PARENT_DEATH_SIGNAL, _on_parent_death)
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, _PARENT_DEATH_SIGNAL)
+    except (OSError, AttributeError):  # not Linux: the pool's own shutdown ends it
+        pass
+    if os.getppid() != parent_pid:  # the flight process ended before the prctl
+        os._exit(0)
+
+
+#: Linux's prctl option, and the signal it sends the worker when the flight process ends.
+_PR_SET_PDEATHSIG = 1
+_PARENT_DEATH_SIGNAL = signal.SIGUSR1
+_busy = False  # a call of the flight process is running (in the worker)
+_orphaned = False  # the flight process has ended (in the worker)
+
+
+def _on_parent_death(signum: int, frame: Any) -> None:
+    """The flight process ended without shutting the worker down (killed, crashed): end too,
+    at once when idle, else once the call in progress has written its files. Left alone the
+    worker (and multiprocessing's resource tracker with it) lived on, holding the terminal's
+    output open: a test reading gcs's output after a SIGKILL waited for ever."""
+    global _orphaned
+    _orphaned = True
+    if not _busy:
+        os._exit(0)
+
+
+def _call(fn: Callable[[], Any]) -> Any:
+    """Run ``fn`` as a call of the flight process: an orphaned worker ends after it."""
+    global _busy
+    _busy = True
+    try:
+        return fn()
+    finally:
+        _busy = False
+        if _orphaned:
+            os._exit(0)
 
 
 def _build(build: Callable[..., Any], args: tuple[Any, ...]) -> None:
     """Build the worker's trial source (in the worker)."""
-    global _source
 
     def notify(kind: str, payload: Any) -> None:
         _notes.append((kind, payload))
 
-    _source = build(*args, notify=notify)
+    def make() -> None:
+        global _source
+        _source = build(*args, notify=notify)
+
+    _call(make)
     if hasattr(os, "nice"):  # built (its imports done) at full speed, before the flight
         os.nice(WORKER_NICE)
 
@@ -256,6 +300,6 @@ def _run(name: str, args: tuple[Any, ...]) -> tuple[Any, list[tuple[str, Any]]]:
     """Call the worker's source; its answer and the callbacks it queued (in the worker)."""
     _notes.clear()
     try:
-        return getattr(_source, name)(*args), list(_notes)
+        return _call(lambda: getattr(_source, name)(*args)), list(_notes)
     finally:
         _notes.clear()
