@@ -551,7 +551,7 @@ class _Campaign:
             self.vehicle, setpoints, t_ilc_s, self.settings, progress, self.plan.yaw_deg
         )
         if mocap is not None:
-            mocap.drain()  # the trial's raw file starts here
+            mocap.start_journal()  # the trial's raw file starts here
         recording = await self.run.fly()
         if mocap is not None:  # y(N) needs a mocap sample on both sides
             await asyncio.to_thread(mocap_steps.wait_past_end, mocap, recording)
