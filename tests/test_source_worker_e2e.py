@@ -23,7 +23,7 @@ from flight_gaps import gaps
 from synthetic import CI_FLIGHT
 from test_mocap_e2e import INDOOR, TIMEOUT_S
 
-from gcs.app.fly import fly_run, plan_fly, start_run
+from gcs.app.fly import FlyRequest, fly_run, plan_fly, start_run
 from gcs.app.fly_view import learning_lines
 from gcs.flight.mocap.health import HealthLimits
 from gcs.flight.mocap.link import MocapLink
@@ -80,8 +80,10 @@ def test_learning_between_trials_does_not_delay_the_vision_or_the_setpoints(
         cpu_burner(TIMEOUT_S),
     ):
         plan = plan_fly(
-            adaptive_mocap_profile(tmp_path), SHORT, None, run_path=run_path,
-            mocap=mock.mocap_url,
+            FlyRequest(
+                profile=adaptive_mocap_profile(tmp_path), trajectory=SHORT, run=run_path,
+                mocap=mock.mocap_url,
+            )
         )  # fmt: skip
         assert plan.mocap is not None and plan.mocap.source is not None
         source = plan.mocap.source
