@@ -9,9 +9,13 @@ import pytest
 
 from gcs.core.frames import mapping_for
 from gcs.flight.clock import fit_clock
-from gcs.flight.mocap.link import trial_mocap
+from gcs.flight.mocap.campaign import with_mocap
+from gcs.flight.mocap.link import MocapLink, trial_mocap
+from gcs.flight.mocap.reader import SAMPLE
 from gcs.flight.trial import TrialRecording
 from gcs.io.mocap_samples import MocapSeries
+from gcs.io.mocap_source import parse_mocap_url
+from gcs.io.settings import MocapSettings
 
 MOTIVE = mapping_for("optitrack")
 OFFSET_S = 1000.0  # local monotonic time = vehicle time + 1000 s
@@ -87,3 +91,39 @@ def test_a_gap_the_watch_lets_a_trial_fly_through_is_interpolated_across() -> No
     np.testing.assert_allclose(result.pos_ned_m[outside], circle_ned(t[outside]), atol=2e-4)
     error = np.abs(result.pos_ned_m[inside] - circle_ned(t[inside])).max()
     assert 1e-3 < error < 0.05, error  # the chord across the gap, not the circle
+
+
+def test_a_stream_pausing_across_k0_still_puts_k0_on_the_grid() -> None:
+    """The stream pauses 0.22 s across the trial's start (a mock Motive stalled on a loaded
+    machine), and the trial's journal opens inside the pause, two stream periods before k = 0.
+    Begun there, it held no sample before k = 0: k = 0, 1, 2 were left without mocap ("no mocap
+    position at k = 0 (3 grid points)") and the trial was refused by learning. Begun with the
+    last max_gap_s of the stream, it has the sample before the pause, and k = 0 is on the grid
+    like any point of a gap the watch let the trial fly through."""
+    rec = recording(0.0)
+    stream = mocap()  # 120 Hz from 0.5 s before k = 0, received 1 ms after the vehicle time
+    t = stream.t_receipt_s - OFFSET_S - 0.001 - 20.0  # vehicle time from k = 0 [s]
+    journal_start_s = OFFSET_S + 0.001 + 20.0 - 2 / 60  # two 60 Hz stream periods before k = 0
+
+    def flown(pre_roll: bool) -> np.ndarray:
+        link = MocapLink(parse_mocap_url("optitrack://127.0.0.1/drone"), MOTIVE, MocapSettings())
+        feed = link.client._record  # as the client's thread takes the reader's records
+        for i in np.flatnonzero(t < -0.1):  # up to the pause
+            feed(b"S", SAMPLE.pack(i, stream.t_receipt_s[i], True, *stream.pos_m[i], 1, 0, 0, 0))
+        if pre_roll:
+            link.start_journal(now_s=journal_start_s)
+        else:  # the journal of the trial alone
+            link.client.start_journal(now_s=journal_start_s)
+        for i in np.flatnonzero(t >= 0.12):  # after the pause
+            feed(b"S", SAMPLE.pack(i, stream.t_receipt_s[i], True, *stream.pos_m[i], 1, 0, 0, 0))
+        recording_with = with_mocap(rec, link)
+        assert recording_with.mocap is not None
+        return recording_with.mocap.pos_ned_m
+
+    missing = np.flatnonzero(~np.all(np.isfinite(flown(pre_roll=False)), axis=1))
+    np.testing.assert_array_equal(missing, [0, 1, 2])
+    on_grid = flown(pre_roll=True)
+    assert np.all(np.isfinite(on_grid))
+    # k = 0..2 on the chord across the pause, the rest on the circle
+    np.testing.assert_allclose(on_grid[3:], circle_ned(rec.t_s[3:]), atol=2e-4)
+    np.testing.assert_allclose(on_grid[:3], circle_ned(rec.t_s[:3]), atol=0.01)

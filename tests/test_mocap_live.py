@@ -85,6 +85,7 @@ def test_pose_round_trip_rate_and_timestamps_at_240_hz() -> None:
     try:
         with MocapClient(parse_mocap_url(server.url)) as client:
             first = client.wait_until(lambda s: s.tracked, WAIT_S)
+            client.start_journal()
             client.wait_until(lambda s: s.seq >= first.seq + 240, WAIT_S)
             got = client.drain()
     finally:

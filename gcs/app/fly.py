@@ -2,7 +2,10 @@
 
 The flight layer asks for "the next sequence" and hands back recordings; :class:`RunSource`
 answers from the run directory and learns with :func:`gcs.app.learn.learn_run`, the same function
-``gcs learn`` calls. Everything here runs in worker threads while the vehicle hovers.
+``gcs learn`` calls. In a flight it lives in a worker process of its own
+(:mod:`gcs.app.source_worker`, built there by :func:`run_source`), so that writing the trials and
+learning cannot take the flight process's time; its rows and learning outcomes come back to the
+view's callbacks.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from gcs.app.session import (
     to_record,
     trial_extra,
 )
+from gcs.app.source_worker import Notify, WorkerSource
 from gcs.core.floor import FloorDrift, FloorVerdict, floor_drift
 from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trajectory import (
@@ -56,6 +60,7 @@ __all__ = [
     "plan_fly",
     "start_run",
     "RunSource",
+    "run_source",
     "prepare_run",
     "fly_run",
     "converged_reason",
@@ -729,6 +734,36 @@ def newest_record(run: RunDir) -> dict | None:
     return run.read_learn_record(j)
 
 
+def run_source(
+    run: RunDir, until_converged: bool, mock_seed: int | None, *, notify: Notify
+) -> RunSource:
+    """The run's trial source as the worker process builds it, its callbacks sent back.
+
+    Parameters
+    ----------
+    run : RunDir
+        The run being flown.
+    until_converged : bool
+        Fly no further trial once learning has converged.
+    mock_seed : int or None
+        The mock drone's seed (None on a real vehicle).
+    notify : callable
+        ``notify(kind, payload)``: ``"row"`` with the Table IV rows, ``"learn"`` with the
+        learning step's outcome (:class:`gcs.app.source_worker.WorkerSource`).
+
+    Returns
+    -------
+    RunSource
+    """
+    return RunSource(
+        run,
+        on_row=lambda rows: notify("row", rows),
+        on_learn=lambda outcome: notify("learn", outcome),
+        until_converged=until_converged,
+        mock_seed=mock_seed,
+    )
+
+
 def fly_run(
     url: str,
     run: RunDir,
@@ -740,8 +775,12 @@ def fly_run(
     until_converged: bool = False,
     mocap: MocapLink | None = None,
     mock_seed: int | None = None,
-) -> RunSource:
+) -> None:
     """Fly ``iterations`` trials of ``run`` from its next trial, learning between trials.
+
+    The run's trial source (:class:`RunSource`: trial files, learning, session records) runs
+    in a worker process of its own (:class:`gcs.app.source_worker.WorkerSource`), shut down
+    when the campaign ends, however it ends.
 
     Parameters
     ----------
@@ -765,20 +804,18 @@ def fly_run(
         A started motion-capture link (forwarded, checked, watched, logged).
     mock_seed : int or None
         The mock drone's seed, recorded in the session (None on a real vehicle).
-
-    Returns
-    -------
-    RunSource
     """
     first = run.next_trial()
     if first > 0 and not (run.path / f"setpoints-{first:03d}.csv").exists():
         raise RunLogError(f"{run.path}: no setpoints for trial {first}; run 'gcs learn' first")
-    source = RunSource(
-        run, on_row, on_learn=on_learn, until_converged=until_converged, mock_seed=mock_seed
-    )
+    callbacks = {"row": on_row or _ignore, "learn": on_learn or _ignore}
     fence = flight_fence(run.profile(), settings)
     plan = CampaignPlan(
         url, first, iterations, run.t_ilc_s, settings, fence, trial_yaw_deg(run.reference())
     )
-    run_campaign(plan, source, on_event, mocap=mocap)
-    return source
+    with WorkerSource(run_source, (run, until_converged, mock_seed), callbacks) as source:
+        run_campaign(plan, source, on_event, mocap=mocap)
+
+
+def _ignore(payload: object) -> None:
+    """A callback nobody asked for."""

@@ -42,6 +42,7 @@ from gcs.app.session import (
     to_record,
     trial_extra,
 )
+from gcs.app.source_worker import Notify, WorkerSource
 from gcs.core.excitation import multisine, prbs
 from gcs.core.model import DiscreteModel, frequency_response
 from gcs.core.pbsid import (
@@ -70,6 +71,7 @@ __all__ = [
     "plan_experiments",
     "create_identification_run",
     "IdentificationSource",
+    "identification_source",
     "fly_identification",
     "AxisResult",
     "run_axes",
@@ -408,6 +410,9 @@ def fly_identification(
 ) -> None:
     """Fly both experiments of an identification run (take off, 2 trials, land).
 
+    The experiments are written by a worker process of their own
+    (:class:`gcs.app.source_worker.WorkerSource`), as the learning runs of ``gcs fly``.
+
     Parameters
     ----------
     url : str
@@ -422,10 +427,31 @@ def fly_identification(
         A started motion-capture link (forwarded, checked, watched, logged).
     """
     center = np.asarray(_run_source(run)["center_ned_m"], dtype=float)
-    source = IdentificationSource(run, center)
     fence = flight_fence(run.profile(), settings)
     plan = CampaignPlan(url, 0, 2, run.t_ilc_s, settings, fence)
-    run_campaign(plan, source, on_event, mocap=mocap)
+    with WorkerSource(identification_source, (run, center)) as source:
+        run_campaign(plan, source, on_event, mocap=mocap)
+
+
+def identification_source(
+    run: RunDir, center_ned_m: np.ndarray, *, notify: Notify
+) -> IdentificationSource:
+    """The trial source of an identification run as its worker process builds it.
+
+    Parameters
+    ----------
+    run : RunDir
+        The identification run.
+    center_ned_m : ndarray, shape (3,)
+        Hover point before each experiment [m].
+    notify : callable
+        Unused (the experiments report nothing back beyond the campaign's events).
+
+    Returns
+    -------
+    IdentificationSource
+    """
+    return IdentificationSource(run, center_ned_m)
 
 
 # --------------------------------------------------------------------------- identification

@@ -82,7 +82,13 @@ _log = logging.getLogger(__name__)
 
 
 class TrialSource(Protocol):
-    """Where trials come from and where their recordings go (blocking; run in a thread)."""
+    """Where trials come from and where their recordings go (blocking; run in a thread).
+
+    The calls run in threads of the flight process, which must meanwhile forward the mocap,
+    stream the setpoints and watch the telemetry: a source with heavy work (learning) does it
+    in a process of its own, this process only waiting for the answer (``gcs fly`` and
+    ``gcs identify`` do so).
+    """
 
     def setpoints_for(self, j: int) -> np.ndarray:
         """Setpoints of trial ``j`` (may run a learner).
@@ -545,7 +551,7 @@ class _Campaign:
             self.vehicle, setpoints, t_ilc_s, self.settings, progress, self.plan.yaw_deg
         )
         if mocap is not None:
-            mocap.drain()  # the trial's raw file starts here
+            mocap.start_journal()  # the trial's raw file starts here
         recording = await self.run.fly()
         if mocap is not None:  # y(N) needs a mocap sample on both sides
             await asyncio.to_thread(mocap_steps.wait_past_end, mocap, recording)

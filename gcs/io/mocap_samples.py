@@ -156,7 +156,8 @@ class MocapTrial:
     Parameters
     ----------
     series : MocapSeries
-        Raw samples received during the trial (system axes, receipt times).
+        Raw samples received during the trial, from the watch's longest gap before its
+        start (system axes, receipt times).
     pos_ned_m : numpy.ndarray
         Mocap position on the trial's grid, shape (N+1, 3) [m, NED]; NaN where no tracked
         samples bracket the grid time within the longest gap the watch allows

@@ -3,8 +3,9 @@
 :class:`MocapClient` starts the reader process (:mod:`gcs.flight.mocap.reader`, the
 ``motioncapture`` library), and a thread of this process that turns its records into
 :class:`MocapSample` objects: it keeps the last seconds for the health checks
-(:meth:`MocapClient.recent`), a journal for the raw-sample file (:meth:`MocapClient.drain`)
-and calls ``on_sample`` for each frame (in that thread: hand work to the asyncio loop with
+(:meth:`MocapClient.recent`), a journal of the samples from :meth:`MocapClient.start_journal`
+to :meth:`MocapClient.drain` (a trial's raw-sample file; none is kept outside) and calls
+``on_sample`` for each frame (in that thread: hand work to the asyncio loop with
 ``loop.call_soon_threadsafe``). Every accessor is thread-safe and returns at once, so the
 setpoint loop can poll :meth:`MocapClient.latest` without ever waiting for the mocap.
 
@@ -39,7 +40,7 @@ __all__ = ["MocapSample", "MocapClient", "series_of"]
 
 #: Most frames a client keeps per second of history (the highest rate it expects).
 _MAX_RATE_HZ = 1000
-#: The journal (for the raw-sample file) keeps at most this many undrained samples.
+#: An open journal (a trial's raw-sample file) keeps at most this many undrained samples.
 _JOURNAL_MAX = 2_000_000
 
 
@@ -163,7 +164,7 @@ class MocapClient:
         self.on_sample = on_sample
         self.connect_timeout_s = connect_timeout_s
         self._history: deque[MocapSample] = deque(maxlen=int(history_s * _MAX_RATE_HZ))
-        self._journal: list[MocapSample] = []
+        self._journal: list[MocapSample] | None = None  # open between start_journal and drain
         self._journal_dropped = 0
         self._cond = threading.Condition()
         self._connected = threading.Event()
@@ -276,10 +277,12 @@ class MocapClient:
             sample = MocapSample(seq, t, math.nan, tracked, tuple(values[:3]), tuple(values[3:]))
             with self._cond:
                 self._history.append(sample)
-                self._journal.append(sample)
-                if len(self._journal) > _JOURNAL_MAX:
-                    del self._journal[0]
-                    self._journal_dropped += 1
+                journal = self._journal
+                if journal is not None:
+                    journal.append(sample)
+                    if len(journal) > _JOURNAL_MAX:
+                        del journal[0]
+                        self._journal_dropped += 1
                 self._count += 1
                 self._cond.notify_all()
             if self.on_sample is not None:
@@ -360,16 +363,39 @@ class MocapClient:
             picked = list(newest_first)[::-1]
         return series_of(picked)
 
+    def start_journal(self, pre_s: float = 0.0, now_s: float | None = None) -> None:
+        """Journal the samples delivered from now on, until :meth:`drain` (a trial's raw file),
+        beginning with those received in the last ``pre_s`` seconds.
+
+        No journal is kept outside a recording, so opening one costs only its ``pre_s`` of
+        history, whatever ran before: one kept from the client's start held the whole stream
+        before the first trial (minutes of frames), and emptying it ran on the flight's event
+        loop just before the trial's first setpoint. An open journal is dropped and a new one
+        opened.
+
+        Parameters
+        ----------
+        pre_s : float
+            How much of the recent stream the journal starts with [s] (at most ``history_s``).
+        now_s : float or None
+            The start (``time.monotonic()`` if None).
+        """
+        start = (time.monotonic() if now_s is None else now_s) - pre_s
+        with self._cond:
+            recent = itertools.takewhile(lambda s: s.t_receipt_s >= start, reversed(self._history))
+            self._journal = list(recent)[::-1] if pre_s > 0 else []
+
     def drain(self) -> MocapSeries:
-        """All samples delivered since the previous drain (for the raw-sample file).
+        """The samples journaled since :meth:`start_journal`; the journal is closed (empty
+        when none was open).
 
         Returns
         -------
         MocapSeries
         """
         with self._cond:
-            taken, self._journal = self._journal, []
-        return series_of(taken)
+            taken, self._journal = self._journal, None
+        return series_of(taken or [])
 
     def wait_until(self, predicate: Callable[[MocapSample], bool], timeout_s: float) -> MocapSample:
         """Block until a sample delivered from now on satisfies ``predicate``.
@@ -428,7 +454,7 @@ class MocapClient:
         }
 
     def stats(self) -> dict[str, float]:
-        """Counters: samples delivered, tracked samples in the history, samples the journal
+        """Counters: samples delivered, tracked samples in the history, samples an open journal
         dropped (undrained for too long), seconds since start.
 
         Returns

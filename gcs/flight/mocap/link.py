@@ -9,7 +9,9 @@ it (in the client's thread: never on the event loop). The campaign asks it:
   so that a bad stream aborts like a fence breach;
 - :meth:`MocapLink.latest_ned`: where the mocap sees the vehicle (pre-flight agreement and the
   move checks);
-- :meth:`MocapLink.drain`: the raw samples since the last call (one trial's raw file).
+- :meth:`MocapLink.start_journal` and :meth:`MocapLink.drain`: the raw samples from a trial's
+  start (and the :attr:`MocapLink.max_gap_s` before it) to its end (one trial's raw file;
+  nothing else is kept between trials).
 
 :func:`trial_mocap` puts a trial's raw samples on the trial's grid (vehicle time, through the
 trial's own clock fit) and measures how far the vehicle's estimate lags behind.
@@ -191,8 +193,26 @@ class MocapLink:
             f"({problem or 'not tracked'}; bodies in the stream: {seen})"
         )
 
+    def start_journal(self, now_s: float | None = None) -> None:
+        """Keep the raw samples from :attr:`max_gap_s` before ``now_s`` on, for :meth:`drain`
+        (a trial's start, two stream periods before its k = 0).
+
+        The journal starts with the last :attr:`max_gap_s` of the stream so that the tracked
+        sample before k = 0 is in it whenever the gap across k = 0 is one the grid bridges: a
+        journal begun at the trial's start alone held nothing before k = 0 when the stream
+        paused there (a mock Motive stalled 0.15-0.2 s on a loaded machine), and k = 0 and the
+        grid points after it were left without mocap and the trial refused by learning. The
+        end has :func:`gcs.flight.mocap.campaign.wait_past_end`.
+
+        Parameters
+        ----------
+        now_s : float or None
+            The start (``time.monotonic()`` if None).
+        """
+        self.client.start_journal(self.max_gap_s, now_s)
+
     def drain(self) -> MocapSeries:
-        """Raw samples since the previous call.
+        """Raw samples since :meth:`start_journal` (none kept after: a trial's end).
 
         Returns
         -------
@@ -246,7 +266,7 @@ def trial_mocap(
     Parameters
     ----------
     series : MocapSeries
-        Raw samples received during the trial.
+        Raw samples received during the trial (and the last ``max_gap_s`` before it).
     mapping : FrameMapping
         System axes to NED.
     recording : TrialRecording
