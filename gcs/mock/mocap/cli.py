@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import signal
 import sys
-import time
 from typing import Annotated
 
 import typer
@@ -14,7 +13,6 @@ from gcs.core.frames import SYSTEM_FRAMES, mapping_for
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
 from gcs.mock.mocap.server import FaultWindow, NatNetServer, PoseFn, parse_fault_window
-from gcs.mock.mocap.sih import SihTruth, sih_display_port
 
 __all__ = ["mocap_command", "parse_window", "parse_version", "serve"]
 
@@ -113,14 +111,6 @@ def mocap_command(
         list[str] | None,
         typer.Option("--jump", help="START:DURATION:DX:DY:DZ, s and m (mocap axes)."),
     ] = None,
-    px4_sih: Annotated[
-        int | None,
-        typer.Option(
-            "--px4-sih",
-            min=0,
-            help="Serve PX4 SITL instance N's SIH ground truth (its display link) instead.",
-        ),
-    ] = None,
 ) -> None:
     """Run a mock OptiTrack Motive streaming one rigid body over NatNet.
 
@@ -150,12 +140,6 @@ def mocap_command(
         python -m gcs.mock.mocap --rate 240 --circle 1:6
 
         python -m gcs.mock.mocap --occlusion 5:0.5 --jump 8:0.05:0.3:0:0
-
-    With ``--px4-sih N`` the rigid body is PX4 SITL instance N's simulated vehicle (SIH):
-    its ground truth, which PX4 streams on its display link (UDP 19410+N), is served as a
-    lab's Motive would, origin where the vehicle was first seen:
-
-        python -m gcs.mock.mocap --px4-sih 0
     \f
     Parameters
     ----------
@@ -181,8 +165,6 @@ def mocap_command(
         ``RADIUS:PERIOD`` of a circle, or None to hover.
     occlusion, dropout, freeze, jump : list of str or None
         Fault windows.
-    px4_sih : int or None
-        PX4 SITL instance whose SIH ground truth is served (instead of a scripted pose).
     """
     version = parse_version(natnet)
     faults = _faults(
@@ -193,11 +175,7 @@ def mocap_command(
             "jump": jump or [],
         }
     )
-    epoch_s = time.monotonic()  # server time 0, shared with the ground truth's receipt clock
-    sih = None
-    if px4_sih is not None:
-        truth = sih = SihTruth(sih_display_port(px4_sih), epoch_s=epoch_s).start()
-    elif circle is None:
+    if circle is None:
         truth = Hover()
     else:
         try:
@@ -205,24 +183,19 @@ def mocap_command(
         except ValueError:
             raise typer.BadParameter(f"--circle must be RADIUS:PERIOD, got {circle!r}") from None
         truth = Circle(radius_m=radius, period_s=period)
-    try:
-        serve(
-            truth,
-            body=body,
-            rate_hz=rate_hz,
-            version=version,
-            noise_mm=noise_mm,
-            seed=seed,
-            port=port,
-            room=room,
-            yaw_offset_deg=yaw_offset_deg,
-            latency_ms=latency_ms,
-            faults=faults,
-            epoch_s=epoch_s,
-        )
-    finally:
-        if sih is not None:
-            sih.close()
+    serve(
+        truth,
+        body=body,
+        rate_hz=rate_hz,
+        version=version,
+        noise_mm=noise_mm,
+        seed=seed,
+        port=port,
+        room=room,
+        yaw_offset_deg=yaw_offset_deg,
+        latency_ms=latency_ms,
+        faults=faults,
+    )
 
 
 def serve(
