@@ -1,8 +1,8 @@
 """The pre-flight frame check on real PX4 v1.16 firmware (SIH) in the lab rig, flight after flight.
 
 Each flight is a fresh PX4 set up for vision only (``tests/px4/test_px4_lab.py``'s
-``LAB_PARAMS``) and a fresh rig (``python -m gcs.mock.mocap --px4-sih N``: PX4's ground truth
-served as an OptiTrack rigid body), then ``gcs fly --mocap ... --iter 1`` with the lab test's
+``LAB_PARAMS``) and a fresh rig (``tests/px4/lab_rig.py``: PX4's ground truth served as an
+OptiTrack rigid body), then ``gcs fly --mocap ... --iter 1`` with the lab test's
 profile and trajectory: take-off, the frame check (``gcs.flight.mocap.checks.frame_check``),
 one short trial, landing. Flights with a correct mapping count the check's false aborts;
 flights with the rig's room rotated (``--yaw-offset-deg``: gcs maps the mocap 90 or 180
@@ -33,11 +33,10 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+from px4.lab_rig import LabRig  # noqa: E402
 from px4.sitl import STARTED_LINE, Px4Build, Px4Sitl, build_dir  # noqa: E402
 from px4.test_px4_lab import LAB_PARAMS  # noqa: E402
 from synthetic import CI_FLIGHT, SHORT  # noqa: E402
-
-from gcs.mock.mocap.process import MocapServerProcess  # noqa: E402
 
 FLY_TIMEOUT_S = 300
 
@@ -67,8 +66,7 @@ def fly(build: Px4Build, number: int, yaw_deg: float) -> dict:
         try:
             vehicle.start()
             (tmp / "tiny.yaml").write_text(yaml.safe_dump(SHORT))
-            rig_args = ["--px4-sih", str(vehicle.instance), "--yaw-offset-deg", str(yaw_deg)]
-            with MocapServerProcess(rig_args) as rig:
+            with LabRig(vehicle.instance, ["--yaw-offset-deg", str(yaw_deg)]) as rig:
                 proc = subprocess.run(
                     [sys.executable, "-m", "gcs", "fly", "--connect", vehicle.url,
                      "--mocap", rig.url, "--iter", "1", "--trajectory", str(tmp / "tiny.yaml"),

@@ -16,7 +16,6 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs.core.frames import FrameMapping, mapping_for, quat_angle_rad
 from gcs.errors import MocapError
@@ -36,7 +35,6 @@ from gcs.mock.mocap import natnet
 from gcs.mock.mocap.process import MocapServerProcess
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
 from gcs.mock.mocap.server import CLOCK_HZ, FaultWindow, NatNetServer
-from gcs.mock.mocap.sih import sih_display_port
 
 # a real NatNet server and reader in real time (rates, stale and jump timing): out of test-fast
 pytestmark = pytest.mark.live
@@ -366,65 +364,6 @@ def test_server_program_serves_the_pose_of_its_latency_before_and_stamps_it() ->
         assert np.linalg.norm(pos - circle(t_s)[0]) > 0.1  # 3.1 m/s: 12.6 cm in 40 ms
         assert (received - exposure) / CLOCK_HZ == pytest.approx(0.040, abs=1e-6)
         assert 0.040 <= (transmit - exposure) / CLOCK_HZ < 1.0
-
-
-def _free_udp(port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError:
-            return False
-    return True
-
-
-def test_server_program_serves_px4_sih_truth_as_it_was_its_latency_before() -> None:
-    """``--px4-sih N --latency-ms 40`` fed a synthetic SIH stream (25 Hz on N's display port, a
-    vehicle going north at 2 m/s, stamped with this machine's monotonic clock as it is sent):
-    each tracked frame shows the vehicle where it was at the frame's mid-exposure stamp, 40 ms
-    before the frame's instant. The receiver times states by their receipt, so the figure is
-    the median over the frames (a latency ignored would be 8 cm off)."""
-    instance = next(n for n in range(200, 300) if _free_udp(sih_display_port(n)))
-    speed, lat0, lon0, alt0 = 2.0, 47.397742, 8.545594, 488.0
-    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
-    stop = threading.Event()
-    t_first: list[float] = []
-
-    def stream() -> None:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
-            while not stop.is_set():
-                now = time.monotonic()
-                t_first[:1] = t_first[:1] or [now]
-                lat = lat0 + math.degrees(speed * (now - t_first[0]) / 6_378_137.0)
-                msg = mav.hil_state_quaternion_encode(
-                    0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, round(lat * 1e7),
-                    round(lon0 * 1e7), round(alt0 * 1e3), round(speed * 100), 0, 0, 0, 0, 0, 0, 0,
-                )  # fmt: skip
-                out.sendto(msg.pack(mav), ("127.0.0.1", sih_display_port(instance)))
-                stop.wait(0.04)
-
-    args = ["--px4-sih", str(instance), "--rate", "100", "--natnet", "3.1", "--noise-mm", "0"]
-    with MocapServerProcess([*args, "--latency-ms", "40"]) as mock:
-        sender = threading.Thread(target=stream, daemon=True)
-        sender.start()
-        try:
-            frames = natnet_frames(mock.url, 150)
-        finally:
-            stop.set()
-            sender.join(WAIT_S)
-    room = mapping_for("optitrack")
-    body = 4 + 4 + 4 + len(b"drone\0") + 4 + 5 * 12 + 4 + 4  # one marker set, one body
-    errors = []
-    for data in frames:
-        if struct.unpack_from("<i", data, 8)[0] == 0:  # no marker set: not tracked (yet)
-            continue
-        _, x, y, z, *_, params = struct.unpack_from("<i3f4ffh", data, body)
-        assert params & 1
-        _, exposure, received, _ = struct.unpack_from("<dQQQ", data, len(data) - 38)
-        assert (received - exposure) / CLOCK_HZ == pytest.approx(0.040, abs=1e-6)
-        north = room.position_to_ned(np.array([x, y, z]))[0]
-        errors.append(north - speed * (exposure / CLOCK_HZ - t_first[0]))
-    assert len(errors) >= 100
-    assert abs(float(np.median(errors))) < 0.03 and max(map(abs, errors)) < 0.3
 
 
 @pytest.mark.parametrize(

@@ -40,7 +40,7 @@ INTRO = """\
 The tests in `tests/px4/` fly real PX4 v1.16 firmware in software-in-the-loop (its built-in SIH
 quadrotor, EKF2 on GPS, the default airframe; the lab's tests: EKF2 on external vision only,
 the simulator's ground truth served by gcs's mock Motive over NatNet as a lab's OptiTrack
-would, `gcs.mock.mocap.sih`) with the real `gcs` command line, over MAVSDK on UDP loopback,
+would, `tests/px4/lab_rig.py`) with the real `gcs` command line, over MAVSDK on UDP loopback,
 like a user would. Each test starts its own PX4 (`tests/px4/sitl.py`): a
 fresh working directory, an instance number that no other PX4 and no bound port on the
 machine uses (so `pytest -n 2` flies two at once), parameters set at start-up

@@ -3,8 +3,8 @@ ground truth served as an OptiTrack rigid body by our mock Motive (the lab's rig
 flying with ``--mocap`` as a lab would (gcs forwards the mocap to PX4 as vision).
 
 The rig: PX4 SIH streams its true state as HIL_STATE_QUATERNION on its display link (UDP
-19410+N); ``python -m gcs.mock.mocap --px4-sih N`` (:mod:`gcs.mock.mocap.sih`) receives it and
-serves it over NatNet in Motive's axes, from a process of its own, under the lab's conditions
+19410+N); the rig (:mod:`px4.lab_rig`) receives it and serves it through gcs's mock Motive over
+NatNet in Motive's axes, from a process of its own, under the lab's conditions
 (:class:`LabConditions`: frame rate, latency, marker noise, the room's heading; by default
 120 Hz, no latency, 0.2 mm, 0 deg), PX4's EKF2_EV_DELAY set to the latency where a test says so.
 Every wait is on an event: gcs's own output lines, its exit, PX4's heartbeat and landed state.
@@ -28,8 +28,8 @@ import yaml
 from synthetic import CI_FLIGHT, SHORT
 
 from gcs.io.rundir import RunDir
-from gcs.mock.mocap.process import MocapServerProcess
 from px4.flying import remember
+from px4.lab_rig import LabRig
 from px4.sitl import ROOT, STARTED_LINE, Px4Sitl
 
 pytestmark = pytest.mark.px4
@@ -54,7 +54,7 @@ class LabConditions:
     Parameters
     ----------
     rate_hz : float
-        Frame rate [Hz] (the mock Motive's ``--rate``, 50-360).
+        Frame rate [Hz] (the rig's ``--rate``, 50-360).
     latency_ms : float
         Time from the vehicle's motion to the frame [ms] (``--latency-ms``, 0-50).
     noise_mm : float
@@ -73,12 +73,11 @@ class LabConditions:
     yaw_offset_deg: float = 0.0
     match_ev_delay: bool = False
 
-    def rig_args(self, instance: int) -> list[str]:
-        """The options of ``python -m gcs.mock.mocap`` serving PX4 instance ``instance``."""
+    def rig_args(self) -> list[str]:
+        """The rig's options (:func:`px4.lab_rig.rig_command`) for these conditions."""
         return [
-            "--px4-sih", str(instance), "--rate", f"{self.rate_hz:g}",
-            "--latency-ms", f"{self.latency_ms:g}", "--noise-mm", f"{self.noise_mm:g}",
-            "--yaw-offset-deg", f"{self.yaw_offset_deg:g}",
+            "--rate", f"{self.rate_hz:g}", "--latency-ms", f"{self.latency_ms:g}",
+            "--noise-mm", f"{self.noise_mm:g}", "--yaw-offset-deg", f"{self.yaw_offset_deg:g}",
         ]  # fmt: skip
 
     def px4_params(self, **overrides: float) -> dict[str, float]:
@@ -90,15 +89,12 @@ class LabConditions:
 
 
 @contextlib.contextmanager
-def lab_rig(
-    vehicle: Px4Sitl, conditions: LabConditions | None = None
-) -> Iterator[MocapServerProcess]:
-    """The lab's OptiTrack around ``vehicle``: ``python -m gcs.mock.mocap --px4-sih N``, its
-    SIH ground truth served over NatNet under ``conditions`` (default :class:`LabConditions`)
-    from a process of its own, as Motive runs on its own PC."""
+def lab_rig(vehicle: Px4Sitl, conditions: LabConditions | None = None) -> Iterator[LabRig]:
+    """The lab's OptiTrack around ``vehicle``: the rig (:class:`px4.lab_rig.LabRig`), its SIH
+    ground truth served over NatNet under ``conditions`` (default :class:`LabConditions`) from
+    a process of its own, as Motive runs on its own PC."""
     assert vehicle.instance is not None
-    args = (conditions or LabConditions()).rig_args(vehicle.instance)
-    with MocapServerProcess(args) as rig:
+    with LabRig(vehicle.instance, (conditions or LabConditions()).rig_args()) as rig:
         yield rig
 
 

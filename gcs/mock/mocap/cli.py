@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import signal
 import sys
-import time
 from typing import Annotated
 
 import typer
@@ -13,10 +12,9 @@ import typer
 from gcs.core.frames import SYSTEM_FRAMES, mapping_for
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
-from gcs.mock.mocap.server import FaultWindow, NatNetServer, parse_fault_window
-from gcs.mock.mocap.sih import SihTruth, sih_display_port
+from gcs.mock.mocap.server import FaultWindow, NatNetServer, PoseFn, parse_fault_window
 
-__all__ = ["mocap_command", "parse_window", "parse_version"]
+__all__ = ["mocap_command", "parse_window", "parse_version", "serve"]
 
 
 def parse_window(kind: str, text: str) -> FaultWindow:
@@ -113,14 +111,6 @@ def mocap_command(
         list[str] | None,
         typer.Option("--jump", help="START:DURATION:DX:DY:DZ, s and m (mocap axes)."),
     ] = None,
-    px4_sih: Annotated[
-        int | None,
-        typer.Option(
-            "--px4-sih",
-            min=0,
-            help="Serve PX4 SITL instance N's SIH ground truth (its display link) instead.",
-        ),
-    ] = None,
 ) -> None:
     """Run a mock OptiTrack Motive streaming one rigid body over NatNet.
 
@@ -150,12 +140,6 @@ def mocap_command(
         python -m gcs.mock.mocap --rate 240 --circle 1:6
 
         python -m gcs.mock.mocap --occlusion 5:0.5 --jump 8:0.05:0.3:0:0
-
-    With ``--px4-sih N`` the rigid body is PX4 SITL instance N's simulated vehicle (SIH):
-    its ground truth, which PX4 streams on its display link (UDP 19410+N), is served as a
-    lab's Motive would, origin where the vehicle was first seen:
-
-        python -m gcs.mock.mocap --px4-sih 0
     \f
     Parameters
     ----------
@@ -181,8 +165,6 @@ def mocap_command(
         ``RADIUS:PERIOD`` of a circle, or None to hover.
     occlusion, dropout, freeze, jump : list of str or None
         Fault windows.
-    px4_sih : int or None
-        PX4 SITL instance whose SIH ground truth is served (instead of a scripted pose).
     """
     version = parse_version(natnet)
     faults = _faults(
@@ -193,11 +175,7 @@ def mocap_command(
             "jump": jump or [],
         }
     )
-    epoch_s = time.monotonic()  # server time 0, shared with the ground truth's receipt clock
-    sih = None
-    if px4_sih is not None:
-        truth = sih = SihTruth(sih_display_port(px4_sih), epoch_s=epoch_s).start()
-    elif circle is None:
+    if circle is None:
         truth = Hover()
     else:
         try:
@@ -205,8 +183,73 @@ def mocap_command(
         except ValueError:
             raise typer.BadParameter(f"--circle must be RADIUS:PERIOD, got {circle!r}") from None
         truth = Circle(radius_m=radius, period_s=period)
+    serve(
+        truth,
+        body=body,
+        rate_hz=rate_hz,
+        version=version,
+        noise_mm=noise_mm,
+        seed=seed,
+        port=port,
+        room=room,
+        yaw_offset_deg=yaw_offset_deg,
+        latency_ms=latency_ms,
+        faults=faults,
+    )
+
+
+def serve(
+    pose_ned: PoseFn,
+    *,
+    body: str = "drone",
+    rate_hz: float = 120.0,
+    version: tuple[int, int] = (4, 1),
+    noise_mm: float = 0.2,
+    seed: int = 0,
+    port: int = 0,
+    room: str = "optitrack",
+    yaw_offset_deg: float = 0.0,
+    latency_ms: float = 0.0,
+    faults: tuple[FaultWindow, ...] = (),
+    epoch_s: float | None = None,
+) -> None:
+    """Serve a NED truth as the mock Motive until SIGTERM or Ctrl-C: the body of
+    :func:`mocap_command`, for any pose function of time.
+
+    Prints ``READY <url>`` on stdout once it serves, a line on stderr saying where, and its
+    counters (JSON) on stderr when it stops.
+
+    Parameters
+    ----------
+    pose_ned : callable
+        ``pose_ned(t_s) -> (pos_m, quat_wxyz)`` in NED at server time ``t_s``, or None (out
+        of view); seen through the room's axes (:func:`gcs.mock.mocap.scripted.in_room`).
+    body : str
+        Rigid body name.
+    rate_hz : float
+        Frame rate [Hz].
+    version : tuple of int
+        NatNet version (:func:`parse_version`).
+    noise_mm : float
+        Marker noise [mm].
+    seed : int
+        Seed of the noise.
+    port : int
+        Command port (0 = any free port).
+    room : str
+        Named convention of the room's axes.
+    yaw_offset_deg : float
+        Heading of the room's north axis [deg].
+    latency_ms : float
+        Time from the body's motion to the frame [ms].
+    faults : tuple of FaultWindow
+        Fault windows, in seconds from the start.
+    epoch_s : float or None
+        ``time.monotonic()`` at server time 0 (a pose function on the monotonic clock shares
+        it); None: when the server is created.
+    """
     server = NatNetServer(
-        in_room(truth, mapping_for(room, yaw_offset_deg=yaw_offset_deg)),
+        in_room(pose_ned, mapping_for(room, yaw_offset_deg=yaw_offset_deg)),
         body_name=body,
         rate_hz=rate_hz,
         version=version,
@@ -221,8 +264,8 @@ def mocap_command(
         signal.signal(sig, lambda *_: server.stop())
     print(f"READY {server.url}", flush=True)
     print(
-        f"mock Motive (NatNet {natnet}) on 127.0.0.1:{server.command_port}, frames to "
-        f"{server.multicast_group}:{server.data_port} on loopback; Ctrl-C to stop",
+        f"mock Motive (NatNet {version[0]}.{version[1]}) on 127.0.0.1:{server.command_port}, "
+        f"frames to {server.multicast_group}:{server.data_port} on loopback; Ctrl-C to stop",
         file=sys.stderr,
         flush=True,
     )
@@ -230,6 +273,4 @@ def mocap_command(
         server.serve()
     finally:
         server.close()
-        if sih is not None:
-            sih.close()
         print(json.dumps(server.stats()), file=sys.stderr, flush=True)

@@ -22,9 +22,9 @@ datagram byte for byte, a jump offsets the solved position.
 
 Latency (``latency_s``): the time from the body's motion to the frame. The frame due at server
 time ``t`` carries the pose ``pose_fn(t - latency_s)``: the body as it was, not extrapolated to
-now (a scripted trajectory at that time; PX4's ground truth interpolated between the states
-around it, :mod:`gcs.mock.mocap.sih`). A pose function that only knows the present (the mock
-drone's arena) must be served without latency.
+now (a scripted trajectory at that time; a truth received from elsewhere, such as a
+simulator's ground truth, as it was then, from the states it keeps). A pose function that only
+knows the present (the mock drone's arena) must be served without latency.
 
 Time stamps: the frame's ``timestamp`` counts frames over the rate since the first frame (as
 Motive's does); the high-resolution stamps are this machine's monotonic clock in ticks of
@@ -312,8 +312,8 @@ class NatNetServer:
         ``latency_s`` before its instant, and its mid-exposure stamp says so.
     epoch_s : float or None
         ``time.monotonic()`` at server time 0; None: when the server is created. A pose
-        function on the monotonic clock (:class:`gcs.mock.mocap.sih.SihTruth`) is given the
-        same epoch.
+        function on the monotonic clock (a truth timed by when its states arrived) is given
+        the same epoch.
 
     Attributes
     ----------

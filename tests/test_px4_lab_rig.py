@@ -1,22 +1,39 @@
-"""The lab rig's receiver: PX4 SIH's HIL_STATE_QUATERNION over UDP to a NED pose, served as it
-was at the time asked (interpolated between the states around it, carried forward past the
-newest), and through the mock Motive with a latency."""
+"""The real-firmware tests' lab rig (tests/px4/lab_rig.py): PX4 SIH's HIL_STATE_QUATERNION over
+UDP to a NED pose, served as it was at the time asked (interpolated between the states around
+it, carried forward past the newest), through the mock Motive with a latency, and as a program
+with the mock Motive's options.
+
+Here in tests/ rather than beside the rig: they need no PX4 build (a synthetic SIH stream on
+loopback), and tests/px4/ is collected only when one is there."""
 
 from __future__ import annotations
 
 import contextlib
 import math
 import socket
+import struct
+import threading
 import time
 from collections.abc import Iterator
 
 import numpy as np
 import pytest
+import typer
+from px4.lab_rig import (
+    SIH_DISPLAY_PORT,
+    LabRig,
+    SihTruth,
+    rig_command,
+    sih_display_port,
+    state_time,
+)
 from pymavlink.dialects.v20 import common as mavlink2
+from test_mocap_live import WAIT_S, natnet_frames
 
-from gcs.core.frames import quat_angle_rad
+from gcs.core.frames import mapping_for, quat_angle_rad
+from gcs.errors import MocapError
+from gcs.mock.mocap.cli import mocap_command
 from gcs.mock.mocap.server import CLOCK_HZ, NatNetServer
-from gcs.mock.mocap.sih import SIH_DISPLAY_PORT, SihTruth, sih_display_port, state_time
 
 LAT0, LON0, ALT0 = 47.397742, 8.545594, 488.0
 R = 6_378_137.0
@@ -218,3 +235,103 @@ def test_a_state_that_arrives_late_is_dated_near_when_it_was_made() -> None:
     assert all(b > a for a, b in zip(dated, dated[1:], strict=False))
     assert state_time(dated[-1], dated[-1] + period + 0.5, period) == dated[-1] + period + 0.5
     assert state_time(None, 3.0, period) == 3.0 and state_time(1.0, 3.0, None) == 3.0
+
+
+def _free_udp(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+@pytest.mark.live  # a real rig process and NatNet in real time
+def test_the_rig_serves_the_truth_as_it_was_its_latency_before() -> None:
+    """The rig's program, ``N --latency-ms 40``, fed a synthetic SIH stream (25 Hz on N's
+    display port, a vehicle going north at 2 m/s, stamped with this machine's monotonic clock
+    as it is sent): each tracked frame shows the vehicle where it was at the frame's
+    mid-exposure stamp, 40 ms before the frame's instant. The receiver times states by their
+    receipt, so the figure is the median over the frames (a latency ignored would be 8 cm
+    off)."""
+    instance = next(n for n in range(200, 300) if _free_udp(sih_display_port(n)))
+    speed, lat0, lon0, alt0 = 2.0, 47.397742, 8.545594, 488.0
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    stop = threading.Event()
+    t_first: list[float] = []
+
+    def stream() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+            while not stop.is_set():
+                now = time.monotonic()
+                t_first[:1] = t_first[:1] or [now]
+                lat = lat0 + math.degrees(speed * (now - t_first[0]) / 6_378_137.0)
+                msg = mav.hil_state_quaternion_encode(
+                    0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, round(lat * 1e7),
+                    round(lon0 * 1e7), round(alt0 * 1e3), round(speed * 100), 0, 0, 0, 0, 0, 0, 0,
+                )  # fmt: skip
+                out.sendto(msg.pack(mav), ("127.0.0.1", sih_display_port(instance)))
+                stop.wait(0.04)
+
+    args = ["--rate", "100", "--natnet", "3.1", "--noise-mm", "0", "--latency-ms", "40"]
+    with LabRig(instance, args) as mock:
+        sender = threading.Thread(target=stream, daemon=True)
+        sender.start()
+        try:
+            frames = natnet_frames(mock.url, 150)
+        finally:
+            stop.set()
+            sender.join(WAIT_S)
+    room = mapping_for("optitrack")
+    body = 4 + 4 + 4 + len(b"drone\0") + 4 + 5 * 12 + 4 + 4  # one marker set, one body
+    errors = []
+    for data in frames:
+        if struct.unpack_from("<i", data, 8)[0] == 0:  # no marker set: not tracked (yet)
+            continue
+        _, x, y, z, *_, params = struct.unpack_from("<i3f4ffh", data, body)
+        assert params & 1
+        _, exposure, received, _ = struct.unpack_from("<dQQQ", data, len(data) - 38)
+        assert (received - exposure) / CLOCK_HZ == pytest.approx(0.040, abs=1e-6)
+        north = room.position_to_ned(np.array([x, y, z]))[0]
+        errors.append(north - speed * (exposure / CLOCK_HZ - t_first[0]))
+    assert len(errors) >= 100
+    assert abs(float(np.median(errors))) < 0.03 and max(map(abs, errors)) < 0.3
+
+
+def _options(command) -> dict[str, dict]:
+    """Each parameter of a command as typer parses it: flags, type, range, default."""
+    app = typer.Typer(add_completion=False)
+    app.command()(command)
+    return {
+        p.name: {
+            "opts": p.opts,
+            "argument": isinstance(p, typer.core.TyperArgument),
+            "type": p.type_descriptor.annotation,
+            "min": p.min,
+            "max": p.max,
+            "default": p.default,
+            "required": p.required,
+            "multiple": p.multiple,
+        }
+        for p in typer.main.get_command(app).params
+    }
+
+
+def test_the_rig_takes_the_mock_motives_options_as_they_are() -> None:
+    """Every option of the rig is the mock Motive's (``python -m gcs.mock.mocap``): same flag,
+    type, range and default; the rig adds only the PX4 instance."""
+    rig, motive = _options(rig_command), _options(mocap_command)
+    instance = rig.pop("instance")
+    assert instance["argument"] and instance["required"] and instance["min"] == 0
+    assert set(rig) == {
+        "body", "rate_hz", "natnet", "noise_mm", "seed", "port", "room", "yaw_offset_deg",
+        "latency_ms",
+    }  # fmt: skip
+    for name, option in rig.items():
+        assert option == motive[name], name
+
+
+@pytest.mark.live  # starts the rig's process
+def test_the_rig_refuses_a_bad_option_before_it_serves() -> None:
+    with pytest.raises(MocapError, match="--latency-ms"):
+        LabRig(0, ["--latency-ms", "51"]).__enter__()

@@ -1,4 +1,13 @@
-"""A lab's motion capture around PX4's SIH simulator: its ground truth served over NatNet.
+"""The motion-capture lab of the real-firmware tests: PX4 SIH's ground truth served over NatNet
+as a lab's OptiTrack Motive would (the lab's rig).
+
+The rig is a program of its own, as Motive runs on a PC of its own: :class:`LabRig` starts it
+and gives its URL; from the checkout it runs as ``PYTHONPATH=tests python -m px4.lab_rig N
+[options]``. It serves PX4 SITL instance ``N``'s ground truth (:class:`SihTruth`) through gcs's
+mock Motive (:func:`gcs.mock.mocap.cli.serve`: one ``READY <url>`` line on stdout, its
+counters on stderr when SIGTERM or Ctrl-C stops it), with the mock Motive's own options for
+the frame rate, NatNet version, marker noise and seed, command port, the room's axes and
+heading, latency and body name (:func:`rig_command`).
 
 PX4 SITL with the built-in SIH physics streams the simulated vehicle's true state as MAVLink
 ``HIL_STATE_QUATERNION`` (25 Hz) on its display link: PX4 instance ``N`` sends it to UDP port
@@ -36,19 +45,32 @@ from __future__ import annotations
 
 import math
 import socket
+import sys
 import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Annotated
 
 import numpy as np
+import typer
 from pymavlink.dialects.v20 import common as mavlink2
+
+from gcs.core.frames import SYSTEM_FRAMES
+from gcs.errors import MocapError
+from gcs.mock.child import ChildNotReady, ChildProgram
+from gcs.mock.mocap.cli import parse_version, serve
 
 __all__ = [
     "SIH_DISPLAY_PORT",
+    "LabRig",
     "SihState",
     "SihTruth",
+    "main",
     "pose_between",
+    "rig_command",
     "sih_display_port",
     "state_time",
 ]
@@ -376,3 +398,160 @@ class SihTruth:
             Position (3,) [m, NED] and attitude ``w, x, y, z`` (4,), or None (out of view).
         """
         return self.pose_at(self.epoch_s + t_s)
+
+
+def rig_command(
+    instance: Annotated[
+        int, typer.Argument(min=0, help="PX4 SITL instance whose SIH ground truth is served.")
+    ],
+    body: Annotated[str, typer.Option("--body", help="Rigid body name.")] = "drone",
+    rate_hz: Annotated[
+        float, typer.Option("--rate", min=50.0, max=360.0, help="Frame rate, Hz.")
+    ] = 120.0,
+    natnet: Annotated[
+        str, typer.Option("--natnet", help="NatNet version: 3.0 3.1 4.0 4.1.")
+    ] = "4.1",
+    noise_mm: Annotated[
+        float, typer.Option("--noise-mm", min=0.0, help="Marker noise, mm (1 sigma per axis).")
+    ] = 0.2,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the marker noise.")] = 0,
+    port: Annotated[
+        int, typer.Option("--port", min=0, max=65535, help="Command port on 127.0.0.1; 0 = free.")
+    ] = 0,
+    room: Annotated[
+        str, typer.Option("--room", help=f"Axes of the mocap: {', '.join(SYSTEM_FRAMES)}.")
+    ] = "optitrack",
+    yaw_offset_deg: Annotated[
+        float, typer.Option("--yaw-offset-deg", help="Heading of the room's north axis, deg.")
+    ] = 0.0,
+    latency_ms: Annotated[
+        float,
+        typer.Option(
+            "--latency-ms", min=0.0, max=50.0, help="Time from the body's motion to the frame, ms."
+        ),
+    ] = 0.0,
+) -> None:
+    """Serve PX4 SITL instance N's SIH ground truth as a lab's OptiTrack Motive would.
+
+    The truth PX4 streams on its display link (UDP 19410+N) is served over NatNet by gcs's
+    mock Motive, origin where the vehicle was first seen; the options are the mock Motive's
+    (``python -m gcs.mock.mocap --help``). Example, from the checkout:
+
+        PYTHONPATH=tests python -m px4.lab_rig 0 --latency-ms 20
+    \f
+    Parameters
+    ----------
+    instance : int
+        PX4's ``-i`` instance number.
+    body : str
+        Rigid body name.
+    rate_hz : float
+        Frame rate [Hz].
+    natnet : str
+        NatNet version.
+    noise_mm : float
+        Marker noise [mm].
+    seed : int
+        Seed of the noise.
+    port : int
+        Command port (0 = any free port).
+    room : str
+        Named convention of the room's axes.
+    yaw_offset_deg : float
+        Heading of the room's north axis [deg].
+    latency_ms : float
+        Time from the body's motion to the frame [ms].
+    """
+    version = parse_version(natnet)
+    epoch_s = time.monotonic()  # server time 0, shared with the ground truth's receipt clock
+    with SihTruth(sih_display_port(instance), epoch_s=epoch_s) as truth:
+        serve(
+            truth,
+            body=body,
+            rate_hz=rate_hz,
+            version=version,
+            noise_mm=noise_mm,
+            seed=seed,
+            port=port,
+            room=room,
+            yaw_offset_deg=yaw_offset_deg,
+            latency_ms=latency_ms,
+            epoch_s=epoch_s,
+        )
+
+
+def main() -> None:
+    """Run :func:`rig_command` as a program (its arguments from ``sys.argv``)."""
+    app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
+    app.command()(rig_command)
+    app(prog_name="px4.lab_rig")
+
+
+#: tests/ and the checkout: the rig's process imports this checkout's gcs and the px4 package.
+_TESTS = Path(__file__).resolve().parents[1]
+_PATH = [str(_TESTS.parent), str(_TESTS)]
+#: The rig's process: the two paths first on ``sys.path`` (taken from ``argv``), then :func:`main`.
+_RUN = (
+    "import sys; sys.path[:0] = sys.argv[1:3]; del sys.argv[1:3]; "
+    "import px4.lab_rig as rig; rig.main()"
+)
+
+
+class LabRig:
+    """The rig as a process of its own: ``with LabRig(n, ["--rate", "240"]) as rig: rig.url``.
+
+    On entry it starts the program (:class:`gcs.mock.child.ChildProgram`: its own session, its
+    ``READY <url>`` line awaited) and exposes :attr:`url`; on exit it sends SIGTERM, waits,
+    and kills as a fallback.
+
+    Parameters
+    ----------
+    instance : int
+        PX4 SITL instance whose ground truth is served.
+    args : list of str
+        Options of the rig (:func:`rig_command`: ``--rate``, ``--latency-ms``...).
+    ready_timeout_s : float
+        How long to wait for the READY line [s].
+
+    Attributes
+    ----------
+    url : str
+        The mocap URL (``optitrack://127.0.0.1:<port>/<body>?interface=127.0.0.1``).
+    pid : int
+        Process id.
+    stderr_text : str
+        What the program wrote on stderr (its counters as JSON last), read on exit.
+    """
+
+    def __init__(
+        self, instance: int, args: list[str] | None = None, ready_timeout_s: float = 20.0
+    ) -> None:
+        self.instance = instance
+        self.args = list(args or [])
+        self.url = ""
+        self.pid = 0
+        self.stderr_text = ""
+        argv = [sys.executable, "-c", _RUN, *_PATH, str(instance), *self.args]
+        self._child = ChildProgram(argv, ready_timeout_s)
+
+    def __enter__(self) -> LabRig:
+        try:
+            self.url = self._child.start()
+        except ChildNotReady as exc:
+            self.stderr_text = self._child.stderr_text
+            raise MocapError(f"lab rig did not start: {exc}") from None
+        self.pid = self._child.pid
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self._child.stop()
+        self.stderr_text = self._child.stderr_text
+
+
+if __name__ == "__main__":
+    main()
