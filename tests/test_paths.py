@@ -14,6 +14,7 @@ from synthetic import ROOT
 
 from gcs.errors import PathError
 from gcs.io.paths import (
+    RUN_FILE,
     check_new_dir,
     check_output_dir,
     check_output_file,
@@ -22,6 +23,7 @@ from gcs.io.paths import (
     packaged_names,
     resolve_named,
 )
+from gcs.io.rundir import RunDir
 
 
 @contextmanager
@@ -102,6 +104,23 @@ def test_output_file_checks(tmp_path: Path) -> None:
             check_output_file(tmp_path / "run" / name, "--html")
     assert check_output_file(tmp_path / "run" / "report.html", "--html")
     assert list(tmp_path.rglob(".gcs-probe-*")) == []  # the probes are gone
+
+
+def test_output_checks_refuse_the_run_files_by_the_names_the_run_gives_them(
+    tmp_path: Path,
+) -> None:
+    run = RunDir(tmp_path / "run", {})  # only its names are asked for
+    for path in (
+        run.manifest_path,
+        run.reference_path,
+        run.identified_path,
+        run.setpoints_path(1),
+        run.trial_path(3),
+        run.status_path(3),
+        run.estimate_path(2),
+        run.session_path(2),
+    ):
+        assert RUN_FILE.match(path.name), path.name
 
 
 def test_output_dir_and_new_dir_checks(tmp_path: Path) -> None:

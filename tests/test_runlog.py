@@ -88,6 +88,44 @@ def test_create_writes_manifest_reference_and_first_setpoints(tmp_path):
     assert tmp_files(tmp_path) == []
 
 
+def test_the_run_names_its_own_files_as_docs_formats_lists_them(tmp_path):
+    run = new_run(tmp_path)
+    names = {
+        run.manifest_path: "manifest.json",
+        run.reference_path: "reference.csv",
+        run.floor_path: "floor.json",
+        run.identified_path: "identified.yaml",
+        run.setpoints_path(7): "setpoints-007.csv",
+        run.trial_path(7): "trial-007.csv",
+        run.status_path(7): "trial-007.json",
+        run.mocap_path(7): "mocap-007.csv",
+        run.estimate_path(7): "estimate-007.csv",
+        run.learn_path(7): "learn-007.json",
+        run.model_path(7): "model-007.yaml",
+        run.again_path(7): "again-007.json",
+        run.session_path(2): "session-002.json",
+    }
+    assert list(names) == [run.path / name for name in names.values()]
+    assert sorted(p.name for p in run.path.iterdir()) == [
+        "manifest.json",
+        "reference.csv",
+        "setpoints-000.csv",
+    ]
+    docs = (Path(__file__).resolve().parent.parent / "docs" / "formats.md").read_text()
+    for name in [*names.values(), f"{RunDir.ABORTED_DIR}/", f"{RunDir.SUPERSEDED_DIR}/"]:
+        documented = re.sub(r"-\d{3}\.", "-JJJ.", name.replace("session-002", "session-SSS"))
+        assert documented in docs, name
+
+
+def test_csv_trials_count_a_csv_without_its_sidecar(tmp_path):
+    run = new_run(tmp_path)
+    run.write_trial(0, record_for(run), complete(0))
+    run.trial_path(2).write_text("k,t_s\n")  # a CSV whose sidecar was never written
+    assert run.csv_trials() == [0, 2]
+    assert [s.trial for s in run.statuses()] == [0]
+    assert run.again_trials() == [] and run.aborted_attempts() == {}
+
+
 def test_open_round_trip(tmp_path):
     run = new_run(tmp_path, "kilc")
     again = RunDir.open(run.path)

@@ -203,9 +203,9 @@ def plan_fly(request: FlyRequest) -> FlyPlan:
         raise RunLogError("--again flies an earlier trial of a run again: give it with --resume")
     if resume is not None:
         plan = _plan_resume(resume, profile_path, trajectory_path, algorithm, logs, again)
+        where = f"{plan.run.manifest_path}:profile" if plan.run else str(resume)
         if until_converged:
-            check_until_converged(plan.profile, f"{resume}/manifest.json:profile")
-        where = f"{plan.run.path}/manifest.json:profile" if plan.run else str(resume)
+            check_until_converged(plan.profile, where)
         return replace(plan, mocap=plan_mocap(plan.profile, where, mocap, use_mock))
     if profile_path is None or trajectory_path is None:
         raise ProfileError("a new run needs a profile and a trajectory")
@@ -371,13 +371,13 @@ def _plan_resume(
     try:
         check_within_limits(ref, profile)
     except TrajectoryError as exc:
-        raise RunLogError(f"{run.path}/reference.csv: {exc}") from None
+        raise RunLogError(f"{run.reference_path}: {exc}") from None
     first = run.next_trial()
     if again is not None:
         check_again(run, profile, first, again)
     elif first > 0:
         run.read_trial(first - 1)  # the trial the next setpoints were learned from
-        if not (run.path / f"setpoints-{first:03d}.csv").exists():
+        if not run.setpoints_path(first).exists():
             raise RunLogError(
                 f"{run.path}: no setpoints for trial {first}; run 'gcs learn {run.path}' first"
             )
@@ -729,7 +729,7 @@ def newest_record(run: RunDir) -> dict | None:
     dict or None
     """
     j = run.newest_complete()
-    if j is None or not (run.path / f"learn-{j:03d}.json").exists():
+    if j is None or not run.learn_path(j).exists():
         return None
     return run.read_learn_record(j)
 
@@ -806,7 +806,7 @@ def fly_run(
         The mock drone's seed, recorded in the session (None on a real vehicle).
     """
     first = run.next_trial()
-    if first > 0 and not (run.path / f"setpoints-{first:03d}.csv").exists():
+    if first > 0 and not run.setpoints_path(first).exists():
         raise RunLogError(f"{run.path}: no setpoints for trial {first}; run 'gcs learn' first")
     callbacks = {"row": on_row or _ignore, "learn": on_learn or _ignore}
     fence = flight_fence(run.profile(), settings)

@@ -513,7 +513,7 @@ def _run_source(run: RunDir) -> dict:
         )
     for key in ("axes", "center_ned_m"):
         if key not in source:
-            raise RunLogError(f"{run.path}/manifest.json: field 'trajectory.{key}' is missing")
+            raise RunLogError(f"{run.manifest_path}: field 'trajectory.{key}' is missing")
     return source
 
 
@@ -545,7 +545,7 @@ def run_axes(run: RunDir, axis: str | None = None) -> tuple[str, ...]:
 
 def _trial(run: RunDir, j: int, what: str) -> TrialRecord:
     """Experiment j as identification measures it (``mocap.measurement`` of the run)."""
-    if not (run.path / f"trial-{j:03d}.json").exists():
+    if not run.status_path(j).exists():
         raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
     return run.measured_trial(j)
 

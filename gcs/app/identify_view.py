@@ -35,8 +35,6 @@ from gcs.io.settings import IdentifySettings
 
 __all__ = ["results_table", "model_lines", "identify_with_display", "excitation_lines"]
 
-OUT_NAME = "identified.yaml"
-
 
 def _poly(c: np.ndarray) -> str:
     n = len(c) - 1
@@ -154,13 +152,13 @@ def identify_with_display(
         run.require_kind("identification", "gcs identify --from-log")
         if profile_path is None:
             profile: Profile = run.profile()
-            where = f"{run.path}/manifest.json:profile"
+            where = f"{run.manifest_path}:profile"
         else:
             profile, where = load_profile(profile_path), str(profile_path)
         settings = profile.identification
         run_axes(run, axis)
         for j, what in ((0, "fitting"), (1, "validation")):
-            if not (run.path / f"trial-{j:03d}.json").exists():
+            if not run.status_path(j).exists():
                 raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
             run.read_trial(j)
         _check_target(out, run.path)
@@ -235,7 +233,7 @@ def identify_with_display(
     console.print(results_table(results, profile.name))
     for line in model_lines(results):
         console.print(line, highlight=False)
-    target = Path(out) if out is not None else run.path / OUT_NAME
+    target = Path(out) if out is not None else run.identified_path
     text = identified_profile_text(
         profile, results, str(run.path), str(target), run.manifest.get("created_utc")
     )
@@ -264,8 +262,10 @@ def _check_target(out: Path | None, run_path: Path | None) -> None:
             RunDir.open(run_path).check_writable()
         return
     if run_path is not None and _in_run(out, run_path):
-        if out.name != OUT_NAME:
-            raise PathError(f"--out {out}: inside the run directory only {OUT_NAME} is written")
+        if out.name != RunDir.IDENTIFIED_FILE:
+            raise PathError(
+                f"--out {out}: inside the run directory only {RunDir.IDENTIFIED_FILE} is written"
+            )
         RunDir.open(run_path).check_writable()
         return
     check_output_file(out, "--out")

@@ -117,7 +117,7 @@ def _check_profile(run: RunDir, profile_path: Path | None) -> Profile:
         key = differing_field(given.source, run.manifest["profile"])
         if key is not None:
             raise RunLogError(
-                f"{profile_path}: does not match the profile in {run.path}/manifest.json "
+                f"{profile_path}: does not match the profile in {run.manifest_path} "
                 f"(field '{key}' differs)"
             )
     return profile
@@ -242,9 +242,9 @@ def learn_run(
     record = run.measured_trial(j, profile.mocap.measurement)
     ref = run.reference()
     if np.max(np.abs(record.ref_ned_m - ref.pos_ned_m)) > 1e-6:
-        raise RunLogError(f"{run.path}/trial-{j:03d}.csv: reference columns differ from the run's")
+        raise RunLogError(f"{run.trial_path(j)}: reference columns differ from the run's")
     kilc_prior = _kilc_prior(run, j) if run.algorithm == "kilc" else None
-    where = f"{run.path}/trial-{j:03d}.csv: the learning update failed on this trial"
+    where = f"{run.trial_path(j)}: the learning update failed on this trial"
     with _failure(where):
         settings = learner_settings(profile, run.algorithm)
         axes = settings.axes
@@ -299,15 +299,13 @@ def _history(run: RunDir, j: int, measurement: str) -> list[TrialRecord]:
     if missing:
         raise RunLogError(
             f"{run.path}: trial {missing[0]} is not complete, but learning with history needs "
-            f"every trial 0..{j} (trial-{missing[0]:03d}.json)"
+            f"every trial 0..{j} ({run.status_path(missing[0]).name})"
         )
     ref = run.reference().pos_ned_m
     records = [run.measured_trial(t, measurement) for t in range(j + 1)]
     for t, record in enumerate(records):
         if np.max(np.abs(record.ref_ned_m - ref)) > 1e-6:
-            raise RunLogError(
-                f"{run.path}/trial-{t:03d}.csv: reference columns differ from the run's"
-            )
+            raise RunLogError(f"{run.trial_path(t)}: reference columns differ from the run's")
     return records
 
 
@@ -447,7 +445,7 @@ def _refreshed_profile(
     ordered.update({k: v for k, v in data.items() if k not in ordered})
     header = (
         f"# Written by gcs learn: the models refreshed from trials 0..{j} of this run (the\n"
-        f"# decisions are in learn-{j:03d}.json). model / model_y: discrete state spaces at\n"
+        f"# decisions are in {run.learn_path(j).name}). model / model_y: discrete state spaces at\n"
         f"# t_ilc_s = {profile.t_ilc_s:g} s. Everything else is the run's profile. Fly it with\n"
         "# gcs fly --profile <this file>.\n"
     )

@@ -209,11 +209,7 @@ def trial_overview(run: RunDir) -> list[TrialEntry]:
         By index; a gap is ``"missing"``, a CSV without its sidecar ``"incomplete"``.
     """
     statuses = {s.trial: s for s in run.statuses()}
-    csv_only = {
-        int(p.stem.split("-")[1])
-        for p in run.path.glob("trial-[0-9][0-9][0-9].csv")
-        if int(p.stem.split("-")[1]) not in statuses
-    }
+    csv_only = {j for j in run.csv_trials() if j not in statuses}
     last = max([*statuses, *csv_only], default=-1)
     out = []
     for j in range(last + 1):
@@ -221,9 +217,10 @@ def trial_overview(run: RunDir) -> list[TrialEntry]:
             s = statuses[j]
             out.append(TrialEntry(j, "complete" if s.complete else "incomplete", s.reason))
         elif j in csv_only:
-            out.append(TrialEntry(j, "incomplete", f"trial-{j:03d}.csv without its .json"))
+            reason = f"{run.trial_path(j).name} without its .json"
+            out.append(TrialEntry(j, "incomplete", reason))
         else:
-            out.append(TrialEntry(j, "missing", f"no trial-{j:03d}.json"))
+            out.append(TrialEntry(j, "missing", f"no {run.status_path(j).name}"))
     return out
 
 
@@ -240,11 +237,7 @@ def aborted_attempts(run: RunDir) -> dict[int, int]:
     dict of int to int
         Number of attempts by trial index.
     """
-    counts: dict[int, int] = {}
-    for p in (run.path / "aborted").glob("trial-[0-9][0-9][0-9]-attempt-*.json"):
-        j = int(p.name.split("-")[1])
-        counts[j] = counts.get(j, 0) + 1
-    return counts
+    return run.aborted_attempts()
 
 
 def flown_again(run: RunDir) -> dict[int, int]:
@@ -261,8 +254,7 @@ def flown_again(run: RunDir) -> dict[int, int]:
         The earlier trial by trial index.
     """
     out = {}
-    for p in sorted(run.path.glob("again-[0-9][0-9][0-9].json")):
-        j = int(p.stem.split("-")[1])
+    for j in run.again_trials():
         k = run.again_of(j)
         if k is not None:
             out[j] = k
@@ -312,7 +304,7 @@ def run_metrics(run: RunDir, measurement: str | None = None) -> list[IterationMe
     """
     records = complete_records(run, measurement)
     if 0 not in records:
-        what = "incomplete" if (run.path / "trial-000.json").exists() else "missing"
+        what = "incomplete" if run.status_path(0).exists() else "missing"
         raise RunLogError(
             f"{run.path}: trial 0 is {what}; e_pos,j / e_pos,0 needs it (complete trials: "
             f"{', '.join(map(str, records)) or 'none'})"
@@ -320,7 +312,7 @@ def run_metrics(run: RunDir, measurement: str | None = None) -> list[IterationMe
     errors = {j: trial_errors(r) for j, r in records.items()}
     if not errors[0][0] > 0:
         raise RunLogError(
-            f"{run.path}/trial-000.csv: e_pos,0 = 0 (the positions equal the reference); "
+            f"{run.trial_path(0)}: e_pos,0 = 0 (the positions equal the reference); "
             "no percentages relative to it"
         )
     order = sorted(errors)

@@ -295,7 +295,7 @@ def _fig_epos(
 def _fig_disturbance(plt: Any, run: RunDir, iterations: list[int], label: str) -> Any | None:
     estimates = {}
     for j in iterations:
-        if (run.path / f"estimate-{j:03d}.csv").exists():
+        if run.estimate_path(j).exists():
             estimates[j] = run.read_estimate(j)
     if not estimates:
         return None
@@ -364,7 +364,7 @@ def report_figures(
     try:
         measurement = run.profile().mocap.measurement
     except ProfileError as exc:
-        raise RunLogError(f"{run.path}/manifest.json: {exc}") from None
+        raise RunLogError(f"{run.manifest_path}: {exc}") from None
     records = {j: run.measured_trial(j, measurement) for j in iterations}  # what learning saw
     learning = run_learning(run) if run.kind == "learning" else None
     names = {j: f"j = {j}" for j in iterations}

@@ -413,7 +413,7 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
     if outside.size:
         k = outside[0]
         raise TrajectoryError(
-            f"setpoints-{j:03d}.csv: setpoint k = {k} {np.round(sp[k], 3).tolist()} is "
+            f"{run.setpoints_path(j).name}: setpoint k = {k} {np.round(sp[k], 3).tolist()} is "
             f"outside the arena {arena}; not flown"
         )
     if run.kind != "learning" or j == 0:
@@ -426,15 +426,15 @@ def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:
     if j <= repeats:
         if not np.array_equal(sp, run.read_setpoints(0)):
             raise TrajectoryError(
-                f"{run.path}/setpoints-{j:03d}.csv: trial {j} repeats trial 0, but its "
-                "setpoints differ from setpoints-000.csv; not flown"
+                f"{run.setpoints_path(j)}: trial {j} repeats trial 0, but its setpoints "
+                f"differ from {run.setpoints_path(0).name}; not flown"
             )
         return sp
     models = models_in_use(run, profile, j)[0] if profile.learning.adaptive else None
     try:
         check_learned(sp, profile, run.reference(), models)
     except TrajectoryError as exc:
-        raise TrajectoryError(f"{run.path}/setpoints-{j:03d}.csv: {exc}; not flown") from None
+        raise TrajectoryError(f"{run.setpoints_path(j)}: {exc}; not flown") from None
     return sp
 
 

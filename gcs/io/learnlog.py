@@ -34,8 +34,10 @@ __all__ = ["LearnLog"]
 class LearnLog:
     """The learning files of a run directory (a base of :class:`gcs.io.rundir.RunDir`).
 
-    It relies on the run's ``path``, ``n_samples``, ``t_ilc_s`` and its setpoint files
-    (``_file``, ``_setpoints_text``, ``write_setpoints``, ``read_setpoints``).
+    It relies on the run's ``path``, ``n_samples``, ``t_ilc_s``, the names of its files
+    (``estimate_path``, ``learn_path``, ``model_path``, ``floor_path``, ``setpoints_path``,
+    ``_numbered``: the run names its own files) and its setpoints (``_setpoints_text``,
+    ``write_setpoints``, ``read_setpoints``).
     """
 
     path: Path
@@ -55,7 +57,7 @@ class LearnLog:
         p_ne_m2 : ndarray, shape (N, 2) or (N, 3)
             Its error variance [m^2] (K-ILC: the filter's scalar, repeated).
         """
-        write_once(self._file("estimate", j, "csv"), self._estimate_text(d_hat_ne_m, p_ne_m2))
+        write_once(self.estimate_path(j), self._estimate_text(d_hat_ne_m, p_ne_m2))
 
     def _estimate_text(self, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray) -> str:
         k = np.arange(1, self.n_samples + 1)
@@ -88,8 +90,8 @@ class LearnLog:
             The setpoints file.
         """
         for path, text in (
-            (self._file("estimate", j, "csv"), self._estimate_text(d_hat_ne_m, p_ne_m2)),
-            (self._file("setpoints", j + 1, "csv"), self._setpoints_text(j + 1, sp_ned_m)),
+            (self.estimate_path(j), self._estimate_text(d_hat_ne_m, p_ne_m2)),
+            (self.setpoints_path(j + 1), self._setpoints_text(j + 1, sp_ned_m)),
         ):
             if path.exists() and path.read_bytes() != text.encode("utf-8"):
                 raise RunLogError(
@@ -157,11 +159,11 @@ class LearnLog:
         if record.get("trial") != j:
             raise RunLogError(f"learning record of trial {j} names trial {record.get('trial')!r}")
         files = [
-            (self._file("model", j, "yaml"), model_text),
-            (self.path / "floor.json", None if floor is None else json_text(floor)),
-            (self._file("estimate", j, "csv"), self._estimate_text(d_hat_ne_m, p_ne_m2)),
-            (self._file("learn", j, "json"), json_text(record)),
-            (self._file("setpoints", j + 1, "csv"), self._setpoints_text(j + 1, sp_ned_m)),
+            (self.model_path(j), model_text),
+            (self.floor_path, None if floor is None else json_text(floor)),
+            (self.estimate_path(j), self._estimate_text(d_hat_ne_m, p_ne_m2)),
+            (self.learn_path(j), json_text(record)),
+            (self.setpoints_path(j + 1), self._setpoints_text(j + 1, sp_ned_m)),
         ]
         files = [(path, text) for path, text in files if text is not None]
         for path, text in files:
@@ -188,10 +190,11 @@ class LearnLog:
             ``model_file``, ``setpoints`` and ``decision`` (the record of
             :func:`gcs.core.learning.plan_next_trial`), each checked against its type.
         """
-        path = self._file("learn", j, "json")
+        path = self.learn_path(j)
         if not path.exists():
             raise RunLogError(f"{path}: missing; trial {j + 1} was learned without its record")
-        return _check_learn_record(path, j, read_json(path, "learning record"))
+        data = read_json(path, "learning record")
+        return _check_learn_record(path, j, self.model_path(j).name, data)
 
     def learn_records(self) -> dict[int, dict[str, Any]]:
         """Every decision record of the run, by the trial it learned from.
@@ -200,25 +203,7 @@ class LearnLog:
         -------
         dict of int to dict
         """
-        out = {}
-        for path in sorted(self.path.glob("learn-[0-9][0-9][0-9].json")):
-            j = int(path.stem.split("-")[1])
-            out[j] = self.read_learn_record(j)
-        return out
-
-    def model_path(self, j: int) -> Path:
-        """``model-JJJ.yaml``: the profile with the models refreshed when learning from trial j.
-
-        Parameters
-        ----------
-        j : int
-            The trial learned from.
-
-        Returns
-        -------
-        Path
-        """
-        return self._file("model", j, "yaml")
+        return {j: self.read_learn_record(j) for j in self._numbered("learn", "json")}
 
     def read_model(self, j: int) -> tuple[DiscreteModel, DiscreteModel]:
         """The (north, east) models refreshed when learning from trial j (``model-JJJ.yaml``).
@@ -235,19 +220,19 @@ class LearnLog:
         -------
         tuple of DiscreteModel
         """
-        path = self.model_path(j)
+        path, learn = self.model_path(j), self.learn_path(j).name
         record = self.read_learn_record(j)
         if record["model_file"] is None:
-            raise RunLogError(f"{path}: learn-{j:03d}.json records no refreshed model")
+            raise RunLogError(f"{path}: {learn} records no refreshed model")
         if not path.exists():
-            raise RunLogError(f"{path}: missing, but learn-{j:03d}.json records a refreshed model")
+            raise RunLogError(f"{path}: missing, but {learn} records a refreshed model")
         models = profile_from_dict(read_yaml(path, RunLogError), str(path)).models()
         for a, (name, model) in enumerate(zip(("north", "east"), models, strict=True)):
             refresh = record["decision"]["axes"][a]["refresh"]
             recorded = refresh.get("model") if isinstance(refresh, dict) else None
             if not _same_model(model, recorded):
                 raise RunLogError(
-                    f"{path}: its {name} model is not the one learn-{j:03d}.json records; the "
+                    f"{path}: its {name} model is not the one {learn} records; the "
                     "files do not belong together"
                 )
         return models
@@ -261,7 +246,7 @@ class LearnLog:
             ``trials`` (the flights of identical setpoints), ``epos_m``, ``scatter_m`` and the
             rest of :meth:`gcs.core.floor.Floor.as_dict`.
         """
-        path = self.path / "floor.json"
+        path = self.floor_path
         if not path.exists():
             return None
         data = read_json(path, "floor record")
@@ -290,7 +275,7 @@ class LearnLog:
         -------
         tuple of ndarray
         """
-        path = self._file("estimate", j, "csv")
+        path = self.estimate_path(j)
         if not path.exists():
             raise RunLogError(f"{path}: no estimate for trial {j} (run 'gcs learn' on it)")
         table = read_csv(path, ESTIMATE_COLUMNS, ESTIMATE_DOWN_COLUMNS)
@@ -303,8 +288,9 @@ class LearnLog:
         return table[:, [2, 3, 6]], table[:, [4, 5, 7]]
 
 
-def _check_learn_record(path: Path, j: int, data: Any) -> dict[str, Any]:
-    """A ``learn-JJJ.json`` checked against its name and the types its readers rely on."""
+def _check_learn_record(path: Path, j: int, model_file: str, data: Any) -> dict[str, Any]:
+    """A ``learn-JJJ.json`` checked against its name and the types its readers rely on
+    (``model_file``: the name of the model file it may name, ``model-JJJ.yaml``)."""
     if not isinstance(data, dict):
         raise RunLogError(f"{path}: malformed learning record (not a JSON object)")
 
@@ -320,9 +306,9 @@ def _check_learn_record(path: Path, j: int, data: Any) -> dict[str, Any]:
         raise fail("learned_from", f"must list the trials 0..{j}, got {learned!r}")
     if not (isinstance(data.get("next_iteration"), int) and data["next_iteration"] >= 1):
         raise fail("next_iteration", f"must be an integer >= 1, got {data.get('next_iteration')!r}")
-    model_file = data.get("model_file")
-    if model_file not in (None, f"model-{j:03d}.yaml"):
-        raise fail("model_file", f"must be null or 'model-{j:03d}.yaml', got {model_file!r}")
+    named = data.get("model_file")
+    if named not in (None, model_file):
+        raise fail("model_file", f"must be null or '{model_file}', got {named!r}")
     decision = data.get("decision")
     if not isinstance(decision, dict):
         raise fail("decision", "must be an object")
@@ -336,7 +322,7 @@ def _check_learn_record(path: Path, j: int, data: Any) -> dict[str, Any]:
         ):
             raise fail(f"decision.axes[{a}].refresh", "must be null or an object with 'accepted'")
     refreshed = any(isinstance(a.get("refresh"), dict) and a["refresh"]["accepted"] for a in axes)
-    if refreshed != (model_file is not None):
+    if refreshed != (named is not None):
         raise fail("model_file", "must name the refreshed model exactly when one was refreshed")
     verdicts = decision.get("verdicts")
     if not (isinstance(verdicts, list) and all(isinstance(v, dict) for v in verdicts)):

@@ -32,7 +32,9 @@ __all__ = [
 
 #: What can be found by name, and the directory of the package that holds it.
 KINDS = {"profile": "profiles", "trajectory": "trajectories"}
-#: Names of the files a run directory records; never an output of anything else.
+#: Names of the files a run directory records; never an output of anything else. They are the
+#: names :class:`gcs.io.rundir.RunDir` gives them (tests/test_paths.py holds the two together),
+#: spelled again here because that module builds on this one.
 RUN_FILE = re.compile(
     r"^(manifest\.json|reference\.csv|identified\.yaml|"
     r"(setpoints|trial|estimate)-\d{3}\.(csv|json)|session-\d{3}\.json)$"

@@ -25,6 +25,10 @@ Layout of ``logs/<run-id>/`` (documented for users in docs/formats.md)::
     aborted/               earlier incomplete attempts of a trial, kept when it is re-flown
     again-JJJ.json         ``gcs fly --resume --again K``: trial JJJ flies trial K's setpoints
                            instead of the learned ones, which are kept in ``superseded/``
+    identified.yaml        identification runs: the profile ``gcs identify`` identified from them
+
+:class:`RunDir` names these files (its ``*_FILE`` names and ``*_path`` members); code outside
+it asks the run for a file's path instead of spelling the name again.
 
 Every file is written atomically (temporary file in the same directory, then ``os.replace``),
 and a trial counts as complete only once its ``.json`` says so; it is written after the CSV. A
@@ -98,10 +102,16 @@ LEARNING_ALGORITHMS = ("smoother", "kilc")
 RUN_KINDS = {"smoother": "learning", "kilc": "learning", "identify": "identification"}
 #: Tolerance of a trial's setpoint columns against its setpoints file [m].
 _SP_TOL_M = 1e-6
+#: The three digits JJJ of a numbered file's name, as a glob pattern.
+_JJJ = "[0-9][0-9][0-9]"
 
 
 class RunDir(LearnLog):
     """A run directory (see the module docstring for its layout).
+
+    The names of the run's files are spelled here and nowhere else: the ``*_FILE`` and ``*_DIR``
+    names below, the numbered files (``<kind>-JJJ.<ext>``) by the ``*_path`` members. Other code
+    asks the run for a file's path or name.
 
     Parameters
     ----------
@@ -110,6 +120,19 @@ class RunDir(LearnLog):
     manifest : dict
         Its parsed ``manifest.json``.
     """
+
+    #: The manifest: profile, trajectory and algorithm as used, software versions.
+    MANIFEST_FILE = "manifest.json"
+    #: The reference on the grid.
+    REFERENCE_FILE = "reference.csv"
+    #: The floor measured from the flights of identical setpoints (learning with history).
+    FLOOR_FILE = "floor.json"
+    #: The profile identified from an identification run (``gcs identify``).
+    IDENTIFIED_FILE = "identified.yaml"
+    #: Earlier incomplete attempts of a trial, kept when it is flown again.
+    ABORTED_DIR = "aborted"
+    #: Setpoints learned for a trial and replaced by ``gcs fly --again``, kept.
+    SUPERSEDED_DIR = "superseded"
 
     def __init__(self, path: Path, manifest: dict[str, Any]) -> None:
         self.path = Path(path)
@@ -182,8 +205,8 @@ class RunDir(LearnLog):
         }
         try:
             staged = cls(staging, manifest)
-            atomic_write_text(staging / "manifest.json", json.dumps(manifest, indent=2) + "\n")
-            atomic_write_text(staging / "reference.csv", _reference_text(ref))
+            atomic_write_text(staged.manifest_path, json.dumps(manifest, indent=2) + "\n")
+            atomic_write_text(staged.reference_path, _reference_text(ref))
             staged.write_setpoints(0, ref.pos_ned_m[:-1])
             path = _rename_into_place(staging, root, base, fixed=run_id is not None)
         except BaseException:
@@ -208,7 +231,7 @@ class RunDir(LearnLog):
         path = Path(path)
         if not path.is_dir():
             raise RunLogError(f"{path}: not a run directory")
-        mpath = path / "manifest.json"
+        mpath = path / cls.MANIFEST_FILE
         try:
             manifest = json.loads(mpath.read_text())
         except OSError as exc:
@@ -280,11 +303,11 @@ class RunDir(LearnLog):
 
     def profile(self) -> Profile:
         """The profile as recorded in the manifest."""
-        return profile_from_dict(self.manifest["profile"], f"{self.path}/manifest.json:profile")
+        return profile_from_dict(self.manifest["profile"], f"{self.manifest_path}:profile")
 
     def trajectory(self) -> TrajectorySpec:
         """The trajectory as recorded in the manifest."""
-        where = f"{self.path}/manifest.json:trajectory"
+        where = f"{self.manifest_path}:trajectory"
         return trajectory_from_dict(self.manifest["trajectory"], where)
 
     def reference(self) -> Reference:
@@ -297,7 +320,7 @@ class RunDir(LearnLog):
         return self._reference
 
     def _read_reference(self) -> Reference:
-        path = self.path / "reference.csv"
+        path = self.reference_path
         table = read_csv(path, REFERENCE_COLUMNS, REFERENCE_YAW_COLUMNS)
         self._check_grid(path, table, self.n_samples + 1)
         if not np.all(np.isfinite(table)):
@@ -312,8 +335,191 @@ class RunDir(LearnLog):
             yaw = None if yaw_deg is None else np.full(len(pos), np.radians(float(yaw_deg)))
         return Reference(table[:, 1], pos, vel, np.gradient(vel, self.t_ilc_s, axis=0), yaw)
 
+    # ----------------------------------------------------------------- layout
+    @property
+    def manifest_path(self) -> Path:
+        """``manifest.json``."""
+        return self.path / self.MANIFEST_FILE
+
+    @property
+    def reference_path(self) -> Path:
+        """``reference.csv``."""
+        return self.path / self.REFERENCE_FILE
+
+    @property
+    def floor_path(self) -> Path:
+        """``floor.json``: the floor, once learning with history has measured it."""
+        return self.path / self.FLOOR_FILE
+
+    @property
+    def identified_path(self) -> Path:
+        """``identified.yaml``: an identification run's own identified profile."""
+        return self.path / self.IDENTIFIED_FILE
+
+    def setpoints_path(self, j: int) -> Path:
+        """``setpoints-JJJ.csv``: the setpoints to fly in trial j.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        Path
+        """
+        return self._file("setpoints", j, "csv")
+
+    def trial_path(self, j: int) -> Path:
+        """``trial-JJJ.csv``: trial j as flown, on the grid.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        Path
+        """
+        return self._file("trial", j, "csv")
+
+    def status_path(self, j: int) -> Path:
+        """``trial-JJJ.json``: the status sidecar of trial j (the trial counts once it says so).
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        Path
+        """
+        return self._file("trial", j, "json")
+
+    def mocap_path(self, j: int) -> Path:
+        """``mocap-JJJ.csv``: every raw motion-capture sample of trial j.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        Path
+        """
+        return self._file("mocap", j, "csv")
+
+    def estimate_path(self, j: int) -> Path:
+        """``estimate-JJJ.csv``: the disturbance estimate learned from trial j.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        Path
+        """
+        return self._file("estimate", j, "csv")
+
+    def learn_path(self, j: int) -> Path:
+        """``learn-JJJ.json``: the decision record of the learning step from trials 0..j.
+
+        Parameters
+        ----------
+        j : int
+            The newest trial that step learned from.
+
+        Returns
+        -------
+        Path
+        """
+        return self._file("learn", j, "json")
+
+    def model_path(self, j: int) -> Path:
+        """``model-JJJ.yaml``: the profile with the models refreshed when learning from trial j.
+
+        Parameters
+        ----------
+        j : int
+            The trial learned from.
+
+        Returns
+        -------
+        Path
+        """
+        return self._file("model", j, "yaml")
+
+    def again_path(self, j: int) -> Path:
+        """``again-JJJ.json``: the record of trial j flying an earlier trial's setpoints again.
+
+        Parameters
+        ----------
+        j : int
+            Trial index.
+
+        Returns
+        -------
+        Path
+        """
+        return self._file("again", j, "json")
+
+    def session_path(self, number: int) -> Path:
+        """``session-SSS.json``: the record of flight session ``number``.
+
+        Parameters
+        ----------
+        number : int
+            The session's number (from 1).
+
+        Returns
+        -------
+        Path
+        """
+        return self._file("session", number, "json")
+
     def _file(self, kind: str, j: int, ext: str) -> Path:
         return self.path / f"{kind}-{j:03d}.{ext}"
+
+    def _numbered(self, kind: str, ext: str) -> list[int]:
+        """Indices of the files ``<kind>-JJJ.<ext>`` on disk, ascending."""
+        return [int(p.stem.split("-")[1]) for p in sorted(self.path.glob(f"{kind}-{_JJJ}.{ext}"))]
+
+    def _aborted_path(self, kind: str, j: int, attempt: int, ext: str) -> Path:
+        """``aborted/<kind>-JJJ-attempt-A.<ext>``: attempt A of trial j's file of ``kind``."""
+        return self.path / self.ABORTED_DIR / f"{kind}-{j:03d}-attempt-{attempt}.{ext}"
+
+    def _superseded_path(self, j: int, n: int) -> Path:
+        """``superseded/setpoints-JJJ-N.csv``: the n-th setpoints of trial j replaced."""
+        return self.path / self.SUPERSEDED_DIR / f"setpoints-{j:03d}-{n}.csv"
+
+    def csv_trials(self) -> list[int]:
+        """Indices of the trials with a ``trial-JJJ.csv`` on disk (whatever their status, also
+        one whose sidecar was never written), ascending."""
+        return self._numbered("trial", "csv")
+
+    def again_trials(self) -> list[int]:
+        """Indices of the trials with a record ``again-JJJ.json``, ascending (in force or not:
+        :meth:`again_of`)."""
+        return self._numbered("again", "json")
+
+    def aborted_attempts(self) -> dict[int, int]:
+        """Incomplete attempts of each trial that was flown again, kept in ``aborted/``.
+
+        Returns
+        -------
+        dict of int to int
+            Number of attempts (their sidecars) by trial index.
+        """
+        counts: dict[int, int] = {}
+        for p in (self.path / self.ABORTED_DIR).glob(f"trial-{_JJJ}-attempt-*.json"):
+            j = int(p.name.split("-")[1])
+            counts[j] = counts.get(j, 0) + 1
+        return counts
 
     # ----------------------------------------------------------------- setpoints
     def write_setpoints(self, j: int, sp_ned_m: np.ndarray) -> Path:
@@ -330,7 +536,7 @@ class RunDir(LearnLog):
         -------
         Path
         """
-        path = self._file("setpoints", j, "csv")
+        path = self.setpoints_path(j)
         write_once(path, self._setpoints_text(j, sp_ned_m))
         return path
 
@@ -354,7 +560,7 @@ class RunDir(LearnLog):
         -------
         ndarray
         """
-        path = self._file("setpoints", j, "csv")
+        path = self.setpoints_path(j)
         if not path.exists():
             raise RunLogError(f"{path}: no setpoints for trial {j} (run 'gcs learn' first)")
         table = read_csv(path, SETPOINT_COLUMNS)
@@ -394,15 +600,14 @@ class RunDir(LearnLog):
         if not 0 <= k < j or k not in self.complete_trials():
             raise RunLogError(f"{self.path}: trial {k} is not a complete trial before trial {j}")
         sp = self.read_setpoints(k)
-        current = self._file("setpoints", j, "csv")
+        current = self.setpoints_path(j)
         if current.exists() and np.array_equal(self.read_setpoints(j), sp):
             return current  # in force already (an earlier --again, or learned identical)
-        superseded = self.path / "superseded"
-        superseded.mkdir(exist_ok=True)
         n = 1
-        while (superseded / f"setpoints-{j:03d}-{n}.csv").exists():
+        while self._superseded_path(j, n).exists():
             n += 1
-        moved = superseded / f"setpoints-{j:03d}-{n}.csv"
+        moved = self._superseded_path(j, n)
+        moved.parent.mkdir(exist_ok=True)
         entries = self._again_entries(j)
         entries.append(
             {
@@ -412,7 +617,7 @@ class RunDir(LearnLog):
             }
         )
         atomic_write_text(
-            self._file("again", j, "json"),
+            self.again_path(j),
             json.dumps({"trial": j, "again": entries}, indent=2) + "\n",
         )
         if current.exists():
@@ -433,14 +638,14 @@ class RunDir(LearnLog):
             None when trial j flies the setpoints learned for it.
         """
         entries = self._again_entries(j)
-        if not entries or not self._file("setpoints", j, "csv").exists():
+        if not entries or not self.setpoints_path(j).exists():
             return None
         k = entries[-1]["setpoints_of"]
         same = np.array_equal(self.read_setpoints(j), self.read_setpoints(k))
         return k if same else None
 
     def _again_entries(self, j: int) -> list[dict[str, Any]]:
-        path = self._file("again", j, "json")
+        path = self.again_path(j)
         if not path.exists():
             return []
         what = "record of setpoints flown again"
@@ -459,10 +664,7 @@ class RunDir(LearnLog):
     # ----------------------------------------------------------------- trials
     def statuses(self) -> list[TrialStatus]:
         """Status of every trial on disk, by trial index."""
-        out = []
-        for p in sorted(self.path.glob("trial-[0-9][0-9][0-9].json")):
-            out.append(self.read_status(int(p.stem.split("-")[1])))
-        return out
+        return [self.read_status(j) for j in self._numbered("trial", "json")]
 
     def read_status(self, j: int) -> TrialStatus:
         """The sidecar of trial j.
@@ -476,7 +678,7 @@ class RunDir(LearnLog):
         -------
         TrialStatus
         """
-        path = self._file("trial", j, "json")
+        path = self.status_path(j)
         try:
             data = json.loads(path.read_text())
         except OSError as exc:
@@ -518,7 +720,7 @@ class RunDir(LearnLog):
         mocap : MocapSeries or None
             The trial's raw motion-capture samples (``mocap-JJJ.csv``).
         """
-        csv_path, json_path = self._file("trial", j, "csv"), self._file("trial", j, "json")
+        csv_path, json_path = self.trial_path(j), self.status_path(j)
         if record.n_samples != self.n_samples:
             raise RunLogError(f"trial {j} has {record.n_samples} samples, the run {self.n_samples}")
         if json_path.exists():
@@ -528,7 +730,7 @@ class RunDir(LearnLog):
         elif csv_path.exists():  # a CSV whose sidecar was never written (interrupted write)
             self._archive_attempt(j)
         if mocap is not None:
-            write_mocap_csv(self._file("mocap", j, "csv"), mocap)
+            write_mocap_csv(self.mocap_path(j), mocap)
         atomic_write_text(csv_path, csv_text(record.columns, record.table()))
         data = {
             "trial": j,
@@ -543,20 +745,16 @@ class RunDir(LearnLog):
         atomic_write_text(json_path, json.dumps(data, indent=2) + "\n")
 
     def _archive_attempt(self, j: int) -> None:
-        aborted = self.path / "aborted"
-        aborted.mkdir(exist_ok=True)
+        (self.path / self.ABORTED_DIR).mkdir(exist_ok=True)
         attempt = 1
-        while any(
-            (aborted / f"trial-{j:03d}-attempt-{attempt}.{ext}").exists() for ext in ("csv", "json")
-        ):
+        while any(self._aborted_path("trial", j, attempt, ext).exists() for ext in ("csv", "json")):
             attempt += 1
-        for ext in ("csv", "json"):
-            src = self._file("trial", j, ext)
+        for src, ext in ((self.trial_path(j), "csv"), (self.status_path(j), "json")):
             if src.exists():
-                os.replace(src, aborted / f"trial-{j:03d}-attempt-{attempt}.{ext}")
-        raw = self._file("mocap", j, "csv")
+                os.replace(src, self._aborted_path("trial", j, attempt, ext))
+        raw = self.mocap_path(j)
         if raw.exists():
-            os.replace(raw, aborted / f"mocap-{j:03d}-attempt-{attempt}.csv")
+            os.replace(raw, self._aborted_path("mocap", j, attempt, "csv"))
 
     def measured_trial(self, j: int, measurement: str | None = None) -> TrialRecord:
         """Trial j as learning and e_pos see it: its motion capture or its estimate.
@@ -585,7 +783,7 @@ class RunDir(LearnLog):
         try:
             return record.measured(measurement)
         except RunLogError as exc:
-            raise RunLogError(f"{self._file('trial', j, 'csv')}: {exc}") from None
+            raise RunLogError(f"{self.trial_path(j)}: {exc}") from None
 
     def read_trial(self, j: int) -> TrialRecord:
         """Read and validate a complete trial for learning or reporting.
@@ -605,7 +803,7 @@ class RunDir(LearnLog):
             Incomplete trial, wrong length, NaN values, or a grid that does not match t_ilc_s.
         """
         status = self.read_status(j)
-        path = self._file("trial", j, "csv")
+        path = self.trial_path(j)
         if not status.complete:
             raise RunLogError(
                 f"{path}: trial {j} is incomplete ({status.reason}); not learned from"
@@ -626,7 +824,7 @@ class RunDir(LearnLog):
 
     def _check_flown_setpoints(self, path: Path, j: int, record: TrialRecord) -> None:
         """The setpoint columns of trial j must be ``setpoints-JJJ.csv``: files agree with names."""
-        sp_path = self._file("setpoints", j, "csv")
+        sp_path = self.setpoints_path(j)
         if not sp_path.exists():
             raise RunLogError(f"{sp_path}: missing; trial {j} cannot be checked against it")
         diff = np.abs(record.sp_ned_m[:-1] - self.read_setpoints(j))
@@ -673,7 +871,7 @@ class RunDir(LearnLog):
             return json.dumps(json_safe({"session": n, **data}), indent=2) + "\n"
 
         if number is not None:
-            atomic_write_text(self._file("session", number, "json"), text(number))
+            atomic_write_text(self.session_path(number), text(number))
             return number
         number = len(self.sessions()) + 1
         tmp = self.path / f".session-new.{os.getpid()}.tmp"
@@ -681,7 +879,7 @@ class RunDir(LearnLog):
             while True:
                 atomic_write_text(tmp, text(number))
                 try:
-                    os.link(tmp, self._file("session", number, "json"))  # fails if it exists
+                    os.link(tmp, self.session_path(number))  # fails if it exists
                     return number
                 except FileExistsError:
                     number += 1
@@ -696,12 +894,12 @@ class RunDir(LearnLog):
         list of dict
         """
         out = []
-        for path in sorted(self.path.glob("session-[0-9][0-9][0-9].json")):
+        for number in self._numbered("session", "json"):
+            path = self.session_path(number)
             try:
                 data = json.loads(path.read_text())
             except (OSError, ValueError) as exc:
                 raise RunLogError(f"{path}: unreadable session record ({exc})") from exc
-            number = int(path.stem.split("-")[1])
             if not isinstance(data, dict) or data.get("session") != number:
                 raise RunLogError(f"{path}: field 'session' must be {number}, as its name says")
             out.append(data)

@@ -20,6 +20,7 @@ from typing import Any
 from gcs.errors import GcsError, PathError, StudyError
 from gcs.io.config import Profile, TrajectorySpec, _Fields, load_trajectory, profile_from_dict
 from gcs.io.paths import resolve_named
+from gcs.io.rundir import RunDir
 from gcs.io.yamlfile import read_yaml
 
 __all__ = [
@@ -149,7 +150,7 @@ def _pair(f: _Fields, key: str, default: float) -> tuple[float, float]:
 def _floor_rms(f: _Fields, run: Path | None, key: str) -> tuple[float, float]:
     if run is None:
         raise f.fail(key, "is 'floor': give the run directory with its floor.json in 'run'")
-    path = run / "floor.json"
+    path = run / RunDir.FLOOR_FILE  # a directory with the file will do: not opened as a run
     try:
         data = json.loads(path.read_text())
         rms = data["axis_rms_m"]
@@ -194,7 +195,7 @@ def _uncertainty(f: _Fields) -> dict:
     for key in ("noise_std_m", "disturbance_rms_m"):
         if f.raw(key, 0.0) == "floor":
             out[key] = _floor_rms(f, run, key)
-            out["floor_source"] = str(run / "floor.json")
+            out["floor_source"] = str(run / RunDir.FLOOR_FILE)
         else:
             out[key] = _pair(f, key, 0.0)
     f.done()
