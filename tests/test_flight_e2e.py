@@ -9,13 +9,16 @@ and the same campaign again, fly on the virtual clock in tests/test_campaign_vir
 from __future__ import annotations
 
 import asyncio
+import gc
 import json
+import os
 import socket
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from realtime import RAISED
 
 from gcs.errors import VehicleError
 from gcs.flight.campaign import (
@@ -108,9 +111,13 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     events: list[object] = []
     stamps: list[float] = []
 
+    policies: list[int] = []
+
     def on_event(event: object) -> None:
         events.append(event)
         stamps.append(time.monotonic())
+        if isinstance(event, TrialStarted):
+            policies.append(os.sched_getscheduler(0))
 
     started = time.monotonic()
     with _mock(tmp_path) as mock:
@@ -118,6 +125,9 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
             fly_campaign(CampaignPlan(mock.url, 0, 2, T_ILC_S, SETTINGS, FENCE), source, on_event)
         )
     assert time.monotonic() - started < 50.0
+    # the flight loop ran raised where allowed (gcs.io.scheduling) and got its policy back
+    assert policies == [RAISED[0]] * 2 and os.sched_getscheduler(0) == os.SCHED_OTHER
+    assert gc.get_freeze_count() == 0
     assert source.asked == [0, 1]
     assert [j for j, _ in source.recorded] == [0, 1] and not source.incomplete
     n = source.setpoints.shape[0]
@@ -184,3 +194,5 @@ def test_unreachable_url_gives_vehicle_error_quickly() -> None:
     assert time.monotonic() - started < 3.0
     with pytest.raises(VehicleError, match="cannot open connection"):
         asyncio.run(connect("foo://bar"))
+    # neither attempt left this thread under the flight's policy or the heap frozen
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER and gc.get_freeze_count() == 0

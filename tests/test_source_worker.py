@@ -30,7 +30,7 @@ class Source:
         if j < 0:
             raise TrajectoryError(f"setpoints-{j:03d}.csv: no such trial; not flown")
         sp = np.zeros((self.n, 3))
-        sp[:, 0], sp[:, 1] = os.getpid(), os.nice(0)
+        sp[:, 0], sp[:, 1], sp[:, 2] = os.getpid(), os.nice(0), os.sched_getscheduler(0)
         return sp
 
     def hover_point_for(self, j: int) -> np.ndarray:
@@ -181,3 +181,19 @@ def running(pid: int) -> bool:
     except FileNotFoundError:
         return False
     return state != "Z"
+
+
+def test_a_worker_of_a_real_time_flight_process_runs_at_normal_policy() -> None:
+    """A flight process under SCHED_RR (chrt, as PX4 SITL runs its threads) must not hand that
+    policy to the worker: its seconds of numerics would take a core from everything else."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(1))
+    except PermissionError:
+        pytest.skip("this user may not use a real-time policy (needs CAP_SYS_NICE)")
+    try:
+        with WorkerSource(build, (2,), {}) as source:
+            sp = source.setpoints_for(0)
+    finally:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    assert sp[0, 2] == os.SCHED_OTHER
+    assert sp[0, 1] == min(os.nice(0) + WORKER_NICE, 19)

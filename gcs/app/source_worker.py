@@ -45,6 +45,7 @@ import numpy as np
 
 from gcs.flight.campaign import FlightSession
 from gcs.flight.trial import TrialRecording
+from gcs.io.scheduling import to_normal
 
 __all__ = ["WorkerSource", "WorkerDied", "Notify", "WORKER_NICE"]
 
@@ -249,6 +250,9 @@ def _init_worker(parent_pid: int) -> None:
         pass
     if os.getppid() != parent_pid:  # the flight process ended before the prctl
         os._exit(0)
+    # a flight process under a real-time policy (gcs.io.scheduling, chrt) hands it down: the
+    # worker's seconds of numerics would then take a core from everything at normal priority
+    to_normal()
 
 
 #: Linux's prctl option, and the signal it sends the worker when the flight process ends.

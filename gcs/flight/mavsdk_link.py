@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any, TypeVar
 
@@ -31,6 +32,7 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryA
 
 from gcs.flight.backend import CommandRefused, LinkUnreachable, PositionReport, VehicleLink
 from gcs.flight.clock import WALL_CLOCK, Clock
+from gcs.io.scheduling import Previous, freeze_heap, raise_thread, restore_thread, thaw_heap
 
 __all__ = ["MavsdkLink"]
 
@@ -79,8 +81,20 @@ class MavsdkLink(VehicleLink):
         self._offboard: OffboardAsync | None = None
         self._telemetry: TelemetryAsync | None = None
         self._direct: MavlinkDirectAsync | None = None
+        self._raised: tuple[int, Previous | None] | None = None
 
     async def connect(self, url: str, timeout_s: float) -> bool:
+        self._enter_flight()
+        try:
+            connected = await self._connect(url, timeout_s)
+        except BaseException:
+            self._leave_flight()
+            raise
+        if not connected:
+            self._leave_flight()
+        return connected
+
+    async def _connect(self, url: str, timeout_s: float) -> bool:
         log_subscribe(route_mavsdk_log)
         config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
         self._mavsdk = Mavsdk(config)
@@ -107,6 +121,21 @@ class MavsdkLink(VehicleLink):
             self._mavsdk.destroy()
             self._mavsdk = None
         self._system = None
+        self._leave_flight()
+
+    def _enter_flight(self) -> None:
+        """The flight loop, and what MAVSDK starts for it, keep their streams at rate on a busy
+        machine: a real-time policy where allowed, the heap frozen (gcs.io.scheduling)."""
+        if self._raised is None:
+            self._raised = (threading.get_ident(), raise_thread())
+            freeze_heap()
+
+    def _leave_flight(self) -> None:
+        """Give back what :meth:`_enter_flight` took (in the thread that took it)."""
+        if self._raised is not None and self._raised[0] == threading.get_ident():
+            restore_thread(self._raised[1])
+            self._raised = None
+            thaw_heap()
 
     @property
     def system(self) -> System:

@@ -11,6 +11,7 @@ from typing import Annotated
 import typer
 
 from gcs.errors import GcsError
+from gcs.io.scheduling import freeze_heap, raise_thread
 from gcs.mock.config import Faults, load_mock_config
 from gcs.mock.mocap.arena import ArenaOptions, parse_arena_fault
 
@@ -185,7 +186,9 @@ def run_mock(
     from gcs.mock.server import MockServer
 
     cfg = load_mock_config(config)
+    raise_thread()  # as PX4 SITL runs its own threads (gcs.io.scheduling); the arena's inherits
     server = MockServer(cfg, faults, seed=seed, port=port, gcs_port=gcs_port, arena=arena)
+    freeze_heap()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: server.stop())
     signal.signal(signal.SIGUSR1, lambda *_: server.lose_link_now())

@@ -60,6 +60,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs.core.frames import SYSTEM_FRAMES
 from gcs.errors import MocapError
+from gcs.io.scheduling import raise_thread
 from gcs.mock.child import ChildNotReady, ChildProgram
 from gcs.mock.mocap.cli import parse_version, serve
 
@@ -463,6 +464,7 @@ def rig_command(
         Time from the body's motion to the frame [ms].
     """
     version = parse_version(natnet)
+    raise_thread()  # the truth's receiving thread too (gcs.io.scheduling), as PX4's own threads
     epoch_s = time.monotonic()  # server time 0, shared with the ground truth's receipt clock
     with SihTruth(sih_display_port(instance), epoch_s=epoch_s) as truth:
         serve(

@@ -35,6 +35,7 @@ from gcs.errors import MocapError
 from gcs.flight.mocap.reader import HEADER, SAMPLE
 from gcs.io.mocap_samples import MocapSeries
 from gcs.io.mocap_source import MocapSource
+from gcs.io.scheduling import raise_thread
 
 __all__ = ["MocapSample", "MocapClient", "series_of"]
 
@@ -255,6 +256,7 @@ class MocapClient:
     # the thread ----------------------------------------------------------------------------
 
     def _read(self, stream) -> None:
+        raise_thread()  # it forwards the frames to the vehicle: gcs.io.scheduling
         try:
             while True:
                 head = stream.read(HEADER.size)

@@ -36,6 +36,8 @@ import sys
 import time
 from typing import Any
 
+from gcs.io.scheduling import raise_thread
+
 __all__ = ["SAMPLE", "HEADER", "pack_record", "main"]
 
 HEADER = struct.Struct("<cH")
@@ -123,6 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     spec: dict[str, Any] = json.loads(args[1])
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with_parent()
+    raise_thread()  # its receipt times are the stream's: gcs.io.scheduling
     try:
         _run(out, spec["system"], spec["config"], spec["body"])
     except BrokenPipeError:

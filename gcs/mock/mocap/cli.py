@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 
 from gcs.core.frames import SYSTEM_FRAMES, mapping_for
+from gcs.io.scheduling import raise_thread
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
 from gcs.mock.mocap.server import FaultWindow, NatNetServer, PoseFn, parse_fault_window
@@ -248,6 +249,7 @@ def serve(
         ``time.monotonic()`` at server time 0 (a pose function on the monotonic clock shares
         it); None: when the server is created.
     """
+    raise_thread()  # as a real Motive is never starved by gcs's machine (gcs.io.scheduling)
     server = NatNetServer(
         in_room(pose_ned, mapping_for(room, yaw_offset_deg=yaw_offset_deg)),
         body_name=body,

@@ -1,0 +1,104 @@
+"""Real-time scheduling for the threads that keep a flight's streams at rate.
+
+On a busy machine the OS may leave a sleeping process unscheduled for a long time: on a
+2-core machine with its test suite and two CPU-bound processes beside a mock flight, a thread
+that only sleeps 5 ms at a time went up to 0.75 s without running, both cores busy in user
+code, with no time stolen by the host, no I/O wait and no garbage collection in that process.
+A mocap stream, the vision forwarded to the vehicle or the vehicle's telemetry that stops for
+0.4 s is refused as stale, and the flight ends. PX4 SITL, started as root, runs its own
+threads under ``SCHED_FIFO`` for this reason.
+
+So the threads that carry a flight's streams ask for ``SCHED_RR`` at priority
+:data:`FLIGHT_PRIORITY` (the lowest real-time priority: above every normal process, below
+PX4's own threads and the kernel's): gcs's flight loop while it is linked to a vehicle, its
+motion-capture reader and the thread that forwards the frames, and the mock drone's and mock
+Motive's loops. Where the OS does not allow it (a normal user without ``CAP_SYS_NICE`` or an
+``RLIMIT_RTPRIO``), nothing changes. A thread already under a real-time policy (``chrt``) keeps
+it. Heavy work never runs there: the learning runs in a worker process at the normal policy
+(:mod:`gcs.app.source_worker`), and a virtual clock never asks.
+
+On Linux a policy belongs to a thread: threads and processes it starts afterwards inherit it.
+
+The other pause of a process is its own: a full garbage collection walks every object the
+process holds, and holds the GIL meanwhile. The mock drone, with pymavlink's dialect and its
+flight records, paused 81 ms in one (its vehicle's served pose then jumped 0.10 m in one frame
+and the flight was aborted); gcs's flight process, with MAVSDK, numpy, scipy and rich, 0.17 s.
+So these processes collect once and freeze what they hold before the flight
+(:func:`freeze_heap`, :func:`gc.freeze`): later collections walk only what the flight creates.
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+
+__all__ = [
+    "FLIGHT_PRIORITY",
+    "Previous",
+    "raise_thread",
+    "restore_thread",
+    "to_normal",
+    "freeze_heap",
+    "thaw_heap",
+]
+
+FLIGHT_PRIORITY = 1
+"""``SCHED_RR`` priority of the flight's threads (1-99, 1 the lowest)."""
+
+Previous = tuple[int, int]
+"""A thread's policy and priority before :func:`raise_thread`."""
+
+
+def raise_thread() -> Previous | None:
+    """Put the calling thread under ``SCHED_RR`` at :data:`FLIGHT_PRIORITY` where allowed.
+
+    Returns
+    -------
+    tuple of int or None
+        The policy and priority it had (for :func:`restore_thread`); None when nothing changed:
+        not allowed, not available on this OS, or already under a real-time policy.
+    """
+    if not hasattr(os, "sched_setscheduler"):
+        return None
+    policy = os.sched_getscheduler(0)
+    if policy in (os.SCHED_FIFO, os.SCHED_RR):
+        return None
+    before = (policy, os.sched_getparam(0).sched_priority)
+    try:
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(FLIGHT_PRIORITY))
+    except OSError:  # PermissionError: neither root, CAP_SYS_NICE nor an RLIMIT_RTPRIO
+        return None
+    return before
+
+
+def restore_thread(previous: Previous | None) -> None:
+    """Give the calling thread back the policy it had before :func:`raise_thread`.
+
+    Parameters
+    ----------
+    previous : tuple of int or None
+        What :func:`raise_thread` returned (None: nothing to give back).
+    """
+    if previous is not None:
+        os.sched_setscheduler(0, previous[0], os.sched_param(previous[1]))
+
+
+def to_normal() -> None:
+    """Put the calling thread under the normal policy if it runs under a real-time one (always
+    allowed): for heavy work started by a raised thread, such as the learning worker."""
+    if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) in (
+        os.SCHED_FIFO,
+        os.SCHED_RR,
+    ):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+def freeze_heap() -> None:
+    """Collect, then leave everything the process holds now out of later collections."""
+    gc.collect()
+    gc.freeze()
+
+
+def thaw_heap() -> None:
+    """Give the frozen objects back to the collector (a process that goes on after a flight)."""
+    gc.unfreeze()
