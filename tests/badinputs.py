@@ -1315,6 +1315,13 @@ def _output_cases() -> Iterator[Case]:
         lambda ws: ["report", str(r := ws.run()), "--html", str(r / "manifest.json")],
         "run directory",
     )
+    yield Case(
+        k,
+        "report",
+        "--html onto a learning record of the run",
+        lambda ws: ["report", str(r := ws.run()), "--html", str(r / "learn-001.json")],
+        "run directory",
+    )
     k = "options: report"
     yield Case(
         k,

@@ -119,8 +119,15 @@ def test_output_checks_refuse_the_run_files_by_the_names_the_run_gives_them(
         run.status_path(3),
         run.estimate_path(2),
         run.session_path(2),
+        run.floor_path,
+        run.mocap_path(1),
+        run.learn_path(1),
+        run.model_path(1),
+        run.again_path(4),
     ):
         assert RUN_FILE.match(path.name), path.name
+    for name in ("report.html", "learn-001.csv", "model-1.yaml", "trial-0001.csv", "floor.yaml"):
+        assert not RUN_FILE.match(name), name  # outputs a user may name so
 
 
 def test_output_dir_and_new_dir_checks(tmp_path: Path) -> None:

@@ -36,8 +36,9 @@ KINDS = {"profile": "profiles", "trajectory": "trajectories"}
 #: names :class:`gcs.io.rundir.RunDir` gives them (tests/test_paths.py holds the two together),
 #: spelled again here because that module builds on this one.
 RUN_FILE = re.compile(
-    r"^(manifest\.json|reference\.csv|identified\.yaml|"
-    r"(setpoints|trial|estimate)-\d{3}\.(csv|json)|session-\d{3}\.json)$"
+    r"^(manifest\.json|reference\.csv|identified\.yaml|floor\.json|"
+    r"(setpoints|trial|estimate|mocap)-\d{3}\.csv|(trial|learn|again|session)-\d{3}\.json|"
+    r"model-\d{3}\.yaml)$"
 )
 
 
