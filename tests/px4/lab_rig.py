@@ -51,7 +51,6 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 from typing import Annotated
 
 import numpy as np
@@ -59,10 +58,9 @@ import typer
 from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs.core.frames import SYSTEM_FRAMES
-from gcs.errors import MocapError
 from gcs.io.scheduling import raise_thread
-from gcs.mock.child import ChildNotReady, ChildProgram
 from gcs.mock.mocap.cli import parse_version, serve
+from gcs.mock.mocap.process import MocapServerProcess
 
 __all__ = [
     "SIH_DISPLAY_PORT",
@@ -499,7 +497,7 @@ _RUN = (
 )
 
 
-class LabRig:
+class LabRig(MocapServerProcess):
     """The rig as a process of its own: ``with LabRig(n, ["--rate", "240"]) as rig: rig.url``.
 
     On entry it starts the program (:class:`gcs.mock.child.ChildProgram`: its own session, its
@@ -528,31 +526,9 @@ class LabRig:
     def __init__(
         self, instance: int, args: list[str] | None = None, ready_timeout_s: float = 20.0
     ) -> None:
+        program = [sys.executable, "-c", _RUN, *_PATH, str(instance)]
+        super().__init__(args, ready_timeout_s, program=program, name="lab rig")
         self.instance = instance
-        self.args = list(args or [])
-        self.url = ""
-        self.pid = 0
-        self.stderr_text = ""
-        argv = [sys.executable, "-c", _RUN, *_PATH, str(instance), *self.args]
-        self._child = ChildProgram(argv, ready_timeout_s)
-
-    def __enter__(self) -> LabRig:
-        try:
-            self.url = self._child.start()
-        except ChildNotReady as exc:
-            self.stderr_text = self._child.stderr_text
-            raise MocapError(f"lab rig did not start: {exc}") from None
-        self.pid = self._child.pid
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self._child.stop()
-        self.stderr_text = self._child.stderr_text
 
 
 if __name__ == "__main__":

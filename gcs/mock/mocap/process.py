@@ -24,6 +24,11 @@ class MocapServerProcess:
         Options of ``python -m gcs.mock.mocap`` (``--rate``, ``--circle``, faults...).
     ready_timeout_s : float
         How long to wait for the READY line [s].
+    program : list of str or None
+        The command before ``args`` (None: ``python -m gcs.mock.mocap``); another program that
+        serves NatNet the same way (prints ``READY <url>``, counters on stderr).
+    name : str
+        What the program is called in the error when it does not start.
 
     Attributes
     ----------
@@ -35,22 +40,29 @@ class MocapServerProcess:
         What the program wrote on stderr (its counters as JSON last), read on exit.
     """
 
-    def __init__(self, args: list[str] | None = None, ready_timeout_s: float = 20.0) -> None:
+    def __init__(
+        self,
+        args: list[str] | None = None,
+        ready_timeout_s: float = 20.0,
+        *,
+        program: list[str] | None = None,
+        name: str = "mock motion capture",
+    ) -> None:
         self.args = list(args or [])
         self.ready_timeout_s = ready_timeout_s
         self.url = ""
         self.pid = 0
         self.stderr_text = ""
-        self._child = ChildProgram(
-            [sys.executable, "-m", "gcs.mock.mocap", *self.args], ready_timeout_s
-        )
+        self._name = name
+        command = [sys.executable, "-m", "gcs.mock.mocap"] if program is None else program
+        self._child = ChildProgram([*command, *self.args], ready_timeout_s)
 
     def __enter__(self) -> MocapServerProcess:
         try:
             self.url = self._child.start()
         except ChildNotReady as exc:
             self.stderr_text = self._child.stderr_text
-            raise MocapError(f"mock motion capture did not start: {exc}") from None
+            raise MocapError(f"{self._name} did not start: {exc}") from None
         self.pid = self._child.pid
         return self
 
