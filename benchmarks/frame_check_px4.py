@@ -38,7 +38,7 @@ from px4.sitl import STARTED_LINE, Px4Build, Px4Sitl, build_dir  # noqa: E402
 from px4.test_px4_lab import LAB_PARAMS  # noqa: E402
 from synthetic import CI_FLIGHT, SHORT  # noqa: E402
 
-FLY_TIMEOUT_S = 300
+FLY_TIMEOUT_S = 600  # a hung flight, not a slow one: a loaded machine makes healthy flights slow
 
 
 def _profile(tmp: Path) -> Path:
@@ -56,6 +56,10 @@ def _ended(out: str) -> str:
     return errors[-1][len("error:") :].strip() if errors else (lines[-1] if lines else "")
 
 
+def _text(data: bytes | str | None) -> str:
+    return data.decode(errors="replace") if isinstance(data, bytes) else (data or "")
+
+
 def fly(build: Px4Build, number: int, yaw_deg: float) -> dict:
     """One flight: fresh PX4 and rig, ``gcs fly --iter 1``, the outcome and the check's figures."""
     load_before = os.getloadavg()[0]
@@ -67,16 +71,22 @@ def fly(build: Px4Build, number: int, yaw_deg: float) -> dict:
             vehicle.start()
             (tmp / "tiny.yaml").write_text(yaml.safe_dump(SHORT))
             with LabRig(vehicle.instance, ["--yaw-offset-deg", str(yaw_deg)]) as rig:
-                proc = subprocess.run(
-                    [sys.executable, "-m", "gcs", "fly", "--connect", vehicle.url,
-                     "--mocap", rig.url, "--iter", "1", "--trajectory", str(tmp / "tiny.yaml"),
-                     "--profile", str(_profile(tmp)), "--run", str(tmp / "run")],
-                    cwd=ROOT, capture_output=True, text=True, timeout=FLY_TIMEOUT_S,
-                    env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
-                )  # fmt: skip
+                try:
+                    proc = subprocess.run(
+                        [sys.executable, "-m", "gcs", "fly", "--connect", vehicle.url,
+                         "--mocap", rig.url, "--iter", "1", "--trajectory", str(tmp / "tiny.yaml"),
+                         "--profile", str(_profile(tmp)), "--run", str(tmp / "run")],
+                        cwd=ROOT, capture_output=True, text=True, timeout=FLY_TIMEOUT_S,
+                        env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
+                    )  # fmt: skip
+                    returncode, out = proc.returncode, proc.stdout + proc.stderr
+                except subprocess.TimeoutExpired as timeout:
+                    # what it had said by then tells where a flight that slow was
+                    said = [_text(timeout.stdout), _text(timeout.stderr)]
+                    returncode, out = None, "".join(said)
+                    out += f"\nerror: no end after {FLY_TIMEOUT_S} s: {_ended(''.join(said))}"
         finally:
             vehicle.stop()
-        out = proc.stdout + proc.stderr
         sessions = sorted((tmp / "run").glob("session-*.json"))
         session = json.loads(sessions[-1].read_text()) if sessions else {}
     checks = (session.get("mocap") or {}).get("moves") or []
@@ -84,14 +94,14 @@ def fly(build: Px4Build, number: int, yaw_deg: float) -> dict:
     return {
         "flight": number,
         "yaw_offset_deg": yaw_deg,
-        "exit": proc.returncode,
+        "exit": returncode,
         "checked": bool(checks),
         "check_refused": refused,
         "check_passed": "mocap check: the mocap moved with the vehicle's estimate" in out,
         "unjudged": "was not judged" in out,
         "flown_again": "once more with" in out,
-        "trial_done": "landed and disarmed" in out and proc.returncode == 0,
-        "ended": _ended(out) if proc.returncode else "completed",
+        "trial_done": "landed and disarmed" in out and returncode == 0,
+        "ended": _ended(out) if returncode != 0 else "completed",
         "checks": checks,
         "load_before": round(load_before, 2),
         "load_after": round(os.getloadavg()[0], 2),
