@@ -28,30 +28,17 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 def run_guarded(main: Coroutine[Any, Any, T], on_repeat: Callable[[int], None] | None = None) -> T:
     """Run ``main`` in a new event loop; a stop signal cancels it once, and only once.
 
-    Parameters
-    ----------
-    main : coroutine
-        The flight. On cancellation it must stop the vehicle before it ends.
-    on_repeat : callable, optional
-        Called on the event loop with the number of stop signals so far (2, 3, ...) for each
-        signal that arrives after the first, while ``main`` is still stopping; must return
-        quickly.
+    ``main``: the flight. On cancellation it must stop the vehicle before it ends. ``on_repeat``:
+    called on the event loop with the number of stop signals so far (2, 3, ...) for each signal that
+    arrives after the first, while ``main`` is still stopping; must return quickly.
 
-    Returns
-    -------
-    object
-        What ``main`` returned, when no stop signal arrived.
+    Returns: what ``main`` returned, when no stop signal arrived.
 
-    Raises
-    ------
-    KeyboardInterrupt
-        A stop signal arrived and ``main`` ended because of the cancellation (after it stopped
-        the vehicle).
+    Raises ``KeyboardInterrupt``: a stop signal arrived and ``main`` ended because of the
+    cancellation (after it stopped the vehicle).
 
-    Notes
-    -----
-    Where the event loop cannot take signal handlers (not the main thread, or a platform
-    without ``loop.add_signal_handler``), ``main`` runs under plain ``asyncio.run`` rules.
+    Where the event loop cannot take signal handlers (not the main thread, or a platform without
+    ``loop.add_signal_handler``), ``main`` runs under plain ``asyncio.run`` rules.
     """
     return asyncio.run(_guarded(main, on_repeat))
 
