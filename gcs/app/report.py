@@ -444,7 +444,7 @@ def change_pct(rows: list[IterationMetrics]) -> dict[int, float | None]:
 
     ``rows``: from :func:`run_metrics` (``delta_pct`` None after a gap).
 
-    Returns: [%] by trial number; None for trial 0 and after a gap.
+    Returns the change [%] by trial number; None for trial 0 and after a gap.
     """
     out: dict[int, float | None] = {}
     for i, r in enumerate(rows):

@@ -465,7 +465,7 @@ class VisionAidedError:
         sample is compared with the estimate this long ago. ``ev_ctrl``: ``EKF2_EV_CTRL``: bit 0
         fuses the horizontal position, bit 1 the height.
 
-        Returns: the sample was fused (False: rejected by the gate, or nothing to fuse).
+        Returns True when the sample was fused (False: rejected by the gate, or nothing to fuse).
         """
         axes = (bool(ev_ctrl & 1), bool(ev_ctrl & 1), bool(ev_ctrl & 2))
         if not any(axes) or not all(math.isfinite(x) for x in pos_ned_m):
