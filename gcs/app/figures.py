@@ -17,17 +17,7 @@ DPI = 110
 
 
 def figure_png(fig: Any) -> bytes:
-    """A matplotlib figure as PNG bytes; the figure is closed.
-
-    Parameters
-    ----------
-    fig : matplotlib.figure.Figure
-        The figure.
-
-    Returns
-    -------
-    bytes
-    """
+    """A matplotlib figure as PNG bytes; the figure is closed."""
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
@@ -40,16 +30,7 @@ def figure_png(fig: Any) -> bytes:
 def save_figure(fig: Any, path: Path) -> Path:
     """Write a matplotlib figure (PNG, SVG, PDF) atomically (temporary file + rename), close it.
 
-    Parameters
-    ----------
-    fig : matplotlib.figure.Figure
-        The figure.
-    path : Path
-        Destination; its extension is the format (.png, .svg, .pdf).
-
-    Returns
-    -------
-    Path
+    ``path``: destination; its extension is the format (.png, .svg, .pdf).
     """
     import matplotlib.pyplot as plt
 

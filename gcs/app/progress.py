@@ -25,14 +25,7 @@ INTERVAL_S = 10.0
 def clock(seconds: float) -> str:
     """``HH:MM:SS`` of a duration.
 
-    Parameters
-    ----------
-    seconds : float
-        Duration [s].
-
-    Returns
-    -------
-    str
+    ``seconds``: duration [s].
     """
     s = int(round(max(seconds, 0.0)))
     return f"{s // 3600:02d}:{s % 3600 // 60:02d}:{s % 60:02d}"
@@ -50,20 +43,8 @@ def progress_lines(
     A line is said at the first call, then when ``interval_s`` has passed since the last one,
     and when ``done == total``.
 
-    Parameters
-    ----------
-    say : callable
-        Receives each line.
-    label, unit : str
-        ``"<label>: <done>/<total> <unit>, ..."``.
-    interval_s : float
-        Seconds between lines.
-    now : callable
-        Monotonic clock [s] (a parameter for tests).
-
-    Returns
-    -------
-    callable
+    ``label``, ``unit``: ``"<label>: <done>/<total> <unit>, ..."``. ``interval_s``: seconds between
+    lines. ``now``: monotonic clock [s] (a parameter for tests).
     """
     start = now()
     last: list[float | None] = [None]
@@ -88,21 +69,9 @@ def track(
 ) -> Iterator[Callable[[int, int], None]]:
     """Progress on ``console``: a bar on a terminal, else plain periodic lines.
 
-    Parameters
-    ----------
-    console : rich.console.Console
-        Where to show it (usually stderr).
-    label : str
-        What is being done.
-    unit : str
-        What is counted (``"chunks"``).
-    interval_s : float
-        Seconds between plain lines.
+    ``unit``: what is counted (``"chunks"``). ``interval_s``: seconds between plain lines.
 
-    Yields
-    ------
-    callable
-        ``progress(done, total)``.
+    Yields: callable, ``progress(done, total)``.
     """
     if not console.is_terminal:
         yield progress_lines(

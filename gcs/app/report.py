@@ -84,27 +84,12 @@ JSON_DIGITS = 9
 class RunFacts:
     """Where a report comes from: the run and what it was flown with.
 
-    Parameters
-    ----------
-    run_id : str
-        The run directory's own name (``logs/latest`` resolved to the run it points at).
-    path : str
-        The run directory as given.
-    algorithm : str
-        ``smoother``, ``kilc`` or ``identify``.
-    profile, trajectory : str
-        Names of the profile and the trajectory recorded in the manifest.
-    seeds : tuple of int
-        The mock drone's seed of each flight session, in order (empty on a real vehicle, or
-        where it was not recorded).
-    gcs_version : str
-        The gcs that created the run.
-    created_utc : str
-        When the run was created (ISO 8601, UTC).
-    n_samples : int
-        Samples per trial.
-    t_ilc_s : float
-        Sample time of the learning grid [s].
+    ``run_id``: the run directory's own name (``logs/latest`` resolved to the run it points at).
+    ``algorithm``: ``smoother``, ``kilc`` or ``identify``. ``profile``, ``trajectory``: names of the
+    profile and the trajectory recorded in the manifest. ``seeds``: the mock drone's seed of each
+    flight session, in order (empty on a real vehicle, or where it was not recorded).
+    ``created_utc``: when the run was created (ISO 8601, UTC). ``t_ilc_s``: sample time of the
+    learning grid [s].
     """
 
     run_id: str
@@ -119,24 +104,14 @@ class RunFacts:
     t_ilc_s: float
 
     def title(self) -> str:
-        """The report's title: run id, algorithm, profile, trajectory, seed and gcs version.
-
-        Returns
-        -------
-        str
-        """
+        """The report's title: run id, algorithm, profile, trajectory, seed and gcs version."""
         return (
             f"{self.run_id} ({self.algorithm}) · profile {self.profile} · trajectory "
             f"{self.trajectory} · {self.seed_text()} · gcs {self.gcs_version}"
         )
 
     def seed_text(self) -> str:
-        """``"seed 3"``, ``"seeds 3, 4"`` (one per session) or ``"seed -"`` (none recorded).
-
-        Returns
-        -------
-        str
-        """
+        """``"seed 3"``, ``"seeds 3, 4"`` (one per session) or ``"seed -"`` (none recorded)."""
         if not self.seeds:
             return "seed -"
         unique = list(dict.fromkeys(self.seeds))
@@ -146,14 +121,7 @@ class RunFacts:
 def run_facts(run: RunDir) -> RunFacts:
     """The provenance of ``run`` from its manifest and session records.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory (``logs/latest`` is resolved to the run it points at).
-
-    Returns
-    -------
-    RunFacts
+    ``run``: the run directory (``logs/latest`` is resolved to the run it points at).
     """
     m = run.manifest
     seeds = tuple(
@@ -179,15 +147,8 @@ def run_facts(run: RunDir) -> RunFacts:
 class TrialEntry:
     """What the run directory says about one trial index.
 
-    Parameters
-    ----------
-    trial : int
-        Trial index j.
-    status : str
-        ``"complete"``, ``"incomplete"`` or ``"missing"`` (no sidecar although a later trial
-        has one).
-    reason : str or None
-        Why an incomplete trial stopped (or what is missing).
+    ``status``: ``"complete"``, ``"incomplete"`` or ``"missing"`` (no sidecar although a later trial
+    has one). ``reason``: why an incomplete trial stopped (or what is missing).
     """
 
     trial: int
@@ -198,15 +159,7 @@ class TrialEntry:
 def trial_overview(run: RunDir) -> list[TrialEntry]:
     """Every trial index from 0 to the newest on disk, with its status.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-
-    Returns
-    -------
-    list of TrialEntry
-        By index; a gap is ``"missing"``, a CSV without its sidecar ``"incomplete"``.
+    Returns: by index; a gap is ``"missing"``, a CSV without its sidecar ``"incomplete"``.
     """
     statuses = {s.trial: s for s in run.statuses()}
     csv_only = {j for j in run.csv_trials() if j not in statuses}
@@ -225,34 +178,12 @@ def trial_overview(run: RunDir) -> list[TrialEntry]:
 
 
 def aborted_attempts(run: RunDir) -> dict[int, int]:
-    """Incomplete attempts of each trial that was flown again, kept in ``aborted/``.
-
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-
-    Returns
-    -------
-    dict of int to int
-        Number of attempts by trial index.
-    """
+    """Incomplete attempts of each trial that was flown again, kept in ``aborted/``."""
     return run.aborted_attempts()
 
 
 def flown_again(run: RunDir) -> dict[int, int]:
-    """Trials that flew an earlier trial's setpoints again (``gcs fly --again``).
-
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-
-    Returns
-    -------
-    dict of int to int
-        The earlier trial by trial index.
-    """
+    """Trials that flew an earlier trial's setpoints again (``gcs fly --again``)."""
     out = {}
     for j in run.again_trials():
         k = run.again_of(j)
@@ -264,17 +195,8 @@ def flown_again(run: RunDir) -> dict[int, int]:
 def complete_records(run: RunDir, measurement: str | None = None) -> dict[int, TrialRecord]:
     """Every complete trial of ``run``, by index, measured as asked.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    measurement : str or None
-        ``"mocap"`` or ``"estimate"`` (:meth:`TrialRecord.measured`); None: the run's own
-        (``mocap.measurement`` of its profile, default mocap where a trial has it).
-
-    Returns
-    -------
-    dict of int to TrialRecord
+    ``measurement``: ``"mocap"`` or ``"estimate"`` (:meth:`TrialRecord.measured`); None: the run's
+    own (``mocap.measurement`` of its profile, default mocap where a trial has it).
     """
     measurement = measurement or run.profile().mocap.measurement
     return {j: run.measured_trial(j, measurement) for j in run.complete_trials()}
@@ -286,21 +208,9 @@ def run_metrics(run: RunDir, measurement: str | None = None) -> list[IterationMe
     Percentages are relative to trial 0, and the change column compares consecutive trials
     only (``-`` after a gap).
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    measurement : str or None
-        ``"mocap"`` or ``"estimate"``; None: the run's own.
+    ``measurement``: ``"mocap"`` or ``"estimate"``; None: the run's own.
 
-    Returns
-    -------
-    list of IterationMetrics
-
-    Raises
-    ------
-    RunLogError
-        No complete trial 0 (missing or incomplete), or e_pos,0 = 0.
+    Raises ``RunLogError``: no complete trial 0 (missing or incomplete), or e_pos,0 = 0.
     """
     records = complete_records(run, measurement)
     if 0 not in records:
@@ -328,15 +238,6 @@ def run_metrics(run: RunDir, measurement: str | None = None) -> list[IterationMe
 def is_three_d(run: RunDir) -> bool:
     """True when the run learns down or its reference moves vertically: its table and live
     lines then show the 3-D e_pos and the down RMS beside eq. (10)'s horizontal e_pos.
-
-    Parameters
-    ----------
-    run : RunDir
-        A learning run.
-
-    Returns
-    -------
-    bool
     """
     if 2 in run.profile().learning.axes:
         return True
@@ -347,20 +248,11 @@ def is_three_d(run: RunDir) -> bool:
 class TrialLearning:
     """What learning says about one complete trial.
 
-    Parameters
-    ----------
-    trial : int
-        Trial number (order of flight).
-    iteration : int
-        The paper's iteration j (learning updates before it; a repeat is j = 0).
-    repeat_of : int or None
-        The trial it repeats, or None.
-    sp_rms_m, sp_max_m : float
-        RMS and largest horizontal distance of its setpoints from the reference [m].
-    verdict : FloorVerdict or None
-        e_pos against the floor (None without a floor).
-    record : dict or None
-        The decision record of the learning step from this trial (``learn-JJJ.json``).
+    ``iteration``: the paper's iteration j (learning updates before it; a repeat is j = 0).
+    ``repeat_of``: the trial it repeats, or None. ``sp_rms_m``, ``sp_max_m``: RMS and largest
+    horizontal distance of its setpoints from the reference [m]. ``verdict``: e_pos against the
+    floor (None without a floor). ``record``: the decision record of the learning step from this
+    trial (``learn-JJJ.json``).
     """
 
     trial: int
@@ -376,20 +268,9 @@ class TrialLearning:
 class RunLearning:
     """What learning says about a run.
 
-    Parameters
-    ----------
-    history : bool
-        The profile has ``learning.adaptive`` (every trial learned from, decisions recorded).
-    repeats : int
-        Repeats of trial 0.
-    floor : Floor or None
-        The floor, from trial 0 and its repeats (:func:`gcs.core.floor.floor_flights`).
-    floor_trials : tuple of int
-        The trials it was measured from.
-    floor_z : float
-        Threshold of the "at the floor" statistic.
-    trials : dict of int to TrialLearning
-        By trial number (complete trials).
+    ``history``: the profile has ``learning.adaptive`` (every trial learned from, decisions
+    recorded). ``repeats``: repeats of trial 0. ``floor``: the floor, from trial 0 and its repeats
+    (:func:`gcs.core.floor.floor_flights`). ``floor_z``: threshold of the "at the floor" statistic.
     """
 
     history: bool
@@ -407,16 +288,7 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
     learning uses (:mod:`gcs.core.floor`), so that a trial not yet learned from has its verdict
     too.
 
-    Parameters
-    ----------
-    run : RunDir
-        A learning run.
-    records : dict of int to TrialRecord, optional
-        Its complete trials, if read already (:func:`complete_records`).
-
-    Returns
-    -------
-    RunLearning
+    ``records``: its complete trials, if read already (:func:`complete_records`).
     """
     records = complete_records(run) if records is None else records
     ref = run.reference().pos_ned_m
@@ -448,15 +320,7 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
 def trial_clock_rates(run: RunDir) -> dict[int, float | None]:
     """The vehicle-time / wall-time rate each trial was flown at, from the sidecars.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-
-    Returns
-    -------
-    dict of int to float or None
-        By trial index; None where it was not recorded (runs flown before it was).
+    Returns: by trial index; None where it was not recorded (runs flown before it was).
     """
     rates: dict[int, float | None] = {}
     for status in run.statuses():
@@ -485,27 +349,15 @@ def metrics_json(
     Table IV's unsigned change (``IterationMetrics.delta_pct``) is not a key: ``change_pct``
     carries the same number with its sign (version 3 of the document).
 
-    Parameters
-    ----------
-    rows : list of IterationMetrics
-        The rows of the complete trials (``iteration``: the trial number).
-    rates : dict of int to float or None, optional
-        Vehicle-time rate per trial: adds the key ``vehicle_time_rate`` (null if unknown).
-    entries : list of TrialEntry, optional
-        Every trial (:func:`trial_overview`): missing and incomplete trials are listed too,
-        with ``status``, ``reason`` and null metrics.
-    learning : RunLearning, optional
-        What learning says (:func:`run_learning`): adds ``trial`` (the trial number; then
-        ``iteration`` is the paper's j, 0 for a repeat), ``repeat_of`` (the trial repeated,
-        or null), ``sp_rms_m`` and ``sp_max_m`` (the setpoints' distance from the
-        reference); with a floor ``floor_m``, ``floor_scatter_m``, ``floor_ratio``,
-        ``floor_z``, ``at_floor``, ``converged``; with ``learning.adaptive`` ``learning``
-        (the record of the learning step from the trial: ``learn-JJJ.json``, or null).
-
-    Returns
-    -------
-    list of dict
-        By trial number.
+    ``rows``: the rows of the complete trials (``iteration``: the trial number). ``rates``:
+    Vehicle-time rate per trial: adds the key ``vehicle_time_rate`` (null if unknown). ``entries``:
+    every trial (:func:`trial_overview`): missing and incomplete trials are listed too, with
+    ``status``, ``reason`` and null metrics. ``learning``: what learning says
+    (:func:`run_learning`): adds ``trial`` (the trial number; then ``iteration`` is the paper's j, 0
+    for a repeat), ``repeat_of`` (the trial repeated, or null), ``sp_rms_m`` and ``sp_max_m`` (the
+    setpoints' distance from the reference); with a floor ``floor_m``, ``floor_scatter_m``,
+    ``floor_ratio``, ``floor_z``, ``at_floor``, ``converged``; with ``learning.adaptive``
+    ``learning`` (the record of the learning step from the trial: ``learn-JJJ.json``, or null).
     """
     changes = change_pct(rows)
     by_trial = {
@@ -555,17 +407,7 @@ def _learning_json(row: dict, learning: RunLearning) -> dict:
 
 
 def parse_iterations(text: str) -> list[int]:
-    """``"0,2,5"`` as ``[0, 2, 5]`` (sorted, unique); refused with the option's name.
-
-    Parameters
-    ----------
-    text : str
-        Comma-separated trial indices.
-
-    Returns
-    -------
-    list of int
-    """
+    """``"0,2,5"`` as ``[0, 2, 5]`` (sorted, unique); refused with the option's name."""
     try:
         values = sorted({int(v) for v in text.split(",") if v.strip()})
     except ValueError:
@@ -580,16 +422,7 @@ def parse_iterations(text: str) -> list[int]:
 def choose_iterations(run: RunDir, wanted: list[int] | None) -> list[int]:
     """The trials to draw: ``wanted`` (each must be complete), or 0, 1, 2 and the last.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    wanted : list of int or None
-        From ``--iterations``.
-
-    Returns
-    -------
-    list of int
+    ``wanted``: from ``--iterations``.
     """
     done = run.complete_trials()
     if wanted is None:
@@ -609,15 +442,9 @@ def change_pct(rows: list[IterationMetrics]) -> dict[int, float | None]:
     Table IV's column is ``|Δe_pos|``: an improvement and a worse trial read alike. This is
     ``100 (e_pos,j - e_pos,j-1) / e_pos,j-1``: negative is better, positive worse.
 
-    Parameters
-    ----------
-    rows : list of IterationMetrics
-        From :func:`run_metrics` (``delta_pct`` None after a gap).
+    ``rows``: from :func:`run_metrics` (``delta_pct`` None after a gap).
 
-    Returns
-    -------
-    dict of int to float or None
-        [%] by trial number; None for trial 0 and after a gap.
+    Returns the change [%] by trial number; None for trial 0 and after a gap.
     """
     out: dict[int, float | None] = {}
     for i, r in enumerate(rows):
@@ -630,17 +457,7 @@ def change_pct(rows: list[IterationMetrics]) -> dict[int, float | None]:
 def rounded(value: Any, digits: int = JSON_DIGITS) -> Any:
     """``value`` as strict JSON with every float to ``digits`` significant digits.
 
-    Parameters
-    ----------
-    value : Any
-        Nested dicts, lists and scalars.
-    digits : int
-        Significant digits.
-
-    Returns
-    -------
-    Any
-        NaN and infinities as None (``100.00000000000001`` becomes ``100.0``).
+    Returns: NaN and infinities as None (``100.00000000000001`` becomes ``100.0``).
     """
     value = json_safe(value)
     if isinstance(value, dict):
@@ -661,25 +478,9 @@ def report_document(
 ) -> dict[str, Any]:
     """The JSON document of ``gcs report --json`` (schema: docs/report.md).
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    rows : list of IterationMetrics
-        Its complete trials (:func:`run_metrics`).
-    rates : dict of int to float or None, optional
-        Vehicle-time rate per trial (:func:`trial_clock_rates`).
-    entries : list of TrialEntry, optional
-        Every trial (:func:`trial_overview`).
-    learning : RunLearning, optional
-        What learning says (:func:`run_learning`).
-
-    Returns
-    -------
-    dict
-        ``format`` ("gcs-report"), ``version`` (3), ``run`` (:class:`RunFacts` as an
-        object), ``verdict`` (:class:`Verdict` as an object, null for an identification
-        run) and ``rows`` (:func:`metrics_json`), numbers rounded (:func:`rounded`).
+    Returns: ``format`` ("gcs-report"), ``version`` (3), ``run`` (:class:`RunFacts` as an object),
+    ``verdict`` (:class:`Verdict` as an object, null for an identification run) and ``rows``
+    (:func:`metrics_json`), numbers rounded (:func:`rounded`).
     """
     verdict = run_verdict(rows, learning) if run.kind == "learning" else None
     return rounded(
@@ -702,46 +503,20 @@ class Verdict:
     """The run in plain words: what was learned, how far above the floor, converged or not,
     and how many flights are likely left.
 
-    Parameters
-    ----------
-    flights : int
-        Complete trials.
-    first_epos_m : float
-        e_pos of trial 0 (the reference flown as setpoints) [m].
-    best_trial : int
-        The complete trial with the smallest e_pos.
-    best_epos_m : float
-        Its e_pos [m].
-    best_updates : int
-        Learning updates before it (the paper's iteration j).
-    change_pct : float
-        100 (best - first) / first [%]: negative is better.
-    last_trial : int
-        The newest complete trial.
-    last_epos_m : float
-        Its e_pos [m].
-    floor_m : float or None
-        The floor, when the run measured one (repeats of trial 0) [m].
-    floor_ratio : float or None
-        best e_pos / floor.
-    floor_z : float or None
-        The best trial's z = (e_pos - floor) / scatter.
-    floor_z_max : float
-        The z of the verdict "at floor" (``learning.adaptive.floor_z``).
-    converged_trial : int or None
-        The first trial with the verdict "converged".
-    flights_left : int or None
-        Likely flights until "converged" (0 when converged); None when it cannot be estimated.
-    flights_left_how : str
-        How ``flights_left`` was estimated, or why it cannot be.
-    drift_trials : list of int
-        The newest trials, above the floor after an earlier trial reached it
-        (:func:`gcs.core.floor.floor_drift`); empty when learning did not drift up.
-    drift_reached_trial : int or None
-        The first trial at the floor, when it drifted.
-    drift_best_trial : int or None
-        The trial at the floor with the smallest e_pos, when it drifted: its setpoints are
-        the ones worth flying again.
+    ``first_epos_m``: e_pos of trial 0 (the reference flown as setpoints) [m]. ``best_trial``: the
+    complete trial with the smallest e_pos. ``best_epos_m``: its e_pos [m]. ``best_updates``:
+    learning updates before it (the paper's iteration j). ``change_pct``: 100 (best - first) / first
+    [%]: negative is better. ``last_epos_m``: its e_pos [m]. ``floor_m``: the floor, when the run
+    measured one (repeats of trial 0) [m]. ``floor_z``: the best trial's z = (e_pos - floor) /
+    scatter. ``floor_z_max``: the z of the verdict "at floor" (``learning.adaptive.floor_z``).
+    ``converged_trial``: the first trial with the verdict "converged". ``flights_left``: likely
+    flights until "converged" (0 when converged); None when it cannot be estimated.
+    ``flights_left_how``: how ``flights_left`` was estimated, or why it cannot be. ``drift_trials``:
+    the newest trials, above the floor after an earlier trial reached it
+    (:func:`gcs.core.floor.floor_drift`); empty when learning did not drift up.
+    ``drift_reached_trial``: the first trial at the floor, when it drifted. ``drift_best_trial``:
+    the trial at the floor with the smallest e_pos, when it drifted: its setpoints are the ones
+    worth flying again.
     """
 
     flights: int
@@ -764,12 +539,7 @@ class Verdict:
     drift_best_trial: int | None = None
 
     def lines(self) -> list[str]:
-        """The verdict as a few lines of plain words (terminal and HTML).
-
-        Returns
-        -------
-        list of str
-        """
+        """The verdict as a few lines of plain words (terminal and HTML)."""
         flights = f"{self.flights} flight" + ("s" if self.flights != 1 else "")
         updates = f"{self.best_updates} learning update" + ("s" if self.best_updates != 1 else "")
         out = [
@@ -813,12 +583,7 @@ class Verdict:
         return out
 
     def as_dict(self) -> dict:
-        """JSON-ready dictionary: the fields, and ``text`` (:meth:`lines`).
-
-        Returns
-        -------
-        dict
-        """
+        """JSON-ready dictionary: the fields, and ``text`` (:meth:`lines`)."""
         return {**asdict(self), "text": self.lines()}
 
 
@@ -838,16 +603,8 @@ def run_verdict(rows: list[IterationMetrics], learning: RunLearning | None) -> V
     such trials, or with an excess that did not fall, it is not estimated and the reason is
     said instead.
 
-    Parameters
-    ----------
-    rows : list of IterationMetrics
-        From :func:`run_metrics` (``iteration``: the trial number).
-    learning : RunLearning or None
-        From :func:`run_learning` (None: an identification run has no learning).
-
-    Returns
-    -------
-    Verdict
+    ``rows``: from :func:`run_metrics` (``iteration``: the trial number). ``learning``: from
+    :func:`run_learning` (None: an identification run has no learning).
     """
     epos = {r.iteration: r.epos_m for r in rows}
     best = min(epos, key=lambda t: (epos[t], t))
@@ -893,16 +650,8 @@ def drift_sentence(drift: FloorDrift) -> str:
     """A drift up from the floor in words, as the live lines, the landing and the verdict
     say it.
 
-    Parameters
-    ----------
-    drift : FloorDrift
-        From :func:`gcs.core.floor.floor_drift`.
-
-    Returns
-    -------
-    str
-        E.g. "drifting up: trial 3 reached the floor, trials 5 and 6 are above it again;
-        the best setpoints at the floor are trial 4's".
+    E.g. "drifting up: trial 3 reached the floor, trials 5 and 6 are above it again; the
+    best setpoints at the floor are trial 4's".
     """
     above = " and ".join(map(str, drift.above))
     return (

@@ -61,19 +61,8 @@ _GROUPS = (
 class ComparedRun:
     """One run of a comparison.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    facts : RunFacts
-        Its provenance.
-    rows : list of IterationMetrics
-        Its complete trials (``iteration``: the trial number).
-    verdict : Verdict
-        Its verdict.
-    name : str
-        How the comparison names it: the run's id, or the path as given where two runs have
-        the same id.
+    ``rows``: its complete trials (``iteration``: the trial number). ``name``: how the comparison
+    names it: the run's id, or the path as given where two runs have the same id.
     """
 
     run: RunDir
@@ -86,14 +75,7 @@ class ComparedRun:
 def compare_runs(paths: list[Path]) -> list[ComparedRun]:
     """Open and read every run to compare; each must be a learning run with a complete trial 0.
 
-    Parameters
-    ----------
-    paths : list of Path
-        Two or more run directories.
-
-    Returns
-    -------
-    list of ComparedRun
+    ``paths``: two or more run directories.
     """
     out = []
     for path in paths:
@@ -136,15 +118,7 @@ def differences(runs: list[ComparedRun]) -> list[str]:
     """What differed between the runs, one line per kind: algorithm, profile, trajectory,
     model, learning settings, arena, flight settings, vehicle and seed.
 
-    Parameters
-    ----------
-    runs : list of ComparedRun
-        From :func:`compare_runs`.
-
-    Returns
-    -------
-    list of str
-        Empty when the manifests agree in everything but the run's own name and time.
+    Returns: empty when the manifests agree in everything but the run's own name and time.
     """
     names = [c.name for c in runs]
     lines = []
@@ -181,15 +155,6 @@ def differences(runs: list[ComparedRun]) -> list[str]:
 def compare_lines(runs: list[ComparedRun]) -> list[str]:
     """The lines under the comparison table: a warning when the trajectories differ, what
     differed, and each run's verdict.
-
-    Parameters
-    ----------
-    runs : list of ComparedRun
-        From :func:`compare_runs`.
-
-    Returns
-    -------
-    list of str
     """
     out = []
     trajectories = [c.facts.trajectory for c in runs]
@@ -212,21 +177,10 @@ def _mm(value: float | None) -> str:
 def compare_table(runs: list[ComparedRun]) -> tuple[list[str], list[list[str]], list[list[str]]]:
     """The two tables of a comparison as text cells.
 
-    Parameters
-    ----------
-    runs : list of ComparedRun
-        From :func:`compare_runs`.
-
-    Returns
-    -------
-    headers : list of str
-        Of the summary: run, trajectory, trials, e0 [mm], best [mm], best trial, change [%],
-        floor [mm], converged.
-    summary : list of list of str
-        One row per run.
-    per_trial : list of list of str
-        e_pos [mm] of every trial (rows) per run (columns), ``-`` where a run has none; the
-        first cell of each row is the trial number.
+    Returns: ``headers``: of the summary: run, trajectory, trials, e0 [mm], best [mm], best trial,
+    change [%], floor [mm], converged. ``summary``: one row per run. ``per_trial``: e_pos [mm] of
+    every trial (rows) per run (columns), ``-`` where a run has none; the first cell of each row is
+    the trial number.
     """
     headers = ["run", "trajectory", "trials", "e0 [mm]", "best [mm]", "best trial",
                "change [%]", "floor [mm]", "converged"]  # fmt: skip
@@ -247,16 +201,8 @@ def compare_table(runs: list[ComparedRun]) -> tuple[list[str], list[list[str]], 
 def compare_document(runs: list[ComparedRun]) -> dict[str, Any]:
     """The JSON document of ``gcs report RUN RUN --json``.
 
-    Parameters
-    ----------
-    runs : list of ComparedRun
-        From :func:`compare_runs`.
-
-    Returns
-    -------
-    dict
-        ``format`` ("gcs-report-compare"), ``version`` (1), ``differences`` (lines of
-        words), ``same_trajectory`` and ``runs``: each run's report document (docs/report.md).
+    Returns: ``format`` ("gcs-report-compare"), ``version`` (1), ``differences`` (lines of words),
+    ``same_trajectory`` and ``runs``: each run's report document (docs/report.md).
     """
     docs = []
     for c in runs:
@@ -278,17 +224,7 @@ def compare_document(runs: list[ComparedRun]) -> dict[str, Any]:
 
 
 def compare_figure(runs: list[ComparedRun]) -> Any:
-    """The e_pos curves of the runs overlaid (log scale), each run's floor dotted.
-
-    Parameters
-    ----------
-    runs : list of ComparedRun
-        From :func:`compare_runs`.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
+    """The e_pos curves of the runs overlaid (log scale), each run's floor dotted."""
     import matplotlib
 
     matplotlib.use("Agg")

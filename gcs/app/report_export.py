@@ -42,18 +42,8 @@ def _cell(value: Any) -> str:
 def write_rows_csv(path: Path, rows: list[dict], comment: str | None = None) -> Path:
     """Write dictionaries as CSV (header from the first row's keys; empty cell for null).
 
-    Parameters
-    ----------
-    path : Path
-        The file (written atomically; its directory created if missing).
-    rows : list of dict
-        The rows, each with the same keys.
-    comment : str, optional
-        A first line ``# comment``.
-
-    Returns
-    -------
-    Path
+    ``path``: the file (written atomically; its directory created if missing). ``rows``: the rows,
+    each with the same keys. ``comment``: a first line ``# comment``.
     """
     buf = io.StringIO()
     if comment:
@@ -72,17 +62,6 @@ def write_rows_csv(path: Path, rows: list[dict], comment: str | None = None) -> 
 def write_table_csv(path: Path, json_rows: list[dict]) -> Path:
     """Write the report's table as CSV: one line per trial, the columns :data:`TABLE_COLUMNS`
     that the run has (SI units, as in the JSON rows; empty where the JSON has null).
-
-    Parameters
-    ----------
-    path : Path
-        The file.
-    json_rows : list of dict
-        :func:`gcs.app.report.metrics_json` of the run.
-
-    Returns
-    -------
-    Path
     """
     present = [c for c in TABLE_COLUMNS if any(c in r for r in json_rows)]
     rows = [{c: r.get(c) for c in present} for r in json_rows]
@@ -93,19 +72,7 @@ def write_table_csv(path: Path, json_rows: list[dict]) -> Path:
 
 
 def best_learned_trial(run: RunDir, learning: RunLearning) -> int:
-    """The complete trial with the smallest e_pos among those learned (j >= 1).
-
-    Parameters
-    ----------
-    run : RunDir
-        A learning run.
-    learning : RunLearning
-        What learning says about it (:func:`gcs.app.report.run_learning`).
-
-    Returns
-    -------
-    int
-    """
+    """The complete trial with the smallest e_pos among those learned (j >= 1)."""
     learned = [t for t in learning.trials if iteration_of(t, learning.repeats) >= 1]
     if not learned:
         raise RunLogError(
@@ -126,17 +93,6 @@ def setpoints_samples(run: RunDir, trial: int) -> np.ndarray:
     setpoint; then setpoint u(k) at t_k + t_ilc_s (k = 0..N-1), the time it was held until;
     the last setpoints are pinned to the end's hover point, so the file ends where it began
     as the samples format asks.
-
-    Parameters
-    ----------
-    run : RunDir
-        A learning run.
-    trial : int
-        A complete trial.
-
-    Returns
-    -------
-    ndarray, shape (N + 1, 4)
     """
     sp = run.read_setpoints(trial)
     ref = run.reference()
@@ -149,18 +105,8 @@ def setpoints_samples(run: RunDir, trial: int) -> np.ndarray:
 def write_setpoints(run: RunDir, path: Path, trial: int) -> Path:
     """Write a trial's setpoints as a ``samples`` CSV (docs/trajectories.md).
 
-    Parameters
-    ----------
-    run : RunDir
-        A learning run.
-    path : Path
-        The ``.csv`` file (written atomically).
-    trial : int
-        The trial (:func:`best_learned_trial`).
-
-    Returns
-    -------
-    Path
+    ``path``: the ``.csv`` file (written atomically). ``trial``: the trial
+    (:func:`best_learned_trial`).
     """
     table = setpoints_samples(run, trial)
     lines = [

@@ -34,15 +34,7 @@ __all__ = ["FIGURES", "CAPTIONS", "report_figures", "write_plots", "run_label"]
 def run_label(facts: RunFacts) -> str:
     """The line every figure carries: which run, flown with what.
 
-    Parameters
-    ----------
-    facts : RunFacts
-        From :func:`gcs.app.report.run_facts`.
-
-    Returns
-    -------
-    str
-        Two lines: the run id and algorithm, then profile, trajectory, seed and gcs version.
+    Returns: two lines: the run id and algorithm, then profile, trajectory, seed and gcs version.
     """
     return (
         f"{facts.run_id} ({facts.algorithm})\nprofile {facts.profile} · trajectory "
@@ -341,18 +333,8 @@ def report_figures(
     carries the run's id, profile, trajectory, seed and gcs version (:func:`run_label`). In a
     run with repeats the trials are labelled with their number and their iteration j.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory (trial 0 complete; see :func:`run_metrics`).
-    iterations : list of int
-        Complete trials to draw (:func:`choose_iterations`).
-    progress : callable, optional
-        Told ``(done, total)`` figures as they are drawn (:func:`gcs.app.progress.track`).
-
-    Returns
-    -------
-    dict of str to matplotlib.figure.Figure
+    ``run``: the run directory (trial 0 complete; see :func:`run_metrics`). ``progress``: told
+    ``(done, total)`` figures as they are drawn (:func:`gcs.app.progress.track`).
     """
     import matplotlib
 
@@ -401,22 +383,9 @@ def write_plots(
 ) -> list[Path]:
     """Write the report's figures as files ``<name>.<format>`` (see :func:`report_figures`).
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    out_dir : Path
-        Where to write (created if missing).
-    iterations : list of int, optional
-        Trials to draw (default: 0, 1, 2 and the last).
-    progress : callable, optional
-        Told ``(done, total)`` figures as they are drawn.
-    figure_format : str
-        ``png``, ``svg`` or ``pdf``.
-
-    Returns
-    -------
-    list of Path
+    ``out_dir``: where to write (created if missing). ``iterations``: trials to draw (default: 0, 1,
+    2 and the last). ``progress``: told ``(done, total)`` figures as they are drawn.
+    ``figure_format``: ``png``, ``svg`` or ``pdf``.
     """
     chosen = choose_iterations(run, iterations)
     figures = report_figures(run, chosen, progress)

@@ -46,20 +46,9 @@ def write_html(
     The figures are embedded as base64 PNG; the file refers to nothing outside itself and
     can be mailed as it is.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    path : Path
-        The HTML file (written atomically; its directory created if missing).
-    iterations : list of int, optional
-        Trials to draw (default: 0, 1, 2 and the last).
-    progress : callable, optional
-        Told ``(done, total)`` figures as they are drawn.
-
-    Returns
-    -------
-    Path
+    ``path``: the HTML file (written atomically; its directory created if missing). ``iterations``:
+    trials to draw (default: 0, 1, 2 and the last). ``progress``: told ``(done, total)`` figures as
+    they are drawn.
     """
     rows = run_metrics(run)
     rates = trial_clock_rates(run)

@@ -45,18 +45,7 @@ __all__ = [
 def report_notes(run: RunDir, entries: list[TrialEntry], learning: RunLearning | None) -> list[str]:
     """The lines below the table: learning's notes, trials not in the table, sessions.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-    entries : list of TrialEntry
-        Every trial (:func:`gcs.app.report.trial_overview`).
-    learning : RunLearning or None
-        What learning says, for a learning run.
-
-    Returns
-    -------
-    list of str
+    ``learning``: what learning says, for a learning run.
     """
     notes = learning_notes(learning) if learning is not None else []
     again = trial_notes(entries, aborted_attempts(run), flown_again(run))
@@ -66,18 +55,10 @@ def report_notes(run: RunDir, entries: list[TrialEntry], learning: RunLearning |
 def table_legend(learning: RunLearning | None, shown: bool = True) -> list[str]:
     """What the table's short words mean, one line under it (adaptive profiles only).
 
-    Parameters
-    ----------
-    learning : RunLearning or None
-        What learning says.
-    shown : bool
-        The table shows the learning step column (False: a narrow terminal left it out, and
-        the line says where its contents are).
+    ``shown``: the table shows the learning step column (False: a narrow terminal left it out, and
+    the line says where its contents are).
 
-    Returns
-    -------
-    list of str
-        Empty where the table has no learning step column.
+    Returns: empty where the table has no learning step column.
     """
     if learning is None or not learning.history:
         return []
@@ -108,18 +89,8 @@ def trial_notes(
     """One line per trial that is not in the table (missing or incomplete), per trial flown
     again after an incomplete attempt, and per trial that flew an earlier one's setpoints.
 
-    Parameters
-    ----------
-    entries : list of TrialEntry
-        From :func:`trial_overview`.
-    aborted : dict of int to int, optional
-        Incomplete attempts kept in ``aborted/``, by trial (:func:`aborted_attempts`).
-    again : dict of int to int, optional
-        The earlier trial whose setpoints a trial flew again, by trial (:func:`flown_again`).
-
-    Returns
-    -------
-    list of str
+    ``aborted``: incomplete attempts kept in ``aborted/``, by trial (:func:`aborted_attempts`).
+    ``again``: the earlier trial whose setpoints a trial flew again, by trial (:func:`flown_again`).
     """
     out = []
     for e in entries:
@@ -140,15 +111,7 @@ def trial_notes(
 def mocap_lines(run: RunDir) -> list[str]:
     """With motion capture: e_pos by the mocap and by the estimate per trial, and the lag.
 
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-
-    Returns
-    -------
-    list of str
-        Empty when no complete trial has mocap columns.
+    Returns: empty when no complete trial has mocap columns.
     """
     lines = []
     for j in run.complete_trials():
@@ -178,15 +141,7 @@ def mocap_lines(run: RunDir) -> list[str]:
 def floor_line(learning: RunLearning) -> str | None:
     """One line on the floor: its e_pos, scatter and RMS, the trials it came from.
 
-    Parameters
-    ----------
-    learning : RunLearning
-        From :func:`run_learning`.
-
-    Returns
-    -------
-    str or None
-        None when the run has no floor.
+    Returns: None when the run has no floor.
     """
     f = learning.floor
     if f is None:
@@ -206,15 +161,9 @@ def floor_line(learning: RunLearning) -> str | None:
 def decision_summary(record: dict) -> str:
     """The decisions of one learning step in a few words (a table cell).
 
-    Parameters
-    ----------
-    record : dict
-        A ``learn-JJJ.json`` record.
+    ``record``: a ``learn-JJJ.json`` record.
 
-    Returns
-    -------
-    str
-        E.g. ``"from 3, step 0.5; model N 26 %"``, ``"-"`` when nothing beyond the update.
+    E.g. ``"from 3, step 0.5; model N 26 %"``, ``"-"`` when nothing beyond the update.
     """
     decision = record["decision"]
     parts = []
@@ -238,14 +187,7 @@ def decision_lines(record: dict) -> list[str]:
     it moved, or why not), the estimate's weight of the newest trial and the noise, and the
     next trial's setpoints.
 
-    Parameters
-    ----------
-    record : dict
-        A ``learn-JJJ.json`` record.
-
-    Returns
-    -------
-    list of str
+    ``record``: a ``learn-JJJ.json`` record.
     """
     decision, j = record["decision"], record["trial"]
     lines = []
@@ -300,17 +242,7 @@ def decision_lines(record: dict) -> list[str]:
 
 
 def learning_notes(learning: RunLearning) -> list[str]:
-    """The floor, and the decisions of every learning step, as lines below the table.
-
-    Parameters
-    ----------
-    learning : RunLearning
-        From :func:`run_learning`.
-
-    Returns
-    -------
-    list of str
-    """
+    """The floor, and the decisions of every learning step, as lines below the table."""
     out = [line for line in (floor_line(learning),) if line is not None]
     for t in learning.trials.values():
         if t.record is not None:
@@ -325,17 +257,7 @@ def learning_notes(learning: RunLearning) -> list[str]:
 
 
 def session_lines(run: RunDir) -> list[str]:
-    """One line per flight session: trials, navigation source, hover and settle tolerances.
-
-    Parameters
-    ----------
-    run : RunDir
-        The run directory.
-
-    Returns
-    -------
-    list of str
-    """
+    """One line per flight session: trials, navigation source, hover and settle tolerances."""
     lines = []
     for s in run.sessions():
         nav = s.get("navigation")
@@ -367,29 +289,14 @@ def metrics_table(
 ) -> Table:
     """A rich table with one row per trial (the columns of the paper's Table IV, and more).
 
-    Parameters
-    ----------
-    rows : list of IterationMetrics
-        The rows (``iteration``: the trial number).
-    title : str
-        Table title.
-    rates : dict of int to float or None, optional
-        Vehicle-time rate per trial (:func:`trial_clock_rates`): adds a column when one is
-        known.
-    learning : RunLearning, optional
-        What learning says (:func:`run_learning`): adds the setpoints' RMS distance from the
-        reference; with ``learning.adaptive`` the trial number beside the iteration j (a
-        repeat is j = 0), and with a floor e_pos / floor and the verdict; and the decisions of
-        the learning step from each trial.
-    width : int, optional
-        The width it will be printed at (a console's): where the headers on one line do not
-        fit, they wrap at spaces (the adaptive table fits 80 columns).
-    three_d : bool
-        Add the 3-D e_pos and the down axis's RMS error (:func:`gcs.app.report.is_three_d`).
-
-    Returns
-    -------
-    rich.table.Table
+    ``rows``: the rows (``iteration``: the trial number). ``rates``: vehicle-time rate per trial
+    (:func:`trial_clock_rates`): adds a column when one is known. ``learning``: what learning says
+    (:func:`run_learning`): adds the setpoints' RMS distance from the reference; with
+    ``learning.adaptive`` the trial number beside the iteration j (a repeat is j = 0), and with a
+    floor e_pos / floor and the verdict; and the decisions of the learning step from each trial.
+    ``width``: the width it will be printed at (a console's): where the headers on one line do not
+    fit, they wrap at spaces (the adaptive table fits 80 columns). ``three_d``: add the 3-D e_pos
+    and the down axis's RMS error (:func:`gcs.app.report.is_three_d`).
     """
     # narrow: no vertical rules, one space between columns (the adaptive table fits 80
     # columns); a narrower terminal wraps the headers and the learning step at spaces, a
@@ -438,16 +345,8 @@ def shows_step(
 ) -> bool:
     """Whether :func:`metrics_table` at ``width`` shows the learning step column.
 
-    Parameters
-    ----------
-    rows, rates, learning, three_d
-        As for :func:`metrics_table`.
-    width : int or None
-        The console's width.
-
-    Returns
-    -------
-    bool
+    ``rows``, ``rates``, ``learning``, ``three_d``: as for :func:`metrics_table`. ``width``: the
+    console's width.
     """
     headers, cells = table_cells(rows, rates, learning, three_d)
     return "learning step" in headers and not _drops_step(headers, cells, width)
@@ -489,25 +388,12 @@ def table_cells(
 
     The headers are short enough for 80 columns; each is defined in docs/report.md.
 
-    Parameters
-    ----------
-    rows : list of IterationMetrics
-        The rows (``iteration``: the trial number).
-    rates : dict of int to float or None or None
-        Vehicle-time rate per trial (a column when one is known).
-    learning : RunLearning or None
-        What learning says (see :func:`metrics_table`).
-    three_d : bool
-        Add the columns ``e3d [m]`` (3-D e_pos) and ``rms D [m]`` (down's RMS error).
-    every_axis : bool
-        With ``three_d``, north's and east's RMS error as well (``rms N [m]``, ``rms E [m]``;
-        the HTML report, where 80 columns do not bind).
+    ``rows``: the rows (``iteration``: the trial number). ``rates``: vehicle-time rate per trial (a
+    column when one is known). ``three_d``: add the columns ``e3d [m]`` (3-D e_pos) and ``rms D
+    [m]`` (down's RMS error). ``every_axis``: with ``three_d``, north's and east's RMS error as well
+    (``rms N [m]``, ``rms E [m]``; the HTML report, where 80 columns do not bind).
 
-    Returns
-    -------
-    headers : list of str
-    cells : list of list of str
-        One list per row, as many cells as headers.
+    Returns: ``cells``: one list per row, as many cells as headers.
     """
     headers = ["j", "e_pos [m]", "e/e0 [%]", "change [%]", "max err [m]"]
     if three_d:

@@ -63,21 +63,14 @@ class WorkerDied(RuntimeError):
 class WorkerSource:
     """A :class:`gcs.flight.campaign.TrialSource` that runs in a worker process.
 
-    Parameters
-    ----------
-    build : callable
-        A module-level function (pickled by name) that builds the source in the worker:
-        ``build(*args, notify=notify)``; ``notify(kind, payload)`` has ``callbacks[kind]``
-        called with ``payload`` in this process before the current call returns.
-    args : tuple
-        Its picklable arguments (a :class:`gcs.io.rundir.RunDir`, arrays, flags).
-    callbacks : dict of str to callable, optional
-        The callbacks by kind, called in this process (in the thread that made the call).
+    ``build``: a module-level function (pickled by name) that builds the source in the worker:
+    ``build(*args, notify=notify)``; ``notify(kind, payload)`` has ``callbacks[kind]`` called with
+    ``payload`` in this process before the current call returns. ``args``: its picklable arguments
+    (a :class:`gcs.io.rundir.RunDir`, arrays, flags). ``callbacks``: the callbacks by kind, called
+    in this process (in the thread that made the call).
 
-    Notes
-    -----
-    Use it as a context manager: the worker starts (building the source; its error comes at
-    the first call) on entry and is shut down on exit, after the calls made so far have run.
+    Use it as a context manager: the worker starts (building the source; its error comes at the
+    first call) on entry and is shut down on exit, after the calls made so far have run.
     """
 
     def __init__(
@@ -147,71 +140,32 @@ class WorkerSource:
     def setpoints_for(self, j: int) -> np.ndarray:
         """Setpoints of trial ``j`` (see :class:`gcs.flight.campaign.TrialSource`).
 
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        ndarray, shape (N, 3)
-            Absolute local NED setpoints [m].
+        Returns: ndarray, shape (N, 3), absolute local NED setpoints [m].
         """
         return self._call("setpoints_for", j)
 
     def hover_point_for(self, j: int) -> np.ndarray:
         """Where the vehicle hovers before trial ``j``.
 
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        ndarray, shape (3,)
-            Absolute local NED [m].
+        Returns: ndarray, shape (3,), absolute local NED [m].
         """
         return self._call("hover_point_for", j)
 
     def record(self, j: int, recording: TrialRecording) -> str | None:
         """Hand the complete recording of trial ``j`` to the worker (files, learning).
 
-        Parameters
-        ----------
-        j : int
-            Trial index.
-        recording : TrialRecording
-            The complete recording.
-
-        Returns
-        -------
-        str or None
-            A reason to fly no further trial, or None.
+        Returns: a reason to fly no further trial, or None.
         """
         return self._call("record", j, recording)
 
     def record_incomplete(self, j: int, recording: TrialRecording, reason: str) -> None:
-        """Hand the partial recording of trial ``j`` to the worker.
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-        recording : TrialRecording
-            The partial recording.
-        reason : str
-            Why the trial stopped, one line.
-        """
+        """Hand the partial recording of trial ``j`` to the worker."""
         self._call("record_incomplete", j, recording, reason)
 
     def record_session(self, session: FlightSession) -> None:
         """Hand the flight session's record to the worker.
 
-        Parameters
-        ----------
-        session : FlightSession
-            What the campaign found out about the vehicle.
+        ``session``: what the campaign found out about the vehicle.
         """
         self._call("record_session", session)
 

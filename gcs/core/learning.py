@@ -164,7 +164,7 @@ def axis_limits(
     ----------
     arena : Box or None
         Flight volume, local NED [m]; None for no bounds.
-    start_ne_m : float or ndarray
+    start_ne_m : float or ndarray, shape (2,) or (3,)
         Start point of this axis [m] (a scalar), the origin of the learning coordinates; an
         array of the NED start point is indexed by ``axis``.
     axis : int

@@ -204,7 +204,7 @@ def from_state_space(
     ----------
     A, B, C : array_like
         Discrete state-space matrices, shapes (n, n), (n, 1), (1, n).
-    D : array_like or float
+    D : array_like, shape (1, 1), or float
         Direct feedthrough; must be zero (to 1e-9 relative to the Markov parameters), since the
         lifted map of the paper has none.
     dt_s : float

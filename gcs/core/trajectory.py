@@ -535,7 +535,8 @@ def points_outside(pos_ned_m: np.ndarray, arena: Box, tol_m: float = 1e-9) -> np
 
     Returns
     -------
-    ndarray of int
+    ndarray of int, shape (K,)
+        The indices, ascending (empty when every point is inside).
     """
     b = arena.bounds()
     p = np.asarray(pos_ned_m, dtype=float)

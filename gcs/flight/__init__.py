@@ -1,0 +1,1 @@
+"""Flying through MAVSDK: connection, preflight, trials, landing; knows nothing of the maths."""

@@ -42,10 +42,7 @@ __all__ = [
 class CommandRefused(Exception):
     """The vehicle (or the link) refused a command.
 
-    Parameters
-    ----------
-    result : str
-        The result's name, e.g. ``"COMMAND_DENIED"``.
+    ``result``: the result's name, e.g. ``"COMMAND_DENIED"``.
     """
 
     def __init__(self, result: str) -> None:
@@ -61,14 +58,8 @@ class LinkUnreachable(Exception):
 class PositionReport:
     """One LOCAL_POSITION_NED as received (the vehicle's own time stamp, raw).
 
-    Parameters
-    ----------
-    time_boot_s : float
-        The vehicle's stamp (``time_boot_ms / 1000``) [s].
-    pos_ned_m : tuple of 3 float
-        Position, local NED [m] (NaN: no position).
-    vel_ned_m_s : tuple of 3 float
-        Velocity, local NED [m/s].
+    ``time_boot_s``: the vehicle's stamp (``time_boot_ms / 1000``) [s]. ``pos_ned_m``: position,
+    local NED [m] (NaN: no position). ``vel_ned_m_s``: velocity, local NED [m/s].
     """
 
     time_boot_s: float
@@ -90,21 +81,9 @@ class VehicleLink(Protocol):
     async def connect(self, url: str, timeout_s: float) -> bool:
         """Open ``url`` and wait for an autopilot; False if none answered within ``timeout_s``.
 
-        Parameters
-        ----------
-        url : str
-            Connection URL.
-        timeout_s : float
-            Limit [s].
+        ``timeout_s``: limit [s].
 
-        Returns
-        -------
-        bool
-
-        Raises
-        ------
-        LinkUnreachable
-            The URL cannot be opened.
+        Raises ``LinkUnreachable``: the URL cannot be opened.
         """
         ...
 
@@ -161,30 +140,21 @@ class VehicleLink(Protocol):
     async def set_position_rate(self, rate_hz: float) -> None:
         """Ask for LOCAL_POSITION_NED at ``rate_hz``.
 
-        Parameters
-        ----------
-        rate_hz : float
-            Rate [Hz].
+        ``rate_hz``: rate [Hz].
         """
         ...
 
     async def set_landed_state_rate(self, rate_hz: float) -> None:
         """Ask for the landed state at ``rate_hz``.
 
-        Parameters
-        ----------
-        rate_hz : float
-            Rate [Hz].
+        ``rate_hz``: rate [Hz].
         """
         ...
 
     async def set_takeoff_altitude(self, altitude_m: float) -> None:
         """Take-off altitude above home [m].
 
-        Parameters
-        ----------
-        altitude_m : float
-            Altitude [m].
+        ``altitude_m``: altitude [m].
         """
         ...
 
@@ -217,12 +187,8 @@ class VehicleLink(Protocol):
     ) -> None:
         """Send one position setpoint (kept re-sent by the link, as MAVSDK does, at 20 Hz).
 
-        Parameters
-        ----------
-        north_m, east_m, down_m : float
-            Position, local NED [m].
-        yaw_deg : float
-            Heading [deg], in [-180, 180).
+        ``north_m``, ``east_m``, ``down_m``: position, local NED [m]. ``yaw_deg``: heading [deg], in
+        [-180, 180).
         """
         ...
 
@@ -230,44 +196,28 @@ class VehicleLink(Protocol):
     async def get_param_int(self, name: str) -> int:
         """Read an integer parameter.
 
-        Parameters
-        ----------
-        name : str
-            PX4 parameter name.
+        ``name``: PX4 parameter name.
         """
         ...
 
     async def get_param_float(self, name: str) -> float:
         """Read a float parameter.
 
-        Parameters
-        ----------
-        name : str
-            PX4 parameter name.
+        ``name``: PX4 parameter name.
         """
         ...
 
     async def set_param_int(self, name: str, value: int) -> None:
         """Write an integer parameter.
 
-        Parameters
-        ----------
-        name : str
-            PX4 parameter name.
-        value : int
-            Value.
+        ``name``: PX4 parameter name.
         """
         ...
 
     async def set_param_float(self, name: str, value: float) -> None:
         """Write a float parameter.
 
-        Parameters
-        ----------
-        name : str
-            PX4 parameter name.
-        value : float
-            Value.
+        ``name``: PX4 parameter name.
         """
         ...
 
@@ -282,22 +232,14 @@ class VehicleLink(Protocol):
     async def set_gps_global_origin(self, lat_deg: float, lon_deg: float, alt_m: float) -> None:
         """Send SET_GPS_GLOBAL_ORIGIN.
 
-        Parameters
-        ----------
-        lat_deg, lon_deg : float
-            WGS84 [deg].
-        alt_m : float
-            AMSL [m].
+        ``lat_deg``, ``lon_deg``: WGS84 [deg]. ``alt_m``: AMSL [m].
         """
         ...
 
     async def upload_inclusion_polygon(self, vertices_deg: list[tuple[float, float]]) -> None:
         """Replace the geofence by one inclusion polygon of (lat, lon) vertices [deg].
 
-        Parameters
-        ----------
-        vertices_deg : list of (float, float)
-            (latitude, longitude) [deg].
+        ``vertices_deg``: (latitude, longitude) [deg].
         """
         ...
 
@@ -313,55 +255,24 @@ _SCHEMES: dict[str, LinkFactory] = {}
 def register_scheme(scheme: str, factory: LinkFactory) -> None:
     """Open URLs ``scheme://...`` with ``factory(url)`` instead of MAVSDK.
 
-    Parameters
-    ----------
-    scheme : str
-        URL scheme, e.g. ``"sim"``.
-    factory : callable
-        Takes the URL, returns a :class:`VehicleLink` (not yet connected).
+    ``scheme``: URL scheme, e.g. ``"sim"``. ``factory``: takes the URL, returns a
+    :class:`VehicleLink` (not yet connected).
     """
     _SCHEMES[scheme] = factory
 
 
 def unregister_scheme(scheme: str) -> None:
-    """Forget a scheme of :func:`register_scheme` (no error if unknown).
-
-    Parameters
-    ----------
-    scheme : str
-        URL scheme.
-    """
+    """Forget a scheme of :func:`register_scheme` (no error if unknown)."""
     _SCHEMES.pop(scheme, None)
 
 
 def is_registered(url: str) -> bool:
-    """Whether ``url``'s scheme was registered (:func:`register_scheme`).
-
-    Parameters
-    ----------
-    url : str
-        Connection URL.
-
-    Returns
-    -------
-    bool
-    """
+    """Whether ``url``'s scheme was registered (:func:`register_scheme`)."""
     return "://" in url and url.split("://", 1)[0] in _SCHEMES
 
 
 def registered_link(url: str) -> VehicleLink | None:
-    """The link of a registered scheme for ``url``, or None (then MAVSDK's is used).
-
-    Parameters
-    ----------
-    url : str
-        Connection URL.
-
-    Returns
-    -------
-    VehicleLink or None
-        Not yet connected.
-    """
+    """The link (not yet connected) of a registered scheme for ``url``, or None (then MAVSDK's)."""
     scheme = url.split("://", 1)[0] if "://" in url else ""
     factory = _SCHEMES.get(scheme)
     return None if factory is None else factory(url)

@@ -40,18 +40,10 @@ Judgement = tuple[str, str]  # (level, what to do); ("ok", "") when nothing
 class Item:
     """One row of the checklist.
 
-    Parameters
-    ----------
-    param : str
-        PX4 parameter name.
-    advised : str
-        The value advised, in words (e.g. ``"3 (Land) or 2 (Return)"``).
-    why : str
-        Why, in one sentence.
-    judge : callable
-        ``judge(value, params) -> (level, note)``: ``value`` is the vehicle's (None when it
-        did not answer), ``params`` every value read; ``level`` one of ``ok``, ``warn``,
-        ``refuse``, ``note`` the fix.
+    ``param``: PX4 parameter name. ``advised``: the value advised, in words (e.g. ``"3 (Land) or 2
+    (Return)"``). ``judge``: ``judge(value, params) -> (level, note)``: ``value`` is the vehicle's
+    (None when it did not answer), ``params`` every value read; ``level`` one of ``ok``, ``warn``,
+    ``refuse``, ``note`` the fix.
     """
 
     param: str
@@ -64,18 +56,8 @@ class Item:
 class Verdict:
     """A checklist row judged against the vehicle.
 
-    Parameters
-    ----------
-    param : str
-        PX4 parameter name.
-    found : float or None
-        The vehicle's value (None: not read).
-    advised : str
-        The value advised.
-    level : str
-        ``ok``, ``warn`` or ``refuse``.
-    note : str
-        What to do (empty when ok).
+    ``param``: PX4 parameter name. ``found``: the vehicle's value (None: not read). ``level``:
+    ``ok``, ``warn`` or ``refuse``. ``note``: what to do (empty when ok).
     """
 
     param: str
@@ -236,15 +218,9 @@ _MOCAP = (
 def checklist(navigation: str) -> tuple[Item, ...]:
     """The checklist of one way of navigating.
 
-    Parameters
-    ----------
-    navigation : str
-        ``"gps"`` or ``"mocap"``.
+    ``navigation``: ``"gps"`` or ``"mocap"``.
 
-    Returns
-    -------
-    tuple of Item
-        The navigation rows first, then link loss, offboard loss, RC takeover and geofence.
+    Returns: the navigation rows first, then link loss, offboard loss, RC takeover and geofence.
     """
     if navigation not in NAVIGATIONS:
         raise ValueError(f"navigation must be one of {', '.join(NAVIGATIONS)}, got {navigation!r}")
@@ -254,17 +230,10 @@ def checklist(navigation: str) -> tuple[Item, ...]:
 def judge(params: dict[str, float | None], navigation: str) -> list[Verdict]:
     """Judge the vehicle's parameters against the checklist.
 
-    Parameters
-    ----------
-    params : dict of str to float or None
-        The vehicle's values by name; a missing name or None is "not read" (a warning).
-    navigation : str
-        ``"gps"`` or ``"mocap"``.
+    ``params``: the vehicle's values by name; a missing name or None is "not read" (a warning).
+    ``navigation``: ``"gps"`` or ``"mocap"``.
 
-    Returns
-    -------
-    list of Verdict
-        One per row of :func:`checklist`, in its order.
+    Returns: one per row of :func:`checklist`, in its order.
     """
     out = []
     for item in checklist(navigation):
@@ -278,17 +247,7 @@ def judge(params: dict[str, float | None], navigation: str) -> list[Verdict]:
 
 
 def checklist_lines(verdicts: list[Verdict]) -> list[str]:
-    """The verdicts as lines: ``ok``/``warn``/``refuse``, parameter, found, advised, fix.
-
-    Parameters
-    ----------
-    verdicts : list of Verdict
-        From :func:`judge`.
-
-    Returns
-    -------
-    list of str
-    """
+    """The verdicts as lines: ``ok``/``warn``/``refuse``, parameter, found, advised, fix."""
     lines = []
     for v in verdicts:
         found = "not read" if v.found is None else f"{v.found:g}"
@@ -298,17 +257,7 @@ def checklist_lines(verdicts: list[Verdict]) -> list[str]:
 
 
 def refusal(verdicts: list[Verdict]) -> str | None:
-    """One line naming every refused parameter and its fix, or None when none is refused.
-
-    Parameters
-    ----------
-    verdicts : list of Verdict
-        From :func:`judge`.
-
-    Returns
-    -------
-    str or None
-    """
+    """One line naming every refused parameter and its fix, or None when none is refused."""
     refused = [v for v in verdicts if v.level == "refuse"]
     if not refused:
         return None
@@ -318,17 +267,7 @@ def refusal(verdicts: list[Verdict]) -> str | None:
 async def read_params(url: str, settings: FlightSettings) -> dict[str, float | None]:
     """Connect to the vehicle at ``url`` and read all its parameters (nothing is sent).
 
-    Parameters
-    ----------
-    url : str
-        MAVSDK connection URL.
-    settings : FlightSettings
-        Connection and command timeouts.
-
-    Returns
-    -------
-    dict of str to float or None
-        Every parameter the vehicle has, by name.
+    Returns: every parameter the vehicle has, by name.
     """
     from gcs.flight.vehicle import Vehicle
 

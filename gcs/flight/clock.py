@@ -65,21 +65,10 @@ smaller steps back are reordered datagrams and are kept as they are."""
 class ClockFit:
     """The vehicle clock as seen from the local clock: ``local = offset + vehicle / rate``.
 
-    Parameters
-    ----------
-    rate : float
-        Vehicle seconds per local (wall) second; 1 for real time, 0.9 for a simulator at
-        90 % of real time.
-    offset_s : float
-        Local time at vehicle time 0, smallest latency included [s].
-    n_samples : int
-        Samples fitted.
-    span_s : float
-        Vehicle time they span [s].
-    latency_p50_s : float
-        Median receipt delay above the fitted line [s].
-    latency_max_s : float
-        Largest receipt delay above the fitted line [s].
+    ``rate``: vehicle seconds per local (wall) second; 1 for real time, 0.9 for a simulator at 90 %
+    of real time. ``offset_s``: local time at vehicle time 0, smallest latency included [s].
+    ``span_s``: vehicle time they span [s]. ``latency_p50_s``: median receipt delay above the fitted
+    line [s]. ``latency_max_s``: largest receipt delay above the fitted line [s].
     """
 
     rate: float
@@ -92,30 +81,18 @@ class ClockFit:
     def to_local(self, vehicle_t_s: float | np.ndarray) -> float | np.ndarray:
         """Local time of a vehicle time (plus the smallest latency).
 
-        Parameters
-        ----------
-        vehicle_t_s : float or ndarray
-            Continuous vehicle time [s].
+        ``vehicle_t_s``: continuous vehicle time [s].
 
-        Returns
-        -------
-        float or ndarray
-            Local time [s].
+        Returns: local time [s].
         """
         return self.offset_s + vehicle_t_s / self.rate
 
     def to_vehicle(self, local_t_s: float | np.ndarray) -> float | np.ndarray:
         """Vehicle time at a local time (inverse of :meth:`to_local`).
 
-        Parameters
-        ----------
-        local_t_s : float or ndarray
-            Local time [s].
+        ``local_t_s``: local time [s].
 
-        Returns
-        -------
-        float or ndarray
-            Continuous vehicle time [s].
+        Returns: continuous vehicle time [s].
         """
         return (local_t_s - self.offset_s) * self.rate
 
@@ -123,17 +100,7 @@ class ClockFit:
 def lower_hull(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Indices of the lower convex hull of points sorted by ``x`` (Andrew's monotone chain).
 
-    Parameters
-    ----------
-    x : ndarray, shape (N,)
-        Abscissae, non-decreasing.
-    y : ndarray, shape (N,)
-        Ordinates.
-
-    Returns
-    -------
-    ndarray of int, shape (H,)
-        Hull vertices from left to right; of equal ``x`` only the lowest point can be one.
+    Returns: hull vertices from left to right; of equal ``x`` only the lowest point can be one.
     """
     hull: list[int] = []
     xs, ys = x.tolist(), y.tolist()
@@ -156,23 +123,11 @@ def lower_hull(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 def fit_clock(vehicle_t_s: object, receipt_t_s: object) -> ClockFit:
     """Fit ``receipt = offset + vehicle / rate + latency`` (latency >= 0) by the lower envelope.
 
-    Parameters
-    ----------
-    vehicle_t_s : array_like, shape (N,)
-        Continuous vehicle time of each sample [s] (see :func:`unwrap_vehicle_time`),
-        non-decreasing.
-    receipt_t_s : array_like, shape (N,)
-        Local receipt time of each sample [s].
+    ``vehicle_t_s``: continuous vehicle time of each sample [s] (see :func:`unwrap_vehicle_time`),
+    non-decreasing. ``receipt_t_s``: local receipt time of each sample [s].
 
-    Returns
-    -------
-    ClockFit
-
-    Raises
-    ------
-    ValueError
-        Shapes differ, NaN, decreasing vehicle time, fewer than two distinct vehicle times,
-        or a fitted rate that is not positive.
+    Raises ``ValueError``: shapes differ, NaN, decreasing vehicle time, fewer than two distinct
+    vehicle times, or a fitted rate that is not positive.
     """
     v = np.asarray(vehicle_t_s, dtype=float).reshape(-1)
     r = np.asarray(receipt_t_s, dtype=float).reshape(-1)
@@ -209,22 +164,13 @@ def unwrap_vehicle_time(
 ) -> np.ndarray:
     """Continuous vehicle time from raw stamps: counter wraps removed, restarts bridged.
 
-    Parameters
-    ----------
-    raw_t_s : array_like, shape (N,)
-        The vehicle's stamps as received [s] (e.g. ``time_boot_ms / 1000``), in receipt order.
-    receipt_t_s : array_like, shape (N,)
-        Local receipt times [s], used to bridge a restart.
-    wrap_s : float
-        Period of the counter [s]; ``inf`` for a stamp that does not wrap.
-    restart_jump_s : float
-        A step back larger than this, and not a wrap, is a restart [s].
+    ``raw_t_s``: the vehicle's stamps as received [s] (e.g. ``time_boot_ms / 1000``), in receipt
+    order. ``receipt_t_s``: local receipt times [s], used to bridge a restart. ``wrap_s``: period of
+    the counter [s]; ``inf`` for a stamp that does not wrap. ``restart_jump_s``: a step back larger
+    than this, and not a wrap, is a restart [s].
 
-    Returns
-    -------
-    ndarray, shape (N,)
-        Continuous vehicle time [s]: equal to ``raw_t_s`` until the first wrap or restart. A
-        reordered datagram keeps its own (earlier) time: sort before interpolating.
+    Returns: continuous vehicle time [s]: equal to ``raw_t_s`` until the first wrap or restart. A
+    reordered datagram keeps its own (earlier) time: sort before interpolating.
     """
     clock = VehicleClock(wrap_s=wrap_s, restart_jump_s=restart_jump_s)
     raw = np.asarray(raw_t_s, dtype=float).reshape(-1)
@@ -237,15 +183,10 @@ def unwrap_vehicle_time(
 class VehicleClock:
     """Sample-by-sample continuous vehicle time and a sliding-window :func:`fit_clock`.
 
-    Parameters
-    ----------
-    window_s : float
-        Vehicle time kept for the fit [s]: long enough to average latency out, short enough to
-        follow a simulator that changes speed (the flight layer uses 10 s).
-    wrap_s : float
-        Period of the raw counter [s] (``time_boot_ms``: :data:`BOOT_MS_WRAP_S`).
-    restart_jump_s : float
-        A step back larger than this, and not a wrap, is a restart [s].
+    ``window_s``: vehicle time kept for the fit [s]: long enough to average latency out, short
+    enough to follow a simulator that changes speed (the flight layer uses 10 s). ``wrap_s``: period
+    of the raw counter [s] (``time_boot_ms``: :data:`BOOT_MS_WRAP_S`). ``restart_jump_s``: a step
+    back larger than this, and not a wrap, is a restart [s].
     """
 
     def __init__(
@@ -267,17 +208,9 @@ class VehicleClock:
     def add(self, raw_t_s: float, receipt_t_s: float) -> float:
         """Take one sample; return its continuous vehicle time.
 
-        Parameters
-        ----------
-        raw_t_s : float
-            The vehicle's stamp [s].
-        receipt_t_s : float
-            Local receipt time [s].
+        ``raw_t_s``: the vehicle's stamp [s]. ``receipt_t_s``: local receipt time [s].
 
-        Returns
-        -------
-        float
-            Continuous vehicle time [s].
+        Returns: continuous vehicle time [s].
         """
         if self._last_raw_s is not None:
             step = raw_t_s - self._last_raw_s
@@ -303,12 +236,7 @@ class VehicleClock:
         return vehicle_t_s
 
     def fit(self) -> ClockFit | None:
-        """The fit over the window, or None with fewer than two distinct vehicle times.
-
-        Returns
-        -------
-        ClockFit or None
-        """
+        """The fit over the window, or None with fewer than two distinct vehicle times."""
         if self._fit is None and len(self._window) >= 2:
             v, r = np.array(self._window).T
             if v[-1] > v[0]:
@@ -327,20 +255,8 @@ class VehicleClock:
 def rate_warning(trial: int, rate: float, duration_s: float, t_ilc_s: float) -> str | None:
     """A line about a trial whose vehicle clock ran off real time, or None within 2 %.
 
-    Parameters
-    ----------
-    trial : int
-        Trial index.
-    rate : float
-        The trial's vehicle-time / wall-time rate.
-    duration_s : float
-        The trial's length in vehicle time [s].
-    t_ilc_s : float
-        ILC sample time [s].
-
-    Returns
-    -------
-    str or None
+    ``rate``: the trial's vehicle-time / wall-time rate. ``duration_s``: the trial's length in
+    vehicle time [s]. ``t_ilc_s``: ILC sample time [s].
     """
     if not math.isfinite(rate) or abs(rate - 1.0) <= RATE_TOLERANCE:
         return None
@@ -370,10 +286,7 @@ class Clock(Protocol):
     async def sleep(self, delay_s: float) -> None:
         """Sleep ``delay_s`` of local time (no sleep, one yield, when not positive).
 
-        Parameters
-        ----------
-        delay_s : float
-            Delay [s].
+        ``delay_s``: delay [s].
         """
         ...
 
@@ -382,21 +295,13 @@ class WallClock:
     """``time.monotonic()``, the clock of asyncio's own event loop."""
 
     def now(self) -> float:
-        """The local time [s] (``time.monotonic()``).
-
-        Returns
-        -------
-        float
-        """
+        """The local time [s] (``time.monotonic()``)."""
         return time.monotonic()
 
     async def sleep(self, delay_s: float) -> None:
         """Sleep ``delay_s`` seconds on the event loop.
 
-        Parameters
-        ----------
-        delay_s : float
-            Delay [s]; not positive: one yield.
+        ``delay_s``: delay [s]; not positive: one yield.
         """
         await asyncio.sleep(max(delay_s, 0.0))
 
@@ -405,12 +310,7 @@ class LoopClock(WallClock):
     """The running event loop's own ``time()`` (a virtual-time loop's virtual time)."""
 
     def now(self) -> float:
-        """The running loop's time [s] (``time.monotonic()`` outside a loop).
-
-        Returns
-        -------
-        float
-        """
+        """The running loop's time [s] (``time.monotonic()`` outside a loop)."""
         try:
             return asyncio.get_running_loop().time()
         except RuntimeError:

@@ -71,14 +71,7 @@ def _ned(x: Any) -> np.ndarray:
 def format_ned(ned_m: np.ndarray) -> str:
     """A local NED position for a message: ``NED (n, e, d) m`` to the centimetre.
 
-    Parameters
-    ----------
-    ned_m : ndarray, shape (3,)
-        North, east, down [m].
-
-    Returns
-    -------
-    str
+    ``ned_m``: north, east, down [m].
     """
     return "NED (" + ", ".join(f"{x:.2f}" for x in ned_m) + ") m"
 
@@ -87,23 +80,14 @@ def format_ned(ned_m: np.ndarray) -> str:
 class Fence:
     """The arena and the limits a flight is watched against.
 
-    Parameters
-    ----------
-    arena_ned_m : tuple of three (min, max) pairs
-        The arena box per NED axis [m]: setpoints lie inside it.
-    margin_m : float
-        How far outside the arena a measured position may be before the flight is stopped [m]
-        (``flight.fence_margin_m``).
-    max_speed_xy_m_s : float
-        Largest horizontal speed measured before the flight is stopped [m/s].
-    max_speed_z_m_s : float
-        Largest vertical speed (up or down) measured before the flight is stopped [m/s].
-    jump_m : float
-        Largest step of the position between two samples beyond what its velocity explains
-        [m] (``flight.fence_jump_m``).
-    drift_m : float
-        Largest movement of the position against the integral of its velocity within
-        :data:`DRIFT_WINDOW_S` [m] (``flight.fence_drift_m``).
+    ``arena_ned_m``: the arena box per NED axis [m]: setpoints lie inside it. ``margin_m``: how far
+    outside the arena a measured position may be before the flight is stopped [m]
+    (``flight.fence_margin_m``). ``max_speed_xy_m_s``: largest horizontal speed measured before the
+    flight is stopped [m/s]. ``max_speed_z_m_s``: largest vertical speed (up or down) measured
+    before the flight is stopped [m/s]. ``jump_m``: largest step of the position between two samples
+    beyond what its velocity explains [m] (``flight.fence_jump_m``). ``drift_m``: largest movement
+    of the position against the integral of its velocity within :data:`DRIFT_WINDOW_S` [m]
+    (``flight.fence_drift_m``).
     """
 
     arena_ned_m: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
@@ -132,20 +116,11 @@ class Fence:
     ) -> Fence:
         """The fence of an arena with a profile's vehicle limits and flight settings.
 
-        Parameters
-        ----------
-        arena_ned_m : array_like, shape (3, 2)
-            (min, max) per NED axis [m].
-        settings : FlightSettings
-            ``fence_margin_m``, ``fence_speed_factor``, ``fence_jump_m``, ``fence_drift_m``.
-        max_speed_m_s : float
-            The vehicle's horizontal speed limit (profile ``vehicle.max_speed_m_s``) [m/s].
-        max_vertical_speed_m_s : float
-            The vehicle's vertical speed limit (``vehicle.max_vertical_speed_m_s``) [m/s].
-
-        Returns
-        -------
-        Fence
+        ``arena_ned_m``: (min, max) per NED axis [m]. ``settings``: ``fence_margin_m``,
+        ``fence_speed_factor``, ``fence_jump_m``, ``fence_drift_m``. ``max_speed_m_s``: the
+        vehicle's horizontal speed limit (profile ``vehicle.max_speed_m_s``) [m/s].
+        ``max_vertical_speed_m_s``: the vehicle's vertical speed limit
+        (``vehicle.max_vertical_speed_m_s``) [m/s].
         """
         b = np.asarray(arena_ned_m, dtype=float)
         if b.shape != (3, 2):  # a (2, 3) array read as pairs would be another box
@@ -168,14 +143,7 @@ class Fence:
     def outside_by(self, pos_ned_m: Any) -> float:
         """How far a point lies outside the arena (0 inside) [m], the largest axis.
 
-        Parameters
-        ----------
-        pos_ned_m : array_like, shape (3,)
-            Local NED [m].
-
-        Returns
-        -------
-        float
+        ``pos_ned_m``: local NED [m].
         """
         p, b = _ned(pos_ned_m), self.bounds
         return float(max(0.0, np.max(b[:, 0] - p), np.max(p - b[:, 1])))
@@ -183,14 +151,7 @@ class Fence:
     def setpoint_problem(self, pos_ned_m: Any) -> str | None:
         """Why a setpoint may not be sent (outside the arena, or not finite), or None.
 
-        Parameters
-        ----------
-        pos_ned_m : array_like, shape (3,)
-            Setpoint, local NED [m].
-
-        Returns
-        -------
-        str or None
+        ``pos_ned_m``: setpoint, local NED [m].
         """
         p = _ned(pos_ned_m)
         if not np.all(np.isfinite(p)):
@@ -203,14 +164,7 @@ class Fence:
     def setpoints_problem(self, setpoints_ned_m: Any) -> str | None:
         """Why a sequence may not be flown (its first setpoint outside the arena), or None.
 
-        Parameters
-        ----------
-        setpoints_ned_m : array_like, shape (N, 3)
-            Local NED [m].
-
-        Returns
-        -------
-        str or None
+        ``setpoints_ned_m``: local NED [m].
         """
         sp = np.asarray(setpoints_ned_m, dtype=float).reshape(-1, 3)
         b = self.bounds
@@ -225,14 +179,7 @@ class Fence:
     def position_problem(self, pos_ned_m: Any) -> str | None:
         """Why a measured position ends the flight (beyond the arena plus margin), or None.
 
-        Parameters
-        ----------
-        pos_ned_m : array_like, shape (3,)
-            Measured position, local NED [m].
-
-        Returns
-        -------
-        str or None
+        ``pos_ned_m``: measured position, local NED [m].
         """
         p = _ned(pos_ned_m)
         out = self.outside_by(p)
@@ -246,35 +193,18 @@ class Fence:
     def clamp(self, pos_ned_m: Any) -> np.ndarray:
         """The point of the arena nearest to a position.
 
-        Parameters
-        ----------
-        pos_ned_m : array_like, shape (3,)
-            Local NED [m].
-
-        Returns
-        -------
-        ndarray, shape (3,)
+        ``pos_ned_m``: local NED [m].
         """
         b = self.bounds
         return np.clip(_ned(pos_ned_m), b[:, 0], b[:, 1])
 
     def arena_text(self) -> str:
-        """The arena as ``N [-3, 3] E [-3, 3] D [-3, 0] m``.
-
-        Returns
-        -------
-        str
-        """
+        """The arena as ``N [-3, 3] E [-3, 3] D [-3, 0] m``."""
         pairs = zip("NED", self.bounds, strict=True)
         return " ".join(f"{a} [{lo:g}, {hi:g}]" for a, (lo, hi) in pairs) + " m"
 
     def describe(self) -> str:
-        """One line for the operator: what is watched and the limits.
-
-        Returns
-        -------
-        str
-        """
+        """One line for the operator: what is watched and the limits."""
         return (
             f"fence: arena {self.arena_text()}, {self.margin_m:g} m margin, watched from arming "
             f"to disarming; stops at {self.max_speed_xy_m_s:.2f} m/s horizontally, "
@@ -286,17 +216,9 @@ class Fence:
 class EstimateMonitor:
     """Watches the reported position and velocity sample by sample (see the module docstring).
 
-    Parameters
-    ----------
-    fence : Fence
-        Arena and limits.
-
-    Attributes
-    ----------
-    peaks : dict of str to float
-        The largest value of each statistic seen so far: ``outside_m`` (beyond the arena),
-        ``speed_xy_m_s``, ``speed_z_m_s``, ``jump_m`` (step beyond the velocity, less what
-        physics allows over a gap), ``drift_m`` (over the window); the thresholds' evidence.
+    ``peaks``: the largest value of each statistic seen so far: ``outside_m`` (beyond the arena),
+    ``speed_xy_m_s``, ``speed_z_m_s``, ``jump_m`` (step beyond the velocity, less what physics
+    allows over a gap), ``drift_m`` (over the window); the thresholds' evidence.
     """
 
     def __init__(self, fence: Fence) -> None:
@@ -317,19 +239,8 @@ class EstimateMonitor:
 
         Samples older than the last one taken are ignored (a reordered datagram).
 
-        Parameters
-        ----------
-        t_vehicle_s : float
-            The sample's vehicle time [s].
-        pos_ned_m : array_like, shape (3,)
-            Reported position, local NED [m].
-        vel_ned_m_s : array_like, shape (3,)
-            Reported velocity, local NED [m/s].
-
-        Returns
-        -------
-        str or None
-            One line naming what was seen.
+        ``t_vehicle_s``: the sample's vehicle time [s]. ``pos_ned_m``: reported position, local NED
+        [m]. ``vel_ned_m_s``: reported velocity, local NED [m/s].
         """
         p, v = _ned(pos_ned_m), _ned(vel_ned_m_s)
         last = self._last
@@ -392,18 +303,10 @@ class EstimateMonitor:
 def fence_polygon(fence: Fence, lat0_deg: float, lon0_deg: float) -> list[tuple[float, float]]:
     """The arena plus margin, horizontally, as latitude/longitude vertices around the origin.
 
-    Parameters
-    ----------
-    fence : Fence
-        The arena and margin.
-    lat0_deg, lon0_deg : float
-        The local frame's origin [deg] (PX4's GPS_GLOBAL_ORIGIN).
+    ``lat0_deg``, ``lon0_deg``: the local frame's origin [deg] (PX4's GPS_GLOBAL_ORIGIN).
 
-    Returns
-    -------
-    list of (float, float)
-        Four vertices (lat, lon) [deg], counter-clockwise seen from above: the corners
-        (N min, E min), (N min, E max), (N max, E max), (N max, E min).
+    Returns: four vertices (lat, lon) [deg], counter-clockwise seen from above: the corners (N min,
+    E min), (N min, E max), (N max, E max), (N max, E min).
     """
     (n0, n1), (e0, e1) = (
         (lo - fence.margin_m, hi + fence.margin_m) for lo, hi in fence.arena_ned_m[:2]

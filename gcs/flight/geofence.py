@@ -52,22 +52,11 @@ GF_ACTION_NAMES = {0: "none", 1: "warning", 2: "Hold", 3: "Return", 4: "Terminat
 class GeofenceState:
     """What the vehicle's own geofence is, as far as gcs set it up.
 
-    Parameters
-    ----------
-    uploaded : bool
-        The polygon was accepted by the vehicle.
-    origin_deg : tuple of float or None
-        The local origin used: latitude, longitude [deg], altitude AMSL [m].
-    vertices_deg : tuple of (float, float)
-        The polygon uploaded, (latitude, longitude) [deg].
-    gf_action : int or None
-        ``GF_ACTION`` as set (None: not set).
-    gf_max_ver_dist_m : float or None
-        ``GF_MAX_VER_DIST`` as set [m] (None: not set).
-    gf_max_hor_dist_m : float or None
-        ``GF_MAX_HOR_DIST`` as read [m] (None: not read; 0: off).
-    problem : str or None
-        What failed, if anything.
+    ``uploaded``: the polygon was accepted by the vehicle. ``origin_deg``: the local origin used:
+    latitude, longitude [deg], altitude AMSL [m]. ``vertices_deg``: the polygon uploaded, (latitude,
+    longitude) [deg]. ``gf_action``: ``GF_ACTION`` as set (None: not set). ``gf_max_ver_dist_m``:
+    ``GF_MAX_VER_DIST`` as set [m] (None: not set). ``gf_max_hor_dist_m``: ``GF_MAX_HOR_DIST`` as
+    read [m] (None: not read; 0: off). ``problem``: what failed, if anything.
     """
 
     uploaded: bool
@@ -86,14 +75,7 @@ class GeofenceState:
     def text(self, margin_m: float) -> str:
         """One line for the operator before take-off.
 
-        Parameters
-        ----------
-        margin_m : float
-            The fence's margin [m], for the line.
-
-        Returns
-        -------
-        str
+        ``margin_m``: the fence's margin [m], for the line.
         """
         if not self.uploaded:
             return (
@@ -121,17 +103,7 @@ class GeofenceState:
 
 
 def vertical_limit_m(fence: Fence) -> float:
-    """``GF_MAX_VER_DIST`` for a fence: the arena's ceiling plus the margin, above home [m].
-
-    Parameters
-    ----------
-    fence : Fence
-        The arena and margin.
-
-    Returns
-    -------
-    float
-    """
+    """``GF_MAX_VER_DIST`` for a fence: the arena's ceiling plus the margin, above home [m]."""
     return -fence.arena_ned_m[2][0] + fence.margin_m
 
 
@@ -139,17 +111,6 @@ async def install_geofence(vehicle: Vehicle, fence: Fence) -> GeofenceState:
     """Upload the arena plus margin as the vehicle's geofence and set its breach action.
 
     Never raises for a vehicle that refuses: the state says what failed.
-
-    Parameters
-    ----------
-    vehicle : Vehicle
-        Connected, on the ground.
-    fence : Fence
-        The arena and margin.
-
-    Returns
-    -------
-    GeofenceState
     """
     try:
         origin = await vehicle.gps_global_origin()

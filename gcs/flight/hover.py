@@ -72,36 +72,18 @@ MIN_SAMPLES = 10
 class HoverStats:
     """Statistics of one hover at a target point.
 
-    Parameters
-    ----------
-    duration_s : float
-        Time spanned by the samples [s, vehicle time].
-    n_samples : int
-        Number of position samples.
-    offset_ned_m : tuple of float
-        Mean position minus target, north, east, down [m].
-    offset_m : float
-        3-D length of ``offset_ned_m`` [m].
-    distance_p50_m : float
-        Median 3-D distance from the target [m].
-    distance_p95_m : float
-        95th percentile of the 3-D distance from the target [m].
-    distance_max_m : float
-        Largest 3-D distance from the target [m].
-    noise_m : float
-        Fast noise: RMS (3-D) of the residual from a moving mean over ``NOISE_SPAN_S`` [m].
-    drift_m_s : float
-        Speed of the least-squares straight line through the positions (3-D) [m/s].
-    drift_away : bool
-        The straight line ends further from the target than it starts.
-    speed_p50_m_s, speed_p95_m_s : float
-        Median and 95th percentile of the speed over ``SPEED_SPAN_S`` (3-D) [m/s].
-    oscillation_m : float
-        Amplitude (3-D) of the strongest sinusoid with ``MIN_CYCLES`` or more cycles [m].
-    oscillation_period_s : float
-        Its period [s] (NaN when the window is too short to search).
-    oscillation_share : float
-        Share of the detrended variance it explains (0..1).
+    ``duration_s``: time spanned by the samples [s, vehicle time]. ``offset_ned_m``: mean position
+    minus target, north, east, down [m]. ``offset_m``: 3-D length of ``offset_ned_m`` [m].
+    ``distance_p50_m``: median 3-D distance from the target [m]. ``distance_p95_m``: 95th percentile
+    of the 3-D distance from the target [m]. ``distance_max_m``: largest 3-D distance from the
+    target [m]. ``noise_m``: fast noise: RMS (3-D) of the residual from a moving mean over
+    ``NOISE_SPAN_S`` [m]. ``drift_m_s``: speed of the least-squares straight line through the
+    positions (3-D) [m/s]. ``drift_away``: the straight line ends further from the target than it
+    starts. ``speed_p50_m_s``, ``speed_p95_m_s``: median and 95th percentile of the speed over
+    ``SPEED_SPAN_S`` (3-D) [m/s]. ``oscillation_m``: amplitude (3-D) of the strongest sinusoid with
+    ``MIN_CYCLES`` or more cycles [m]. ``oscillation_period_s``: its period [s] (NaN when the window
+    is too short to search). ``oscillation_share``: share of the detrended variance it explains
+    (0..1).
     """
 
     duration_s: float
@@ -121,12 +103,7 @@ class HoverStats:
     oscillation_share: float
 
     def describe(self) -> str:
-        """One line for the operator, e.g. ``0.24 m off (95 % within 0.34 m), ...``.
-
-        Returns
-        -------
-        str
-        """
+        """One line for the operator, e.g. ``0.24 m off (95 % within 0.34 m), ...``."""
         text = (
             f"{self.offset_m:.2f} m off on average (95 % within {self.distance_p95_m:.2f} m, "
             f"at most {self.distance_max_m:.2f} m), {100 * self.noise_m:.1f} cm fast noise, "
@@ -143,20 +120,11 @@ class HoverStats:
 class HoverVerdict:
     """Whether a hover is good enough to fly trials from, and the settle tolerances it gives.
 
-    Parameters
-    ----------
-    ok : bool
-        The vehicle holds position well enough.
-    kind : str
-        ``"ok"``, ``"short"`` (too few samples), ``"approaching"`` (still converging on the
-        target: measure again), ``"oscillating"``, ``"drifting"`` or ``"off"`` (beyond
-        ``hover_max_offset_m``).
-    reason : str
-        Why, one line that follows "the vehicle ..." (empty when ``ok``).
-    tolerance_m : float
-        Settle tolerance on the distance from the target [m].
-    speed_tolerance_m_s : float
-        Settle tolerance on the speed [m/s].
+    ``ok``: the vehicle holds position well enough. ``kind``: ``"ok"``, ``"short"`` (too few
+    samples), ``"approaching"`` (still converging on the target: measure again), ``"oscillating"``,
+    ``"drifting"`` or ``"off"`` (beyond ``hover_max_offset_m``). ``reason``: why, one line that
+    follows "the vehicle ..." (empty when ``ok``). ``tolerance_m``: settle tolerance on the distance
+    from the target [m]. ``speed_tolerance_m_s``: settle tolerance on the speed [m/s].
     """
 
     ok: bool
@@ -181,19 +149,10 @@ def _check_samples(t_s: object, pos_ned_m: object) -> tuple[np.ndarray, np.ndarr
 def speeds(t_s: object, pos_ned_m: object, span_s: float = SPEED_SPAN_S) -> np.ndarray:
     """Speed of each sample over the following ``span_s``: displacement / elapsed time.
 
-    Parameters
-    ----------
-    t_s : array_like, shape (N,)
-        Sample times [s], non-decreasing.
-    pos_ned_m : array_like, shape (N, 3)
-        Positions, local NED [m].
-    span_s : float
-        Span of the differences [s].
+    ``t_s``: sample times [s], non-decreasing. ``pos_ned_m``: positions, local NED [m]. ``span_s``:
+    span of the differences [s].
 
-    Returns
-    -------
-    ndarray, shape (M,)
-        3-D speeds [m/s] of the M samples that have a sample ``span_s`` or more later.
+    Returns: 3-D speeds [m/s] of the M samples that have a sample ``span_s`` or more later.
     """
     t, pos = _check_samples(t_s, pos_ned_m)
     later = np.searchsorted(t, t + span_s, side="left")
@@ -255,23 +214,10 @@ def _oscillation(t: np.ndarray, x: np.ndarray) -> tuple[float, float, float]:
 def hover_stats(t_s: object, pos_ned_m: object, target_ned_m: object) -> HoverStats:
     """Statistics of a hover at ``target_ned_m`` (see the module docstring).
 
-    Parameters
-    ----------
-    t_s : array_like, shape (N,)
-        Sample times [s] (the vehicle's clock), non-decreasing, N >= 10.
-    pos_ned_m : array_like, shape (N, 3)
-        Reported positions, local NED [m].
-    target_ned_m : array_like, shape (3,)
-        The hover setpoint, local NED [m].
+    ``t_s``: sample times [s] (the vehicle's clock), non-decreasing, N >= 10. ``pos_ned_m``:
+    reported positions, local NED [m]. ``target_ned_m``: the hover setpoint, local NED [m].
 
-    Returns
-    -------
-    HoverStats
-
-    Raises
-    ------
-    ValueError
-        Wrong shapes, NaN, decreasing times, or fewer than 10 samples.
+    Raises ``ValueError``: wrong shapes, NaN, decreasing times, or fewer than 10 samples.
     """
     t, pos = _check_samples(t_s, pos_ned_m)
     target = np.asarray(target_ned_m, dtype=float).reshape(3)
@@ -320,16 +266,8 @@ def judge_hover(stats: HoverStats, settings: FlightSettings) -> HoverVerdict:
     loosely: its settle tolerances are the median distance and ``TOLERANCE_FACTOR`` times the
     95th-percentile speed measured, at least ``settle_tolerance_m`` and ``settle_speed_m_s``.
 
-    Parameters
-    ----------
-    stats : HoverStats
-        The measured hover.
-    settings : FlightSettings
-        Limits (``hover_max_*``) and floors (``settle_tolerance_m``, ``settle_speed_m_s``).
-
-    Returns
-    -------
-    HoverVerdict
+    ``settings``: limits (``hover_max_*``) and floors (``settle_tolerance_m``,
+    ``settle_speed_m_s``).
     """
     s = settings
     tolerance_m = max(s.settle_tolerance_m, stats.distance_p50_m)
@@ -377,20 +315,9 @@ def widened(
     median distance measured before; the distance tolerance becomes the 95th percentile of
     that window, so that the next settle finds the vehicle within it most of the time.
 
-    Parameters
-    ----------
-    tolerance_m : float
-        Distance tolerance so far [m].
-    speed_tolerance_m_s : float
-        Speed tolerance so far [m/s].
-    stats : HoverStats
-        The hover of the settle that timed out.
-    settings : FlightSettings
-        Floors (``settle_tolerance_m``, ``settle_speed_m_s``).
-
-    Returns
-    -------
-    tolerance_m, speed_tolerance_m_s : float
+    ``tolerance_m``: distance tolerance so far [m]. ``speed_tolerance_m_s``: speed tolerance so far
+    [m/s]. ``stats``: the hover of the settle that timed out. ``settings``: floors
+    (``settle_tolerance_m``, ``settle_speed_m_s``).
     """
     verdict = judge_hover(stats, settings)
     return (
@@ -409,25 +336,12 @@ def is_settled(
 ) -> bool:
     """Whether the last ``window_s`` of samples stayed within both settle tolerances.
 
-    Parameters
-    ----------
-    t_s : array_like, shape (N,)
-        Sample times [s] (vehicle clock), non-decreasing.
-    pos_ned_m : array_like, shape (N, 3)
-        Positions, local NED [m].
-    target_ned_m : array_like, shape (3,)
-        Hover point [m].
-    tolerance_m : float
-        Largest allowed 3-D distance from the target [m].
-    speed_tolerance_m_s : float
-        Largest allowed speed over ``SPEED_SPAN_S`` [m/s].
-    window_s : float
-        How long both must have held, up to the newest sample [s].
+    ``t_s``: sample times [s] (vehicle clock), non-decreasing. ``pos_ned_m``: positions, local NED
+    [m]. ``target_ned_m``: hover point [m]. ``tolerance_m``: largest allowed 3-D distance from the
+    target [m]. ``speed_tolerance_m_s``: largest allowed speed over ``SPEED_SPAN_S`` [m/s].
+    ``window_s``: how long both must have held, up to the newest sample [s].
 
-    Returns
-    -------
-    bool
-        False too when the samples span less than ``window_s + SPEED_SPAN_S``.
+    Returns: False too when the samples span less than ``window_s + SPEED_SPAN_S``.
     """
     t, pos = _check_samples(t_s, pos_ned_m)
     if t.size < 2 or t[-1] - t[0] < window_s + SPEED_SPAN_S:

@@ -28,30 +28,13 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 def run_guarded(main: Coroutine[Any, Any, T], on_repeat: Callable[[int], None] | None = None) -> T:
     """Run ``main`` in a new event loop; a stop signal cancels it once, and only once.
 
-    Parameters
-    ----------
-    main : coroutine
-        The flight. On cancellation it must stop the vehicle before it ends.
-    on_repeat : callable, optional
-        Called on the event loop with the number of stop signals so far (2, 3, ...) for each
-        signal that arrives after the first, while ``main`` is still stopping; must return
-        quickly.
-
-    Returns
-    -------
-    object
-        What ``main`` returned, when no stop signal arrived.
-
-    Raises
-    ------
-    KeyboardInterrupt
-        A stop signal arrived and ``main`` ended because of the cancellation (after it stopped
-        the vehicle).
-
-    Notes
-    -----
-    Where the event loop cannot take signal handlers (not the main thread, or a platform
-    without ``loop.add_signal_handler``), ``main`` runs under plain ``asyncio.run`` rules.
+    ``main`` is the flight: on cancellation it must stop the vehicle before it ends. Its result is
+    returned when no stop signal arrived; when one did and ``main`` ended because of the
+    cancellation (after it stopped the vehicle), ``KeyboardInterrupt`` is raised. Each later
+    signal, while ``main`` is still stopping, calls ``on_repeat`` on the event loop with the
+    number of stop signals so far (2, 3, ...); it must return quickly. Where the event loop
+    cannot take signal handlers (not the main thread, or a platform without
+    ``loop.add_signal_handler``), ``main`` runs under plain ``asyncio.run`` rules.
     """
     return asyncio.run(_guarded(main, on_repeat))
 

@@ -48,17 +48,10 @@ NOT_BLOCKING = ("No manual control input",)
 class PrearmState:
     """What PX4 said about arming while gcs waited (filled by :func:`wait_ready_to_arm`).
 
-    Parameters
-    ----------
-    armable : bool
-        ``SYS_STATUS`` pre-arm bit (MAVSDK ``Health.is_armable``).
-    problems : list of str
-        The current mode's failing checks from PX4's latest health report (events interface;
-        empty where the vehicle does not report them).
-    texts : list of str
-        PX4's status texts seen (newest last).
-    waited_s : float
-        Time from the start of the wait to its end [s].
+    ``armable``: ``SYS_STATUS`` pre-arm bit (MAVSDK ``Health.is_armable``). ``problems``: the
+    current mode's failing checks from PX4's latest health report (events interface; empty where the
+    vehicle does not report them). ``texts``: PX4's status texts seen (newest last). ``waited_s``:
+    time from the start of the wait to its end [s].
     """
 
     armable: bool = False
@@ -70,15 +63,9 @@ class PrearmState:
 def refusal_text(state: PrearmState) -> str:
     """PX4's reasons for not arming, in one line.
 
-    Parameters
-    ----------
-    state : PrearmState
-        What PX4 reported.
+    ``state``: what PX4 reported.
 
-    Returns
-    -------
-    str
-        Its failing checks, else its last status texts about arming, else a plain statement.
+    Returns: its failing checks, else its last status texts about arming, else a plain statement.
     """
     reasons = [p for p in state.problems if p not in NOT_BLOCKING]
     if reasons:
@@ -94,22 +81,11 @@ async def ensure_global_origin(
 ) -> tuple[tuple[float, float, float], bool]:
     """The vehicle's global origin, set to ``origin`` first if it has none.
 
-    Parameters
-    ----------
-    vehicle : Vehicle
-        Connected.
-    origin : tuple of float
-        Latitude [deg], longitude [deg], altitude AMSL [m] to set when there is none.
+    ``origin``: latitude [deg], longitude [deg], altitude AMSL [m] to set when there is none.
 
-    Returns
-    -------
-    tuple
-        The origin read back, and whether gcs set it.
+    Returns: the origin read back, and whether gcs set it.
 
-    Raises
-    ------
-    VehicleError
-        The vehicle took no origin.
+    Raises ``VehicleError``: the vehicle took no origin.
     """
     with contextlib.suppress(VehicleError):
         return await vehicle.gps_global_origin(), False
@@ -123,22 +99,12 @@ async def ensure_global_origin(
 async def wait_ready_to_arm(vehicle: Vehicle, timeout_s: float) -> PrearmState:
     """Wait until PX4 reports that it can arm (its pre-arm bit), at most ``timeout_s``.
 
-    Parameters
-    ----------
-    vehicle : Vehicle
-        Connected.
-    timeout_s : float
-        Limit [s].
+    ``timeout_s``: limit [s].
 
-    Returns
-    -------
-    PrearmState
-        What PX4 reported; ``waited_s`` is the time spent.
+    Returns: what PX4 reported; ``waited_s`` is the time spent.
 
-    Raises
-    ------
-    VehicleError
-        Not ready within ``timeout_s`` (naming PX4's reasons), or the link was lost.
+    Raises ``VehicleError``: not ready within ``timeout_s`` (naming PX4's reasons), or the link was
+    lost.
     """
     state = PrearmState()
     link = vehicle.link

@@ -44,15 +44,9 @@ NAV_DLL_ACT_NAMES = {
 def link_loss_warnings(params: dict[str, int | None]) -> list[str]:
     """One line per way in which a lost link would leave the vehicle in the air.
 
-    Parameters
-    ----------
-    params : dict of str to int or None
-        The vehicle's values of :data:`LINK_LOSS_PARAMS`; None where it did not answer.
+    ``params``: the vehicle's values of :data:`LINK_LOSS_PARAMS`; None where it did not answer.
 
-    Returns
-    -------
-    list of str
-        Warnings, one line each; empty when a lost link ends in a landing or a return.
+    Returns: warnings, one line each; empty when a lost link ends in a landing or a return.
     """
     action = params.get("NAV_DLL_ACT")
     if action is None:
@@ -84,20 +78,11 @@ _EV_BITS = ((0, "position"), (1, "height"), (2, "velocity"), (3, "yaw"))
 class NavigationSource:
     """What PX4's EKF2 navigates on, from its parameters.
 
-    Parameters
-    ----------
-    gps : bool or None
-        GPS horizontal position or velocity is fused (None: unknown).
-    vision : bool or None
-        External vision (motion capture, VIO) horizontal position or velocity is fused.
-    height : str or None
-        The height reference (``EKF2_HGT_REF``), e.g. ``"GPS"``; None if unknown.
-    text : str
-        One line for the operator.
-    warning : bool
-        The line is a warning (unknown source, or nothing that holds the horizontal position).
-    params : dict of str to int or None
-        The values read.
+    ``gps``: GPS horizontal position or velocity is fused (None: unknown). ``vision``: external
+    vision (motion capture, VIO) horizontal position or velocity is fused. ``height``: the height
+    reference (``EKF2_HGT_REF``), e.g. ``"GPS"``; None if unknown. ``text``: one line for the
+    operator. ``warning``: the line is a warning (unknown source, or nothing that holds the
+    horizontal position).
     """
 
     gps: bool | None
@@ -125,16 +110,10 @@ def _bits(value: int, names: tuple[tuple[int, str], ...]) -> str:
 def navigation_source(params: dict[str, int | None]) -> NavigationSource:
     """Decode PX4's EKF2 aiding parameters into the navigation source, said in one line.
 
-    Parameters
-    ----------
-    params : dict of str to int or None
-        The vehicle's values of :data:`NAV_PARAMS`; None where it did not answer.
+    ``params``: the vehicle's values of :data:`NAV_PARAMS`; None where it did not answer.
 
-    Returns
-    -------
-    NavigationSource
-        ``gps`` if ``EKF2_GPS_CTRL`` fuses horizontal position (bit 0) or velocity (bit 2),
-        ``vision`` likewise for ``EKF2_EV_CTRL``.
+    Returns: ``gps`` if ``EKF2_GPS_CTRL`` fuses horizontal position (bit 0) or velocity (bit 2),
+    ``vision`` likewise for ``EKF2_EV_CTRL``.
     """
     values = {name: params.get(name) for name in NAV_PARAMS}
     gps_ctrl, hgt_ref, ev_ctrl = (values[n] for n in NAV_PARAMS)

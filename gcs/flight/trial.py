@@ -75,48 +75,23 @@ class TrialRecording:
     All times are on the vehicle's clock, relative to the trial's start ``v0`` (when setpoint 0
     takes over), except ``t0_monotonic_s``.
 
-    Parameters
-    ----------
-    t_s : ndarray, shape (N+1,)
-        Grid times ``k t_ilc_s`` relative to v0 [s].
-    pos_ned_m : ndarray, shape (N+1, 3)
-        Measured position at the grid times, local NED [m]; NaN where no sample brackets the
-        grid time (only in incomplete recordings).
-    vel_ned_m_s : ndarray, shape (N+1, 3)
-        Measured velocity at the grid times, local NED [m/s]; NaN like ``pos_ned_m``.
-    sent_s : ndarray, shape (N,)
-        Time the first send of each setpoint was issued, relative to v0 [s, vehicle time]; NaN
-        if never sent.
-    interpolated : ndarray of bool, shape (N+1,)
-        Grid point interpolated between samples more than 2 telemetry periods apart.
-    complete : bool
-        The trial ran to its end (``y(N)`` recorded).
-    abort_reason : str or None
-        Why it stopped early; None when complete.
-    setpoints_ned_m : ndarray, shape (N, 3)
-        The setpoints flown, local NED [m].
-    t_ilc_s : float
-        ILC sample time [s].
-    raw_t_s : ndarray, shape (M,)
-        Vehicle time stamps of the raw position samples relative to v0 [s], sorted.
-    raw_pos_ned_m : ndarray, shape (M, 3)
-        Raw positions, local NED [m].
-    raw_vel_ned_m_s : ndarray, shape (M, 3)
-        Raw velocities, local NED [m/s].
-    max_send_late_s : float
-        Largest delay of a send after its deadline [s].
-    t0_monotonic_s : float
-        The start on the local clock [s] (``time.monotonic()``, CLOCK_MONOTONIC, comparable
-        with other local processes; virtual time on a simulated link): where the clock fit
-        put vehicle time v0.
-    t0_vehicle_s : float
-        v0, the start in continuous vehicle time [s].
-    clock : ClockFit or None
-        Fit of the vehicle clock over the trial's own samples: ``clock.rate`` is the trial's
-        vehicle-time / wall-time rate (None with fewer than two samples).
-    mocap : MocapTrial or None
-        The motion capture of the trial (raw samples, on the grid, the estimate's lag), when
-        the flight had one.
+    ``t_s``: grid times ``k t_ilc_s`` relative to v0 [s]. ``pos_ned_m``: measured position at the
+    grid times, local NED [m]; NaN where no sample brackets the grid time (only in incomplete
+    recordings). ``vel_ned_m_s``: measured velocity at the grid times, local NED [m/s]; NaN like
+    ``pos_ned_m``. ``sent_s``: time the first send of each setpoint was issued, relative to v0 [s,
+    vehicle time]; NaN if never sent. ``interpolated``: grid point interpolated between samples more
+    than 2 telemetry periods apart. ``complete``: the trial ran to its end (``y(N)`` recorded).
+    ``abort_reason``: why it stopped early; None when complete. ``setpoints_ned_m``: the setpoints
+    flown, local NED [m]. ``t_ilc_s``: ILC sample time [s]. ``raw_t_s``: vehicle time stamps of the
+    raw position samples relative to v0 [s], sorted. ``raw_pos_ned_m``: raw positions, local NED
+    [m]. ``raw_vel_ned_m_s``: raw velocities, local NED [m/s]. ``max_send_late_s``: largest delay of
+    a send after its deadline [s]. ``t0_monotonic_s``: the start on the local clock [s]
+    (``time.monotonic()``, CLOCK_MONOTONIC, comparable with other local processes; virtual time on a
+    simulated link): where the clock fit put vehicle time v0. ``t0_vehicle_s``: v0, the start in
+    continuous vehicle time [s]. ``clock``: fit of the vehicle clock over the trial's own samples:
+    ``clock.rate`` is the trial's vehicle-time / wall-time rate (None with fewer than two samples).
+    ``mocap``: the motion capture of the trial (raw samples, on the grid, the estimate's lag), when
+    the flight had one.
     """
 
     t_s: np.ndarray
@@ -153,21 +128,11 @@ def send_schedule(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Deadlines and setpoint indices of the stream over one trial.
 
-    Parameters
-    ----------
-    n_setpoints : int
-        Number of setpoints N.
-    sends_per_sample : int
-        Sends per ILC sample ``m`` (``stream_rate_hz * t_ilc_s``).
-    t_ilc_s : float
-        ILC sample time [s].
+    ``sends_per_sample``: sends per ILC sample ``m`` (``stream_rate_hz * t_ilc_s``). ``t_ilc_s``:
+    ILC sample time [s].
 
-    Returns
-    -------
-    deadlines_s : ndarray, shape (N*m,)
-        Send deadlines relative to t0 [s]: ``i * t_ilc_s / m``.
-    index : ndarray of int, shape (N*m,)
-        Setpoint sent at each deadline: ``i // m``.
+    Returns: ``deadlines_s``: send deadlines relative to t0 [s]: ``i * t_ilc_s / m``. ``index``:
+    setpoint sent at each deadline: ``i // m``.
     """
     ticks = np.arange(n_setpoints * sends_per_sample)
     return ticks * (t_ilc_s / sends_per_sample), ticks // sends_per_sample
@@ -181,24 +146,13 @@ def align_to_grid(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Linearly interpolate time-stamped samples onto a time grid and flag gaps.
 
-    Parameters
-    ----------
-    sample_t_s : array_like, shape (M,)
-        Non-decreasing sample times [s] (same clock and origin as ``grid_t_s``).
-    sample_values : ndarray, shape (M, D)
-        Sample values (any unit).
-    grid_t_s : ndarray, shape (K,)
-        Grid times [s].
-    max_gap_s : float
-        Neighbours further apart than this make a grid point "interpolated across a gap" [s].
+    ``sample_t_s``: non-decreasing sample times [s] (same clock and origin as ``grid_t_s``).
+    ``sample_values``: sample values (any unit). ``grid_t_s``: grid times [s]. ``max_gap_s``:
+    neighbours further apart than this make a grid point "interpolated across a gap" [s].
 
-    Returns
-    -------
-    values : ndarray, shape (K, D)
-        Interpolated values; NaN where the grid time is not bracketed by samples (before the
-        first or after the last). A grid time equal to a sample time takes that sample.
-    gap : ndarray of bool, shape (K,)
-        Grid point interpolated between neighbours more than ``max_gap_s`` apart.
+    Returns: ``values``: interpolated values; NaN where the grid time is not bracketed by samples
+    (before the first or after the last). A grid time equal to a sample time takes that sample.
+    ``gap``: grid point interpolated between neighbours more than ``max_gap_s`` apart.
     """
     t = np.asarray(sample_t_s, dtype=float).reshape(-1)
     x = np.asarray(sample_values, dtype=float)
@@ -240,21 +194,11 @@ class TrialRun:
     Kept as an object so that a caller who is cancelled mid-trial can still take the partial
     recording with :meth:`recording`.
 
-    Parameters
-    ----------
-    vehicle : Vehicle
-        Connected vehicle in OFFBOARD, hovering near the first setpoint.
-    setpoints_ned_m : array_like, shape (N, 3)
-        Absolute local NED setpoints [m].
-    t_ilc_s : float
-        ILC sample time [s].
-    settings : FlightSettings
-        Stream rate and watchdog limits.
-    on_progress : callable, optional
-        ``on_progress(k, n, err_m)``, called at most 10 times a second on the event loop
-        (must return quickly).
-    yaw_deg : array_like, shape (N,), or None
-        Heading of each setpoint [deg]; None: the profile's ``flight.yaw_deg`` throughout.
+    ``vehicle``: connected vehicle in OFFBOARD, hovering near the first setpoint.
+    ``setpoints_ned_m``: absolute local NED setpoints [m]. ``t_ilc_s``: ILC sample time [s].
+    ``on_progress``: ``on_progress(k, n, err_m)``, called at most 10 times a second on the event
+    loop (must return quickly). ``yaw_deg``: heading of each setpoint [deg]; None: the profile's
+    ``flight.yaw_deg`` throughout.
     """
 
     def __init__(
@@ -281,19 +225,10 @@ class TrialRun:
         self.samples: list[TelemetrySample] = []
 
     async def fly(self) -> TrialRecording:
-        """Stream the trial and return the complete recording.
+        """Stream the trial and return the complete recording (``complete=True``).
 
-        Returns
-        -------
-        TrialRecording
-            With ``complete=True``.
-
-        Raises
-        ------
-        TrialAborted
-            The watchdog fired; ``.recording`` holds the partial recording.
-        VehicleError
-            No clock fit yet (no time-stamped samples).
+        Raises ``TrialAborted``: the watchdog fired; ``.recording`` holds the partial recording;
+        ``VehicleError``: no clock fit yet (no time-stamped samples).
         """
         vehicle, settings, sp, yaw = self.vehicle, self.settings, self.setpoints_ned_m, self.yaw_deg
         n, m = sp.shape[0], self.sends_per_sample
@@ -353,16 +288,10 @@ class TrialRun:
     def recording(self, abort_reason: str | None) -> TrialRecording:
         """The recording so far, aligned to the grid in vehicle time.
 
-        Parameters
-        ----------
-        abort_reason : str or None
-            None for a complete trial; otherwise why it stopped (the recording is then marked
-            incomplete).
+        ``abort_reason``: None for a complete trial; otherwise why it stopped (the recording is then
+        marked incomplete).
 
-        Returns
-        -------
-        TrialRecording
-            Grid points after the last sample are NaN.
+        Returns: grid points after the last sample are NaN.
         """
         sp = self.setpoints_ned_m
         n = sp.shape[0]
@@ -422,34 +351,18 @@ async def fly_trial(
 ) -> TrialRecording:
     """Fly one trial's setpoint sequence and record the response on the sample grid.
 
-    Parameters
-    ----------
-    vehicle : Vehicle
-        Connected vehicle in OFFBOARD, hovering at (or near) ``setpoints_ned_m[0]``.
-    setpoints_ned_m : array_like, shape (N, 3)
-        Absolute local NED setpoints [m]; setpoint k holds for one sample from t0 + k t_ilc_s.
-    t_ilc_s : float
-        ILC sample time [s].
-    settings : FlightSettings
-        Stream rate (an integer multiple of 1/t_ilc_s) and watchdog limits.
-    on_progress : callable, optional
-        ``on_progress(k, n, err_m)`` at most 10 times a second (see the module docstring).
-    yaw_deg : array_like, shape (N,), or None
-        Heading of each setpoint [deg, clockwise from north]; None: the profile's
-        ``flight.yaw_deg`` throughout.
+    ``vehicle``: connected vehicle in OFFBOARD, hovering at (or near) ``setpoints_ned_m[0]``.
+    ``setpoints_ned_m``: absolute local NED setpoints [m]; setpoint k holds for one sample from t0 +
+    k t_ilc_s. ``t_ilc_s``: ILC sample time [s]. ``settings``: stream rate (an integer multiple of
+    1/t_ilc_s) and watchdog limits. ``on_progress``: ``on_progress(k, n, err_m)`` at most 10 times a
+    second (see the module docstring). ``yaw_deg``: heading of each setpoint [deg, clockwise from
+    north]; None: the profile's ``flight.yaw_deg`` throughout.
 
-    Returns
-    -------
-    TrialRecording
-        Complete recording: grid times, positions and velocities at k = 0..N, send times.
+    Returns: complete recording: grid times, positions and velocities at k = 0..N, send times.
 
-    Raises
-    ------
-    TrialAborted
-        Late setpoint, stale telemetry, link loss or a mode other than OFFBOARD; its
-        ``recording`` attribute holds the partial recording.
-    TrajectoryError
-        ``setpoints_ned_m`` is not a finite (N, 3) array, or ``yaw_deg`` not N finite values.
+    Raises ``TrialAborted``: late setpoint, stale telemetry, link loss or a mode other than
+    OFFBOARD; its ``recording`` attribute holds the partial recording; ``TrajectoryError``:
+    ``setpoints_ned_m`` is not a finite (N, 3) array, or ``yaw_deg`` not N finite values.
     """
     run = TrialRun(vehicle, setpoints_ned_m, t_ilc_s, settings, on_progress, yaw_deg)
     return await run.fly()

@@ -1,0 +1,1 @@
+"""Files and formats: profiles, run directories, trial records and motion-capture samples."""

@@ -29,15 +29,7 @@ FILE_MODE, DIR_MODE = 0o666 & ~_umask(), 0o777 & ~_umask()
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically (temporary file + rename).
-
-    Parameters
-    ----------
-    path : Path
-        Destination.
-    text : str
-        Content.
-    """
+    """Write ``text`` to ``path`` atomically (temporary file + rename)."""
     path = Path(path)
     tmp = _temporary_copy(path, text)
     try:
@@ -69,22 +61,9 @@ def write_once(path: Path, text: str) -> bool:
     or not at all. If ``path`` holds exactly ``text`` already nothing is written (learning
     twice from the same trial is a no-op); different content is refused.
 
-    Parameters
-    ----------
-    path : Path
-        Destination.
-    text : str
-        Content.
+    Returns: True if the file was written, False if it held ``text`` already.
 
-    Returns
-    -------
-    bool
-        True if the file was written, False if it held ``text`` already.
-
-    Raises
-    ------
-    RunLogError
-        ``path`` exists with other content.
+    Raises ``RunLogError``: ``path`` exists with other content.
     """
     path = Path(path)
     if path.is_dir():

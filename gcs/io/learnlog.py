@@ -48,14 +48,9 @@ class LearnLog:
     def write_estimate(self, j: int, d_hat_ne_m: np.ndarray, p_ne_m2: np.ndarray) -> None:
         """Write the disturbance estimate learned from trial j.
 
-        Parameters
-        ----------
-        j : int
-            Trial index the estimate was learned from.
-        d_hat_ne_m : ndarray, shape (N, 2) or (N, 3)
-            Estimate of d(1..N), north and east, learning coordinates [m].
-        p_ne_m2 : ndarray, shape (N, 2) or (N, 3)
-            Its error variance [m^2] (K-ILC: the filter's scalar, repeated).
+        ``j``: trial index the estimate was learned from. ``d_hat_ne_m``: estimate of d(1..N), north
+        and east, learning coordinates [m]. ``p_ne_m2``: its error variance [m^2] (K-ILC: the
+        filter's scalar, repeated).
         """
         write_once(self.estimate_path(j), self._estimate_text(d_hat_ne_m, p_ne_m2))
 
@@ -75,19 +70,7 @@ class LearnLog:
         written (refused), so that a refusal never leaves one of the two behind. The setpoints
         come last: they are what says the next trial can be flown.
 
-        Parameters
-        ----------
-        j : int
-            Trial learned from.
-        d_hat_ne_m, p_ne_m2 : ndarray, shape (N, 2) or (N, 3)
-            As :meth:`write_estimate`.
-        sp_ned_m : ndarray, shape (N, 3)
-            Setpoints of trial j+1, as :meth:`write_setpoints`.
-
-        Returns
-        -------
-        Path
-            The setpoints file.
+        ``j``: trial learned from. ``sp_ned_m``: setpoints of trial j+1, as :meth:`write_setpoints`.
         """
         for path, text in (
             (self.estimate_path(j), self._estimate_text(d_hat_ne_m, p_ne_m2)),
@@ -104,15 +87,7 @@ class LearnLog:
     def write_repeat(self, j: int) -> Path:
         """Trial j repeats trial 0: its setpoints are ``setpoints-000.csv``'s, byte for byte.
 
-        Parameters
-        ----------
-        j : int
-            The repeating trial (``>= 1``).
-
-        Returns
-        -------
-        Path
-            The setpoints file.
+        ``j``: the repeating trial (``>= 1``).
         """
         if j < 1:
             raise RunLogError(f"trial {j} cannot repeat trial 0")
@@ -136,25 +111,10 @@ class LearnLog:
         j writes the same bytes, so an interrupted step is completed by learning again. Every
         file is checked first: if one exists with other content nothing is written.
 
-        Parameters
-        ----------
-        j : int
-            The newest trial learned from.
-        d_hat_ne_m, p_ne_m2 : ndarray, shape (N, 2) or (N, 3)
-            As :meth:`write_estimate`.
-        record : dict
-            The decision record (JSON-ready; NaN becomes null); its ``trial`` must be ``j``.
-        sp_ned_m : ndarray, shape (N, 3)
-            Setpoints of trial j+1, as :meth:`write_setpoints`.
-        model_text : str, optional
-            A profile (YAML) with the refreshed models.
-        floor : dict, optional
-            The floor (JSON-ready), with the trials it was measured from.
-
-        Returns
-        -------
-        Path
-            The setpoints file.
+        ``j``: the newest trial learned from. ``record``: the decision record (JSON-ready; NaN
+        becomes null); its ``trial`` must be ``j``. ``sp_ned_m``: setpoints of trial j+1, as
+        :meth:`write_setpoints`. ``model_text``: a profile (YAML) with the refreshed models.
+        ``floor``: the floor (JSON-ready), with the trials it was measured from.
         """
         if record.get("trial") != j:
             raise RunLogError(f"learning record of trial {j} names trial {record.get('trial')!r}")
@@ -178,17 +138,11 @@ class LearnLog:
     def read_learn_record(self, j: int) -> dict[str, Any]:
         """The decision record ``learn-JJJ.json`` of the learning step from trial j.
 
-        Parameters
-        ----------
-        j : int
-            The newest trial that step learned from.
+        ``j``: the newest trial that step learned from.
 
-        Returns
-        -------
-        dict
-            ``trial``, ``next_trial``, ``next_iteration``, ``learned_from``, ``models_from``,
-            ``model_file``, ``setpoints`` and ``decision`` (the record of
-            :func:`gcs.core.learning.plan_next_trial`), each checked against its type.
+        Returns: ``trial``, ``next_trial``, ``next_iteration``, ``learned_from``, ``models_from``,
+        ``model_file``, ``setpoints`` and ``decision`` (the record of
+        :func:`gcs.core.learning.plan_next_trial`), each checked against its type.
         """
         path = self.learn_path(j)
         if not path.exists():
@@ -197,12 +151,7 @@ class LearnLog:
         return _check_learn_record(path, j, self.model_path(j).name, data)
 
     def learn_records(self) -> dict[int, dict[str, Any]]:
-        """Every decision record of the run, by the trial it learned from.
-
-        Returns
-        -------
-        dict of int to dict
-        """
+        """Every decision record of the run, by the trial it learned from."""
         return {j: self.read_learn_record(j) for j in self._numbered("learn", "json")}
 
     def read_model(self, j: int) -> tuple[DiscreteModel, DiscreteModel]:
@@ -211,14 +160,7 @@ class LearnLog:
         The file must be a loadable profile, and its models the ones ``learn-JJJ.json``
         records (the file agrees with the record of the step that wrote it).
 
-        Parameters
-        ----------
-        j : int
-            The trial learned from.
-
-        Returns
-        -------
-        tuple of DiscreteModel
+        ``j``: the trial learned from.
         """
         path, learn = self.model_path(j), self.learn_path(j).name
         record = self.read_learn_record(j)
@@ -240,11 +182,8 @@ class LearnLog:
     def read_floor(self) -> dict[str, Any] | None:
         """The floor recorded in ``floor.json`` (None before it is measured).
 
-        Returns
-        -------
-        dict or None
-            ``trials`` (the flights of identical setpoints), ``epos_m``, ``scatter_m`` and the
-            rest of :meth:`gcs.core.floor.Floor.as_dict`.
+        Returns: ``trials`` (the flights of identical setpoints), ``epos_m``, ``scatter_m`` and the
+        rest of :meth:`gcs.core.floor.Floor.as_dict`.
         """
         path = self.floor_path
         if not path.exists():
@@ -265,15 +204,6 @@ class LearnLog:
     def read_estimate(self, j: int) -> tuple[np.ndarray, np.ndarray]:
         """The estimate learned from trial j: ``(d_hat (N, n) [m], p (N, n) [m^2])``, n = 2
         (north, east) or 3 when down was learned.
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        tuple of ndarray
         """
         path = self.estimate_path(j)
         if not path.exists():

@@ -45,20 +45,11 @@ MOCAP_COLUMNS = (
 class MocapSeries:
     """Consecutive mocap samples of one rigid body, as arrays (system frame).
 
-    Parameters
-    ----------
-    seq : numpy.ndarray
-        Delivery counter, shape (N,), int.
-    t_receipt_s : numpy.ndarray
-        Monotonic receipt times, shape (N,) [s].
-    t_mocap_s : numpy.ndarray
-        The system's own time stamps, shape (N,) [s], NaN where unknown.
-    tracked : numpy.ndarray
-        Rigid body present in the frame, shape (N,), bool.
-    pos_m : numpy.ndarray
-        Position in the system's axes, shape (N, 3) [m]; NaN rows where not tracked.
-    quat_wxyz : numpy.ndarray
-        Orientation (body to system world), shape (N, 4); NaN rows where not tracked.
+    ``seq``: delivery counter, shape (N,), int. ``t_receipt_s``: monotonic receipt times, shape (N,)
+    [s]. ``t_mocap_s``: the system's own time stamps, shape (N,) [s], NaN where unknown.
+    ``tracked``: rigid body present in the frame, shape (N,), bool. ``pos_m``: position in the
+    system's axes, shape (N, 3) [m]; NaN rows where not tracked. ``quat_wxyz``: orientation (body to
+    system world), shape (N, 4); NaN rows where not tracked.
     """
 
     seq: np.ndarray
@@ -95,12 +86,7 @@ class MocapSeries:
 
     @classmethod
     def empty(cls) -> MocapSeries:
-        """A series of no samples.
-
-        Returns
-        -------
-        MocapSeries
-        """
+        """A series of no samples."""
         return cls(
             np.zeros(0, np.int64),
             np.zeros(0),
@@ -113,14 +99,7 @@ class MocapSeries:
     def since(self, t_s: float) -> MocapSeries:
         """The samples received at or after ``t_s``.
 
-        Parameters
-        ----------
-        t_s : float
-            Monotonic time [s].
-
-        Returns
-        -------
-        MocapSeries
+        ``t_s``: monotonic time [s].
         """
         keep = self.t_receipt_s >= t_s
         return MocapSeries(
@@ -153,17 +132,11 @@ def _row(series: MocapSeries, i: int) -> str:
 class MocapTrial:
     """The motion capture of one trial.
 
-    Parameters
-    ----------
-    series : MocapSeries
-        Raw samples received during the trial, from the watch's longest gap before its
-        start (system axes, receipt times).
-    pos_ned_m : numpy.ndarray
-        Mocap position on the trial's grid, shape (N+1, 3) [m, NED]; NaN where no tracked
-        samples bracket the grid time within the longest gap the watch allows
-        (:func:`gcs.flight.mocap.link.trial_mocap`).
-    lag_s : float or None
-        How far the vehicle's estimate lags behind the mocap [s] (None: not measurable).
+    ``series``: raw samples received during the trial, from the watch's longest gap before its start
+    (system axes, receipt times). ``pos_ned_m``: mocap position on the trial's grid, shape (N+1, 3)
+    [m, NED]; NaN where no tracked samples bracket the grid time within the longest gap the watch
+    allows (:func:`gcs.flight.mocap.link.trial_mocap`). ``lag_s``: how far the vehicle's estimate
+    lags behind the mocap [s] (None: not measurable).
     """
 
     series: MocapSeries
@@ -172,15 +145,7 @@ class MocapTrial:
 
 
 def write_mocap_csv(path: Path, series: MocapSeries) -> None:
-    """Write raw samples atomically (times to the microsecond, poses float32-exact).
-
-    Parameters
-    ----------
-    path : Path
-        Destination CSV.
-    series : MocapSeries
-        The samples.
-    """
+    """Write raw samples atomically (times to the microsecond, poses float32-exact)."""
     lines = [",".join(MOCAP_COLUMNS)] + [_row(series, i) for i in range(len(series))]
     atomic_write_text(Path(path), "\n".join(lines) + "\n")
 
@@ -199,19 +164,8 @@ def _table(path: Path) -> list[list[str]]:
 def read_mocap_csv(path: Path) -> MocapSeries:
     """Read and check a raw-sample file.
 
-    Parameters
-    ----------
-    path : Path
-        CSV written by :func:`write_mocap_csv`.
-
-    Returns
-    -------
-    MocapSeries
-
-    Raises
-    ------
-    RunLogError
-        Header, counts, order, flags or poses inconsistent (one line naming the line and column).
+    Raises ``RunLogError``: header, counts, order, flags or poses inconsistent (one line naming the
+    line and column).
     """
     path = Path(path)
     rows = _table(path)

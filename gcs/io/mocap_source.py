@@ -37,18 +37,9 @@ _NAME = re.compile(r"^[^\s/?#]+$")
 class MocapSource:
     """A motion-capture server and the rigid body to read from it.
 
-    Parameters
-    ----------
-    system : str
-        ``optitrack``, ``vicon``, ``qualisys`` or ``vrpn``.
-    host : str
-        Server address.
-    port : int
-        Server port (OptiTrack: the command port).
-    rigid_body : str
-        Name of the rigid body as the mocap software calls it.
-    interface_ip : str
-        Local address used to join the multicast group (OptiTrack only).
+    ``system``: ``optitrack``, ``vicon``, ``qualisys`` or ``vrpn``. ``rigid_body``: name of the
+    rigid body as the mocap software calls it. ``interface_ip``: local address used to join the
+    multicast group (OptiTrack only).
     """
 
     system: str
@@ -74,10 +65,7 @@ class MocapSource:
     def library_config(self) -> dict[str, str]:
         """The ``(type, config)`` arguments of ``motioncapture.connect``, config part.
 
-        Returns
-        -------
-        dict of str
-            Keys as the library's ``MotionCapture::connect`` reads them.
+        Returns: keys as the library's ``MotionCapture::connect`` reads them.
         """
         if self.system == "optitrack":
             return {
@@ -90,12 +78,7 @@ class MocapSource:
         return {"hostname": f"{self.host}:{self.port}"}
 
     def url(self) -> str:
-        """The URL that :func:`parse_mocap_url` turns back into this source.
-
-        Returns
-        -------
-        str
-        """
+        """The URL that :func:`parse_mocap_url` turns back into this source."""
         query = f"?interface={self.interface_ip}" if self.interface_ip != "0.0.0.0" else ""
         return f"{self.system}://{self.host}:{self.port}/{self.rigid_body}{query}"
 
@@ -110,19 +93,7 @@ def _ipv4(text: str, field: str) -> None:
 def parse_mocap_url(url: str) -> MocapSource:
     """Parse ``SYSTEM://HOST[:PORT]/RIGID_BODY[?interface=IP]``.
 
-    Parameters
-    ----------
-    url : str
-        The URL (see the module docstring).
-
-    Returns
-    -------
-    MocapSource
-
-    Raises
-    ------
-    ProfileError
-        One line naming what is wrong.
+    Raises ``ProfileError``: one line naming what is wrong.
     """
     parts = urlsplit(url)
     system = parts.scheme.lower()

@@ -45,17 +45,11 @@ RUN_FILE = re.compile(
 def packaged_dir(kind: str) -> Path:
     """The directory of the packaged files of ``kind``.
 
-    Parameters
-    ----------
-    kind : str
-        ``"profile"`` or ``"trajectory"``.
+    ``kind``: ``"profile"`` or ``"trajectory"``.
 
-    Returns
-    -------
-    Path
-        ``gcs/profiles`` or ``gcs/trajectories`` of the installed package (in a source
-        checkout, symbolic links to the repository's top-level ``profiles/`` and
-        ``trajectories/``: one copy of every file).
+    Returns: ``gcs/profiles`` or ``gcs/trajectories`` of the installed package (in a source
+    checkout, symbolic links to the repository's top-level ``profiles/`` and ``trajectories/``: one
+    copy of every file).
     """
     return Path(str(resources.files("gcs") / KINDS[kind]))
 
@@ -63,14 +57,7 @@ def packaged_dir(kind: str) -> Path:
 def packaged_names(kind: str) -> list[str]:
     """Names of the packaged files of ``kind`` (file names without ``.yaml``), sorted.
 
-    Parameters
-    ----------
-    kind : str
-        ``"profile"`` or ``"trajectory"``.
-
-    Returns
-    -------
-    list of str
+    ``kind``: ``"profile"`` or ``"trajectory"``.
     """
     directory = packaged_dir(kind)
     return sorted(p.stem for p in directory.glob("*.yaml")) if directory.is_dir() else []
@@ -82,23 +69,10 @@ def resolve_named(value: str | Path, kind: str, option: str) -> Path:
     An existing file is taken as it is; otherwise a bare name (no directory part, with or
     without ``.yaml``) is looked up among the packaged files.
 
-    Parameters
-    ----------
-    value : str or Path
-        What the user typed.
-    kind : str
-        ``"profile"`` or ``"trajectory"``.
-    option : str
-        The option's name for messages (``--profile``).
+    ``kind``: ``"profile"`` or ``"trajectory"``. ``option``: the option's name for messages
+    (``--profile``).
 
-    Returns
-    -------
-    Path
-
-    Raises
-    ------
-    PathError
-        Neither an existing file nor a packaged name; or a directory.
+    Raises ``PathError``: neither an existing file nor a packaged name; or a directory.
     """
     text = str(value)
     if not text.strip():
@@ -136,17 +110,9 @@ def _nearest_existing(path: Path, option: str) -> Path:
 def check_writable_dir(directory: Path, what: str) -> None:
     """Refuse a directory that cannot be written into (probe file, removed at once).
 
-    Parameters
-    ----------
-    directory : Path
-        An existing directory.
-    what : str
-        How to name it in the message (``--plot plots``, ``run logs/x``).
+    ``what``: how to name it in the message (``--plot plots``, ``run logs/x``).
 
-    Raises
-    ------
-    PathError
-        The probe cannot be created.
+    Raises ``PathError``: the probe cannot be created.
     """
     try:
         fd, probe = tempfile.mkstemp(dir=directory, prefix=".gcs-probe-", suffix=".tmp")
@@ -159,23 +125,12 @@ def check_writable_dir(directory: Path, what: str) -> None:
 def check_output_file(path: Path, option: str) -> Path:
     """Check that ``path`` can be written as a file (missing directories will be created).
 
-    Parameters
-    ----------
-    path : Path
-        The file to be written.
-    option : str
-        The option's name for messages (``--json``).
+    ``option``: the option's name for messages (``--json``).
 
-    Returns
-    -------
-    Path
-        ``path``.
+    Returns ``path``.
 
-    Raises
-    ------
-    PathError
-        A directory at ``path``, a file where a directory of it should be, a file a run
-        directory records (``manifest.json``, ``trial-000.csv``, ...), or no permission.
+    Raises ``PathError``: a directory at ``path``, a file where a directory of it should be, a file
+    a run directory records (``manifest.json``, ``trial-000.csv``, ...), or no permission.
     """
     path = Path(path)
     if path.is_dir():
@@ -191,22 +146,11 @@ def check_output_file(path: Path, option: str) -> Path:
 def check_output_dir(path: Path, option: str) -> Path:
     """Check that ``path`` is, or can be created as, a writable directory.
 
-    Parameters
-    ----------
-    path : Path
-        The directory to write into.
-    option : str
-        The option's name for messages (``--plot``).
+    ``option``: the option's name for messages (``--plot``).
 
-    Returns
-    -------
-    Path
-        ``path``.
+    Returns ``path``.
 
-    Raises
-    ------
-    PathError
-        A file at ``path`` or above it, or no permission.
+    Raises ``PathError``: a file at ``path`` or above it, or no permission.
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -219,22 +163,12 @@ def check_output_dir(path: Path, option: str) -> Path:
 def check_new_dir(path: Path, option: str) -> Path:
     """Check that ``path`` does not exist yet and can be created as a directory.
 
-    Parameters
-    ----------
-    path : Path
-        The directory to create (a new run).
-    option : str
-        The option's name for messages (``--run``).
+    ``path``: the directory to create (a new run). ``option``: the option's name for messages
+    (``--run``).
 
-    Returns
-    -------
-    Path
-        ``path``.
+    Returns ``path``.
 
-    Raises
-    ------
-    PathError
-        ``path`` exists, a file is in the way, or no permission.
+    Raises ``PathError``: ``path`` exists, a file is in the way, or no permission.
     """
     path = Path(path)
     if path.exists() or path.is_symlink():

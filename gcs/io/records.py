@@ -69,24 +69,13 @@ ESTIMATE_DOWN_COLUMNS = ("d_down_m", "p_down_m2")
 class TrialRecord:
     """One trial on the grid ``k = 0..N`` (row k holds u(k) and y(k)).
 
-    Parameters
-    ----------
-    t_s : ndarray, shape (N+1,)
-        Grid times ``k t_ilc_s`` [s] from the trial start.
-    ref_ned_m : ndarray, shape (N+1, 3)
-        Reference yd(k), local NED [m].
-    sp_ned_m : ndarray, shape (N+1, 3)
-        Setpoint u(k) [m]; row N is the final setpoint held after the trial.
-    pos_ned_m : ndarray, shape (N+1, 3)
-        Measured position y(k) [m]; NaN where an aborted trial has no data.
-    vel_ned_m_s : ndarray, shape (N+1, 3)
-        Measured velocity [m/s].
-    sp_sent_s : ndarray, shape (N+1,)
-        Time the setpoint was first sent, from the trial start [s]; NaN for row N.
-    interpolated : ndarray of bool, shape (N+1,)
-        True where the position was interpolated across a telemetry gap.
-    mocap_ned_m : ndarray, shape (N+1, 3), or None
-        Motion-capture position on the grid [m, NED] (NaN where none); None without mocap.
+    ``t_s``: grid times ``k t_ilc_s`` [s] from the trial start. ``ref_ned_m``: reference yd(k),
+    local NED [m]. ``sp_ned_m``: setpoint u(k) [m]; row N is the final setpoint held after the
+    trial. ``pos_ned_m``: measured position y(k) [m]; NaN where an aborted trial has no data.
+    ``vel_ned_m_s``: measured velocity [m/s]. ``sp_sent_s``: time the setpoint was first sent, from
+    the trial start [s]; NaN for row N. ``interpolated``: True where the position was interpolated
+    across a telemetry gap. ``mocap_ned_m``: motion-capture position on the grid [m, NED] (NaN where
+    none); None without mocap.
     """
 
     t_s: np.ndarray
@@ -106,21 +95,12 @@ class TrialRecord:
     def measured(self, measurement: str) -> TrialRecord:
         """The record whose ``pos_ned_m`` is what learning and e_pos use.
 
-        Parameters
-        ----------
-        measurement : str
-            ``"mocap"`` (the motion capture when the record has it; else the estimate) or
-            ``"estimate"`` (the vehicle's own).
+        ``measurement``: ``"mocap"`` (the motion capture when the record has it; else the estimate)
+        or ``"estimate"`` (the vehicle's own).
 
-        Returns
-        -------
-        TrialRecord
-            ``self``, or a copy with the mocap positions as ``pos_ned_m``.
+        Returns: ``self``, or a copy with the mocap positions as ``pos_ned_m``.
 
-        Raises
-        ------
-        RunLogError
-            ``"mocap"`` with mocap columns that are NaN somewhere on the grid.
+        Raises ``RunLogError``: ``"mocap"`` with mocap columns that are NaN somewhere on the grid.
         """
         if measurement not in MEASUREMENTS:
             raise RunLogError(f"measurement must be one of {', '.join(MEASUREMENTS)}")
@@ -163,22 +143,10 @@ class TrialRecord:
 class TrialStatus:
     """The sidecar of a trial.
 
-    Parameters
-    ----------
-    trial : int
-        Trial index j.
-    complete : bool
-        Whether the trial was flown to its end.
-    reason : str or None
-        Why an incomplete trial stopped.
-    epos_m : float or None
-        e_pos,j of eq. (10) [m] (complete trials).
-    max_err_m : float or None
-        Largest horizontal error [m] (complete trials).
-    interpolated_share : float
-        Share of grid samples interpolated across a telemetry gap.
-    extra : dict
-        Anything else the flight layer reported (timing statistics).
+    ``complete``: whether the trial was flown to its end. ``epos_m``: e_pos,j of eq. (10) [m]
+    (complete trials). ``max_err_m``: largest horizontal error [m] (complete trials).
+    ``interpolated_share``: share of grid samples interpolated across a telemetry gap. ``extra``:
+    anything else the flight layer reported (timing statistics).
     """
 
     trial: int
@@ -191,17 +159,7 @@ class TrialStatus:
 
 
 def json_safe(value: Any) -> Any:
-    """``value`` with NaN and infinities as None and tuples as lists (strict JSON).
-
-    Parameters
-    ----------
-    value : Any
-        Nested dicts, lists, tuples and scalars.
-
-    Returns
-    -------
-    Any
-    """
+    """``value`` with NaN and infinities as None and tuples as lists (strict JSON)."""
     if isinstance(value, dict):
         return {str(k): json_safe(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
@@ -216,17 +174,6 @@ def json_safe(value: Any) -> Any:
 def csv_text(columns: tuple[str, ...], table: np.ndarray) -> str:
     """A table as CSV text: a header, ``k`` and ``interpolated`` as integers, the rest to 9
     significant digits (``nan`` kept).
-
-    Parameters
-    ----------
-    columns : tuple of str
-        The header.
-    table : ndarray, shape (rows, len(columns))
-        The values.
-
-    Returns
-    -------
-    str
     """
     buf = io.StringIO()
     buf.write(",".join(columns) + "\n")
@@ -246,23 +193,9 @@ def _fmt(column: str, value: float) -> str:
 def read_csv(path: Path, columns: tuple[str, ...], optional: tuple[str, ...] = ()) -> np.ndarray:
     """A CSV file written by :func:`csv_text`, its header checked.
 
-    Parameters
-    ----------
-    path : Path
-        The file.
-    columns : tuple of str
-        The header it must have.
-    optional : tuple of str
-        Last columns it may have in addition.
+    ``columns``: the header it must have. ``optional``: last columns it may have in addition.
 
-    Returns
-    -------
-    ndarray, shape (rows, columns)
-
-    Raises
-    ------
-    RunLogError
-        Unreadable, another header, a value that is no number, ragged rows.
+    Raises ``RunLogError``: unreadable, another header, a value that is no number, ragged rows.
     """
     try:
         with open(path, newline="") as fh:
@@ -290,14 +223,7 @@ PLAUSIBLE = 1e6
 def check_plausible(path: Path, values: np.ndarray, columns: tuple[str, ...]) -> None:
     """Refuse values beyond :data:`PLAUSIBLE` (NaN is left to the caller), naming the column.
 
-    Parameters
-    ----------
-    path : Path
-        The file the values come from (for the message).
-    values : ndarray, shape (rows, len(columns))
-        The values.
-    columns : tuple of str
-        Their column names.
+    ``path``: the file the values come from (for the message).
     """
     with np.errstate(invalid="ignore"):
         bad = np.argwhere(np.abs(values) > PLAUSIBLE)
@@ -310,33 +236,14 @@ def check_plausible(path: Path, values: np.ndarray, columns: tuple[str, ...]) ->
 
 
 def json_text(data: dict[str, Any]) -> str:
-    """Strict JSON of a record (NaN as null), the same bytes for the same data.
-
-    Parameters
-    ----------
-    data : dict
-        The record.
-
-    Returns
-    -------
-    str
-    """
+    """Strict JSON of a record (NaN as null), the same bytes for the same data."""
     return json.dumps(json_safe(data), indent=1, allow_nan=False) + "\n"
 
 
 def read_json(path: Path, what: str) -> Any:
     """A JSON file, parsed; refusals name the file and what it should hold.
 
-    Parameters
-    ----------
-    path : Path
-        The file.
-    what : str
-        What it holds, for the message (``"learning record"``).
-
-    Returns
-    -------
-    Any
+    ``what``: what it holds, for the message (``"learning record"``).
     """
     try:
         return json.loads(path.read_text())
@@ -347,35 +254,14 @@ def read_json(path: Path, what: str) -> Any:
 
 
 def is_number(value: Any) -> bool:
-    """Whether a parsed JSON value is a number (``true`` and ``false`` are not).
-
-    Parameters
-    ----------
-    value : Any
-        The value.
-
-    Returns
-    -------
-    bool
-    """
+    """Whether a parsed JSON value is a number (``true`` and ``false`` are not)."""
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def status_from_json(path: Path, j: int, data: Any) -> TrialStatus:
     """A trial sidecar's JSON as :class:`TrialStatus`, every field checked against its type.
 
-    Parameters
-    ----------
-    path : Path
-        The sidecar (for messages).
-    j : int
-        The trial its name gives.
-    data : Any
-        Its parsed JSON.
-
-    Returns
-    -------
-    TrialStatus
+    ``path``: the sidecar (for messages).
     """
     if not isinstance(data, dict):
         raise RunLogError(f"{path}: malformed trial status (not a JSON object)")

@@ -113,12 +113,7 @@ class RunDir(LearnLog):
     names below, the numbered files (``<kind>-JJJ.<ext>``) by the ``*_path`` members. Other code
     asks the run for a file's path or name.
 
-    Parameters
-    ----------
-    path : Path
-        The directory.
-    manifest : dict
-        Its parsed ``manifest.json``.
+    ``manifest``: its parsed ``manifest.json``.
     """
 
     #: The manifest: profile, trajectory and algorithm as used, software versions.
@@ -152,25 +147,10 @@ class RunDir(LearnLog):
     ) -> RunDir:
         """Create a new run directory under ``root`` with trial 0's setpoints = the reference.
 
-        Parameters
-        ----------
-        root : Path
-            Parent directory (``logs/``).
-        profile : Profile
-            The profile as used.
-        trajectory : TrajectorySpec
-            The trajectory as used.
-        algorithm : str
-            ``"smoother"`` or ``"kilc"``.
-        run_id : str, optional
-            Directory name; default ``<UTC time>-<trajectory>-<algorithm>``.
-        reference : Reference, optional
-            The reference to record; default: the trajectory sampled at ``t_ilc_s``
-            (identification runs pass their excitation here).
-
-        Returns
-        -------
-        RunDir
+        ``root``: parent directory (``logs/``). ``algorithm``: ``"smoother"`` or ``"kilc"``.
+        ``run_id``: directory name; default ``<UTC time>-<trajectory>-<algorithm>``. ``reference``:
+        the reference to record; default: the trajectory sampled at ``t_ilc_s`` (identification runs
+        pass their excitation here).
         """
         if algorithm not in RUN_KINDS:
             raise RunLogError(f"algorithm must be one of {', '.join(RUN_KINDS)}, got {algorithm!r}")
@@ -217,17 +197,7 @@ class RunDir(LearnLog):
 
     @classmethod
     def open(cls, path: Path) -> RunDir:
-        """Open an existing run directory.
-
-        Parameters
-        ----------
-        path : Path
-            The run directory.
-
-        Returns
-        -------
-        RunDir
-        """
+        """Open an existing run directory."""
         path = Path(path)
         if not path.is_dir():
             raise RunLogError(f"{path}: not a run directory")
@@ -257,17 +227,10 @@ class RunDir(LearnLog):
     def require_kind(self, kind: str, command: str) -> None:
         """Refuse a command that writes into a run of the other kind.
 
-        Parameters
-        ----------
-        kind : str
-            ``"learning"`` or ``"identification"``.
-        command : str
-            The command, for the message (``gcs learn``).
+        ``kind``: ``"learning"`` or ``"identification"``. ``command``: the command, for the message
+        (``gcs learn``).
 
-        Raises
-        ------
-        RunLogError
-            The run is of the other kind.
+        Raises ``RunLogError``: the run is of the other kind.
         """
         if self.kind != kind:
             article = "an" if self.kind[0] in "aeiou" else "a"
@@ -280,10 +243,7 @@ class RunDir(LearnLog):
     def check_writable(self) -> None:
         """Refuse a run directory that cannot be written into (a probe file, removed at once).
 
-        Raises
-        ------
-        RunLogError
-            Read-only directory or filesystem, no permission.
+        Raises ``RunLogError``: read-only directory or filesystem, no permission.
         """
         try:
             check_writable_dir(self.path, str(self.path))
@@ -338,12 +298,12 @@ class RunDir(LearnLog):
     # ----------------------------------------------------------------- layout
     @property
     def manifest_path(self) -> Path:
-        """``manifest.json``."""
+        """The path of ``manifest.json``."""
         return self.path / self.MANIFEST_FILE
 
     @property
     def reference_path(self) -> Path:
-        """``reference.csv``."""
+        """The path of ``reference.csv``."""
         return self.path / self.REFERENCE_FILE
 
     @property
@@ -357,128 +317,47 @@ class RunDir(LearnLog):
         return self.path / self.IDENTIFIED_FILE
 
     def setpoints_path(self, j: int) -> Path:
-        """``setpoints-JJJ.csv``: the setpoints to fly in trial j.
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        Path
-        """
+        """``setpoints-JJJ.csv``: the setpoints to fly in trial j."""
         return self._file("setpoints", j, "csv")
 
     def trial_path(self, j: int) -> Path:
-        """``trial-JJJ.csv``: trial j as flown, on the grid.
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        Path
-        """
+        """``trial-JJJ.csv``: trial j as flown, on the grid."""
         return self._file("trial", j, "csv")
 
     def status_path(self, j: int) -> Path:
-        """``trial-JJJ.json``: the status sidecar of trial j (the trial counts once it says so).
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        Path
-        """
+        """``trial-JJJ.json``: the status sidecar of trial j (the trial counts once it says so)."""
         return self._file("trial", j, "json")
 
     def mocap_path(self, j: int) -> Path:
-        """``mocap-JJJ.csv``: every raw motion-capture sample of trial j.
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        Path
-        """
+        """``mocap-JJJ.csv``: every raw motion-capture sample of trial j."""
         return self._file("mocap", j, "csv")
 
     def estimate_path(self, j: int) -> Path:
-        """``estimate-JJJ.csv``: the disturbance estimate learned from trial j.
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        Path
-        """
+        """``estimate-JJJ.csv``: the disturbance estimate learned from trial j."""
         return self._file("estimate", j, "csv")
 
     def learn_path(self, j: int) -> Path:
         """``learn-JJJ.json``: the decision record of the learning step from trials 0..j.
 
-        Parameters
-        ----------
-        j : int
-            The newest trial that step learned from.
-
-        Returns
-        -------
-        Path
+        ``j``: the newest trial that step learned from.
         """
         return self._file("learn", j, "json")
 
     def model_path(self, j: int) -> Path:
         """``model-JJJ.yaml``: the profile with the models refreshed when learning from trial j.
 
-        Parameters
-        ----------
-        j : int
-            The trial learned from.
-
-        Returns
-        -------
-        Path
+        ``j``: the trial learned from.
         """
         return self._file("model", j, "yaml")
 
     def again_path(self, j: int) -> Path:
-        """``again-JJJ.json``: the record of trial j flying an earlier trial's setpoints again.
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        Path
-        """
+        """``again-JJJ.json``: the record of trial j flying an earlier trial's setpoints again."""
         return self._file("again", j, "json")
 
     def session_path(self, number: int) -> Path:
         """``session-SSS.json``: the record of flight session ``number``.
 
-        Parameters
-        ----------
-        number : int
-            The session's number (from 1).
-
-        Returns
-        -------
-        Path
+        ``number``: the session's number (from 1).
         """
         return self._file("session", number, "json")
 
@@ -510,10 +389,7 @@ class RunDir(LearnLog):
     def aborted_attempts(self) -> dict[int, int]:
         """Incomplete attempts of each trial that was flown again, kept in ``aborted/``.
 
-        Returns
-        -------
-        dict of int to int
-            Number of attempts (their sidecars) by trial index.
+        Returns: number of attempts (their sidecars) by trial index.
         """
         counts: dict[int, int] = {}
         for p in (self.path / self.ABORTED_DIR).glob(f"trial-{_JJJ}-attempt-*.json"):
@@ -525,16 +401,7 @@ class RunDir(LearnLog):
     def write_setpoints(self, j: int, sp_ned_m: np.ndarray) -> Path:
         """Write trial j's setpoints u(0..N-1), shape (N, 3), local NED [m].
 
-        Parameters
-        ----------
-        j : int
-            Trial index.
-        sp_ned_m : ndarray, shape (N, 3)
-            Setpoints [m].
-
-        Returns
-        -------
-        Path
+        ``sp_ned_m``: setpoints [m].
         """
         path = self.setpoints_path(j)
         write_once(path, self._setpoints_text(j, sp_ned_m))
@@ -549,17 +416,7 @@ class RunDir(LearnLog):
         return csv_text(SETPOINT_COLUMNS, table)
 
     def read_setpoints(self, j: int) -> np.ndarray:
-        """Trial j's setpoints, shape (N, 3), local NED [m].
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        ndarray
-        """
+        """Trial j's setpoints, shape (N, 3), local NED [m]."""
         path = self.setpoints_path(j)
         if not path.exists():
             raise RunLogError(f"{path}: no setpoints for trial {j} (run 'gcs learn' first)")
@@ -578,22 +435,9 @@ class RunDir(LearnLog):
         from trial j-1 again writes back (the same bytes); :meth:`again_of` believes the
         record only while the setpoints in force are trial k's.
 
-        Parameters
-        ----------
-        j : int
-            The next trial (not flown to completion yet).
-        k : int
-            A complete trial before it.
+        ``j``: the next trial (not flown to completion yet).
 
-        Returns
-        -------
-        Path
-            The setpoints file of trial j.
-
-        Raises
-        ------
-        RunLogError
-            ``j`` complete, or ``k`` not a complete trial before it.
+        Raises ``RunLogError``: ``j`` complete, or ``k`` not a complete trial before it.
         """
         if j in self.complete_trials():
             raise RunLogError(f"{self.path}: trial {j} is complete; its setpoints stay")
@@ -627,15 +471,7 @@ class RunDir(LearnLog):
     def again_of(self, j: int) -> int | None:
         """The trial whose setpoints trial j flies again (``gcs fly --again``), or None.
 
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        int or None
-            None when trial j flies the setpoints learned for it.
+        Returns: None when trial j flies the setpoints learned for it.
         """
         entries = self._again_entries(j)
         if not entries or not self.setpoints_path(j).exists():
@@ -667,17 +503,7 @@ class RunDir(LearnLog):
         return [self.read_status(j) for j in self._numbered("trial", "json")]
 
     def read_status(self, j: int) -> TrialStatus:
-        """The sidecar of trial j.
-
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        TrialStatus
-        """
+        """The sidecar of trial j."""
         path = self.status_path(j)
         try:
             data = json.loads(path.read_text())
@@ -709,16 +535,7 @@ class RunDir(LearnLog):
         An earlier incomplete attempt of trial j is moved to ``aborted/``; a complete trial is
         never overwritten.
 
-        Parameters
-        ----------
-        j : int
-            Trial index.
-        record : TrialRecord
-            The trial on the grid.
-        status : TrialStatus
-            Completion and metrics.
-        mocap : MocapSeries or None
-            The trial's raw motion-capture samples (``mocap-JJJ.csv``).
+        ``mocap``: the trial's raw motion-capture samples (``mocap-JJJ.csv``).
         """
         csv_path, json_path = self.trial_path(j), self.status_path(j)
         if record.n_samples != self.n_samples:
@@ -759,23 +576,13 @@ class RunDir(LearnLog):
     def measured_trial(self, j: int, measurement: str | None = None) -> TrialRecord:
         """Trial j as learning and e_pos see it: its motion capture or its estimate.
 
-        Parameters
-        ----------
-        j : int
-            A complete trial.
-        measurement : str or None
-            ``"mocap"`` (the trial's mocap columns where it has them, else the estimate) or
-            ``"estimate"``; None: the run's own profile's ``mocap.measurement``.
+        ``measurement``: ``"mocap"`` (the trial's mocap columns where it has them, else the
+        estimate) or ``"estimate"``; None: the run's own profile's ``mocap.measurement``.
 
-        Returns
-        -------
-        TrialRecord
-            With ``pos_ned_m`` the chosen measurement [m, NED].
+        Returns: with ``pos_ned_m`` the chosen measurement [m, NED].
 
-        Raises
-        ------
-        RunLogError
-            As :meth:`read_trial`, or mocap columns without a position on the grid.
+        Raises ``RunLogError``: as :meth:`read_trial`, or mocap columns without a position on the
+        grid.
         """
         if measurement is None:
             measurement = self.profile().mocap.measurement
@@ -788,19 +595,8 @@ class RunDir(LearnLog):
     def read_trial(self, j: int) -> TrialRecord:
         """Read and validate a complete trial for learning or reporting.
 
-        Parameters
-        ----------
-        j : int
-            Trial index.
-
-        Returns
-        -------
-        TrialRecord
-
-        Raises
-        ------
-        RunLogError
-            Incomplete trial, wrong length, NaN values, or a grid that does not match t_ilc_s.
+        Raises ``RunLogError``: incomplete trial, wrong length, NaN values, or a grid that does not
+        match t_ilc_s.
         """
         status = self.read_status(j)
         path = self.trial_path(j)
@@ -853,18 +649,10 @@ class RunDir(LearnLog):
     def write_session(self, number: int | None, data: dict[str, Any]) -> int:
         """Record a flight session: a new ``session-SSS.json``, or an update of one's own.
 
-        Parameters
-        ----------
-        number : int or None
-            None for a new session (it takes the next free number; an existing record is
-            never replaced), else the number this session was given before.
-        data : dict
-            The record (NaN becomes null).
+        ``number``: None for a new session (it takes the next free number; an existing record is
+        never replaced), else the number this session was given before.
 
-        Returns
-        -------
-        int
-            The session's number.
+        Returns: the session's number.
         """
 
         def text(n: int) -> str:
@@ -887,12 +675,7 @@ class RunDir(LearnLog):
             tmp.unlink(missing_ok=True)
 
     def sessions(self) -> list[dict[str, Any]]:
-        """Every session record of the run, by number.
-
-        Returns
-        -------
-        list of dict
-        """
+        """Every session record of the run, by number."""
         out = []
         for number in self._numbered("session", "json"):
             path = self.session_path(number)

@@ -39,14 +39,8 @@ MAX_BYTES = 64 * 2**20
 class PlannerSamples:
     """What a samples file holds.
 
-    Parameters
-    ----------
-    t_s : ndarray, shape (M,)
-        Sample times [s], strictly increasing.
-    pos_ned_m : ndarray, shape (M, 3)
-        Positions, local NED [m].
-    yaw_deg : ndarray, shape (M,), or None
-        Yaw [deg]; None when the file has no yaw column.
+    ``t_s``: sample times [s], strictly increasing. ``pos_ned_m``: positions, local NED [m].
+    ``yaw_deg``: yaw [deg]; None when the file has no yaw column.
     """
 
     t_s: np.ndarray
@@ -57,19 +51,9 @@ class PlannerSamples:
 def read_samples(path: str | Path) -> PlannerSamples:
     """Read and check a samples file: finite values, times strictly increasing.
 
-    Parameters
-    ----------
-    path : str or Path
-        A ``.csv``, ``.npy`` or ``.npz`` file.
+    ``path``: a ``.csv``, ``.npy`` or ``.npz`` file.
 
-    Returns
-    -------
-    PlannerSamples
-
-    Raises
-    ------
-    TrajectoryError
-        Naming the file and the line, row or column.
+    Raises ``TrajectoryError``: naming the file and the line, row or column.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -205,12 +189,7 @@ def _checked(path: Path, table: np.ndarray, names: list[str], rows: list[str]) -
 def write_samples_csv(path: str | Path, samples: PlannerSamples) -> None:
     """Write samples as a CSV file :func:`read_samples` reads back exactly.
 
-    Parameters
-    ----------
-    path : str or Path
-        The file to write.
-    samples : PlannerSamples
-        The samples (``repr`` of each float: the values round-trip exactly).
+    ``samples``: the samples (``repr`` of each float: the values round-trip exactly).
     """
     names = list(SAMPLE_COLUMNS) + ([YAW_COLUMN] if samples.yaw_deg is not None else [])
     cols = [samples.t_s, *np.asarray(samples.pos_ned_m).T]

@@ -52,11 +52,8 @@ Previous = tuple[int, int]
 def raise_thread() -> Previous | None:
     """Put the calling thread under ``SCHED_RR`` at :data:`FLIGHT_PRIORITY` where allowed.
 
-    Returns
-    -------
-    tuple of int or None
-        The policy and priority it had (for :func:`restore_thread`); None when nothing changed:
-        not allowed, not available on this OS, or already under a real-time policy.
+    Returns: the policy and priority it had (for :func:`restore_thread`); None when nothing changed:
+    not allowed, not available on this OS, or already under a real-time policy.
     """
     if not hasattr(os, "sched_setscheduler"):
         return None
@@ -74,10 +71,7 @@ def raise_thread() -> Previous | None:
 def restore_thread(previous: Previous | None) -> None:
     """Give the calling thread back the policy it had before :func:`raise_thread`.
 
-    Parameters
-    ----------
-    previous : tuple of int or None
-        What :func:`raise_thread` returned (None: nothing to give back).
+    ``previous``: what :func:`raise_thread` returned (None: nothing to give back).
     """
     if previous is not None:
         os.sched_setscheduler(0, previous[0], os.sched_param(previous[1]))

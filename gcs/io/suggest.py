@@ -13,17 +13,10 @@ def did_you_mean(word: str, known: Iterable[str]) -> str:
 
     Closeness is :func:`difflib.get_close_matches` (ratio at least 0.6), case-insensitive.
 
-    Parameters
-    ----------
-    word : str
-        What was typed (a field, a packaged name).
-    known : iterable of str
-        The names that would have been accepted.
+    ``word``: what was typed (a field, a packaged name). ``known``: the names that would have been
+    accepted.
 
-    Returns
-    -------
-    str
-        The suffix for a refusal's line (empty when no known name is close).
+    Returns: the suffix for a refusal's line (empty when no known name is close).
     """
     names = {name.lower(): name for name in known}
     close = difflib.get_close_matches(word.lower(), list(names), n=1)

@@ -15,17 +15,7 @@ __all__ = ["read_yaml"]
 def read_yaml(path: Path, error: type[GcsError]) -> Any:
     """Parse a YAML file; failures raise ``error`` naming the file (and the line).
 
-    Parameters
-    ----------
-    path : Path
-        The file.
-    error : type
-        Exception class to raise (e.g. ProfileError, TrajectoryError).
-
-    Returns
-    -------
-    Any
-        The parsed document.
+    ``error``: exception class to raise (e.g. ProfileError, TrajectoryError).
     """
     try:
         text = Path(path).read_text()

@@ -31,26 +31,14 @@ class ChildNotReady(RuntimeError):
 class ChildProgram:
     """One run of a program that announces ``READY <text>`` on stdout.
 
-    Parameters
-    ----------
-    argv : sequence of str
-        The command line.
-    ready_timeout_s : float
-        How long :meth:`start` waits for the READY line [s].
-    stop_timeout_s : float
-        How long :meth:`stop` waits after SIGTERM before SIGKILL [s].
-    on_line : callable, optional
-        Called from the reader thread with every other stdout line (e.g. the mock's
-        ``MOCAP <url>``, printed before READY).
+    ``ready_timeout_s``: how long :meth:`start` waits for the READY line [s]. ``stop_timeout_s``:
+    how long :meth:`stop` waits after SIGTERM before SIGKILL [s]. ``on_line``: called from the
+    reader thread with every other stdout line (e.g. the mock's ``MOCAP <url>``, printed before
+    READY).
 
-    Attributes
-    ----------
-    ready : str
-        What followed ``READY`` (the program's URL); empty before.
-    pid : int
-        Process id (0 before :meth:`start`).
-    stderr_text : str
-        Everything the program wrote on stderr, read by :meth:`stop`.
+    ``ready``: what followed ``READY`` (the program's URL); empty before. ``pid``: process id (0
+    before :meth:`start`). ``stderr_text``: everything the program wrote on stderr, read by
+    :meth:`stop`.
     """
 
     def __init__(
@@ -75,16 +63,10 @@ class ChildProgram:
     def start(self) -> str:
         """Start the program and wait for its READY line.
 
-        Returns
-        -------
-        str
-            What followed ``READY``.
+        Returns: what followed ``READY``.
 
-        Raises
-        ------
-        ChildNotReady
-            It exited first (with its code and last stderr line) or stayed silent for
-            ``ready_timeout_s``; it is stopped before this is raised.
+        Raises ``ChildNotReady``: it exited first (with its code and last stderr line) or stayed
+        silent for ``ready_timeout_s``; it is stopped before this is raised.
         """
         self._stderr = tempfile.TemporaryFile("w+")  # noqa: SIM115 (closed in stop())
         self._proc = subprocess.Popen(
@@ -115,10 +97,7 @@ class ChildProgram:
     def send_signal(self, sig: int) -> None:
         """Send a signal to the running program.
 
-        Parameters
-        ----------
-        sig : int
-            E.g. ``signal.SIGUSR1``.
+        ``sig``: e.g. ``signal.SIGUSR1``.
         """
         if self._proc is None:
             raise RuntimeError("the program is not running")

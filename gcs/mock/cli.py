@@ -40,15 +40,7 @@ def _floats(text: str, count: int, what: str, fmt: str) -> list[float]:
 def parse_dropout(text: str) -> tuple[float, float]:
     """Parse ``START:DURATION`` [s].
 
-    Parameters
-    ----------
-    text : str
-        Option value.
-
-    Returns
-    -------
-    tuple of float
-        Start and duration [s].
+    Returns: start and duration [s].
     """
     start, duration = _floats(text, 2, "--dropout", "START:DURATION")
     return start, duration
@@ -57,15 +49,7 @@ def parse_dropout(text: str) -> tuple[float, float]:
 def parse_gust(text: str) -> tuple[float, float, float, float]:
     """Parse ``START:DURATION:VN:VE`` (s, s, m/s, m/s).
 
-    Parameters
-    ----------
-    text : str
-        Option value.
-
-    Returns
-    -------
-    tuple of float
-        Start [s], duration [s], wind north and east [m/s].
+    Returns: start [s], duration [s], wind north and east [m/s].
     """
     start, duration, vn, ve = _floats(text, 4, "--gust", "START:DURATION:VN:VE")
     return start, duration, vn, ve
@@ -76,19 +60,10 @@ def parse_estimator_fault(
 ) -> tuple[float, float | None, tuple[float, float, float]]:
     """Parse ``T:D:N:E:D`` (``--drift``, ``--divergence``) or ``T:N:E:D`` (``--jump``).
 
-    Parameters
-    ----------
-    text : str
-        Option value.
-    option : str
-        The option's name, for the message.
-    timed : bool
-        The value has a duration (drift, divergence); ``--jump`` has none.
+    ``option``: the option's name, for the message. ``timed``: the value has a duration (drift,
+    divergence); ``--jump`` has none.
 
-    Returns
-    -------
-    tuple
-        Start [s], duration [s] (None for a jump) and the NED vector.
+    Returns: start [s], duration [s] (None for a jump) and the NED vector.
     """
     if timed:
         start, duration, n, e, d = _floats(text, 5, option, "T:D:N:E:D")
@@ -105,15 +80,7 @@ def _vector(v: tuple[float, float, float] | None) -> str:
 def faults_cli_args(faults: Faults) -> list[str]:
     """Command-line options of ``gcs mock`` that reproduce a :class:`Faults`.
 
-    Parameters
-    ----------
-    faults : Faults
-        Faults to express.
-
-    Returns
-    -------
-    list of str
-        Options, empty for no faults.
+    Returns: options, empty for no faults.
     """
     args: list[str] = []
     if faults.loss_fraction:
@@ -163,22 +130,10 @@ def run_mock(
 
     With ``arena``, a ``MOCAP <url>`` line (the mock Motive's URL) comes first.
 
-    Parameters
-    ----------
-    config : Path or None
-        Mock profile (YAML); None for the defaults.
-    faults : Faults
-        Injected faults.
-    seed : int
-        Seed of gusts, noise and packet loss.
-    port : int
-        UDP port on 127.0.0.1 (0 = ephemeral).
-    gcs_port : int or None
-        Also send to a GCS listening on 127.0.0.1:gcs_port.
-    stats_out : Path or None
-        Where to write the JSON statistics on exit.
-    arena : ArenaOptions or None
-        Serve the vehicle's true pose over NatNet (a mock OptiTrack Motive).
+    ``config``: mock profile (YAML); None for the defaults. ``seed``: seed of gusts, noise and
+    packet loss. ``port``: UDP port on 127.0.0.1 (0 = ephemeral). ``gcs_port``: also send to a GCS
+    listening on 127.0.0.1:gcs_port. ``stats_out``: where to write the JSON statistics on exit.
+    ``arena``: serve the vehicle's true pose over NatNet (a mock OptiTrack Motive).
     """
     import json
 
@@ -382,53 +337,6 @@ def mock_command(
         gcs mock --clock-rate 0.8
 
         gcs mock --divergence 1.0:30:0:0:1.5 --stats-out /tmp/incident.json
-    \f
-    Parameters
-    ----------
-    config : Path or None
-        Mock profile (YAML).
-    port : int
-        UDP port on 127.0.0.1 (0 = any free port).
-    gcs_port : int or None
-        Also send to a GCS listening on this port.
-    seed : int
-        Seed of gusts, noise and packet loss.
-    loss : float
-        Datagram loss fraction, both directions.
-    latency_ms : float
-        Added one-way latency [ms].
-    dropout : str or None
-        Telemetry dropout ``START:DURATION`` [s after the first OFFBOARD].
-    link_loss_at : float or None
-        Time of the link loss [s after the first OFFBOARD].
-    link_loss_for : float or None
-        Duration of the link loss [s]; None: for good.
-    gust : str or None
-        Wind gust ``START:DURATION:VN:VE`` [s, s, m/s, m/s].
-    stats_out : Path or None
-        JSON statistics file written on exit.
-    clock_rate : float
-        Vehicle time per wall-clock second.
-    drift : str or None
-        Estimator drift ``T:D:VN:VE:VD`` [s after the first arming, s, m/s].
-    divergence : str or None
-        Estimator divergence ``T:D:AN:AE:AD`` [s after the first arming, s, m/s^2].
-    jump : str or None
-        Estimator jump ``T:DN:DE:DD`` [s after the first arming, m].
-    mocap : bool
-        Serve the true pose as a mock Motive.
-    mocap_rate : float
-        Its frame rate [Hz].
-    mocap_noise_mm : float
-        Its marker noise [mm].
-    mocap_room : str
-        Named convention of the room's axes.
-    mocap_yaw_offset_deg : float
-        Heading of the room's north axis [deg].
-    mocap_body : str
-        Rigid body name.
-    mocap_occlusion, mocap_dropout, mocap_freeze, mocap_jump : list of str or None
-        Mocap faults, timed from the first OFFBOARD.
     """
     arena = None
     if mocap:
@@ -473,26 +381,8 @@ def arena_options(
 ) -> ArenaOptions:
     """The arena options of ``gcs mock --mocap ...`` (a bad value is a usage error).
 
-    Parameters
-    ----------
-    rate_hz : float
-        Frame rate [Hz].
-    noise_mm : float
-        Marker noise [mm].
-    room : str
-        Named convention of the room's axes.
-    yaw_offset_deg : float
-        Heading of the room's north axis [deg].
-    body : str
-        Rigid body name.
-    seed : int
-        Seed of the marker noise.
-    faults : dict of str to list of str or None
-        Option values by fault kind.
-
-    Returns
-    -------
-    ArenaOptions
+    ``rate_hz``: frame rate [Hz]. ``noise_mm``: marker noise [mm]. ``room``: named convention of the
+    room's axes. ``yaw_offset_deg``: heading of the room's north axis [deg].
     """
     try:
         windows = tuple(

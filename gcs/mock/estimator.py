@@ -111,14 +111,9 @@ _HISTORY_S = 1.0  # how far back a delayed sample can be compared [s]
 class ErrorProcess(Protocol):
     """One source of navigation error. The :class:`Estimator` sums the processes' errors.
 
-    Attributes
-    ----------
-    pos_err_m : list of float
-        Position error (north, east, down) [m]: estimate minus truth.
-    vel_err_m_s : list of float
-        Velocity error (north, east, down) [m/s].
-    resets : int
-        Number of resets so far (estimate snapped onto the aiding source).
+    ``pos_err_m``: position error (north, east, down) [m]: estimate minus truth. ``vel_err_m_s``:
+    velocity error (north, east, down) [m/s]. ``resets``: number of resets so far (estimate snapped
+    onto the aiding source).
     """
 
     pos_err_m: list[float]
@@ -128,10 +123,7 @@ class ErrorProcess(Protocol):
     def step(self, dt_s: float) -> None:
         """Advance the error by ``dt_s``.
 
-        Parameters
-        ----------
-        dt_s : float
-            Step [s].
+        ``dt_s``: step [s].
         """
 
 
@@ -163,12 +155,8 @@ class AidedInertialError:
     velocity-error sigma and correlation time and its own aiding-error sigma; the aiding
     error's correlation time and the aiding time constant are common.
 
-    Parameters
-    ----------
-    cfg : EstimatorConfig
-        Sigmas, correlation times, aiding time constant and reset rate.
-    rng : random.Random
-        The process's own random stream.
+    ``cfg``: sigmas, correlation times, aiding time constant and reset rate. ``rng``: the process's
+    own random stream.
     """
 
     def __init__(self, cfg: EstimatorConfig, rng: random.Random) -> None:
@@ -192,10 +180,7 @@ class AidedInertialError:
     def step(self, dt_s: float) -> None:
         """Advance the velocity, aiding and position errors by ``dt_s``; maybe reset.
 
-        Parameters
-        ----------
-        dt_s : float
-            Step [s].
+        ``dt_s``: step [s].
         """
         t_aid = self.cfg.aid_time_constant_s
         pos, vel, aid = self.pos_err_m, self.vel_err_m_s, self.aid_err_m
@@ -217,10 +202,7 @@ class AidedInertialError:
 class Estimator:
     """The vehicle's navigation solution: truth plus the sum of its error processes.
 
-    Parameters
-    ----------
-    processes : sequence of ErrorProcess
-        The error sources; stepped in this order.
+    ``processes``: the error sources; stepped in this order.
     """
 
     def __init__(self, processes: Sequence[ErrorProcess]) -> None:
@@ -240,23 +222,14 @@ class Estimator:
         return sum(p.resets for p in self.processes)
 
     def add(self, process: ErrorProcess) -> None:
-        """Add one more error process to the sum.
-
-        Parameters
-        ----------
-        process : ErrorProcess
-            Stepped after the others.
-        """
+        """Add one more error process to the sum."""
         self.processes.append(process)
         self._sum()
 
     def step(self, dt_s: float) -> None:
         """Advance every process by ``dt_s``.
 
-        Parameters
-        ----------
-        dt_s : float
-            Step [s].
+        ``dt_s``: step [s].
         """
         for p in self.processes:
             p.step(dt_s)
@@ -268,16 +241,9 @@ class Estimator:
     ) -> None:  # fmt: skip
         """Write the estimate of a true state into ``out_pos`` and ``out_vel`` (in place).
 
-        Parameters
-        ----------
-        pos_ned_m : sequence of float
-            True position (north, east, down) [m].
-        vel_ned_m_s : sequence of float
-            True velocity [m/s].
-        out_pos : list of float
-            Receives the estimated position [m].
-        out_vel : list of float
-            Receives the estimated velocity [m/s].
+        ``pos_ned_m``: true position (north, east, down) [m]. ``vel_ned_m_s``: true velocity [m/s].
+        ``out_pos``: receives the estimated position [m]. ``out_vel``: receives the estimated
+        velocity [m/s].
         """
         for i in range(3):
             out_pos[i] = pos_ned_m[i] + self.pos_err_m[i]
@@ -287,17 +253,10 @@ class Estimator:
 def make_estimator(cfg: EstimatorConfig, seed: int) -> Estimator | None:
     """The estimator a profile asks for, or None for a vehicle that flies on its true state.
 
-    Parameters
-    ----------
-    cfg : EstimatorConfig
-        The profile's ``estimator`` section.
-    seed : int
-        The run's seed (``--seed``); the estimator draws from ``seed + ESTIMATOR_SEED_OFFSET``.
+    ``cfg``: the profile's ``estimator`` section. ``seed``: the run's seed (``--seed``); the
+    estimator draws from ``seed + ESTIMATOR_SEED_OFFSET``.
 
-    Returns
-    -------
-    Estimator or None
-        None when ``cfg.enabled`` is false: no random number is drawn.
+    Returns: None when ``cfg.enabled`` is false: no random number is drawn.
     """
     if not cfg.enabled:
         return None
@@ -308,19 +267,11 @@ def make_estimator(cfg: EstimatorConfig, seed: int) -> Estimator | None:
 class InjectedFault:
     """An injected position error, timed from the vehicle's first arming (an ErrorProcess).
 
-    Parameters
-    ----------
-    start_s : float
-        When it begins, after the first arming [s, vehicle time].
-    duration_s : float or None
-        How long it grows [s]; afterwards the error stays as it is. None: for ever.
-    vector : tuple of float
-        Its size per NED axis (unit by kind: m/s, m/s^2 or m).
+    ``start_s``: when it begins, after the first arming [s, vehicle time]. ``duration_s``: how long
+    it grows [s]; afterwards the error stays as it is. None: for ever. ``vector``: its size per NED
+    axis (unit by kind: m/s, m/s^2 or m).
 
-    Attributes
-    ----------
-    origin_s : float or None
-        Vehicle time of the first arming (None before it).
+    ``origin_s``: vehicle time of the first arming (None before it).
     """
 
     kind = "fault"
@@ -337,10 +288,7 @@ class InjectedFault:
     def start_clock(self, t_s: float) -> None:
         """Start counting (the vehicle's first arming; later calls change nothing).
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s].
+        ``t_s``: vehicle time [s].
         """
         if self.origin_s is None:
             self.origin_s = t_s
@@ -357,10 +305,7 @@ class InjectedFault:
     def step(self, dt_s: float) -> None:
         """Advance by ``dt_s``; the error follows the kind's law once the fault has begun.
 
-        Parameters
-        ----------
-        dt_s : float
-            Step [s].
+        ``dt_s``: step [s].
         """
         self.t_s += dt_s
         onset = self.onset_s
@@ -376,10 +321,7 @@ class InjectedFault:
     def record(self) -> dict[str, object]:
         """The fault for the statistics file.
 
-        Returns
-        -------
-        dict
-            ``kind``, ``start_s``, ``duration_s``, ``vector``, ``onset_vehicle_s``.
+        Returns: ``kind``, ``start_s``, ``duration_s``, ``vector``, ``onset_vehicle_s``.
         """
         return {
             "kind": self.kind,
@@ -420,15 +362,9 @@ class PositionJump(InjectedFault):
 def injected_faults(faults: Faults) -> list[InjectedFault]:
     """The estimator faults a run's :class:`Faults` ask for.
 
-    Parameters
-    ----------
-    faults : Faults
-        The run's faults.
+    ``faults``: the run's faults.
 
-    Returns
-    -------
-    list of InjectedFault
-        Drift, divergence and jump, those given; empty for none.
+    Returns: drift, divergence and jump, those given; empty for none.
     """
     out: list[InjectedFault] = []
     if faults.drift_start_s is not None and faults.drift_ned_m_s is not None:
@@ -454,23 +390,14 @@ class VisionAidedError:
     sample time; :meth:`fuse` takes the samples, :meth:`xy_valid` says whether PX4 would
     report a local position.
 
-    Parameters
-    ----------
-    cfg : VisionConfig
-        Time constant, gate, reset time and dead-reckoning error.
-    true_pos_ned_m : list of float
-        The physics' true position, read (never written) at every step.
-    rng : random.Random
-        The process's own random stream (direction of the dead-reckoning error).
+    ``cfg``: time constant, gate, reset time and dead-reckoning error. ``true_pos_ned_m``: the
+    physics' true position, read (never written) at every step. ``rng``: the process's own random
+    stream (direction of the dead-reckoning error).
 
-    Attributes
-    ----------
-    fused, rejected, resets : int
-        Samples fused, samples rejected by the gate, resets onto the vision.
-    last_sample_s : float or None
-        Vehicle time of the last sample's arrival, fused or rejected (None before the first).
-    events : list of str
-        What happened, for the commander to say (``"vision data stopped"``, ...).
+    ``fused``, ``rejected``, ``resets``: samples fused, samples rejected by the gate, resets onto
+    the vision. ``last_sample_s``: vehicle time of the last sample's arrival, fused or rejected
+    (None before the first). ``events``: what happened, for the commander to say (``"vision data
+    stopped"``, ...).
     """
 
     def __init__(self, cfg: VisionConfig, true_pos_ned_m: list[float], rng: random.Random) -> None:
@@ -495,10 +422,7 @@ class VisionAidedError:
     def step(self, dt_s: float) -> None:
         """Advance by ``dt_s``: stop fusing after 0.4 s without samples, then dead-reckon.
 
-        Parameters
-        ----------
-        dt_s : float
-            Step [s].
+        ``dt_s``: step [s].
         """
         self.t_s += dt_s
         if (
@@ -536,21 +460,12 @@ class VisionAidedError:
     ) -> bool:
         """Fuse one vision sample, as EKF2 would.
 
-        Parameters
-        ----------
-        t_arrival_s : float
-            Vehicle time the sample arrived [s] (the physics has been stepped to it).
-        pos_ned_m : tuple of float
-            The measured position, local NED [m].
-        delay_s : float
-            ``EKF2_EV_DELAY`` [s]: the sample is compared with the estimate this long ago.
-        ev_ctrl : int
-            ``EKF2_EV_CTRL``: bit 0 fuses the horizontal position, bit 1 the height.
+        ``t_arrival_s``: vehicle time the sample arrived [s] (the physics has been stepped to it).
+        ``pos_ned_m``: the measured position, local NED [m]. ``delay_s``: ``EKF2_EV_DELAY`` [s]: the
+        sample is compared with the estimate this long ago. ``ev_ctrl``: ``EKF2_EV_CTRL``: bit 0
+        fuses the horizontal position, bit 1 the height.
 
-        Returns
-        -------
-        bool
-            The sample was fused (False: rejected by the gate, or nothing to fuse).
+        Returns True when the sample was fused (False: rejected by the gate, or nothing to fuse).
         """
         axes = (bool(ev_ctrl & 1), bool(ev_ctrl & 1), bool(ev_ctrl & 2))
         if not any(axes) or not all(math.isfinite(x) for x in pos_ned_m):
@@ -607,16 +522,7 @@ class VisionAidedError:
         after the last accepted sample while every sample is rejected (invalid at ``last
         accepted + EKF2_NOAID_TOUT``), whichever comes first. Never before the first sample.
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s].
-        noaid_timeout_s : float
-            ``EKF2_NOAID_TOUT`` [s].
-
-        Returns
-        -------
-        bool
+        ``t_s``: vehicle time [s]. ``noaid_timeout_s``: ``EKF2_NOAID_TOUT`` [s].
         """
         if self.last_sample_s is None or self._last_accept_s is None or not self._axes[0]:
             return False

@@ -84,20 +84,9 @@ def _distance_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
 class FenceItem:
     """One MISSION_ITEM_INT of a fence.
 
-    Parameters
-    ----------
-    seq : int
-        Sequence number.
-    frame : int
-        MAV_FRAME.
-    command : int
-        MAV_CMD (5000-5004).
-    param1 : float
-        Vertex count of a polygon, radius of a circle [m].
-    x, y : int
-        Latitude and longitude [1e-7 deg].
-    z : float
-        Altitude [m] (unused by PX4's fence).
+    ``frame``: MAV_FRAME. ``command``: MAV_CMD (5000-5004). ``param1``: vertex count of a polygon,
+    radius of a circle [m]. ``x``, ``y``: latitude and longitude [1e-7 deg]. ``z``: altitude [m]
+    (unused by PX4's fence).
     """
 
     seq: int
@@ -118,25 +107,11 @@ class FenceItem:
 class Reply:
     """What the transfer asks the server to send.
 
-    Parameters
-    ----------
-    kind : str
-        ``"request"`` (MISSION_REQUEST_INT of ``value``), ``"ack"`` (MISSION_ACK of result
-        ``value``), ``"count"`` (MISSION_COUNT of ``value``), ``"item"`` (MISSION_ITEM_INT
-        ``item``), ``"text"`` (STATUSTEXT ``text`` of severity ``value``) or ``"stored"``
-        (a new fence, ``items``, is in place).
-    value : int
-        As ``kind`` says.
-    target : tuple of int
-        Sysid and compid of the partner.
-    item : FenceItem or None
-        For ``"item"``.
-    text : str
-        For ``"text"``.
-    items : tuple of FenceItem
-        For ``"stored"``.
-    mission_type : int
-        Mission type of the message.
+    ``kind``: ``"request"`` (MISSION_REQUEST_INT of ``value``), ``"ack"`` (MISSION_ACK of result
+    ``value``), ``"count"`` (MISSION_COUNT of ``value``), ``"item"`` (MISSION_ITEM_INT ``item``),
+    ``"text"`` (STATUSTEXT ``text`` of severity ``value``) or ``"stored"`` (a new fence, ``items``,
+    is in place). ``value``: as ``kind`` says. ``item``: for ``"item"``. ``text``: for ``"text"``.
+    ``items``: for ``"stored"``.
     """
 
     kind: str
@@ -182,20 +157,7 @@ class FenceTransfer:
     ) -> list[Reply]:
         """MISSION_COUNT: an upload begins (or, with 0, the fence is cleared).
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s].
-        sender : tuple of int
-            Sysid, compid.
-        count : int
-            Number of items.
-        mission_type : int
-            MAV_MISSION_TYPE.
-
-        Returns
-        -------
-        list of Reply
+        ``t_s``: vehicle time [s].
         """
         if mission_type != MAV_MISSION_TYPE_FENCE:
             return self._reject(sender, mission_type)
@@ -246,20 +208,7 @@ class FenceTransfer:
     ) -> list[Reply]:
         """MISSION_ITEM_INT: the next fence item of an upload.
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s].
-        sender : tuple of int
-            Sysid, compid.
-        item : FenceItem
-            The item.
-        mission_type : int
-            MAV_MISSION_TYPE of the item.
-
-        Returns
-        -------
-        list of Reply
+        ``t_s``: vehicle time [s].
         """
         if sender != self.partner:
             return [Reply("text", 2, sender, text="REJ. MIS ITEM: partner id mismatch")]
@@ -298,18 +247,7 @@ class FenceTransfer:
     ) -> list[Reply]:
         """MISSION_REQUEST_LIST: a download begins.
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s].
-        sender : tuple of int
-            Sysid, compid.
-        mission_type : int
-            MAV_MISSION_TYPE.
-
-        Returns
-        -------
-        list of Reply
+        ``t_s``: vehicle time [s].
         """
         if mission_type != MAV_MISSION_TYPE_FENCE:
             return self._reject(sender, mission_type)
@@ -328,20 +266,7 @@ class FenceTransfer:
     ) -> list[Reply]:
         """MISSION_REQUEST_INT: the client asks for item ``seq`` of a download.
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s].
-        sender : tuple of int
-            Sysid, compid.
-        seq : int
-            Item asked for.
-        mission_type : int
-            MAV_MISSION_TYPE.
-
-        Returns
-        -------
-        list of Reply
+        ``t_s``: vehicle time [s].
         """
         if (
             self.state != "sendlist"
@@ -366,20 +291,7 @@ class FenceTransfer:
     ) -> list[Reply]:
         """MISSION_ACK from the client: a download is over, or the client cancels an upload.
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s].
-        sender : tuple of int
-            Sysid, compid.
-        result : int
-            MAV_MISSION_RESULT of the ACK.
-        mission_type : int
-            MAV_MISSION_TYPE.
-
-        Returns
-        -------
-        list of Reply
+        ``t_s``: vehicle time [s].
         """
         if sender != self.partner or mission_type != MAV_MISSION_TYPE_FENCE:
             return []
@@ -390,18 +302,7 @@ class FenceTransfer:
     def on_clear(self, t_s: float, sender: tuple[int, int], mission_type: int) -> list[Reply]:
         """MISSION_CLEAR_ALL: remove the fence (when no transfer is going on).
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s].
-        sender : tuple of int
-            Sysid, compid.
-        mission_type : int
-            MAV_MISSION_TYPE (fence, or 255: all).
-
-        Returns
-        -------
-        list of Reply
+        ``t_s``: vehicle time [s]. ``mission_type``: MAV_MISSION_TYPE (fence, or 255: all).
         """
         if mission_type not in (MAV_MISSION_TYPE_FENCE, 255):
             return self._reject(sender, mission_type)
@@ -412,14 +313,7 @@ class FenceTransfer:
     def tick(self, t_s: float) -> list[Reply]:
         """Retries and timeouts of a transfer in progress.
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s].
-
-        Returns
-        -------
-        list of Reply
+        ``t_s``: vehicle time [s].
         """
         if self.state == "idle":
             return []
@@ -485,23 +379,8 @@ class Geofence:
     ) -> list[tuple[int, str]]:
         """Take a newly stored fence (PX4's ``_updateFence``); return the status texts.
 
-        Parameters
-        ----------
-        items : tuple of FenceItem
-            The stored items.
-        home : tuple of float
-            Home latitude and longitude [deg].
-        here : tuple of float
-            The estimated position's latitude and longitude [deg].
-        in_air : bool
-            The vehicle is flying.
-        action : int
-            ``GF_ACTION``.
-
-        Returns
-        -------
-        list of (int, str)
-            STATUSTEXT severities and texts.
+        ``home``: home latitude and longitude [deg]. ``here``: the estimated position's latitude and
+        longitude [deg]. ``action``: ``GF_ACTION``.
         """
         areas, texts, seq = [], [], 0
         while seq < len(items):
@@ -529,14 +408,7 @@ class Geofence:
     def inside(self, lat: float, lon: float) -> bool:
         """Inside every inclusion area and outside every exclusion one (an empty fence: True).
 
-        Parameters
-        ----------
-        lat, lon : float
-            The position [deg].
-
-        Returns
-        -------
-        bool
+        ``lat``, ``lon``: the position [deg].
         """
         return all(area.passes(lat, lon) for area in self.areas)
 
@@ -550,23 +422,11 @@ def breach_kinds(
 ) -> tuple[str, ...]:
     """Which of PX4's geofence checks a position fails.
 
-    Parameters
-    ----------
-    fence : Geofence
-        The fence in force.
-    position : tuple of float
-        Latitude, longitude [deg], altitude AMSL [m] (PX4 checks the estimate).
-    home : tuple of float
-        Home: latitude, longitude [deg], altitude AMSL [m].
-    max_hor_dist_m : float
-        ``GF_MAX_HOR_DIST`` (0: off) [m].
-    max_ver_dist_m : float
-        ``GF_MAX_VER_DIST`` (0: off) [m].
+    ``position``: latitude, longitude [deg], altitude AMSL [m] (PX4 checks the estimate). ``home``:
+    home: latitude, longitude [deg], altitude AMSL [m]. ``max_hor_dist_m``: ``GF_MAX_HOR_DIST`` (0:
+    off) [m]. ``max_ver_dist_m``: ``GF_MAX_VER_DIST`` (0: off) [m].
 
-    Returns
-    -------
-    tuple of str
-        Any of ``"max_dist"``, ``"max_alt"``, ``"fence"``; empty inside.
+    Returns: any of ``"max_dist"``, ``"max_alt"``, ``"fence"``; empty inside.
     """
     lat, lon, alt = position
     kinds = []

@@ -67,20 +67,11 @@ __all__ = [
 class Target:
     """What the commander asks of the position controller.
 
-    Parameters
-    ----------
-    pos_ned_m : tuple of float
-        Position setpoint (north, east, down) [m].
-    yaw_rad : float
-        Yaw setpoint [rad].
-    vz_m_s : float or None
-        If given, the vertical axis follows this velocity [m/s, down positive] instead of
-        ``pos_ned_m[2]`` (used by LAND).
-    vel_up_max_m_s : float or None
-        Climb-speed limit for this target [m/s] (used by TAKEOFF), below the configured one.
-    hold_xy : bool
-        Control the horizontal position (False: level attitude, no horizontal control, as
-        PX4's Descend when it has no local position).
+    ``pos_ned_m``: position setpoint (north, east, down) [m]. ``yaw_rad``: yaw setpoint [rad].
+    ``vz_m_s``: if given, the vertical axis follows this velocity [m/s, down positive] instead of
+    ``pos_ned_m[2]`` (used by LAND). ``vel_up_max_m_s``: climb-speed limit for this target [m/s]
+    (used by TAKEOFF), below the configured one. ``hold_xy``: control the horizontal position
+    (False: level attitude, no horizontal control, as PX4's Descend when it has no local position).
     """
 
     pos_ned_m: tuple[float, float, float]
@@ -93,10 +84,7 @@ class Target:
 class DisturbanceField:
     """Smooth deterministic acceleration field of the horizontal position.
 
-    Parameters
-    ----------
-    cfg : DisturbanceConfig
-        Amplitude, number of terms, wavelengths and seed of the field.
+    ``cfg``: amplitude, number of terms, wavelengths and seed of the field.
     """
 
     def __init__(self, cfg: DisturbanceConfig) -> None:
@@ -115,15 +103,9 @@ class DisturbanceField:
     def __call__(self, north_m: float, east_m: float) -> tuple[float, float, float]:
         """Disturbance acceleration at a horizontal position.
 
-        Parameters
-        ----------
-        north_m, east_m : float
-            Horizontal position [m].
+        ``north_m``, ``east_m``: horizontal position [m].
 
-        Returns
-        -------
-        tuple of float
-            Acceleration (north, east, down) [m/s^2].
+        Returns: acceleration (north, east, down) [m/s^2].
         """
         out = []
         for terms in self._terms:
@@ -137,28 +119,16 @@ class DisturbanceField:
 class QuadPhysics:
     """Closed-loop translational dynamics of the vehicle, stepped on a fixed grid.
 
-    Parameters
-    ----------
-    cfg : MockConfig
-        Physics, controller, disturbance and noise settings.
-    seed : int
-        Seed of the gusts, the measurement noise and the estimator (not of the disturbance
-        field); each has its own random stream.
-    pos_ned_m : tuple of float
-        Initial position [m]; on the ground unless ``down < 0``.
+    ``seed``: seed of the gusts, the measurement noise and the estimator (not of the disturbance
+    field); each has its own random stream. ``pos_ned_m``: initial position [m]; on the ground
+    unless ``down < 0``.
 
-    Attributes
-    ----------
-    pos, vel : list of float
-        True position [m] and velocity [m/s], NED.
-    nav_pos, nav_vel : list of float
-        Navigation state the controller and the commander act on: the very ``pos`` and
-        ``vel`` lists without an estimator, the estimate with one.
-    estimator : Estimator or None
-        The navigation error (None: the vehicle flies on its true state).
-    vision : VisionAidedError or None
-        With ``cfg.vision.enabled``: the external-vision fusion among the estimator's
-        processes (fed by the server through :meth:`VisionAidedError.fuse`).
+    ``pos``, ``vel``: true position [m] and velocity [m/s], NED. ``nav_pos``, ``nav_vel``:
+    navigation state the controller and the commander act on: the very ``pos`` and ``vel`` lists
+    without an estimator, the estimate with one. ``estimator``: the navigation error (None: the
+    vehicle flies on its true state). ``vision``: with ``cfg.vision.enabled``: the external-vision
+    fusion among the estimator's processes (fed by the server through
+    :meth:`VisionAidedError.fuse`).
     """
 
     def __init__(
@@ -214,12 +184,7 @@ class QuadPhysics:
     def command(self, t_s: float, target: Target) -> None:
         """Queue a target; the controller uses it ``input_delay_s`` after ``t_s``.
 
-        Parameters
-        ----------
-        t_s : float
-            Time of reception [s] on the physics clock.
-        target : Target
-            New target.
+        ``t_s``: time of reception [s] on the physics clock.
         """
         self._queue.append((t_s + self.cfg.physics.input_delay_s, target))
 
@@ -228,11 +193,6 @@ class QuadPhysics:
 
         Without one so far the navigation state becomes its own copy of the truth (the same
         numbers while the error is zero).
-
-        Parameters
-        ----------
-        process : ErrorProcess
-            The error.
         """
         if self.estimator is None:
             self.estimator = Estimator([])
@@ -243,10 +203,7 @@ class QuadPhysics:
     def set_armed(self, armed: bool) -> None:
         """Start or stop the motors; disarming resets the controller's integrators.
 
-        Parameters
-        ----------
-        armed : bool
-            Motor state.
+        ``armed``: motor state.
         """
         self.armed = armed
         self.vel_int = [0.0, 0.0, 0.0]
@@ -299,15 +256,7 @@ class QuadPhysics:
     def advance_to(self, t_s: float) -> int:
         """Step the physics on its fixed grid up to ``t_s``.
 
-        Parameters
-        ----------
-        t_s : float
-            Time to reach [s]; the state ends at the last grid point not after it.
-
-        Returns
-        -------
-        int
-            Number of steps taken.
+        ``t_s``: time to reach [s]; the state ends at the last grid point not after it.
         """
         n = 0
         while self.t_s + self.dt_s <= t_s + 1e-9:
@@ -442,10 +391,7 @@ class QuadPhysics:
     def attitude(self) -> tuple[float, float, float, float, float, float]:
         """Attitude implied by the thrust direction and yaw.
 
-        Returns
-        -------
-        tuple of float
-            ``(roll, pitch, yaw, rollspeed, pitchspeed, yawspeed)`` [rad, rad/s].
+        Returns: ``(roll, pitch, yaw, rollspeed, pitchspeed, yawspeed)`` [rad, rad/s].
         """
         g = self.cfg.physics.gravity_m_s2
         cy, sy = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
@@ -461,11 +407,8 @@ class QuadPhysics:
     def measure(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """Reported position and velocity: the navigation state plus measurement noise.
 
-        Returns
-        -------
-        pos_ned_m, vel_ned_m_s : tuple of float
-            Noisy position [m] and velocity [m/s], NED (the true state's without an
-            estimator, the estimate's with one).
+        Returns: noisy position [m] and velocity [m/s], NED (the true state's without an estimator,
+        the estimate's with one).
         """
         n = self.cfg.noise
         gauss = self._noise_rng.gauss
@@ -481,18 +424,9 @@ class QuadPhysics:
 class StepFit:
     """Second-order-plus-delay description ``K wn^2 e^{-Ls} / (s^2 + 2 zeta wn s + wn^2)``.
 
-    Parameters
-    ----------
-    wn_rad_s : float
-        Natural frequency [rad/s].
-    zeta : float
-        Damping ratio [-].
-    gain : float
-        Static gain [-].
-    delay_s : float
-        Pure delay [s].
-    rms_residual_m : float
-        RMS of the fit residual per unit step (0 for an exact model) [-].
+    ``wn_rad_s``: natural frequency [rad/s]. ``zeta``: damping ratio [-]. ``gain``: static gain [-].
+    ``delay_s``: pure delay [s]. ``rms_residual_m``: RMS of the fit residual per unit step (0 for an
+    exact model) [-].
     """
 
     wn_rad_s: float
@@ -511,15 +445,9 @@ EQ11 = StepFit(
 def eq11_step(t_s: np.ndarray) -> np.ndarray:
     """Unit-step response of the paper's eq. (11), zero included.
 
-    Parameters
-    ----------
-    t_s : ndarray, shape (N,)
-        Times [s], ascending, from 0.
+    ``t_s``: times [s], ascending, from 0.
 
-    Returns
-    -------
-    ndarray, shape (N,)
-        Response [-].
+    Returns: the response, shape (N,) [-].
     """
     import numpy as np
     import scipy.signal
@@ -533,17 +461,9 @@ def eq11_step(t_s: np.ndarray) -> np.ndarray:
 def second_order_step(t_s: np.ndarray, fit: StepFit) -> np.ndarray:
     """Unit-step response of a :class:`StepFit` model.
 
-    Parameters
-    ----------
-    t_s : ndarray, shape (N,)
-        Times [s].
-    fit : StepFit
-        Model.
+    ``t_s``: times [s].
 
-    Returns
-    -------
-    ndarray, shape (N,)
-        Response [-].
+    Returns: the response, shape (N,) [-].
     """
     import numpy as np
 
@@ -571,25 +491,12 @@ def step_response(
     the gusts, the estimator error and the noise are switched off; the nonlinearities (limits,
     drag) stay but are not reached at small amplitude.
 
-    Parameters
-    ----------
-    cfg : MockConfig
-        Mock configuration.
-    axis : int
-        0 for north (x), 1 for east (y), 2 for down (z).
-    amplitude_m : float
-        Step size [m], non-zero.
-    duration_s : float
-        Length of the response [s].
-    t_sample_s : float
-        Sample time of the returned response [s] (a multiple of ``cfg.physics.dt_s``).
+    ``axis``: 0 for north (x), 1 for east (y), 2 for down (z). ``amplitude_m``: step size [m],
+    non-zero. ``duration_s``: length of the response [s]. ``t_sample_s``: sample time of the
+    returned response [s] (a multiple of ``cfg.physics.dt_s``).
 
-    Returns
-    -------
-    t_s : ndarray, shape (N,)
-        Sample times [s], from 0.
-    y : ndarray, shape (N,)
-        Position change along ``axis`` divided by ``amplitude_m`` [-].
+    Returns: ``t_s``: sample times [s], from 0. ``y``: position change along ``axis`` divided by
+    ``amplitude_m`` [-].
     """
     import numpy as np
 
@@ -615,17 +522,9 @@ def step_response(
 def fit_step_response(t_s: np.ndarray, y: np.ndarray) -> StepFit:
     """Least-squares fit of a second-order-plus-delay model to a unit-step response.
 
-    Parameters
-    ----------
-    t_s : ndarray, shape (N,)
-        Sample times [s], from the step.
-    y : ndarray, shape (N,)
-        Response to a unit step [-].
+    ``t_s``: sample times [s], from the step. ``y``: response to a unit step [-].
 
-    Returns
-    -------
-    StepFit
-        Fitted natural frequency, damping, gain, delay and RMS residual.
+    Returns: fitted natural frequency, damping, gain, delay and RMS residual.
     """
     import numpy as np
     import scipy.optimize
@@ -648,17 +547,9 @@ def fit_step_response(t_s: np.ndarray, y: np.ndarray) -> StepFit:
 def measure_axes(cfg: MockConfig, amplitude_m: float = 0.1) -> tuple[StepFit, StepFit]:
     """Fit the small-signal step responses of the mock's x and y closed loops.
 
-    Parameters
-    ----------
-    cfg : MockConfig
-        Mock configuration.
-    amplitude_m : float
-        Step size [m].
+    ``amplitude_m``: step size [m].
 
-    Returns
-    -------
-    tuple of StepFit
-        Fits for x (north) and y (east).
+    Returns: fits for x (north) and y (east).
     """
     fx = fit_step_response(*step_response(cfg, 0, amplitude_m))
     fy = fit_step_response(*step_response(cfg, 1, amplitude_m))

@@ -26,40 +26,16 @@ class MockProcess:
     ``READY <url>`` line awaited) and exposes :attr:`url`. On exit it sends SIGTERM, waits,
     kills as a fallback, and loads the statistics file into :attr:`stats`.
 
-    Parameters
-    ----------
-    config_path : str, Path or None
-        Mock profile (YAML); None for the defaults.
-    seed : int
-        Seed of gusts, noise and packet loss.
-    faults : Faults or None
-        Injected faults (times after the first OFFBOARD entry).
-    stats_path : str, Path or None
-        Where the mock writes its JSON statistics; None uses a temporary file that is removed
-        after reading.
-    port : int
-        UDP port (0 = any free port).
-    gcs_port : int or None
-        Also send to a GCS listening on this port.
-    ready_timeout_s : float
-        How long to wait for the READY line.
-    stop_timeout_s : float
-        How long to wait after SIGTERM before SIGKILL.
-    arena : ArenaOptions or None
-        Also serve the vehicle's true pose as a mock OptiTrack Motive (``--mocap``).
+    ``config_path``: mock profile (YAML); None for the defaults. ``seed``: seed of gusts, noise and
+    packet loss. ``faults``: injected faults (times after the first OFFBOARD entry). ``stats_path``:
+    where the mock writes its JSON statistics; None uses a temporary file that is removed after
+    reading. ``port``: UDP port (0 = any free port). ``gcs_port``: also send to a GCS listening on
+    this port. ``ready_timeout_s``: how long to wait for the READY line. ``stop_timeout_s``: how
+    long to wait after SIGTERM before SIGKILL. ``arena``: also serve the vehicle's true pose as a
+    mock OptiTrack Motive (``--mocap``).
 
-    Attributes
-    ----------
-    url : str
-        MAVSDK URL, ``udpout://127.0.0.1:<port>``.
-    port : int
-        Bound UDP port.
-    pid : int
-        Process id of the mock.
-    stats : dict or None
-        Statistics read on exit (None if the mock wrote none).
-    mocap_url : str
-        The mock Motive's URL with ``arena`` (empty without).
+    ``url``: MAVSDK URL, ``udpout://127.0.0.1:<port>``. ``stats``: statistics read on exit (None if
+    the mock wrote none). ``mocap_url``: the mock Motive's URL with ``arena`` (empty without).
     """
 
     def __init__(
@@ -93,12 +69,7 @@ class MockProcess:
         self._child: ChildProgram | None = None
 
     def argv(self) -> list[str]:
-        """Command line of the mock.
-
-        Returns
-        -------
-        list of str
-        """
+        """Command line of the mock."""
         args = [sys.executable, "-m", "gcs.mock", "--seed", str(self.seed)]
         args += ["--port", str(self.port_request)]
         if self.config_path is not None:

@@ -50,20 +50,9 @@ __all__ = ["MockServer"]
 class MockServer(Commands, Vision, Missions):
     """The mock drone's MAVLink endpoint and real-time loop.
 
-    Parameters
-    ----------
-    cfg : MockConfig
-        Vehicle configuration.
-    faults : Faults
-        Injected faults.
-    seed : int
-        Seed of gusts, noise and packet loss.
-    port : int
-        UDP port to bind on 127.0.0.1 (0 = ephemeral).
-    gcs_port : int or None
-        Also send to 127.0.0.1:gcs_port.
-    arena : ArenaOptions or None
-        Serve the vehicle's true pose over NatNet (a mock OptiTrack Motive), started here.
+    ``seed``: seed of gusts, noise and packet loss. ``port``: UDP port to bind on 127.0.0.1 (0 =
+    ephemeral). ``gcs_port``: also send to 127.0.0.1:gcs_port. ``arena``: serve the vehicle's true
+    pose over NatNet (a mock OptiTrack Motive), started here.
     """
 
     def __init__(
@@ -144,10 +133,7 @@ class MockServer(Commands, Vision, Missions):
     def run(self, duration_s: float | None = None) -> None:
         """Run the real-time loop until :meth:`stop` (or for ``duration_s``).
 
-        Parameters
-        ----------
-        duration_s : float or None
-            Stop after this many seconds (None: until stopped).
+        ``duration_s``: stop after this many seconds (None: until stopped).
         """
         dt = self.vehicle.physics.dt_s / self.clock_rate  # wall time per physics step
         t0 = self.t0
@@ -180,10 +166,7 @@ class MockServer(Commands, Vision, Missions):
     def stats(self) -> dict[str, Any]:
         """Raw statistics of the run (setpoint arrivals, modes, counters).
 
-        Returns
-        -------
-        dict
-            JSON-serialisable; see ``docs/mock.md`` for the fields.
+        Returns: JSON-serialisable; see ``docs/mock.md`` for the fields.
         """
         v = self.vehicle
         cols = list(zip(*self.sp_values, strict=True)) if self.sp_values else [[]] * 6

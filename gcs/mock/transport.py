@@ -21,25 +21,13 @@ __all__ = ["DatagramWriter", "Transport"]
 
 
 class DatagramWriter:
-    """File-like sink that pymavlink's ``*_send`` methods write packed datagrams into.
-
-    Parameters
-    ----------
-    server : Transport
-        Where the datagrams go (:meth:`Transport._transmit`).
-    """
+    """File-like sink that pymavlink's ``*_send`` methods write packed datagrams into."""
 
     def __init__(self, server: Any) -> None:
         self.server = server
 
     def write(self, buf: bytes) -> None:
-        """Send one packed datagram.
-
-        Parameters
-        ----------
-        buf : bytes
-            The datagram.
-        """
+        """Send one packed datagram."""
         self.server._transmit(bytes(buf))
 
 

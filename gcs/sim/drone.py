@@ -137,14 +137,8 @@ class _Topic:
 class SimulatedDrone:
     """The mock drone without its UDP endpoint, reached by ``sim://NAME`` while open.
 
-    Parameters
-    ----------
-    cfg : MockConfig or None
-        The mock's settings; None: the defaults.
-    faults : Faults or None
-        Injected faults (times after the first OFFBOARD, on the vehicle's clock).
-    seed : int
-        Seed of gusts and noise.
+    ``cfg``: the mock's settings; None: the defaults. ``faults``: injected faults (times after the
+    first OFFBOARD, on the vehicle's clock).
     """
 
     def __init__(
@@ -180,31 +174,16 @@ class SimulatedDrone:
 
     # -- time and faults
     def t_offboard(self) -> float | None:
-        """Vehicle time since the first OFFBOARD [s] (None before it).
-
-        Returns
-        -------
-        float or None
-        """
+        """Vehicle time since the first OFFBOARD [s] (None before it)."""
         first = self.vehicle.first_offboard_t_s
         return None if first is None else self.vehicle.t_s - first
 
     def link_up(self) -> bool:
-        """Whether the link carries anything now (no link-loss fault in force).
-
-        Returns
-        -------
-        bool
-        """
+        """Whether the link carries anything now (no link-loss fault in force)."""
         return not self.faults.link_lost(self.t_offboard())
 
     def telemetry_up(self) -> bool:
-        """Whether streamed telemetry gets through now (link up, no dropout).
-
-        Returns
-        -------
-        bool
-        """
+        """Whether streamed telemetry gets through now (link up, no dropout)."""
         return self.link_up() and not self.faults.dropout_active(self.t_offboard())
 
     def lose_link(self) -> None:
@@ -218,10 +197,7 @@ class SimulatedDrone:
     def advance(self, t_s: float) -> None:
         """Step the physics and the commander to vehicle time ``t_s``.
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time [s]; earlier than now: nothing happens.
+        ``t_s``: vehicle time [s]; earlier than now: nothing happens.
         """
         v = self.vehicle
         v.physics.wind_ne_m_s = self.faults.wind_ned_m_s(self.t_offboard())
@@ -237,26 +213,18 @@ class SimulatedDrone:
             self.texts.append({"t_vehicle_s": v.t_s, "severity": severity, "text": text})
 
     def battery_pct(self) -> float:
-        """Remaining charge as the mock reports it [%].
-
-        Returns
-        -------
-        float
-        """
+        """Remaining charge as the mock reports it [%]."""
         used = self.cfg.px4.battery_drain_pct_s * self.vehicle.armed_seconds()
         return float(max(0, int(round(100 - used))))
 
     def stats(self) -> dict[str, Any]:
         """The mock's statistics, in the fields of its file that the tests read.
 
-        Returns
-        -------
-        dict
-            ``clock_rate``, ``faults``, ``modes`` (``t_vehicle_s``, ``mode``, ``armed``),
-            ``setpoints`` (``t_rx_vehicle_s``, ``north_m``, ``east_m``, ``down_m``,
-            ``yaw_rad``), ``statustexts``, ``geofence`` (items, areas in force, parameters,
-            breaches), ``first_armed_vehicle_s``, ``first_offboard_vehicle_s``, ``estimator``
-            (the truth and the estimate's error every 0.02 s) and ``estimator_faults``.
+        Returns: ``clock_rate``, ``faults``, ``modes`` (``t_vehicle_s``, ``mode``, ``armed``),
+        ``setpoints`` (``t_rx_vehicle_s``, ``north_m``, ``east_m``, ``down_m``, ``yaw_rad``),
+        ``statustexts``, ``geofence`` (items, areas in force, parameters, breaches),
+        ``first_armed_vehicle_s``, ``first_offboard_vehicle_s``, ``estimator`` (the truth and the
+        estimate's error every 0.02 s) and ``estimator_faults``.
         """
         v = self.vehicle
         cols = list(zip(*self.setpoints, strict=True)) if self.setpoints else [()] * 5
@@ -288,13 +256,7 @@ class SimulatedDrone:
 
 
 class SimLink(VehicleLink):
-    """A :class:`gcs.flight.backend.VehicleLink` to a :class:`SimulatedDrone` (one connection).
-
-    Parameters
-    ----------
-    drone : SimulatedDrone
-        The drone.
-    """
+    """A :class:`gcs.flight.backend.VehicleLink` to a :class:`SimulatedDrone` (one connection)."""
 
     clock = LoopClock()
 

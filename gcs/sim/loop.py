@@ -60,10 +60,7 @@ class _VirtualSelector:
 class VirtualTimeLoop(asyncio.SelectorEventLoop):
     """A selector event loop whose ``time()`` is virtual (see the module's docstring).
 
-    Parameters
-    ----------
-    start_s : float
-        Virtual time at creation [s].
+    ``start_s``: virtual time at creation [s].
     """
 
     def __init__(self, start_s: float = 0.0) -> None:
@@ -74,21 +71,13 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
         self._selector = _VirtualSelector(self._selector, self)  # type: ignore[assignment]
 
     def time(self) -> float:
-        """Virtual time [s].
-
-        Returns
-        -------
-        float
-        """
+        """Virtual time [s]."""
         return self._virtual_s
 
     def advance(self, delay_s: float) -> None:
         """Move virtual time on by ``delay_s`` (called by the loop when all tasks wait).
 
-        Parameters
-        ----------
-        delay_s : float
-            How far [s]; not negative.
+        ``delay_s``: how far [s]; not negative.
         """
         if delay_s > 0:
             self._virtual_s += delay_s
@@ -101,21 +90,7 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     def run_in_executor(
         self, executor: Any, func: Callable[..., Any], *args: Any
     ) -> asyncio.Future[Any]:
-        """asyncio's ``run_in_executor``, counted: virtual time waits for it.
-
-        Parameters
-        ----------
-        executor : concurrent.futures.Executor or None
-            As asyncio's.
-        func : callable
-            As asyncio's.
-        *args
-            Its arguments.
-
-        Returns
-        -------
-        asyncio.Future
-        """
+        """asyncio's ``run_in_executor``, counted: virtual time waits for it."""
         future = super().run_in_executor(executor, func, *args)
         with self._jobs_lock:
             self._jobs += 1
@@ -131,23 +106,13 @@ class VirtualTimePolicy(asyncio.DefaultEventLoopPolicy):
     """An event loop policy whose new loops are :class:`VirtualTimeLoop`."""
 
     def new_event_loop(self) -> asyncio.AbstractEventLoop:
-        """A new :class:`VirtualTimeLoop`.
-
-        Returns
-        -------
-        VirtualTimeLoop
-        """
+        """A new :class:`VirtualTimeLoop`."""
         return VirtualTimeLoop()
 
 
 @contextlib.contextmanager
 def virtual_time() -> Iterator[None]:
-    """Within the block, ``asyncio.run`` and new event loops run on virtual time.
-
-    Yields
-    ------
-    None
-    """
+    """Within the block, ``asyncio.run`` and new event loops run on virtual time."""
     previous = asyncio.get_event_loop_policy()
     asyncio.set_event_loop_policy(VirtualTimePolicy())
     try:

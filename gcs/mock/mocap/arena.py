@@ -37,16 +37,9 @@ Pose = tuple[tuple[float, float, float], tuple[float, float, float, float]]
 class ArenaFault:
     """A fault of the arena's motion capture.
 
-    Parameters
-    ----------
-    kind : str
-        ``occlusion``, ``dropout``, ``freeze`` or ``jump`` (:data:`FAULT_KINDS`).
-    start_s : float
-        Start, seconds after the vehicle first enters OFFBOARD [s].
-    duration_s : float
-        Length [s].
-    offset_m : tuple of float
-        Offset of a jump, in the room's (mocap) axes [m].
+    ``kind``: ``occlusion``, ``dropout``, ``freeze`` or ``jump`` (:data:`FAULT_KINDS`). ``start_s``:
+    start, seconds after the vehicle first enters OFFBOARD [s]. ``duration_s``: length [s].
+    ``offset_m``: offset of a jump, in the room's (mocap) axes [m].
     """
 
     kind: str
@@ -62,24 +55,9 @@ class ArenaFault:
 class ArenaOptions:
     """How the arena's motion capture streams.
 
-    Parameters
-    ----------
-    rate_hz : float
-        Frame rate [Hz].
-    noise_m : float
-        Marker noise, standard deviation per coordinate [m].
-    room : str
-        Named convention of the room's axes (:data:`gcs.core.frames.SYSTEM_FRAMES`).
-    yaw_offset_deg : float
-        Heading in NED of the room's north axis [deg].
-    body : str
-        Rigid body name.
-    natnet : tuple of int
-        NatNet version.
-    faults : tuple of ArenaFault
-        Faults, timed from the first OFFBOARD.
-    seed : int
-        Seed of the marker noise.
+    ``rate_hz``: frame rate [Hz]. ``noise_m``: marker noise, standard deviation per coordinate [m].
+    ``room``: named convention of the room's axes (:data:`gcs.core.frames.SYSTEM_FRAMES`).
+    ``yaw_offset_deg``: heading in NED of the room's north axis [deg].
     """
 
     rate_hz: float = 120.0
@@ -101,12 +79,7 @@ class ArenaOptions:
         mapping_for(self.room, self.yaw_offset_deg)  # validates the room's convention
 
     def cli_args(self) -> list[str]:
-        """The options of ``gcs mock`` that reproduce these.
-
-        Returns
-        -------
-        list of str
-        """
+        """The options of ``gcs mock`` that reproduce these."""
         args = [
             "--mocap", "--mocap-rate", repr(self.rate_hz),
             "--mocap-noise-mm", repr(self.noise_m * 1000.0), "--mocap-room", self.room,
@@ -123,14 +96,7 @@ class ArenaOptions:
 def quat_from_euler(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
     """Quaternion ``w, x, y, z`` (FRD to NED) of roll, pitch, yaw (ZYX) [rad].
 
-    Parameters
-    ----------
-    roll, pitch, yaw : float
-        Euler angles [rad].
-
-    Returns
-    -------
-    tuple of float
+    ``roll``, ``pitch``, ``yaw``: euler angles [rad].
     """
     cr, sr = math.cos(roll / 2), math.sin(roll / 2)
     cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
@@ -144,13 +110,7 @@ def quat_from_euler(roll: float, pitch: float, yaw: float) -> tuple[float, float
 
 
 class Arena:
-    """The mock Motive serving a vehicle's true pose (see the module docstring).
-
-    Parameters
-    ----------
-    options : ArenaOptions
-        Rate, noise, room, body, faults.
-    """
+    """The mock Motive serving a vehicle's true pose (see the module docstring)."""
 
     def __init__(self, options: ArenaOptions) -> None:
         self.options = options
@@ -180,12 +140,7 @@ class Arena:
     def publish(self, pos_ned_m: Any, quat_wxyz: Any) -> None:
         """The vehicle's true pose now (called by the mock's loop after each physics step).
 
-        Parameters
-        ----------
-        pos_ned_m : sequence of float
-            True position, NED [m].
-        quat_wxyz : sequence of float
-            True attitude, FRD to NED.
+        ``pos_ned_m``: true position, NED [m]. ``quat_wxyz``: true attitude, FRD to NED.
         """
         self._pose = (
             (float(pos_ned_m[0]), float(pos_ned_m[1]), float(pos_ned_m[2])),
@@ -203,12 +158,7 @@ class Arena:
             self.server.add_fault(replace(window, start_s=now + f.start_s))
 
     def start(self) -> Arena:
-        """Serve in a thread; returns self.
-
-        Returns
-        -------
-        Arena
-        """
+        """Serve in a thread; returns self."""
         self.server.start()
         return self
 
@@ -217,12 +167,7 @@ class Arena:
         self.server.stop()
 
     def stats(self) -> dict[str, Any]:
-        """Counters and the faults as placed, for the mock's statistics.
-
-        Returns
-        -------
-        dict
-        """
+        """Counters and the faults as placed, for the mock's statistics."""
         return {
             "url": self.url,
             "rate_hz": self.options.rate_hz,
@@ -240,21 +185,9 @@ class Arena:
 def parse_arena_fault(kind: str, text: str) -> ArenaFault:
     """Parse ``START:DURATION`` (``START:DURATION:DX:DY:DZ`` for a jump).
 
-    Parameters
-    ----------
-    kind : str
-        Fault kind.
-    text : str
-        Option value [s, s, m, m, m].
+    ``text``: option value [s, s, m, m, m].
 
-    Returns
-    -------
-    ArenaFault
-
-    Raises
-    ------
-    ValueError
-        Not that form, or a bad window.
+    Raises ``ValueError``: not that form, or a bad window.
     """
     window = parse_fault_window(kind, text, f"--mocap-{kind}")
     return ArenaFault(kind, window.start_s, window.duration_s, window.offset_m)

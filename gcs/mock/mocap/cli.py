@@ -21,16 +21,7 @@ __all__ = ["mocap_command", "parse_window", "parse_version", "serve"]
 def parse_window(kind: str, text: str) -> FaultWindow:
     """Parse ``START:DURATION`` (or ``START:DURATION:DX:DY:DZ`` for a jump).
 
-    Parameters
-    ----------
-    kind : str
-        Fault kind (see :data:`gcs.mock.mocap.server.FAULT_KINDS`).
-    text : str
-        Option value [s, s, m, m, m].
-
-    Returns
-    -------
-    FaultWindow
+    ``text``: option value [s, s, m, m, m].
     """
     try:
         return parse_fault_window(kind, text, f"--{kind}")
@@ -39,17 +30,7 @@ def parse_window(kind: str, text: str) -> FaultWindow:
 
 
 def parse_version(text: str) -> tuple[int, int]:
-    """Parse a NatNet version ``MAJOR.MINOR``.
-
-    Parameters
-    ----------
-    text : str
-        Option value.
-
-    Returns
-    -------
-    tuple of int
-    """
+    """Parse a NatNet version ``MAJOR.MINOR``."""
     try:
         major, minor = (int(v) for v in text.split("."))
     except ValueError:
@@ -141,31 +122,6 @@ def mocap_command(
         python -m gcs.mock.mocap --rate 240 --circle 1:6
 
         python -m gcs.mock.mocap --occlusion 5:0.5 --jump 8:0.05:0.3:0:0
-    \f
-    Parameters
-    ----------
-    body : str
-        Rigid body name.
-    rate_hz : float
-        Frame rate [Hz].
-    natnet : str
-        NatNet version.
-    noise_mm : float
-        Marker noise [mm].
-    seed : int
-        Seed of the noise.
-    port : int
-        Command port (0 = any free port).
-    room : str
-        Named convention of the room's axes.
-    yaw_offset_deg : float
-        Heading of the room's north axis [deg].
-    latency_ms : float
-        Time from the body's motion to the frame [ms].
-    circle : str or None
-        ``RADIUS:PERIOD`` of a circle, or None to hover.
-    occlusion, dropout, freeze, jump : list of str or None
-        Fault windows.
     """
     version = parse_version(natnet)
     faults = _faults(
@@ -220,34 +176,14 @@ def serve(
     Prints ``READY <url>`` on stdout once it serves, a line on stderr saying where, and its
     counters (JSON) on stderr when it stops.
 
-    Parameters
-    ----------
-    pose_ned : callable
-        ``pose_ned(t_s) -> (pos_m, quat_wxyz)`` in NED at server time ``t_s``, or None (out
-        of view); seen through the room's axes (:func:`gcs.mock.mocap.scripted.in_room`).
-    body : str
-        Rigid body name.
-    rate_hz : float
-        Frame rate [Hz].
-    version : tuple of int
-        NatNet version (:func:`parse_version`).
-    noise_mm : float
-        Marker noise [mm].
-    seed : int
-        Seed of the noise.
-    port : int
-        Command port (0 = any free port).
-    room : str
-        Named convention of the room's axes.
-    yaw_offset_deg : float
-        Heading of the room's north axis [deg].
-    latency_ms : float
-        Time from the body's motion to the frame [ms].
-    faults : tuple of FaultWindow
-        Fault windows, in seconds from the start.
-    epoch_s : float or None
-        ``time.monotonic()`` at server time 0 (a pose function on the monotonic clock shares
-        it); None: when the server is created.
+    ``pose_ned``: ``pose_ned(t_s) -> (pos_m, quat_wxyz)`` in NED at server time ``t_s``, or None
+    (out of view); seen through the room's axes (:func:`gcs.mock.mocap.scripted.in_room`).
+    ``rate_hz``: frame rate [Hz]. ``noise_mm``: marker noise [mm]. ``port``: command port (0 = any
+    free port). ``room``: named convention of the room's axes. ``yaw_offset_deg``: heading of the
+    room's north axis [deg]. ``latency_ms``: time from the body's motion to the frame [ms].
+    ``faults``: fault windows, in seconds from the start. ``epoch_s``: ``time.monotonic()`` at
+    server time 0 (a pose function on the monotonic clock shares it); None: when the server is
+    created.
     """
     raise_thread()  # as a real Motive is never starved by gcs's machine (gcs.io.scheduling)
     server = NatNetServer(

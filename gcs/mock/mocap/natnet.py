@@ -89,14 +89,9 @@ _MARKER_HAS_MODEL = 0x08
 class RigidBodyModel:
     """A rigid body as Motive describes it in its model definitions.
 
-    Parameters
-    ----------
-    name : str
-        Asset name; clients find the rigid body by it (frames carry only the id).
-    body_id : int
-        Streaming id (Motive's "Streaming ID", 1 by default for the first asset).
-    markers_m : numpy.ndarray
-        Marker positions in the rigid body's own frame, shape (M, 3) [m], M >= 3.
+    ``name``: asset name; clients find the rigid body by it (frames carry only the id). ``body_id``:
+    streaming id (Motive's "Streaming ID", 1 by default for the first asset). ``markers_m``: marker
+    positions in the rigid body's own frame, shape (M, 3) [m], M >= 3.
     """
 
     name: str
@@ -116,18 +111,10 @@ class RigidBodyModel:
 class RigidBodyState:
     """The rigid body in one frame, in the motion-capture system's own axes.
 
-    Parameters
-    ----------
-    tracked : bool
-        Tracking valid (the solver found the body in this frame).
-    pos_m : numpy.ndarray
-        Position of the body's origin, shape (3,) [m].
-    quat_wxyz : numpy.ndarray
-        Orientation (body to world), unit quaternion ``w, x, y, z``, shape (4,).
-    error_m : float
-        Mean marker error of the solve [m].
-    markers_m : numpy.ndarray
-        Marker positions in world axes as measured, shape (M, 3) [m].
+    ``tracked``: tracking valid (the solver found the body in this frame). ``pos_m``: position of
+    the body's origin, shape (3,) [m]. ``quat_wxyz``: orientation (body to world), unit quaternion
+    ``w, x, y, z``, shape (4,). ``error_m``: mean marker error of the solve [m]. ``markers_m``:
+    marker positions in world axes as measured, shape (M, 3) [m].
     """
 
     tracked: bool
@@ -141,16 +128,10 @@ class RigidBodyState:
 class FrameStamps:
     """Time stamps of one frame.
 
-    Parameters
-    ----------
-    timestamp_s : float
-        Seconds since the server started streaming (Motive: frame id over the frame rate).
-    mid_exposure_ticks : int
-        Camera mid-exposure, in ticks of the server's high-resolution clock.
-    data_received_ticks : int
-        When the camera data reached the server [ticks].
-    transmit_ticks : int
-        When the frame was sent [ticks].
+    ``timestamp_s``: seconds since the server started streaming (Motive: frame id over the frame
+    rate). ``mid_exposure_ticks``: camera mid-exposure, in ticks of the server's high-resolution
+    clock. ``data_received_ticks``: when the camera data reached the server [ticks].
+    ``transmit_ticks``: when the frame was sent [ticks].
     """
 
     timestamp_s: float
@@ -176,17 +157,7 @@ def _cstr(text: str) -> bytes:
 def packet(message: int, payload: bytes) -> bytes:
     """Prefix a payload with the NatNet header.
 
-    Parameters
-    ----------
-    message : int
-        Message id (``NAT_*``).
-    payload : bytes
-        Payload, at most 65535 bytes.
-
-    Returns
-    -------
-    bytes
-        The datagram.
+    ``message``: message id (``NAT_*``). ``payload``: payload, at most 65535 bytes.
     """
     if len(payload) > 0xFFFF:
         raise ValueError(f"NatNet payload of {len(payload)} bytes does not fit a uint16 count")
@@ -194,17 +165,7 @@ def packet(message: int, payload: bytes) -> bytes:
 
 
 def message_id(datagram: bytes) -> int | None:
-    """Message id of a received datagram (None if shorter than a header).
-
-    Parameters
-    ----------
-    datagram : bytes
-        Received bytes.
-
-    Returns
-    -------
-    int or None
-    """
+    """Message id of a received datagram (None if shorter than a header)."""
     if len(datagram) < 4:
         return None
     return struct.unpack_from("<H", datagram)[0]
@@ -220,25 +181,9 @@ def server_info(
 ) -> bytes:
     """``NAT_SERVERINFO``: the packed ``sSender_Server`` (279-byte payload).
 
-    Parameters
-    ----------
-    version : tuple of int
-        NatNet bitstream version (major, minor).
-    app_version : tuple of int
-        Server application version (Motive's), four bytes.
-    clock_hz : int
-        Ticks per second of the high-resolution clock used in frame stamps.
-    data_port : int
-        UDP port of the data stream.
-    multicast_group : str or None
-        Dotted IPv4 group the frames go to, None for unicast.
-    app_name : str
-        Server application name.
-
-    Returns
-    -------
-    bytes
-        The datagram.
+    ``app_version``: server application version (Motive's), four bytes. ``clock_hz``: ticks per
+    second of the high-resolution clock used in frame stamps. ``multicast_group``: dotted IPv4 group
+    the frames go to, None for unicast.
     """
     _check_version(version)
     name = app_name.encode("utf-8")[: _NAME_LEN - 1].ljust(_NAME_LEN, b"\0")
@@ -266,20 +211,7 @@ def _rigid_body_description(version: tuple[int, int], model: RigidBodyModel) -> 
 
 
 def model_definitions(version: tuple[int, int], models: list[RigidBodyModel]) -> bytes:
-    """``NAT_MODELDEF``: the data descriptions (one rigid body dataset per model).
-
-    Parameters
-    ----------
-    version : tuple of int
-        NatNet bitstream version (major, minor).
-    models : list of RigidBodyModel
-        Rigid bodies to describe.
-
-    Returns
-    -------
-    bytes
-        The datagram.
-    """
+    """``NAT_MODELDEF``: the data descriptions (one rigid body dataset per model)."""
     _check_version(version)
     out = struct.pack("<i", len(models))
     for model in models:
@@ -359,23 +291,9 @@ def frame_of_data(
 ) -> bytes:
     """``NAT_FRAMEOFDATA``: one frame with the given rigid bodies.
 
-    Parameters
-    ----------
-    version : tuple of int
-        NatNet bitstream version (major, minor).
-    frame_number : int
-        Frame counter (int32).
-    models : list of RigidBodyModel
-        The rigid bodies, in the order of the model definitions.
-    states : list of RigidBodyState
-        Their state in this frame, one per model.
-    stamps : FrameStamps
-        Time stamps of the frame.
-
-    Returns
-    -------
-    bytes
-        The datagram.
+    ``frame_number``: frame counter (int32). ``models``: the rigid bodies, in the order of the model
+    definitions. ``states``: their state in this frame, one per model. ``stamps``: time stamps of
+    the frame.
     """
     _check_version(version)
     out = struct.pack("<i", frame_number) + _frame_lists(version, models, states)

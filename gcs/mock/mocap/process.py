@@ -18,26 +18,14 @@ class MocapServerProcess:
     its ``READY <url>`` line awaited) and exposes :attr:`url`; on exit it sends SIGTERM,
     waits, and kills as a fallback.
 
-    Parameters
-    ----------
-    args : list of str
-        Options of ``python -m gcs.mock.mocap`` (``--rate``, ``--circle``, faults...).
-    ready_timeout_s : float
-        How long to wait for the READY line [s].
-    program : list of str or None
-        The command before ``args`` (None: ``python -m gcs.mock.mocap``); another program that
-        serves NatNet the same way (prints ``READY <url>``, counters on stderr).
-    name : str
-        What the program is called in the error when it does not start.
+    ``args``: options of ``python -m gcs.mock.mocap`` (``--rate``, ``--circle``, faults...).
+    ``ready_timeout_s``: how long to wait for the READY line [s]. ``program``: the command before
+    ``args`` (None: ``python -m gcs.mock.mocap``); another program that serves NatNet the same way
+    (prints ``READY <url>``, counters on stderr). ``name``: what the program is called in the error
+    when it does not start.
 
-    Attributes
-    ----------
-    url : str
-        The mocap URL (``optitrack://127.0.0.1:<port>/<body>?interface=127.0.0.1``).
-    pid : int
-        Process id.
-    stderr_text : str
-        What the program wrote on stderr (its counters as JSON last), read on exit.
+    ``url``: the mocap URL (``optitrack://127.0.0.1:<port>/<body>?interface=127.0.0.1``).
+    ``stderr_text``: what the program wrote on stderr (its counters as JSON last), read on exit.
     """
 
     def __init__(

@@ -31,12 +31,7 @@ def _yaw_quat(yaw_rad: float) -> np.ndarray:
 class Hover:
     """A vehicle holding a point.
 
-    Parameters
-    ----------
-    pos_ned_m : tuple of float
-        The point [m, NED].
-    yaw_deg : float
-        Heading [deg].
+    ``pos_ned_m``: the point [m, NED]. ``yaw_deg``: heading [deg].
     """
 
     pos_ned_m: tuple[float, float, float] = (0.0, 0.0, -1.0)
@@ -45,15 +40,9 @@ class Hover:
     def __call__(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Pose at ``t_s``.
 
-        Parameters
-        ----------
-        t_s : float
-            Time [s].
+        ``t_s``: time [s].
 
-        Returns
-        -------
-        tuple of numpy.ndarray
-            Position (3,) [m, NED] and attitude FRD to NED ``w, x, y, z`` (4,).
+        Returns: position (3,) [m, NED] and attitude FRD to NED ``w, x, y, z`` (4,).
         """
         return np.asarray(self.pos_ned_m, float), _yaw_quat(math.radians(self.yaw_deg))
 
@@ -62,14 +51,8 @@ class Hover:
 class Circle:
     """A vehicle flying a horizontal circle, nose along its velocity.
 
-    Parameters
-    ----------
-    center_ned_m : tuple of float
-        Centre [m, NED].
-    radius_m : float
-        Radius [m].
-    period_s : float
-        Time per lap [s]; negative flies it the other way.
+    ``center_ned_m``: centre [m, NED]. ``radius_m``: radius [m]. ``period_s``: time per lap [s];
+    negative flies it the other way.
     """
 
     center_ned_m: tuple[float, float, float] = (0.0, 0.0, -1.0)
@@ -79,15 +62,9 @@ class Circle:
     def __call__(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Pose at ``t_s`` (starts due north of the centre).
 
-        Parameters
-        ----------
-        t_s : float
-            Time [s].
+        ``t_s``: time [s].
 
-        Returns
-        -------
-        tuple of numpy.ndarray
-            Position (3,) [m, NED] and attitude FRD to NED ``w, x, y, z`` (4,).
+        Returns: position (3,) [m, NED] and attitude FRD to NED ``w, x, y, z`` (4,).
         """
         phase = 2.0 * math.pi * t_s / self.period_s
         offset = self.radius_m * np.array([math.cos(phase), math.sin(phase), 0.0])
@@ -98,17 +75,10 @@ class Circle:
 def in_room(pose_ned: NedPose, room: FrameMapping) -> Callable[[float], tuple | None]:
     """A NED pose function seen in the room's mocap axes (for :class:`NatNetServer`).
 
-    Parameters
-    ----------
-    pose_ned : callable
-        ``pose_ned(t_s) -> (pos_ned_m, quat_ned_wxyz)`` or None.
-    room : FrameMapping
-        How the room's mocap axes relate to NED.
+    ``pose_ned``: ``pose_ned(t_s) -> (pos_ned_m, quat_ned_wxyz)`` or None. ``room``: how the room's
+    mocap axes relate to NED.
 
-    Returns
-    -------
-    callable
-        ``pose(t_s) -> (pos_m, quat_wxyz)`` in the mocap's axes, or None.
+    Returns: ``pose(t_s) -> (pos_m, quat_wxyz)`` in the mocap's axes, or None.
     """
 
     def pose(t_s: float) -> tuple[np.ndarray, np.ndarray] | None:

@@ -87,17 +87,10 @@ PoseFn = Callable[[float], tuple[np.ndarray, np.ndarray] | None]
 class FaultWindow:
     """A fault over a window of server time.
 
-    Parameters
-    ----------
-    kind : str
-        ``"occlusion"`` (body not tracked), ``"dropout"`` (no frames), ``"freeze"`` (the last
-        datagram repeated) or ``"jump"`` (position offset by ``offset_m``).
-    start_s : float
-        Start [s of server time, see :meth:`NatNetServer.now_s`].
-    duration_s : float
-        Length [s].
-    offset_m : tuple of float
-        Offset of a jump, system axes [m].
+    ``kind``: ``"occlusion"`` (body not tracked), ``"dropout"`` (no frames), ``"freeze"`` (the last
+    datagram repeated) or ``"jump"`` (position offset by ``offset_m``). ``start_s``: start [s of
+    server time, see :meth:`NatNetServer.now_s`]. ``duration_s``: length [s]. ``offset_m``: offset
+    of a jump, system axes [m].
     """
 
     kind: str
@@ -114,14 +107,7 @@ class FaultWindow:
     def active(self, t_s: float) -> bool:
         """Whether the window covers server time ``t_s``.
 
-        Parameters
-        ----------
-        t_s : float
-            Server time [s].
-
-        Returns
-        -------
-        bool
+        ``t_s``: server time [s].
         """
         return self.start_s <= t_s < self.start_s + self.duration_s
 
@@ -129,23 +115,10 @@ class FaultWindow:
 def parse_fault_window(kind: str, text: str, option: str) -> FaultWindow:
     """Parse a fault option ``START:DURATION`` (``START:DURATION:DX:DY:DZ`` for a jump).
 
-    Parameters
-    ----------
-    kind : str
-        Fault kind (:data:`FAULT_KINDS`).
-    text : str
-        Option value [s, s, m, m, m].
-    option : str
-        The option's name, for the message (``--jump``, ``--mocap-jump``).
+    ``text``: option value [s, s, m, m, m]. ``option``: the option's name, for the message
+    (``--jump``, ``--mocap-jump``).
 
-    Returns
-    -------
-    FaultWindow
-
-    Raises
-    ------
-    ValueError
-        An unknown kind, not that form, or a bad window.
+    Raises ``ValueError``: an unknown kind, not that form, or a bad window.
     """
     if kind not in FAULT_KINDS:
         raise ValueError(f"unknown mocap fault {kind!r}")
@@ -165,26 +138,12 @@ def parse_fault_window(kind: str, text: str, option: str) -> FaultWindow:
 class SentFrame:
     """What the server sent in one frame (for tests and latency measurements).
 
-    Parameters
-    ----------
-    frame_number : int
-        NatNet frame number.
-    t_s : float
-        Server time of the frame (its instant on the rate grid) [s].
-    t_pose_s : float
-        Server time whose pose the frame carries: ``t_s`` minus the latency [s].
-    stamps : natnet.FrameStamps
-        The frame's time stamps as sent.
-    t_send_s : float
-        ``time.monotonic()`` just before the datagram left.
-    tracked : bool
-        Tracking-valid flag sent.
-    pos_m : tuple of float
-        Position sent (float32 values), system frame [m].
-    quat_wxyz : tuple of float
-        Orientation sent (float32 values).
-    true_pos_m : tuple of float
-        Position given by the pose function, system frame [m].
+    ``frame_number``: NatNet frame number. ``t_s``: server time of the frame (its instant on the
+    rate grid) [s]. ``t_pose_s``: server time whose pose the frame carries: ``t_s`` minus the
+    latency [s]. ``stamps``: the frame's time stamps as sent. ``t_send_s``: ``time.monotonic()``
+    just before the datagram left. ``pos_m``: position sent (float32 values), system frame [m].
+    ``quat_wxyz``: orientation sent (float32 values). ``true_pos_m``: position given by the pose
+    function, system frame [m].
     """
 
     frame_number: int
@@ -203,25 +162,14 @@ def frame_stamps(
 ) -> natnet.FrameStamps:
     """The time stamps of a frame, as Motive fills them.
 
-    Parameters
-    ----------
-    frame_number : int
-        Frame number (frames since the first).
-    rate_hz : float
-        Frame rate [Hz].
-    t_grid_s : float
-        The frame's instant on the rate grid, ``time.monotonic()`` [s].
-    latency_s : float
-        Time from the body's motion to the frame [s].
-    t_transmit_s : float
-        ``time.monotonic()`` as the frame is sent [s].
+    ``frame_number``: frame number (frames since the first). ``rate_hz``: frame rate [Hz].
+    ``t_grid_s``: the frame's instant on the rate grid, ``time.monotonic()`` [s]. ``latency_s``:
+    time from the body's motion to the frame [s]. ``t_transmit_s``: ``time.monotonic()`` as the
+    frame is sent [s].
 
-    Returns
-    -------
-    natnet.FrameStamps
-        ``timestamp`` = frame number over the rate; mid-exposure = ``t_grid_s - latency_s``
-        (the instant the pose shows), data received = ``t_grid_s``, transmit =
-        ``t_transmit_s``, in ticks of :data:`CLOCK_HZ`.
+    Returns: ``timestamp`` = frame number over the rate; mid-exposure = ``t_grid_s - latency_s``
+    (the instant the pose shows), data received = ``t_grid_s``, transmit = ``t_transmit_s``, in
+    ticks of :data:`CLOCK_HZ`.
     """
     return natnet.FrameStamps(
         timestamp_s=frame_number / rate_hz,
@@ -236,21 +184,12 @@ def solve_rigid_body(
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Least-squares pose of a rigid body from its markers (Kabsch).
 
-    Parameters
-    ----------
-    markers_body_m : numpy.ndarray
-        Marker positions in the body frame, shape (M, 3) [m].
-    markers_world_m : numpy.ndarray
-        The same markers measured in the world frame, shape (M, 3) [m].
+    ``markers_body_m``: marker positions in the body frame, shape (M, 3) [m]. ``markers_world_m``:
+    the same markers measured in the world frame, shape (M, 3) [m].
 
-    Returns
-    -------
-    pos_m : numpy.ndarray
-        Body origin in the world, shape (3,) [m].
-    quat_wxyz : numpy.ndarray
-        Body-to-world orientation, shape (4,).
-    error_m : float
-        Mean distance between the measured markers and the fitted ones [m].
+    Returns: ``pos_m``: body origin in the world, shape (3,) [m]. ``quat_wxyz``: body-to-world
+    orientation, shape (4,). ``error_m``: mean distance between the measured markers and the fitted
+    ones [m].
     """
     b = np.asarray(markers_body_m, dtype=float)
     w = np.asarray(markers_world_m, dtype=float)
@@ -277,52 +216,22 @@ class _Stats:
 class NatNetServer:
     """Serve one rigid body over NatNet like OptiTrack Motive (multicast on loopback).
 
-    Parameters
-    ----------
-    pose_fn : callable
-        ``pose_fn(t_s) -> (pos_m, quat_wxyz)`` in the system's own axes, or None when the
-        body is out of view; ``t_s`` is the server time (:meth:`now_s`) whose pose is wanted:
-        the frame's instant minus ``latency_s``.
-    body_name : str
-        Rigid body name in the model definitions.
-    body_id : int
-        Its streaming id.
-    rate_hz : float
-        Frame rate [Hz], 1 to 1000 (Motive: 30-360 and more).
-    version : tuple of int
-        NatNet bitstream version announced and written (see :data:`natnet.VERSIONS`).
-    noise_m : float
-        Standard deviation of the noise of each marker coordinate [m].
-    faults : tuple of FaultWindow
-        Faults from the start; more can be added with :meth:`add_fault`.
-    seed : int
-        Seed of the marker noise.
-    host : str
-        Address both sockets bind to (loopback).
-    command_port : int
-        Command port, 0 for any free one.
-    multicast_group : str
-        Group the frames go to.
-    markers_m : numpy.ndarray
-        Rigid body markers in its own frame, shape (M, 3) [m].
-    history : int
-        How many :class:`SentFrame` records :attr:`sent` keeps.
-    latency_s : float
-        Time from the body's motion to the frame [s], >= 0: each frame carries the pose of
-        ``latency_s`` before its instant, and its mid-exposure stamp says so.
-    epoch_s : float or None
-        ``time.monotonic()`` at server time 0; None: when the server is created. A pose
-        function on the monotonic clock (a truth timed by when its states arrived) is given
-        the same epoch.
+    ``pose_fn``: ``pose_fn(t_s) -> (pos_m, quat_wxyz)`` in the system's own axes, or None when the
+    body is out of view; ``t_s`` is the server time (:meth:`now_s`) whose pose is wanted: the
+    frame's instant minus ``latency_s``. ``body_name``: rigid body name in the model definitions.
+    ``rate_hz``: frame rate [Hz], 1 to 1000 (Motive: 30-360 and more). ``version``: NatNet bitstream
+    version announced and written (see :data:`natnet.VERSIONS`). ``noise_m``: standard deviation of
+    the noise of each marker coordinate [m]. ``faults``: faults from the start; more can be added
+    with :meth:`add_fault`. ``host``: address both sockets bind to (loopback). ``command_port``:
+    command port, 0 for any free one. ``multicast_group``: group the frames go to. ``markers_m``:
+    rigid body markers in its own frame, shape (M, 3) [m]. ``history``: how many :class:`SentFrame`
+    records :attr:`sent` keeps. ``latency_s``: time from the body's motion to the frame [s], >= 0:
+    each frame carries the pose of ``latency_s`` before its instant, and its mid-exposure stamp says
+    so. ``epoch_s``: ``time.monotonic()`` at server time 0; None: when the server is created. A pose
+    function on the monotonic clock (a truth timed by when its states arrived) is given the same
+    epoch.
 
-    Attributes
-    ----------
-    command_port : int
-        Bound command port.
-    data_port : int
-        Bound data port (where clients listen).
-    sent : collections.deque of SentFrame
-        The most recent frames sent.
+    ``sent``: the most recent frames sent.
     """
 
     def __init__(
@@ -396,22 +305,11 @@ class NatNetServer:
         return self._t0
 
     def now_s(self) -> float:
-        """Server time [s]: monotonic seconds since the server was created.
-
-        Returns
-        -------
-        float
-        """
+        """Server time [s]: monotonic seconds since the server was created."""
         return time.monotonic() - self._t0
 
     def add_fault(self, fault: FaultWindow) -> None:
-        """Add a fault window (thread-safe; times are server time).
-
-        Parameters
-        ----------
-        fault : FaultWindow
-            The fault.
-        """
+        """Add a fault window (thread-safe; times are server time)."""
         with self._lock:
             self._faults.append(fault)
 
@@ -419,10 +317,6 @@ class NatNetServer:
         """Counters: frames due, datagrams sent, connects, model-definition requests, clients,
         and the longest interval between two datagrams sent (``max_send_gap_s``: a stall of
         the server itself, as against one of its receiver).
-
-        Returns
-        -------
-        dict
         """
         s = self._stats
         return {
@@ -435,12 +329,7 @@ class NatNetServer:
         }
 
     def start(self) -> NatNetServer:
-        """Serve in a background thread; returns self.
-
-        Returns
-        -------
-        NatNetServer
-        """
+        """Serve in a background thread; returns self."""
         self._thread = threading.Thread(target=self.serve, name="natnet-server", daemon=True)
         self._thread.start()
         return self
@@ -544,13 +433,8 @@ class NatNetServer:
         """Build frame ``k`` due at ``t_grid`` and send it (what :meth:`serve` does on its
         grid; called directly, it steps the server without waiting for real time).
 
-        Parameters
-        ----------
-        k : int
-            Frame number.
-        t_grid : float
-            The frame's instant, ``time.monotonic()`` [s]; its server time sets the faults and,
-            minus the latency, the pose.
+        ``k``: frame number. ``t_grid``: the frame's instant, ``time.monotonic()`` [s]; its server
+        time sets the faults and, minus the latency, the pose.
         """
         t_s = t_grid - self._t0
         self._stats.frames += 1
