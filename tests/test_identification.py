@@ -13,11 +13,9 @@ import yaml
 from synthetic import ROOT
 from typer.testing import CliRunner
 
-from gcs.app.identify import (
-    create_identification_run,
-    identify_run,
-    plan_experiments,
-)
+from gcs.app.identify import create_identification_run
+from gcs.app.identify_fit import identify_run
+from gcs.app.identify_plan import plan_experiments
 from gcs.cli import app
 from gcs.core.model import frequency_response, from_transfer_function, markov_parameters, simulate
 from gcs.core.pbsid import continuous_poles
