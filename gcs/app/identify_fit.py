@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.app.identify_plan import run_axes, run_source
+from gcs.app.identify_plan import require_experiment, run_axes, run_source
 from gcs.core.model import DiscreteModel
 from gcs.core.pbsid import (
     IdentificationResult,
@@ -22,7 +22,7 @@ from gcs.core.pbsid import (
     to_continuous_tf,
     vaf,
 )
-from gcs.errors import IdentificationError, ModelError, RunLogError
+from gcs.errors import IdentificationError, ModelError
 from gcs.io.config import Profile
 from gcs.io.records import TrialRecord
 from gcs.io.rundir import RunDir
@@ -76,13 +76,6 @@ class AxisResult:
         return self.result.model
 
 
-def _trial(run: RunDir, j: int, what: str) -> TrialRecord:
-    """Experiment j as identification measures it (``mocap.measurement`` of the run)."""
-    if not run.status_path(j).exists():
-        raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
-    return run.measured_trial(j)
-
-
 def identify_run(
     run: RunDir,
     settings: IdentifySettings,
@@ -106,7 +99,11 @@ def identify_run(
     """
     axes = run_axes(run, axis)
     center = np.asarray(run_source(run)["center_ned_m"], dtype=float)
-    fit_trial, val_trial = _trial(run, 0, "fitting"), _trial(run, 1, "validation")
+    trials = []
+    for j in (0, 1):  # as identification measures them (the run's mocap.measurement)
+        require_experiment(run, j)
+        trials.append(run.measured_trial(j))
+    fit_trial, val_trial = trials
     return [_axis(a, fit_trial, val_trial, center, run.t_ilc_s, settings, profile) for a in axes]
 
 

@@ -27,6 +27,7 @@ __all__ = [
     "plan_experiments",
     "run_source",
     "run_axes",
+    "require_experiment",
     "in_run",
 ]
 
@@ -123,12 +124,24 @@ def _plan_offline(request: IdentifyRequest, from_log: Path) -> IdentifyPlan:
     run.require_kind("identification", "gcs identify --from-log")
     profile = run.profile() if request.profile is None else load_profile(request.profile)
     run_axes(run, request.axis)
-    for j, what in ((0, "fitting"), (1, "validation")):
-        if not run.status_path(j).exists():
-            raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
+    for j in (0, 1):
+        require_experiment(run, j)
         run.read_trial(j)
     _check_target(request.out, run.path)
     return IdentifyPlan(request, profile, profile.identification, run=run)
+
+
+def require_experiment(run: RunDir, j: int) -> None:
+    """Refuse a run without its experiment j (0 fitting, 1 validation).
+
+    Parameters
+    ----------
+    run : RunDir
+    j : int
+    """
+    if not run.status_path(j).exists():
+        what = ("fitting", "validation")[j]
+        raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
 
 
 def in_run(target: Path, run_path: Path) -> bool:
