@@ -27,9 +27,7 @@ from pathlib import Path
 import numpy as np
 from mock_learning_offline import fly, learn
 
-from gcs.app.identify import (
-    plan_experiments,
-)
+from gcs.app.identify_plan import plan_experiments
 from gcs.core.model import frequency_response
 from gcs.core.pbsid import identify, natural_frequency_damping, simulate_free, vaf
 from gcs.core.trajectory import sample_eight

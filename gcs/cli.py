@@ -712,8 +712,9 @@ def identify(
 
     Example: gcs identify --mock --out profiles/mock-identified.yaml --plot plots/
     """
-    from gcs.app.identify import IdentifyRequest
-    from gcs.app.identify_view import identify_with_display
+    from gcs.app.identify import run_identify
+    from gcs.app.identify_plan import IdentifyRequest
+    from gcs.app.identify_view import IdentifyView
 
     if sum((mock, connect is not None, from_log is not None)) != 1:
         raise typer.BadParameter("give exactly one of --mock, --connect and --from-log")
@@ -737,7 +738,7 @@ def identify(
         check_only=check,
         mocap=mocap,
     )
-    identify_with_display(console, err_console, request)
+    run_identify(request, IdentifyView(console, err_console))
 
 
 @app.command()

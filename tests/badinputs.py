@@ -59,10 +59,8 @@ def _set(data: Any, dotted: str, value: Any) -> Any:
 
 def _identification_run(root: Path) -> Path:
     """A synthetic identification run (two 30 s PRBS experiments of a known loop)."""
-    from gcs.app.identify import (
-        create_identification_run,
-        plan_experiments,
-    )
+    from gcs.app.identify import create_identification_run
+    from gcs.app.identify_plan import plan_experiments
 
     data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
     data["identification"]["duration_s"] = 30.0

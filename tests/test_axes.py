@@ -126,7 +126,7 @@ def test_vertical_amplitude_is_parsed_and_checked() -> None:
 
 
 def test_z_experiments_excite_down_only_with_the_vertical_amplitude() -> None:
-    from gcs.app.identify import plan_experiments
+    from gcs.app.identify_plan import plan_experiments
 
     prof = profile_from_dict(antx(), "antx")
     exp = plan_experiments(prof.identification, prof.t_ilc_s, "z", prof.arena)
@@ -296,13 +296,10 @@ def test_a_flat_run_keeps_its_table() -> None:
 def test_z_identified_offline_from_a_vertical_run_and_written_as_model_z(tmp_path) -> None:
     """A synthetic vertical loop excited on z: PBSID finds it (validation VAF), x and y are
     not excited, and the written profile keeps x and y and adds model_z, which loads."""
-    from gcs.app.identify import (
-        create_identification_run,
-        identified_profile_text,
-        identify_run,
-        plan_experiments,
-        run_axes,
-    )
+    from gcs.app.identify import create_identification_run
+    from gcs.app.identify_fit import identify_run
+    from gcs.app.identify_plan import plan_experiments, run_axes
+    from gcs.app.identify_profile import identified_profile_text
     from gcs.io.records import TrialRecord, TrialStatus
 
     data = antx()

@@ -179,7 +179,7 @@ def test_identify_interrupted_exits_130_and_writes_no_profile(
     def interrupted(*args: object, **kwargs: object) -> None:
         raise KeyboardInterrupt  # what run_campaign raises after landing the vehicle
 
-    monkeypatch.setattr("gcs.app.identify_view.fly_identification", interrupted)
+    monkeypatch.setattr("gcs.app.identify.fly_identification", interrupted)
     run = tmp_path / "ident"
     result = invoke("identify", "--connect", "udpout://127.0.0.1:9", "--run", run)
     assert result.exit_code == 130, result.output

@@ -13,11 +13,9 @@ import yaml
 from synthetic import ROOT
 from typer.testing import CliRunner
 
-from gcs.app.identify import (
-    create_identification_run,
-    identify_run,
-    plan_experiments,
-)
+from gcs.app.identify import create_identification_run, run_identify
+from gcs.app.identify_fit import identify_run
+from gcs.app.identify_plan import IdentifyRequest, plan_experiments
 from gcs.cli import app
 from gcs.core.model import frequency_response, from_transfer_function, markov_parameters, simulate
 from gcs.core.pbsid import continuous_poles
@@ -189,6 +187,33 @@ def test_default_output_is_in_the_run_directory(tmp_path: Path) -> None:
     result = invoke("identify", "--from-log", r.path, "--axis", "x", "--out", tmp_path / "x.yaml")
     assert result.exit_code == 2 and "axis x was not excited" in result.output
     assert not (tmp_path / "x.yaml").exists()
+
+
+class Shown:
+    """A display that keeps what the room asks it to show."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple] = []
+
+    def __getattr__(self, name: str):
+        return lambda *args: self.calls.append((name, *args))
+
+
+def test_the_room_tells_its_display_each_step_and_writes_the_run_profile_once(
+    tmp_path: Path,
+) -> None:
+    r = make_run(tmp_path, axis="x", seed=5)
+    shown = Shown()
+    assert run_identify(IdentifyRequest(from_log=r.path, check_only=True), shown) is None
+    assert [c[0] for c in shown.calls] == ["checked"] and shown.calls[0][1].run.path == r.path
+    assert not r.identified_path.exists()
+    for new in (True, False):  # again: the same bytes, the run's record is not rewritten
+        shown = Shown()
+        assert run_identify(IdentifyRequest(from_log=r.path), shown) == r.identified_path
+        assert [c[0] for c in shown.calls] == ["results", "wrote_profile"]
+        assert [x.axis for x in shown.calls[0][1]] == ["x"]
+        assert shown.calls[1][1:] == (r.identified_path, new)
+    assert load_profile(r.identified_path).name.endswith("-identified")
 
 
 # ---------------------------------------------------------------------------- refusals

@@ -1,7 +1,7 @@
 """Figures to files: the one place a matplotlib figure becomes PNG bytes or a PNG file.
 
 Shared by the report (:mod:`gcs.app.report_figures`, :mod:`gcs.app.report_html`) and the
-identification (:mod:`gcs.app.identify`); it knows nothing of runs or learning.
+identification (:mod:`gcs.app.identify_figures`); it knows nothing of runs or learning.
 """
 
 from __future__ import annotations

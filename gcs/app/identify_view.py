@@ -1,39 +1,26 @@
-"""The terminal side of ``gcs identify``: fly or read the experiments, show and write the result."""
+"""What ``gcs identify`` shows: the checks, the flight, the identified models, the files."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import replace
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from rich.console import Console
 from rich.markup import escape
+from rich.progress import Progress
 from rich.table import Table
 
-from gcs.app.identify import (
-    AxisResult,
-    Experiments,
-    IdentifyRequest,
-    create_identification_run,
-    fly_identification,
-    identified_profile_text,
-    identify_run,
-    plan_experiments,
-    run_axes,
-    write_identification_plots,
-    write_identified_profile,
-)
+from gcs.app.fly_view import live_progress, say
+from gcs.app.identify_fit import AxisResult
+from gcs.app.identify_plan import Experiments, IdentifyPlan
 from gcs.core.trajectory import Box
-from gcs.errors import PathError, RunLogError
-from gcs.io.atomic import write_once
-from gcs.io.config import Profile, load_profile
-from gcs.io.paths import check_new_dir, check_output_dir, check_output_file
 from gcs.io.rundir import RunDir
 from gcs.io.settings import IdentifySettings
 
-__all__ = ["results_table", "model_lines", "identify_with_display", "excitation_lines"]
+__all__ = ["IdentifyView", "results_table", "model_lines", "excitation_lines"]
 
 
 def _poly(c: np.ndarray) -> str:
@@ -57,22 +44,14 @@ def _poles(z: np.ndarray) -> str:
 
 
 def results_table(results: Sequence[AxisResult], profile_name: str) -> Table:
-    """The identification result per axis as a rich table (fits an 80-column terminal).
-
-    Columns: axis, order, delay [samples] and [s], dominant continuous pair (wn, zeta; Tustin),
-    and on the validation experiment the VAF and NRMSE fit of the identified model and the VAF
-    of the profile's model. :func:`model_lines` gives the transfer functions and poles.
+    """Per axis: order, delay, wn and zeta, and the validation VAF and fit beside the VAF of
+    the profile's model (80 columns).
 
     Parameters
     ----------
     results : sequence of AxisResult
-        Identified axes.
     profile_name : str
-        Name of the input profile (column title of the comparison).
-
-    Returns
-    -------
-    Table
+        The input profile's name (title of the comparison's column).
     """
     table = Table(title="PBSID: setpoint -> position, validated on trial 1")
     for col in ("axis", "order", "delay", "wn [rad/s]", "zeta", "VAF [%]", "fit [%]"):
@@ -99,11 +78,6 @@ def model_lines(results: Sequence[AxisResult]) -> list[str]:
     Parameters
     ----------
     results : sequence of AxisResult
-        Identified axes.
-
-    Returns
-    -------
-    list of str
     """
     lines = []
     for r in results:
@@ -115,183 +89,126 @@ def model_lines(results: Sequence[AxisResult]) -> list[str]:
     return lines
 
 
-def identify_with_display(
-    console: Console, err_console: Console, request: IdentifyRequest
-) -> Path | None:
-    """Fly the two experiments (or read them), identify, print, write profile and plots.
+@dataclass(frozen=True)
+class IdentifyView:
+    """The terminal of ``gcs identify``: ``console`` for its lines, ``err_console`` for the
+    figures' "wrote" lines."""
 
-    Everything is validated first (profile, identification and flight settings, the
-    excitation against the arena, the run, the output paths, the connection URL or the mock's
-    settings); only then is a run created, a vehicle connected or PBSID run.
+    console: Console
+    err_console: Console
 
-    Parameters
-    ----------
-    console : Console
-        Terminal output.
-    err_console : Console
-        Where "wrote ..." lines go.
-    request : IdentifyRequest
-        The command's options.
+    def checked(self, plan: IdentifyPlan) -> None:
+        """What was checked and would be done (``--check``).
 
-    Returns
-    -------
-    Path or None
-        The profile written (None with ``check_only``).
-    """
-    profile_path, axis, out, from_log, plot, seed = (
-        request.profile, request.axis, request.out, request.from_log, request.plot, request.seed
-    )  # fmt: skip
-    connect, use_mock, mock_config, logs, run_path = (
-        request.connect, request.use_mock, request.mock_config, request.logs, request.run
-    )  # fmt: skip
-    check_only, mocap = request.check_only, request.mocap
-    if plot is not None:
-        check_output_dir(plot, "--plot")
-    if from_log is not None:
-        run = RunDir.open(from_log)
-        run.require_kind("identification", "gcs identify --from-log")
-        if profile_path is None:
-            profile: Profile = run.profile()
-            where = f"{run.manifest_path}:profile"
-        else:
-            profile, where = load_profile(profile_path), str(profile_path)
-        settings = profile.identification
-        run_axes(run, axis)
-        for j, what in ((0, "fitting"), (1, "validation")):
-            if not run.status_path(j).exists():
-                raise RunLogError(f"{run.path}: trial {j} ({what} experiment) is missing")
-            run.read_trial(j)
-        _check_target(out, run.path)
-        if check_only:
-            console.print(f"checked: {run.path}, profile '{profile.name}'; nothing identified")
-            return None
-    else:
-        from gcs.app.fly_view import live_progress, say
-        from gcs.app.session import check_mock_config, check_url, plan_mocap, vehicle_url
-
-        path = profile_path or request.default_profile
-        assert path is not None
-        profile, where = load_profile(path), str(path)
-        settings = profile.identification
-        if seed is not None:
-            settings = replace(settings, seed=int(seed))
-        flight = profile.flight
-        mocap_plan = plan_mocap(profile, where, mocap, use_mock)
-        if use_mock and mock_config is None and mocap_plan is not None and not mocap_plan.source:
-            from gcs.io.paths import resolve_named
-
-            mock_config = resolve_named("mock-mocap", "profile", "--mock-config")
-        experiments = plan_experiments(
-            settings, profile.t_ilc_s, axis or "both", profile.arena, where
-        )
-        if run_path is not None:
-            check_new_dir(run_path, "--run")
-        else:
-            check_output_dir(logs, "--logs")
-        _check_target(out, None)
-        if use_mock:
-            check_mock_config(mock_config)
-        else:
-            check_url(str(connect))
-        if check_only:
-            console.print(
-                f"checked: profile '{profile.name}', {settings.excitation} on "
-                f"{', '.join(experiments.axes)}, two experiments of "
-                f"{settings.n_samples(profile.t_ilc_s)} samples; nothing flown"
+        Parameters
+        ----------
+        plan : IdentifyPlan
+        """
+        profile, settings, exps = plan.profile, plan.settings, plan.experiments
+        if plan.run is not None:
+            self.console.print(
+                f"checked: {plan.run.path}, profile '{profile.name}'; nothing identified"
             )
-            if mocap_plan is not None:
-                console.print(f"checked: {mocap_plan.describe()}")
-            for line in excitation_lines(experiments, settings, profile.t_ilc_s, profile.arena):
-                console.print(line, highlight=False)
-            return None
-        run_root, run_id = (logs, None) if run_path is None else (run_path.parent, run_path.name)
-        run = create_identification_run(run_root, profile, settings, experiments, run_id)
-        n = settings.n_samples(profile.t_ilc_s)
-        console.print(
+            return
+        assert exps is not None
+        self.console.print(
+            f"checked: profile '{profile.name}', {settings.excitation} on "
+            f"{', '.join(exps.axes)}, two experiments of "
+            f"{settings.n_samples(profile.t_ilc_s)} samples; nothing flown"
+        )
+        if plan.mocap is not None:
+            self.console.print(f"checked: {plan.mocap.describe()}")
+        for line in excitation_lines(exps, settings, profile.t_ilc_s, profile.arena):
+            self.console.print(line, highlight=False)
+
+    def started(self, plan: IdentifyPlan, run: RunDir) -> None:
+        """The new run and its excitation.
+
+        Parameters
+        ----------
+        plan : IdentifyPlan
+        run : RunDir
+        """
+        settings, exps, t_ilc_s = plan.settings, plan.experiments, plan.profile.t_ilc_s
+        assert exps is not None
+        n = settings.n_samples(t_ilc_s)
+        self.console.print(
             f"identification run [bold]{run.path}[/]: {settings.excitation} "
-            + ", ".join(f"{settings.amplitude_for(a):g} m on {a}" for a in experiments.axes)
+            + ", ".join(f"{settings.amplitude_for(a):g} m on {a}" for a in exps.axes)
             + ", two experiments of "
-            f"{n} samples ({n * profile.t_ilc_s:.1f} s) around {experiments.center_ned_m.tolist()}"
+            f"{n} samples ({n * t_ilc_s:.1f} s) around {exps.center_ned_m.tolist()}"
         )
-        progress, on_event = live_progress(console)
-        mock_seed = settings.seed if seed is None else seed
-        try:
-            with (
-                vehicle_url(
-                    connect, use_mock, mock_config, mock_seed, say(console), mocap_plan
-                ) as (
-                    url,
-                    link,
-                ),
-                progress,
-            ):
-                fly_identification(url, run, flight, on_event, link)
-        except KeyboardInterrupt:
-            console.print(f"interrupted; no profile written. The experiments are in {run.path}")
-            raise
-    results = identify_run(run, settings, profile, axis)
-    console.print(results_table(results, profile.name))
-    for line in model_lines(results):
-        console.print(line, highlight=False)
-    target = Path(out) if out is not None else run.identified_path
-    text = identified_profile_text(
-        profile, results, str(run.path), str(target), run.manifest.get("created_utc")
-    )
-    if _in_run(target, run.path):  # the run's own record: written once, never replaced
-        if write_once(target, text):
-            console.print(f"wrote profile {target}")
+
+    def flight(self) -> tuple[Progress, Callable[[object], None]]:
+        """The live progress of the flight and its event callback."""
+        return live_progress(self.console)
+
+    def say(self, text: str) -> None:
+        """A set-up line of the flight session.
+
+        Parameters
+        ----------
+        text : str
+        """
+        say(self.console)(text)
+
+    def interrupted(self, run: RunDir) -> None:
+        """Ctrl-C: no profile, the experiments are kept.
+
+        Parameters
+        ----------
+        run : RunDir
+        """
+        self.console.print(f"interrupted; no profile written. The experiments are in {run.path}")
+
+    def results(self, results: Sequence[AxisResult], profile_name: str) -> None:
+        """The table and the models.
+
+        Parameters
+        ----------
+        results : sequence of AxisResult
+        profile_name : str
+        """
+        self.console.print(results_table(results, profile_name))
+        for line in model_lines(results):
+            self.console.print(line, highlight=False)
+
+    def wrote_profile(self, path: Path, new: bool) -> None:
+        """The profile written (``new``), or already there with the same bytes.
+
+        Parameters
+        ----------
+        path : Path
+        new : bool
+        """
+        if new:
+            self.console.print(f"wrote profile {path}")
         else:
-            console.print(f"profile {target} holds this result already")
-    else:
-        write_identified_profile(target, text)
-        console.print(f"wrote profile {target}")
-    if plot is not None:
-        for p in write_identification_plots(results, profile, plot):
-            err_console.print(f"wrote {p}")
-    return target
+            self.console.print(f"profile {path} holds this result already")
 
+    def wrote(self, path: Path) -> None:
+        """A figure written.
 
-def _in_run(target: Path, run_path: Path) -> bool:
-    return target.absolute().parent.resolve() == run_path.absolute().resolve()
-
-
-def _check_target(out: Path | None, run_path: Path | None) -> None:
-    """``--out`` (or the default in the run directory) can be written."""
-    if out is None:
-        if run_path is not None:  # identifying an existing run again: it must take the file
-            RunDir.open(run_path).check_writable()
-        return
-    if run_path is not None and _in_run(out, run_path):
-        if out.name != RunDir.IDENTIFIED_FILE:
-            raise PathError(
-                f"--out {out}: inside the run directory only {RunDir.IDENTIFIED_FILE} is written"
-            )
-        RunDir.open(run_path).check_writable()
-        return
-    check_output_file(out, "--out")
+        Parameters
+        ----------
+        path : Path
+        """
+        self.err_console.print(f"wrote {path}")
 
 
 def excitation_lines(
     experiments: Experiments, settings: IdentifySettings, t_ilc_s: float, arena: Box
 ) -> list[str]:
-    """What identification asks of the vehicle, before it flies: the excitation's amplitude
-    per axis, the box both experiments sweep and its closest distance to the arena's walls,
-    and how long it flies.
+    """What the experiments ask of the vehicle: amplitudes, the box they sweep and its
+    distance to the arena's walls, and how long they fly.
 
     Parameters
     ----------
     experiments : Experiments
-        From :func:`gcs.app.identify.plan_experiments`.
     settings : IdentifySettings
-        The profile's identification settings.
     t_ilc_s : float
         Sample time [s].
     arena : Box
-        The arena.
-
-    Returns
-    -------
-    list of str
     """
     sp = np.vstack(experiments.setpoints_ned_m)
     lo, hi = sp.min(axis=0), sp.max(axis=0)
