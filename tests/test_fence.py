@@ -234,19 +234,23 @@ def test_every_watch_trips_the_same_abort_path_and_only_while_armed() -> None:
     import asyncio
 
     from gcs.errors import VehicleError
-    from gcs.flight.vehicle import Vehicle
+    from gcs.flight.link import Link
+    from gcs.flight.manoeuvres import Manoeuvres
+    from gcs.flight.watches import Watches
 
-    vehicle = Vehicle(SETTINGS, FENCE)
+    mirror = Link(SETTINGS)  # the vehicle's parts, on a mirror that is told it is armed
+    watches = Watches(mirror, SETTINGS, FENCE)
     reasons = ["mocap stream stale (0.40 s since the last frame)"]
-    vehicle.add_watch("mocap", lambda: reasons[0])  # a motion-capture client's problem()
-    assert vehicle.safety_problem() is None  # on the ground, disarmed: not watched
-    vehicle.armed = True
-    assert vehicle.safety_problem() == "mocap: mocap stream stale (0.40 s since the last frame)"
-    vehicle.trip("fence", "something else")  # the first breach is the one kept
-    assert vehicle.breach == "mocap: mocap stream stale (0.40 s since the last frame)"
-    assert vehicle.control_problem() == vehicle.breach  # ends moves, holds and trials
+    watches.add_watch("mocap", lambda: reasons[0])  # a motion-capture client's problem()
+    assert watches.safety_problem() is None  # on the ground, disarmed: not watched
+    mirror.armed = True
+    assert watches.safety_problem() == "mocap: mocap stream stale (0.40 s since the last frame)"
+    watches.trip("fence", "something else")  # the first breach is the one kept
+    assert watches.breach == "mocap: mocap stream stale (0.40 s since the last frame)"
+    assert watches.control_problem() == watches.breach  # ends moves, holds and trials
+    manoeuvres = Manoeuvres(mirror, watches, SETTINGS, FENCE)
     with pytest.raises(VehicleError, match="^mocap: mocap stream stale .* while waiting for a"):
-        asyncio.run(vehicle.wait_healthy_local_position(timeout_s=1.0))  # and every wait
+        asyncio.run(manoeuvres.wait_healthy_local_position(timeout_s=1.0))  # and every wait
 
 
 class _Refusing:

@@ -1,11 +1,12 @@
 """How a vehicle comes down: landing, and the emergency stop that is safe in any state.
 
-:class:`Landing` is one part of :class:`gcs.flight.vehicle.Vehicle`, which sets its state.
+:class:`Landing` is one part of :class:`gcs.flight.vehicle.Vehicle`: it commands through the
+connection, reads its state mirror, waits through the watches, and ends the manoeuvres' setpoint
+stream.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 import math
@@ -15,15 +16,38 @@ from typing import Any
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState
 
 from gcs.errors import VehicleError
+from gcs.flight.link import Link
 from gcs.flight.manoeuvres import Manoeuvres
+from gcs.flight.watches import Watches
+from gcs.io.settings import FlightSettings
 
 __all__ = ["Landing"]
 
 _log = logging.getLogger(__name__)
 
 
-class Landing(Manoeuvres):
-    """Landing and the emergency stop of :class:`gcs.flight.vehicle.Vehicle`."""
+class Landing:
+    """Landing and the emergency stop of :class:`gcs.flight.vehicle.Vehicle`.
+
+    Parameters
+    ----------
+    mirror : Link
+        The connection and its state mirror.
+    watches : Watches
+        The safety watches whose waits the landing waits in.
+    manoeuvres : Manoeuvres
+        The setpoint stream a landing ends.
+    settings : FlightSettings
+        Timeouts (command, landing, link regain) and the telemetry-age limit.
+    """
+
+    def __init__(
+        self, mirror: Link, watches: Watches, manoeuvres: Manoeuvres, settings: FlightSettings
+    ) -> None:
+        self._mirror = mirror
+        self._watches = watches
+        self._manoeuvres = manoeuvres
+        self.settings = settings
 
     async def land_and_disarm(self) -> None:
         """Land, wait for ON_GROUND, then disarm unless PX4 has disarmed by itself.
@@ -33,20 +57,23 @@ class Landing(Manoeuvres):
         VehicleError
             Landing refused or not finished within ``settings.land_timeout_s``, link lost.
         """
-        link = self.link
-        self._streaming_stopped = True
-        await self._command("land", link.land)
-        self._offboard_started = False  # PX4 lands now: a stop must not switch it to Hold
-        await self._wait_until(
-            lambda: self.landed_state == LandedState.ON_GROUND,
+        mirror = self._mirror
+        link = mirror.link
+        self._manoeuvres.stop_streaming()
+        await mirror.command("land", link.land)
+        self._manoeuvres.offboard_started = (
+            False  # PX4 lands now: a stop must not switch it to Hold
+        )
+        await self._watches.wait_until(
+            lambda: mirror.landed_state == LandedState.ON_GROUND,
             self.settings.land_timeout_s,
             "landing",
             in_control=False,
         )
-        if self.armed:
-            await self._command("disarm", link.disarm)
-            await self._wait_until(
-                lambda: not self.armed,
+        if mirror.armed:
+            await mirror.command("disarm", link.disarm)
+            await self._watches.wait_until(
+                lambda: not mirror.armed,
                 self.settings.command_timeout_s,
                 "disarmed state",
                 in_control=False,
@@ -69,42 +96,43 @@ class Landing(Manoeuvres):
             One line describing the outcome, e.g. "landed and disarmed".
         """
         _log.warning("emergency stop: %s", reason)
-        self._streaming_stopped = True
-        if self._link is None:
+        mirror, manoeuvres = self._mirror, self._manoeuvres
+        manoeuvres.stop_streaming()
+        if mirror.backend is None:
             return "not connected"
-        if not (self.armed or self._arm_requested) and not self._offboard_started:
+        if not (mirror.armed or mirror.arm_requested) and not manoeuvres.offboard_started:
             return "vehicle not armed; nothing to do"
-        link = self._link
+        link = mirror.backend
         notes: list[str] = []
 
         async def attempt(what: str, call: Callable[[], Awaitable[Any]]) -> bool:
             try:
-                await self._command(what, call)
+                await mirror.command(what, call)
                 return True
             except VehicleError as exc:
                 _log.warning("emergency stop: %s", exc)
                 notes.append(str(exc))
                 return False
 
-        if self._offboard_started:
+        if manoeuvres.offboard_started:
             await attempt("offboard stop (Hold)", link.stop_offboard)
-            self._offboard_started = False
-        on_ground = self.landed_state == LandedState.ON_GROUND
-        if self.armed and not on_ground:
+            manoeuvres.offboard_started = False
+        on_ground = mirror.landed_state == LandedState.ON_GROUND
+        if mirror.armed and not on_ground:
             on_ground = await self._land_with_retries(lambda: attempt("land", link.land), notes)
-        if on_ground and (self.armed or self._arm_requested) and self.connected:
+        if on_ground and (mirror.armed or mirror.arm_requested) and mirror.connected:
             await attempt("disarm", link.disarm)
             with contextlib.suppress(VehicleError):
-                await self._wait_until(
-                    lambda: not self.armed,
+                await self._watches.wait_until(
+                    lambda: not mirror.armed,
                     self.settings.command_timeout_s,
                     "disarmed state",
                     in_control=False,
                     stopping=True,
                 )
-        if not self.connected:
+        if not mirror.connected:
             return "link lost: vehicle left to its own failsafe (" + "; ".join(notes) + ")"
-        if on_ground and not self.armed:
+        if on_ground and not mirror.armed:
             return "landed and disarmed"
         return "; ".join(notes) or ("on the ground, armed" if on_ground else "airborne")
 
@@ -116,13 +144,16 @@ class Landing(Manoeuvres):
         A land command lost in a link outage is sent again once the vehicle is heard from and
         still not landing, so that a temporary loss of the link does not leave it hovering.
         """
-        clock = self.local_clock
+        mirror = self._mirror
+        clock = mirror.local_clock
         deadline_s = clock.now() + self.settings.land_timeout_s
         last_try_s = -math.inf
         last_heard_s = clock.now()
-        while self.landed_state != LandedState.ON_GROUND:
+        while mirror.landed_state != LandedState.ON_GROUND:
             now_s = clock.now()
-            heard = self.connected and self.telemetry_age_s() < self.settings.max_telemetry_age_s
+            heard = (
+                mirror.connected and mirror.telemetry_age_s() < self.settings.max_telemetry_age_s
+            )
             if heard:
                 last_heard_s = now_s
             elif now_s - last_heard_s > self.settings.link_regain_s:
@@ -130,14 +161,11 @@ class Landing(Manoeuvres):
                 return False
             if now_s >= deadline_s:
                 break
-            if heard and self.flight_mode != FlightMode.LAND and now_s - last_try_s > 1.0:
+            if heard and mirror.flight_mode != FlightMode.LAND and now_s - last_try_s > 1.0:
                 last_try_s = now_s
                 await send_land()
-            changed = self._changed  # woken by any state change of the mirror
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(min(deadline_s - now_s, 0.5)):
-                    await changed.wait()
-        if self.landed_state == LandedState.ON_GROUND:
+            await mirror.wait_change(min(deadline_s - now_s, 0.5))  # or any state change
+        if mirror.landed_state == LandedState.ON_GROUND:
             return True
         notes.append(f"not on the ground after {self.settings.land_timeout_s:g} s")
         return False

@@ -4,16 +4,18 @@
 :func:`gcs.flight.backend.registered_link` picks it by the URL) and a few background tasks, the
 ``_watch_*`` coroutines, that mirror the vehicle's state (position and
 velocity, flight mode, armed, landed state, link, health, battery). Each state change wakes the
-waits (:meth:`Link.notify`); every command is guarded by a timeout (:meth:`Link._command`) so
-that a dead link cannot hang the caller, and MAVSDK errors become one-line
-:class:`gcs.errors.VehicleError`.
+waits (:meth:`Link.notify`, :meth:`Link.wait_change`); every command is guarded by a timeout
+(:meth:`Link.command`) so that a dead link cannot hang the caller, and MAVSDK errors become
+one-line :class:`gcs.errors.VehicleError`. Each position sample is handed to
+:attr:`Link.on_sample` (the safety watches' check) before anything else sees it.
 
 Position samples carry two times: the receipt time on the local clock (:attr:`Link.local_clock`,
 the link's: ``time.monotonic()`` on the wire) and the vehicle's own time stamp
 (LOCAL_POSITION_NED's ``time_boot_ms``); :attr:`Link.clock` makes that a continuous vehicle time
 and fits it to the local clock (:mod:`gcs.flight.clock`).
 
-:class:`Link` is one part of :class:`gcs.flight.vehicle.Vehicle`, which sets its state.
+:class:`Link` is one part of :class:`gcs.flight.vehicle.Vehicle`; the other parts read its mirror
+and command through it.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import asyncio
 import contextlib
 import logging
 import math
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Callable, Coroutine, Iterator
 from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
@@ -30,12 +32,12 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState
 
 from gcs.errors import VehicleError
 from gcs.flight.backend import CommandRefused, LinkUnreachable, VehicleLink, registered_link
+from gcs.flight.clock import WALL_CLOCK, ClockFit, VehicleClock
 from gcs.flight.clock import Clock as LocalClock
-from gcs.flight.clock import ClockFit, VehicleClock
 from gcs.flight.mavsdk_link import MavsdkLink
 from gcs.io.settings import FlightSettings
 
-__all__ = ["Link", "TelemetrySample", "sample_arrays"]
+__all__ = ["Link", "TelemetrySample", "connect_hint", "sample_arrays"]
 
 _log = logging.getLogger(__name__)
 _T = TypeVar("_T")
@@ -112,28 +114,49 @@ def sample_arrays(samples: list[TelemetrySample]) -> tuple[np.ndarray, np.ndarra
     return t[order], pos[order]
 
 
-class Link:
-    """The connection and the state mirror of :class:`gcs.flight.vehicle.Vehicle`."""
+def _ignore(sample: TelemetrySample) -> None:
+    """No check of a position sample (a link without safety watches)."""
 
-    settings: FlightSettings
-    url: str | None
-    connected: bool
-    latest: TelemetrySample | None
-    flight_mode: FlightMode
-    armed: bool
-    _arm_requested: bool  # the arm command was sent, the armed state not yet seen
-    landed_state: LandedState
-    local_position_ok: bool
-    battery_pct: float
-    clock: VehicleClock
-    local_clock: LocalClock  # the clock of receipt times, waits and deadlines
-    _changed: asyncio.Event
-    _recorders: list[list[TelemetrySample]]
-    _tasks: list[asyncio.Task[None]]
-    _link: VehicleLink | None
-    _link_given: VehicleLink | None  # injected at construction (else by the URL)
-    _clock_given: LocalClock | None  # injected at construction (else the link's)
-    _check_sample: Callable[[TelemetrySample], None]  # the safety watches (watches.py)
+
+class Link:
+    """The connection to the vehicle and the mirror of its state.
+
+    Parameters
+    ----------
+    settings : FlightSettings
+        Rates and timeouts (the telemetry rate, the command timeout).
+    link : VehicleLink or None
+        The link to fly through; None: the one the URL names when connecting (MAVSDK's).
+    clock : Clock or None
+        The local clock; None: the link's (the wall clock until connected).
+    """
+
+    def __init__(
+        self,
+        settings: FlightSettings,
+        *,
+        link: VehicleLink | None = None,
+        clock: LocalClock | None = None,
+    ) -> None:
+        self.settings = settings
+        self._link_given = link  # injected at construction (else by the URL)
+        self._clock_given = clock  # injected at construction (else the link's)
+        self.backend: VehicleLink | None = None  # the connected link
+        self.local_clock: LocalClock = clock if clock is not None else WALL_CLOCK
+        self.on_sample: Callable[[TelemetrySample], None] = _ignore  # the safety watches' check
+        self.url: str | None = None
+        self.connected = False
+        self.latest: TelemetrySample | None = None
+        self.flight_mode = FlightMode.UNKNOWN
+        self.armed = False
+        self.arm_requested = False  # the arm command was sent, the armed state not yet seen
+        self.landed_state = LandedState.UNKNOWN
+        self.local_position_ok = False
+        self.battery_pct = math.nan  # remaining charge [%]; NaN until reported
+        self.clock = VehicleClock(window_s=10.0)
+        self._changed = asyncio.Event()
+        self._recorders: list[list[TelemetrySample]] = []
+        self._tasks: list[asyncio.Task[None]] = []
 
     async def connect(self, url: str, timeout_s: float | None = None) -> None:
         """Open ``url``, wait for the autopilot and start mirroring its state.
@@ -154,7 +177,7 @@ class Link:
         timeout_s = self.settings.connect_timeout_s if timeout_s is None else timeout_s
         self.url = url
         link = self._link_given or registered_link(url) or MavsdkLink()
-        self._link = link
+        self.backend = link
         if self._clock_given is None:
             self.local_clock = link.clock
         try:
@@ -182,9 +205,9 @@ class Link:
         ):
             self._tasks.append(asyncio.create_task(watch(), name=f"gcs-{watch.__name__}"))
         rate_hz = self.settings.telemetry_rate_hz
-        await self._command("set position telemetry rate", lambda: link.set_position_rate(rate_hz))
+        await self.command("set position telemetry rate", lambda: link.set_position_rate(rate_hz))
         try:  # 5 Hz landed state makes landing detection snappier; not essential.
-            await self._command("set landed-state rate", lambda: link.set_landed_state_rate(5))
+            await self.command("set landed-state rate", lambda: link.set_landed_state_rate(5))
         except VehicleError as exc:
             _log.warning("%s", exc)
 
@@ -194,7 +217,7 @@ class Link:
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
-        link, self._link = self._link, None
+        link, self.backend = self.backend, None
         if link is not None:
             await link.close()
         self.connected = False
@@ -215,15 +238,11 @@ class Link:
         VehicleError
             Not connected.
         """
-        if self._link is None:
+        if self.backend is None:
             raise VehicleError("not connected: no vehicle to forward the mocap to")
-        return self._link.mocap_plugin()
+        return self.backend.mocap_plugin()
 
     # ------------------------------------------------------------------ state mirror
-
-    def _notify(self) -> None:
-        event, self._changed = self._changed, asyncio.Event()
-        event.set()
 
     async def _watch_position(self) -> None:
         async for report in self.link.positions():
@@ -233,45 +252,45 @@ class Link:
                 continue  # an estimator without a position: not a sample
             t_vehicle_s = self.clock.add(report.time_boot_s, receipt_s)
             sample = TelemetrySample(receipt_s, pos, vel, t_vehicle_s)
-            self._check_sample(sample)
+            self.on_sample(sample)
             if self.latest is None or t_vehicle_s >= self.latest.t_vehicle_s:
                 self.latest = sample
             for recorder in self._recorders:
                 recorder.append(sample)
-            self._notify()
+            self.notify()
 
     async def _watch_connection(self) -> None:
         async for connected in self.link.connection_states():
             self.connected = connected
             if not connected:
                 _log.warning("link to %s lost (no heartbeat for 3 s)", self.url)
-            self._notify()
+            self.notify()
 
     async def _watch_flight_mode(self) -> None:
         async for mode in self.link.flight_modes():
             if mode != self.flight_mode:
                 self.flight_mode = mode
-                self._notify()
+                self.notify()
 
     async def _watch_armed(self) -> None:
         async for armed in self.link.armed_states():
             if armed != self.armed:
                 self.armed = armed
                 if armed:
-                    self._arm_requested = False  # armed now: the armed state covers it
-                self._notify()
+                    self.arm_requested = False  # armed now: the armed state covers it
+                self.notify()
 
     async def _watch_landed_state(self) -> None:
         async for state in self.link.landed_states():
             if state != self.landed_state:
                 self.landed_state = state
-                self._notify()
+                self.notify()
 
     async def _watch_health(self) -> None:
         async for ok in self.link.local_position_health():
             if ok != self.local_position_ok:
                 self.local_position_ok = ok
-                self._notify()
+                self.notify()
 
     async def _watch_battery(self) -> None:
         async for level_pct in self.link.battery_levels():
@@ -315,8 +334,32 @@ class Link:
         return math.inf if self.latest is None else self.local_clock.now() - self.latest.t_s
 
     def notify(self) -> None:
-        """Wake the waits (:meth:`wait_until`): something they check has changed."""
-        self._notify()
+        """Wake the waits (:meth:`wait_change`): something they check has changed."""
+        event, self._changed = self._changed, asyncio.Event()
+        event.set()
+
+    def next_change(self) -> Coroutine[Any, Any, bool]:
+        """An awaitable that ends at the next state change (:meth:`notify`).
+
+        Returns
+        -------
+        coroutine
+            Ends (True) at the next change after this call.
+        """
+        return self._changed.wait()
+
+    async def wait_change(self, timeout_s: float) -> None:
+        """Wait for the next state change (:meth:`notify`), at most ``timeout_s``.
+
+        Parameters
+        ----------
+        timeout_s : float
+            Limit [s] on the local clock's loop; no error when it runs out.
+        """
+        changed = self._changed
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout_s):
+                await changed.wait()
 
     @property
     def link(self) -> VehicleLink:
@@ -327,7 +370,9 @@ class Link:
         VehicleError
             Not connected.
         """
-        return self._require(self._link)
+        if self.backend is None:
+            raise VehicleError("not connected")
+        return self.backend
 
     @property
     def system(self) -> Any:
@@ -338,14 +383,32 @@ class Link:
         VehicleError
             Not connected, or the link is not MAVSDK's.
         """
-        system = getattr(self._link, "system", None)
+        system = getattr(self.backend, "system", None)
         if system is None:
             raise VehicleError("not connected over MAVSDK")
         return system
 
-    async def _command(self, what: str, call: Callable[[], Awaitable[_T]]) -> _T:
-        """Run one link command with the command timeout; a refusal becomes VehicleError."""
-        if self._link is None:
+    async def command(self, what: str, call: Callable[[], Awaitable[_T]]) -> _T:
+        """Run one link command with the command timeout; a refusal becomes VehicleError.
+
+        Parameters
+        ----------
+        what : str
+            The command's name in the error's line, e.g. ``"arm"``.
+        call : callable
+            Makes the command's awaitable on the link.
+
+        Returns
+        -------
+        object
+            What the command returned.
+
+        Raises
+        ------
+        VehicleError
+            Not connected, no answer within ``settings.command_timeout_s``, or refused.
+        """
+        if self.backend is None:
             raise VehicleError(f"{what}: not connected")
         try:
             async with asyncio.timeout(self.settings.command_timeout_s):
@@ -356,9 +419,3 @@ class Link:
             ) from None
         except CommandRefused as exc:
             raise VehicleError(f"{what} failed: {exc.result}") from None
-
-    @staticmethod
-    def _require(plugin: _T | None) -> _T:
-        if plugin is None:
-            raise VehicleError("not connected")
-        return plugin

@@ -5,7 +5,9 @@ arena (:mod:`gcs.flight.fence`); every move and hold checks the vehicle's contro
 (:meth:`gcs.flight.watches.Watches.control_problem`). Landing and the emergency stop are in
 :mod:`gcs.flight.landing`.
 
-:class:`Manoeuvres` is one part of :class:`gcs.flight.vehicle.Vehicle`, which sets its state.
+:class:`Manoeuvres` is one part of :class:`gcs.flight.vehicle.Vehicle`: it commands through the
+connection, reads its state mirror, waits through the watches, and owns the setpoint stream (the
+last target, whether offboard was started, whether streaming was stopped for good).
 """
 
 from __future__ import annotations
@@ -22,10 +24,11 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState
 from gcs.errors import VehicleError
 from gcs.flight.backend import CommandRefused
 from gcs.flight.clock import WALL_CLOCK, Clock
-from gcs.flight.fence import format_ned
+from gcs.flight.fence import Fence, format_ned
 from gcs.flight.hover import SPEED_SPAN_S, is_settled
-from gcs.flight.link import TelemetrySample, sample_arrays
-from gcs.flight.watches import Watches, _WaitTimeout
+from gcs.flight.link import Link, TelemetrySample, sample_arrays
+from gcs.flight.watches import WaitTimeout, Watches
+from gcs.io.settings import FlightSettings
 
 __all__ = ["Manoeuvres", "heading_deg", "min_jerk", "sleep_until"]
 
@@ -82,12 +85,35 @@ def heading_deg(yaw_deg: float) -> float:
     return yaw if -180.0 <= yaw < 180.0 else (yaw + 180.0) % 360.0 - 180.0
 
 
-class Manoeuvres(Watches):
-    """The flying verbs of :class:`gcs.flight.vehicle.Vehicle`."""
+class Manoeuvres:
+    """The flying verbs of :class:`gcs.flight.vehicle.Vehicle`.
 
-    target_ned_m: np.ndarray | None  # the last setpoint sent
-    _streaming_stopped: bool  # by an emergency stop, for good
-    _offboard_started: bool
+    Parameters
+    ----------
+    mirror : Link
+        The connection and its state mirror.
+    watches : Watches
+        The safety watches whose waits the manoeuvres wait in.
+    settings : FlightSettings
+        Rates, timeouts and tolerances.
+    fence : Fence or None
+        The arena every setpoint must lie in; None: no setpoint is sent.
+    """
+
+    def __init__(
+        self, mirror: Link, watches: Watches, settings: FlightSettings, fence: Fence | None
+    ) -> None:
+        self._mirror = mirror
+        self._watches = watches
+        self.settings = settings
+        self.fence = fence
+        self.target_ned_m: np.ndarray | None = None  # the last setpoint sent
+        self.streaming_stopped = False  # by an emergency stop, for good
+        self.offboard_started = False  # PX4 follows our setpoints (a stop switches it to Hold)
+
+    def stop_streaming(self) -> None:
+        """Stop streaming for good: :meth:`send_setpoint` refuses every setpoint from now on."""
+        self.streaming_stopped = True
 
     async def wait_healthy_local_position(self, timeout_s: float | None = None) -> None:
         """Wait until PX4 reports a valid local position and samples are arriving.
@@ -103,10 +129,10 @@ class Manoeuvres(Watches):
             No valid local position within the timeout, or the link was lost.
         """
         timeout_s = self.settings.health_timeout_s if timeout_s is None else timeout_s
-        await self._wait_until(
+        await self._watches.wait_until(
             lambda: (
-                self.local_position_ok
-                and self.telemetry_age_s() <= self.settings.max_telemetry_age_s
+                self._mirror.local_position_ok
+                and self._mirror.telemetry_age_s() <= self.settings.max_telemetry_age_s
             ),
             timeout_s,
             "a valid local position estimate",
@@ -140,40 +166,43 @@ class Manoeuvres(Watches):
                     f"fence: take-off altitude {altitude_m:g} m is outside the arena "
                     f"{self.fence.arena_text()}; not taking off"
                 )
-            self._require_inside("arming")
-        link = self.link
+            self._watches.require_inside("arming")
+        link = self._mirror.link
         try:
-            await self._command(
+            await self._mirror.command(
                 "set take-off altitude", lambda: link.set_takeoff_altitude(float(altitude_m))
             )
         except VehicleError as exc:
             _log.warning("%s; taking off to the vehicle's default altitude", exc)
-        self._arm_requested = True  # the fence watches from the arm command on
+        self._mirror.arm_requested = True  # the fence watches from the arm command on
         try:
-            await self._command("arm", link.arm)
-            await self._wait_until(
-                lambda: self.armed, self.settings.command_timeout_s, "armed state", in_control=False
+            await self._mirror.command("arm", link.arm)
+            await self._watches.wait_until(
+                lambda: self._mirror.armed,
+                self.settings.command_timeout_s,
+                "armed state",
+                in_control=False,
             )
         except BaseException:
-            self._arm_requested = self.armed
+            self._mirror.arm_requested = self._mirror.armed
             raise
-        await self._command("take-off", link.takeoff)
+        await self._mirror.command("take-off", link.takeoff)
         tolerance_m = self.settings.settle_tolerance_m
         seen_takeoff_mode = [False]
 
         def airborne() -> bool:
-            if self.latest is None:
+            if self._mirror.latest is None:
                 return False
-            seen_takeoff_mode[0] |= self.flight_mode == FlightMode.TAKEOFF
-            height_m = -self.latest.pos_ned_m[2]
+            seen_takeoff_mode[0] |= self._mirror.flight_mode == FlightMode.TAKEOFF
+            height_m = -self._mirror.latest.pos_ned_m[2]
             done_in_hold = (
                 seen_takeoff_mode[0]
-                and self.flight_mode == FlightMode.HOLD
-                and self.landed_state == LandedState.IN_AIR
+                and self._mirror.flight_mode == FlightMode.HOLD
+                and self._mirror.landed_state == LandedState.IN_AIR
             )
             return height_m >= altitude_m - tolerance_m or done_in_hold
 
-        await self._wait_until(
+        await self._watches.wait_until(
             airborne,
             self.settings.takeoff_timeout_s,
             f"take-off to {altitude_m:g} m",
@@ -197,14 +226,14 @@ class Manoeuvres(Watches):
             The setpoint lies outside the arena (or the vehicle has no fence), after
             :meth:`emergency_stop` (streaming is over for good), or MAVSDK refused it.
         """
-        if self._streaming_stopped:
+        if self.streaming_stopped:
             raise VehicleError("setpoint streaming was stopped by an emergency stop")
         if self.fence is None:
             raise VehicleError("no arena fence: gcs sends setpoints only inside an arena")
         problem = self.fence.setpoint_problem(pos_ned_m)
         if problem is not None:
             raise VehicleError(f"fence: {problem}; not sent")
-        link = self.link
+        link = self._mirror.link
         n, e, d = (float(x) for x in pos_ned_m)
         yaw = heading_deg(self.settings.yaw_deg if yaw_deg is None else yaw_deg)
         try:
@@ -232,25 +261,28 @@ class Manoeuvres(Watches):
         VehicleError
             No fresh position, offboard refused, or OFFBOARD not reported in time.
         """
-        if self.latest is None or self.telemetry_age_s() > self.settings.max_telemetry_age_s:
+        if (
+            self._mirror.latest is None
+            or self._mirror.telemetry_age_s() > self.settings.max_telemetry_age_s
+        ):
             raise VehicleError("cannot start offboard: no fresh position telemetry")
-        self._require_inside("starting offboard")
-        hover_ned_m = self._hover_point(np.array(self.latest.pos_ned_m))
+        self._watches.require_inside("starting offboard")
+        hover_ned_m = self._hover_point(np.array(self._mirror.latest.pos_ned_m))
         period_s = 1.0 / self.settings.stream_rate_hz
-        clock = self.local_clock
+        clock = self._mirror.local_clock
         t0 = clock.now()
         for i in range(max(1, math.ceil(preroll_s / period_s))):
             await sleep_until(t0 + i * period_s, clock)
-            breach = self.safety_problem()
+            breach = self._watches.safety_problem()
             if breach is not None:
                 raise VehicleError(f"{breach} while starting offboard")
             await self.send_setpoint(hover_ned_m)
-        link = self.link
+        link = self._mirror.link
         await self.send_setpoint(hover_ned_m)
-        await self._command("start offboard", link.start_offboard)
-        self._offboard_started = True
-        await self._wait_until(
-            lambda: self.flight_mode == FlightMode.OFFBOARD,
+        await self._mirror.command("start offboard", link.start_offboard)
+        self.offboard_started = True
+        await self._watches.wait_until(
+            lambda: self._mirror.flight_mode == FlightMode.OFFBOARD,
             self.settings.command_timeout_s,
             "OFFBOARD mode",
             in_control=False,
@@ -279,22 +311,22 @@ class Manoeuvres(Watches):
         target = np.asarray(ned_m, dtype=float).reshape(3)
         if self.fence is not None and (problem := self.fence.setpoint_problem(target)):
             raise VehicleError(f"fence: cannot move to {format_ned(target)}: {problem}")
-        self._require_inside(f"moving to {format_ned(target)}")
+        self._watches.require_inside(f"moving to {format_ned(target)}")
         if self.target_ned_m is not None:
             start = self.target_ned_m.copy()
-        elif self.latest is not None:
-            start = self._hover_point(np.array(self.latest.pos_ned_m))
+        elif self._mirror.latest is not None:
+            start = self._hover_point(np.array(self._mirror.latest.pos_ned_m))
         else:
             raise VehicleError("cannot move: no position telemetry yet")
         distance_m = float(np.linalg.norm(target - start))
         rate_hz = self.settings.stream_rate_hz
         duration_s = 1.875 * distance_m / speed_m_s
         n_ticks = max(1, math.ceil(duration_s * rate_hz))
-        clock = self.local_clock
+        clock = self._mirror.local_clock
         t0 = clock.now()
         for i in range(1, n_ticks + 1):
             await sleep_until(t0 + i / rate_hz, clock)
-            problem = self.control_problem()
+            problem = self._watches.control_problem()
             if problem is not None:
                 raise VehicleError(f"{problem} while moving to {format_ned(target)}")
             await self.send_setpoint(start + min_jerk(i / n_ticks) * (target - start))
@@ -330,20 +362,20 @@ class Manoeuvres(Watches):
         s = self.settings
         # samples enough for the window and its speed span at up to twice the requested rate
         keep = math.ceil((s.settle_time_s + SPEED_SPAN_S) * 2 * s.telemetry_rate_hz) + 2
-        with self.record_telemetry() as samples:
+        with self._mirror.record_telemetry() as samples:
 
             def settled() -> bool:
                 t, pos = sample_arrays(samples[-keep:])
                 return is_settled(t, pos, target, tolerance_m, speed_tolerance_m_s, s.settle_time_s)
 
             try:
-                await self._wait_until(
+                await self._watches.wait_until(
                     settled,
                     s.settle_timeout_s,
                     f"settling at {format_ned(target)}",
                     in_control=True,
                 )
-            except _WaitTimeout:
+            except WaitTimeout:
                 return False
         return True
 
@@ -369,14 +401,14 @@ class Manoeuvres(Watches):
             Control was lost (see :meth:`control_problem`) before the hold ended.
         """
         await self.hold_position()
-        fit = self.clock_fit()
-        with self.record_telemetry() as samples:
+        fit = self._mirror.clock_fit()
+        with self._mirror.record_telemetry() as samples:
             # until a sample stamped duration_s after the vehicle's "now" (not its last sample)
-            end_s = float(fit.to_vehicle(self.local_clock.now())) + duration_s
+            end_s = float(fit.to_vehicle(self._mirror.local_clock.now())) + duration_s
             # twice the expected wall time: a simulator may slow down meanwhile (silence is the
             # watchdog's to catch, not the timeout's)
-            await self._wait_until(
-                lambda: self.clock.latest_s >= end_s,
+            await self._watches.wait_until(
+                lambda: self._mirror.clock.latest_s >= end_s,
                 2 * duration_s / fit.rate + 2 * self.settings.max_telemetry_age_s,
                 what,
                 in_control=True,
@@ -393,8 +425,8 @@ class Manoeuvres(Watches):
         """
         if self.target_ned_m is not None:
             hover = self.target_ned_m.copy()
-        elif self.latest is not None:
-            hover = self._hover_point(np.array(self.latest.pos_ned_m))
+        elif self._mirror.latest is not None:
+            hover = self._hover_point(np.array(self._mirror.latest.pos_ned_m))
         else:
             raise VehicleError("cannot hold: no position telemetry yet")
         await self.send_setpoint(hover)
@@ -429,7 +461,7 @@ class Manoeuvres(Watches):
         while True:
             # woken by every state change (each position sample), at the latest at half the
             # telemetry-age limit so that silence is noticed
-            changed = asyncio.ensure_future(self._changed.wait())
+            changed = asyncio.ensure_future(self._mirror.next_change())
             try:
                 await asyncio.wait(
                     {task, changed},
@@ -440,6 +472,6 @@ class Manoeuvres(Watches):
                 changed.cancel()
             if task.done():
                 return task.result()
-            problem = self.control_problem()
+            problem = self._watches.control_problem()
             if problem is not None:
                 raise VehicleError(f"{problem} while hovering for {what}")

@@ -5,7 +5,8 @@ Param, Telemetry, MavlinkDirect and Geofence plugins on the wire), each guarded 
 timeout of :class:`gcs.flight.link.Link`. What the geofence holds is
 decided in :mod:`gcs.flight.geofence`.
 
-:class:`Params` is one part of :class:`gcs.flight.vehicle.Vehicle`.
+:class:`Params` is one part of :class:`gcs.flight.vehicle.Vehicle`: it needs only the connection
+(:meth:`gcs.flight.link.Link.command`).
 """
 
 from __future__ import annotations
@@ -21,8 +22,17 @@ __all__ = ["Params"]
 _log = logging.getLogger(__name__)
 
 
-class Params(Link):
-    """Parameters, global origin and geofence of :class:`gcs.flight.vehicle.Vehicle`."""
+class Params:
+    """Parameters, global origin and geofence of :class:`gcs.flight.vehicle.Vehicle`.
+
+    Parameters
+    ----------
+    mirror : Link
+        The connection the reads and writes go through.
+    """
+
+    def __init__(self, mirror: Link) -> None:
+        self._mirror = mirror
 
     async def read_int_params(self, names: tuple[str, ...]) -> dict[str, int | None]:
         """Read integer parameters of the autopilot; None for each one it does not answer.
@@ -36,13 +46,13 @@ class Params(Link):
         -------
         dict of str to int or None
         """
-        if self._link is None:
+        if self._mirror.backend is None:
             raise VehicleError("reading parameters: not connected")
-        link = self._link
+        link = self._mirror.backend
         values: dict[str, int | None] = {}
         for name in names:
             try:
-                values[name] = await self._command(
+                values[name] = await self._mirror.command(
                     f"read {name}", lambda name=name: link.get_param_int(name)
                 )
             except VehicleError as exc:
@@ -63,15 +73,15 @@ class Params(Link):
         VehicleError
             A parameter was refused or not answered.
         """
-        if self._link is None:
+        if self._mirror.backend is None:
             raise VehicleError("setting parameters: not connected")
-        link = self._link
+        link = self._mirror.backend
         for name, value in values.items():
             if isinstance(value, int):
                 call = lambda n=name, v=value: link.set_param_int(n, v)  # noqa: E731
             else:
                 call = lambda n=name, v=value: link.set_param_float(n, float(v))  # noqa: E731
-            await self._command(f"set {name}", call)
+            await self._mirror.command(f"set {name}", call)
 
     async def read_float_param(self, name: str) -> float | None:
         """Read one float parameter of the autopilot; None if it does not answer.
@@ -85,11 +95,13 @@ class Params(Link):
         -------
         float or None
         """
-        if self._link is None:
+        if self._mirror.backend is None:
             raise VehicleError("reading parameters: not connected")
-        link = self._link
+        link = self._mirror.backend
         try:
-            return float(await self._command(f"read {name}", lambda: link.get_param_float(name)))
+            return float(
+                await self._mirror.command(f"read {name}", lambda: link.get_param_float(name))
+            )
         except VehicleError as exc:
             _log.warning("%s", exc)
             return None
@@ -102,9 +114,11 @@ class Params(Link):
         dict of str to float or None
             Integer and float parameters by name.
         """
-        if self._link is None:
+        if self._mirror.backend is None:
             raise VehicleError("reading parameters: not connected")
-        found = await self._command("read all parameters", self._link.get_all_params)
+        found = await self._mirror.command(
+            "read all parameters", self._mirror.backend.get_all_params
+        )
         return dict(found)
 
     async def gps_global_origin(self) -> tuple[float, float, float]:
@@ -120,8 +134,8 @@ class Params(Link):
         VehicleError
             Not answered, or not a finite position.
         """
-        link = self.link
-        values = await self._command("read the global origin", link.get_gps_global_origin)
+        link = self._mirror.link
+        values = await self._mirror.command("read the global origin", link.get_gps_global_origin)
         if not all(math.isfinite(float(x)) for x in values):
             raise VehicleError(f"read the global origin: not a position {values}")
         return (float(values[0]), float(values[1]), float(values[2]))
@@ -145,8 +159,8 @@ class Params(Link):
         VehicleError
             Not connected, or MAVSDK refused the message.
         """
-        link = self.link
-        await self._command(
+        link = self._mirror.link
+        await self._mirror.command(
             "set the global origin", lambda: link.set_gps_global_origin(lat_deg, lon_deg, alt_m)
         )
 
@@ -163,7 +177,9 @@ class Params(Link):
         VehicleError
             The upload was refused or not answered.
         """
-        if self._link is None:
+        if self._mirror.backend is None:
             raise VehicleError("geofence upload: not connected")
-        link = self._link
-        await self._command("geofence upload", lambda: link.upload_inclusion_polygon(vertices_deg))
+        link = self._mirror.backend
+        await self._mirror.command(
+            "geofence upload", lambda: link.upload_inclusion_polygon(vertices_deg)
+        )

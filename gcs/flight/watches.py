@@ -6,15 +6,14 @@ other watch reports (:meth:`Watches.trip`, :meth:`Watches.add_watch`: a motion-c
 health, say), is a *breach*: every wait, move, hold and trial of the flight layer raises it at
 once as a :class:`gcs.errors.VehicleError` (or ``TrialAborted``), and the campaign stops the
 vehicle (:meth:`gcs.flight.landing.Landing.emergency_stop`). Every wait is an event wait on the
-state mirror (:mod:`gcs.flight.link`) with a timeout, never a fixed sleep.
+state mirror (:class:`gcs.flight.link.Link`) with a timeout, never a fixed sleep.
 
-:class:`Watches` is one part of :class:`gcs.flight.vehicle.Vehicle`, which sets its state.
+:class:`Watches` is one part of :class:`gcs.flight.vehicle.Vehicle`: it reads the state mirror
+and owns the breach; the mirror hands it each position sample (:meth:`Watches.check_sample`).
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import logging
 from collections.abc import Callable
 
@@ -23,22 +22,42 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode
 from gcs.errors import VehicleError
 from gcs.flight.fence import EstimateMonitor, Fence
 from gcs.flight.link import Link, TelemetrySample
+from gcs.io.settings import FlightSettings
 
-__all__ = ["Watches"]
+__all__ = ["WaitTimeout", "Watches"]
 
 _log = logging.getLogger(__name__)
 
 
-class Watches(Link):
-    """The breach, its watches and the guarded waits of :class:`gcs.flight.vehicle.Vehicle`."""
+class Watches:
+    """The breach, its watches and the guarded waits of :class:`gcs.flight.vehicle.Vehicle`.
 
-    fence: Fence | None
-    breach: str | None  # the first breach seen; ends the flight
-    _monitor: EstimateMonitor | None
-    _watches: list[tuple[str, Callable[[], str | None]]]
+    Parameters
+    ----------
+    mirror : Link
+        The connection and its state mirror (read, and woken on a breach).
+    settings : FlightSettings
+        The telemetry-age limit.
+    fence : Fence or None
+        The arena and the limits watched while armed; None: no estimate monitor.
+    """
 
-    def _check_sample(self, sample: TelemetrySample) -> None:
-        """Give a position sample to the estimate monitor; a breach it names trips the flight."""
+    def __init__(self, mirror: Link, settings: FlightSettings, fence: Fence | None) -> None:
+        self._mirror = mirror
+        self.settings = settings
+        self.fence = fence
+        self.breach: str | None = None  # the first breach seen; ends the flight
+        self._monitor = EstimateMonitor(fence) if fence is not None else None
+        self._watches: list[tuple[str, Callable[[], str | None]]] = []
+
+    def check_sample(self, sample: TelemetrySample) -> None:
+        """Give a position sample to the estimate monitor; a breach it names trips the flight.
+
+        Parameters
+        ----------
+        sample : TelemetrySample
+            As received (before the mirror keeps it).
+        """
         if self._monitor is not None:
             problem = self._monitor.update(sample.t_vehicle_s, sample.pos_ned_m, sample.vel_ned_m_s)
             if problem is not None and self.fence_active:
@@ -47,7 +66,7 @@ class Watches(Link):
     @property
     def fence_active(self) -> bool:
         """Whether breaches count now: from the arm command until the vehicle is disarmed."""
-        return self.armed or self._arm_requested
+        return self._mirror.armed or self._mirror.arm_requested
 
     def trip(self, source: str, reason: str) -> None:
         """Report a breach: the flight stops at once (the first one is kept).
@@ -66,7 +85,7 @@ class Watches(Link):
         if self.breach is None:
             self.breach = f"{source}: {reason}"
             _log.info("breach: %s", self.breach)
-            self._notify()
+            self._mirror.notify()
 
     def add_watch(self, source: str, problem: Callable[[], str | None]) -> None:
         """Watch one more condition while the vehicle is armed (polled at every check).
@@ -96,11 +115,23 @@ class Watches(Link):
                     break
         return self.breach
 
-    def _require_inside(self, what: str) -> None:
-        """Refuse to start ``what`` from a measured position outside the arena plus margin."""
-        if self.fence is None or self.latest is None:
+    def require_inside(self, what: str) -> None:
+        """Refuse to start ``what`` from a measured position outside the arena plus margin.
+
+        Parameters
+        ----------
+        what : str
+            What would start, for the error's line (``"arming"``).
+
+        Raises
+        ------
+        VehicleError
+            The latest position is outside the arena plus its margin.
+        """
+        latest = self._mirror.latest
+        if self.fence is None or latest is None:
             return
-        problem = self.fence.position_problem(self.latest.pos_ned_m)
+        problem = self.fence.position_problem(latest.pos_ned_m)
         if problem is not None:
             raise VehicleError(f"fence: {problem}; not {what}")
 
@@ -116,18 +147,27 @@ class Watches(Link):
         breach = self.safety_problem()
         if breach is not None:
             return breach
-        if not self.connected:
+        mirror = self._mirror
+        if not mirror.connected:
             return "link lost (no heartbeat for 3 s)"
-        if self.flight_mode != FlightMode.OFFBOARD:
-            return f"flight mode is {self.flight_mode.name}, not OFFBOARD"
-        age_s = self.telemetry_age_s()
+        if mirror.flight_mode != FlightMode.OFFBOARD:
+            return f"flight mode is {mirror.flight_mode.name}, not OFFBOARD"
+        age_s = mirror.telemetry_age_s()
         if age_s > self.settings.max_telemetry_age_s:
             return f"position telemetry stale ({age_s:.2f} s old)"
         return None
 
-    async def wait_until(self, predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
-        """Wait (on the vehicle's state-change events, at least every telemetry-age limit)
-        until ``predicate()`` holds, on the ground (a breach or a lost link ends it).
+    async def wait_until(
+        self,
+        predicate: Callable[[], bool],
+        timeout_s: float,
+        what: str,
+        *,
+        in_control: bool = False,
+        stopping: bool = False,
+    ) -> None:
+        """Wait (on the mirror's state-change events, at least every telemetry-age limit) until
+        ``predicate()`` holds; a breach or a lost link ends it.
 
         Parameters
         ----------
@@ -137,30 +177,20 @@ class Watches(Link):
             Limit [s].
         what : str
             Named in the timeout's message.
+        in_control : bool
+            Also end on any :meth:`control_problem` (offboard lost, stale telemetry).
+        stopping : bool
+            The emergency stop's own waits: a breach does not end them.
 
         Raises
         ------
+        WaitTimeout
+            Not within ``timeout_s`` (a VehicleError; control was not lost).
         VehicleError
-            Not within ``timeout_s``, link lost, or a breach.
+            Link lost, a breach (unless ``stopping``), or with ``in_control`` a control problem.
         """
-        await self._wait_until(predicate, timeout_s, what, in_control=False)
-
-    async def _wait_until(
-        self,
-        predicate: Callable[[], bool],
-        timeout_s: float,
-        what: str,
-        *,
-        in_control: bool,
-        stopping: bool = False,
-    ) -> None:
-        """Wait (on state-change events) until ``predicate()`` holds.
-
-        Raises :class:`_WaitTimeout` (a VehicleError) on timeout, VehicleError on link loss,
-        on a breach (unless ``stopping``: the emergency stop itself) and, with ``in_control``,
-        on any :meth:`control_problem`.
-        """
-        clock = self.local_clock
+        mirror = self._mirror
+        clock = mirror.local_clock
         deadline_s = clock.now() + timeout_s
         while True:
             # problems first: a breach seen with the sample that also ends the wait ends it
@@ -171,17 +201,14 @@ class Watches(Link):
                 raise VehicleError(f"{problem} while waiting for {what}")
             if predicate():
                 return
-            if not self.connected:
+            if not mirror.connected:
                 raise VehicleError(f"link lost (no heartbeat for 3 s) while waiting for {what}")
             remaining_s = deadline_s - clock.now()
             if remaining_s <= 0:
-                raise _WaitTimeout(f"{what} did not happen within {timeout_s:g} s")
+                raise WaitTimeout(f"{what} did not happen within {timeout_s:g} s")
             # Wake up at least at the telemetry-age limit so that silence is noticed.
-            changed = self._changed
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(min(remaining_s, self.settings.max_telemetry_age_s)):
-                    await changed.wait()
+            await mirror.wait_change(min(remaining_s, self.settings.max_telemetry_age_s))
 
 
-class _WaitTimeout(VehicleError):
-    """A wait of :meth:`Vehicle._wait_until` ran out of time (control was not lost)."""
+class WaitTimeout(VehicleError):
+    """A wait of :meth:`Watches.wait_until` ran out of time (control was not lost)."""
