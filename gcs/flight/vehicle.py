@@ -62,8 +62,8 @@ class CampaignVehicle(Protocol):
 
     The calls of :mod:`gcs.flight.campaign` and of the steps it hands the vehicle to
     (:mod:`gcs.flight.trial`, :mod:`gcs.flight.prearm`, :mod:`gcs.flight.geofence`,
-    :mod:`gcs.flight.mocap.campaign`, :mod:`gcs.flight.checklist`); :class:`Vehicle` is the one
-    that flies, and the parts that do each are named below.
+    :mod:`gcs.flight.mocap.campaign`, :mod:`gcs.flight.checklist`). :class:`Vehicle` is the one
+    that flies; each call is documented in full by the part that does it.
     """
 
     @property
@@ -107,15 +107,7 @@ class CampaignVehicle(Protocol):
         ...
 
     async def connect(self, url: str, timeout_s: float | None = None) -> None:
-        """Open ``url``, wait for the autopilot, start mirroring its state (:class:`Link`).
-
-        Parameters
-        ----------
-        url : str
-            Connection URL (MAVSDK's, or a registered scheme).
-        timeout_s : float, optional
-            How long to wait for an autopilot [s]; ``settings.connect_timeout_s`` if omitted.
-        """
+        """Open ``url``, wait ``timeout_s`` for the autopilot, start mirroring its state."""
         ...
 
     async def close(self) -> None:
@@ -139,27 +131,11 @@ class CampaignVehicle(Protocol):
         ...
 
     def add_watch(self, source: str, problem: Callable[[], str | None]) -> None:
-        """Watch one more condition while armed (:class:`Watches`).
-
-        Parameters
-        ----------
-        source : str
-            Its name in the breach line, e.g. ``"mocap"``.
-        problem : callable
-            None while all is well, else one line; polled at every check.
-        """
+        """Watch one more condition while armed: ``problem()`` names a breach of ``source``."""
         ...
 
     def trip(self, source: str, reason: str) -> None:
-        """Report a breach: the flight stops at once (the first one is kept).
-
-        Parameters
-        ----------
-        source : str
-            What saw it, e.g. ``"fence"``.
-        reason : str
-            One line naming what was seen.
-        """
+        """Report a breach seen by ``source``: the flight stops at once (the first is kept)."""
         ...
 
     def control_problem(self) -> str | None:
@@ -167,37 +143,15 @@ class CampaignVehicle(Protocol):
         ...
 
     async def wait_until(self, predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
-        """Wait until ``predicate()`` holds, on the ground (a breach or a lost link ends it).
-
-        Parameters
-        ----------
-        predicate : callable
-            Checked on every state change.
-        timeout_s : float
-            Limit [s].
-        what : str
-            Named in the timeout's message ("... did not happen within ...").
-        """
+        """Wait until ``predicate()`` holds, on the ground; a timeout names ``what``."""
         ...
 
     async def read_int_params(self, names: tuple[str, ...]) -> dict[str, int | None]:
-        """Read integer parameters; None for each one not answered (:class:`Params`).
-
-        Parameters
-        ----------
-        names : tuple of str
-            PX4 parameter names.
-        """
+        """Read integer parameters by name; None for each one not answered."""
         ...
 
     async def read_float_param(self, name: str) -> float | None:
-        """Read one float parameter; None if not answered.
-
-        Parameters
-        ----------
-        name : str
-            PX4 parameter name.
-        """
+        """Read one float parameter; None if not answered."""
         ...
 
     async def read_all_params(self) -> dict[str, float | None]:
@@ -205,13 +159,7 @@ class CampaignVehicle(Protocol):
         ...
 
     async def set_params(self, values: dict[str, int | float]) -> None:
-        """Set parameters (an int as INT32, a float as REAL32), one after the other.
-
-        Parameters
-        ----------
-        values : dict of str to int or float
-            PX4 parameter names and values.
-        """
+        """Set parameters (an int as INT32, a float as REAL32), one after the other."""
         ...
 
     async def gps_global_origin(self) -> tuple[float, float, float]:
@@ -219,105 +167,39 @@ class CampaignVehicle(Protocol):
         ...
 
     async def set_global_origin(self, lat_deg: float, lon_deg: float, alt_m: float) -> None:
-        """Set the global position of the local NED origin.
-
-        Parameters
-        ----------
-        lat_deg, lon_deg : float
-            WGS84 latitude and longitude [deg].
-        alt_m : float
-            Altitude AMSL [m].
-        """
+        """Set the global position of the local NED origin (WGS84 [deg], AMSL [m])."""
         ...
 
     async def upload_inclusion_polygon(self, vertices_deg: list[tuple[float, float]]) -> None:
-        """Replace the autopilot's geofence by one inclusion polygon.
-
-        Parameters
-        ----------
-        vertices_deg : list of (float, float)
-            The polygon's vertices, (latitude, longitude) [deg].
-        """
+        """Replace the autopilot's geofence by one inclusion polygon of (lat, lon) [deg]."""
         ...
 
     async def wait_healthy_local_position(self, timeout_s: float | None = None) -> None:
-        """Wait for a valid local position and fresh samples (:class:`Manoeuvres`).
-
-        Parameters
-        ----------
-        timeout_s : float, optional
-            Limit [s]; ``settings.health_timeout_s`` if omitted.
-        """
+        """Wait for a valid local position estimate and fresh samples."""
         ...
 
     async def arm_and_takeoff(self, altitude_m: float) -> None:
-        """Arm and take off to ``altitude_m`` above the local origin.
-
-        Parameters
-        ----------
-        altitude_m : float
-            Height above the local NED origin, positive up [m].
-        """
+        """Arm and take off to ``altitude_m`` above the local origin (positive up)."""
         ...
 
     async def send_setpoint(self, pos_ned_m: Any, yaw_deg: float | None = None) -> None:
-        """Send one position setpoint; one outside the arena is refused.
-
-        Parameters
-        ----------
-        pos_ned_m : array_like, shape (3,)
-            Absolute local NED position [m].
-        yaw_deg : float or None
-            Heading [deg, clockwise from north]; None: the profile's ``flight.yaw_deg``.
-        """
+        """Send one position setpoint (local NED [m]); one outside the arena is refused."""
         ...
 
     async def start_offboard_at_current_position(self, preroll_s: float = 1.0) -> None:
-        """Stream the current position as setpoint, switch to OFFBOARD and wait for it.
-
-        Parameters
-        ----------
-        preroll_s : float
-            How long to stream the hover setpoint before switching [s]; below 3 s.
-        """
+        """Stream the current position as setpoint, switch to OFFBOARD and wait for it."""
         ...
 
     async def goto(self, ned_m: Any, speed_m_s: float) -> None:
-        """Move in a straight line (minimum jerk) to ``ned_m``, watching control.
-
-        Parameters
-        ----------
-        ned_m : array_like, shape (3,)
-            Target in local NED [m].
-        speed_m_s : float
-            Peak speed of the move [m/s].
-        """
+        """Move in a straight line (minimum jerk) to ``ned_m``, watching control."""
         ...
 
     async def settle(self, ned_m: Any, tolerance_m: float, speed_tolerance_m_s: float) -> bool:
-        """Hover at ``ned_m`` until settled; False when the settle timeout ran out first.
-
-        Parameters
-        ----------
-        ned_m : array_like, shape (3,)
-            Hover point in local NED [m].
-        tolerance_m : float
-            Largest distance from the point [m].
-        speed_tolerance_m_s : float
-            Largest speed [m/s].
-        """
+        """Hover at ``ned_m`` until settled; False when the settle timeout ran out first."""
         ...
 
     async def hold(self, duration_s: float, what: str) -> list[TelemetrySample]:
-        """Hover at the current target for ``duration_s`` of vehicle time; its samples.
-
-        Parameters
-        ----------
-        duration_s : float
-            How long, on the vehicle's clock [s].
-        what : str
-            Name of the hold for error messages.
-        """
+        """Hover at the current target for ``duration_s`` of vehicle time; its samples."""
         ...
 
     async def hold_position(self) -> np.ndarray:
@@ -325,15 +207,7 @@ class CampaignVehicle(Protocol):
         ...
 
     async def hover_while(self, work: Awaitable[_T], what: str) -> _T:
-        """Hover while ``work`` runs, watching the vehicle; the result of ``work``.
-
-        Parameters
-        ----------
-        work : awaitable
-            The work to await (not cancelled if the vehicle fails).
-        what : str
-            Name of the work for error messages.
-        """
+        """Hover while ``work`` runs, watching the vehicle; the result of ``work``."""
         ...
 
     async def land_and_disarm(self) -> None:
@@ -341,21 +215,17 @@ class CampaignVehicle(Protocol):
         ...
 
     async def emergency_stop(self, reason: str) -> str:
-        """Stop streaming, Hold, land, disarm once on the ground; never raises (:class:`Landing`).
-
-        Parameters
-        ----------
-        reason : str
-            Why (logged).
-        """
+        """Stop streaming, Hold, land, disarm once on the ground; never raises."""
         ...
 
 
 class Vehicle(CampaignVehicle):
     """A PX4 multirotor behind one connection, made of its parts.
 
-    Each method of :class:`CampaignVehicle` (documented there and in the part that does it)
-    delegates to one part.
+    Each member of :class:`CampaignVehicle` delegates to one part, which documents it in full:
+    :class:`gcs.flight.link.Link`, :class:`gcs.flight.watches.Watches`,
+    :class:`gcs.flight.params.Params`, :class:`gcs.flight.manoeuvres.Manoeuvres`,
+    :class:`gcs.flight.landing.Landing`.
 
     Parameters
     ----------
