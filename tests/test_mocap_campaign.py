@@ -152,3 +152,41 @@ def test_a_mapping_judged_along_one_direction_only_is_refused_after_the_second_c
         else:  # forwarded: the mapping is never judged in the air (docs/mocap.md)
             assert len(asyncio.run(run)) == 2
         assert any("once more" in line for line in lines), lines
+
+
+def test_the_session_record_of_the_mocap_is_each_steps_part_in_the_order_they_came() -> None:
+    import json
+    from dataclasses import replace
+
+    from gcs.app.session import session_record
+    from gcs.flight.campaign import FlightSession
+    from gcs.flight.mocap.campaign import ArmingAgreement, Ekf2Check, MocapReport
+    from gcs.flight.mocap.checks import FrameCheck, Response
+    from gcs.flight.preflight import navigation_source
+
+    ok = Response(1.0, 0.0)
+    check = FrameCheck(
+        ((0.3, 0.0, 0.0), (0.0, 0.3, 0.0)), (ok, ok), (ok, ok), (ok, ok), 0.0, False, 0.02,
+        "ok", None,
+    )  # fmt: skip
+    ekf2 = Ekf2Check({"EKF2_EV_CTRL": 11, "EKF2_EV_DELAY": 5.0}, ("EKF2_EV_DELAY 5 ms",))
+    before = FlightSession(
+        "udpin://", 0, navigation_source({}),
+        mocap=MocapReport(ekf2, ArmingAgreement(0.012, (47.39, 8.54, 488.0), True)),
+    )  # fmt: skip
+    assert before.mocap is not None
+    checked = replace(before, mocap=replace(before.mocap, moves=(check,)))
+    assert checked.mocap is not None
+    ended = replace(checked, mocap=replace(checked.mocap, link={"url": "natnet://x", "samples": 7}))
+    early, middle, last = (session_record(s)["mocap"] for s in (before, checked, ended))
+    assert list(early) == ["ekf2", "findings", "agreement_m", "origin", "origin_set"]
+    assert early["ekf2"] == {"EKF2_EV_CTRL": 11, "EKF2_EV_DELAY": 5.0}
+    assert early["findings"] == ["EKF2_EV_DELAY 5 ms"] and early["origin"] == [47.39, 8.54, 488.0]
+    assert middle == early | {"moves": [check.as_record()]}
+    assert last == middle | {"url": "natnet://x", "samples": 7}
+    assert list(last)[-3:] == ["moves", "url", "samples"]
+    # each session keeps what it had: the later parts did not reach into the earlier values
+    assert session_record(before)["mocap"] == early and before.mocap.moves is None
+    assert json.loads(json.dumps(last)) == last
+    no_mocap = FlightSession("udpin://", 0, navigation_source({}))
+    assert session_record(no_mocap)["mocap"] is None

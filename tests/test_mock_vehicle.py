@@ -9,7 +9,16 @@ import pytest
 
 from gcs.mock.cli import faults_cli_args
 from gcs.mock.config import Faults, MockConfig
-from gcs.mock.vehicle import LandedState, MavResult, Mode, Vehicle, decode_param, encode_param
+from gcs.mock.vehicle import (
+    FAILSAFES,
+    Failsafe,
+    LandedState,
+    MavResult,
+    Mode,
+    Vehicle,
+    decode_param,
+    encode_param,
+)
 
 CFG = MockConfig()
 
@@ -83,12 +92,12 @@ def test_offboard_loss_falls_back_to_hold_after_com_of_loss_t_and_resumes() -> N
     v.update(last + CFG.px4.com_of_loss_t_s - 0.05)
     assert v.mode is Mode.OFFBOARD
     v.update(last + CFG.px4.com_of_loss_t_s + 0.05)
-    assert v.mode is Mode.HOLD and v.failsafe and v.armed
+    assert v.mode is Mode.HOLD and v.failsafe is Failsafe.OFFBOARD_LOSS and v.armed
     held = list(v.physics.pos)
     v.update(v.t_s + 3.0)
     assert abs(v.physics.pos[0] - held[0]) < 0.3  # holds where it was
     stream(v, v.t_s, v.t_s + 0.1)  # setpoints come back: PX4 resumes offboard
-    assert v.mode is Mode.OFFBOARD and not v.failsafe
+    assert v.mode is Mode.OFFBOARD and v.failsafe is Failsafe.NONE
 
 
 def test_land_then_auto_disarm_and_mode_after_disarm() -> None:
@@ -186,12 +195,12 @@ def test_data_link_loss_with_nav_dll_act_3_lands_and_disarms() -> None:
 def test_data_link_loss_with_nav_dll_act_1_holds_until_the_link_returns() -> None:
     v = heard_until(1, 6.0)
     stream(v, v.t_s, 6.0 + DL_LOSS_T_S + 0.05)
-    assert v.mode is Mode.HOLD and v.failsafe and v.data_link_lost
+    assert v.mode is Mode.HOLD and v.failsafe is Failsafe.DATA_LINK_LOSS and v.data_link_lost
     stream(v, v.t_s, v.t_s + 1.0)  # setpoints alone do not end a data-link failsafe
     assert v.mode is Mode.HOLD
     v.on_gcs_heartbeat(v.t_s)
     stream(v, v.t_s, v.t_s + 0.1)
-    assert v.mode is Mode.OFFBOARD and not v.failsafe and not v.data_link_lost
+    assert v.mode is Mode.OFFBOARD and v.failsafe is Failsafe.NONE and not v.data_link_lost
 
 
 def test_data_link_loss_with_the_px4_default_changes_nothing() -> None:
@@ -207,6 +216,42 @@ def test_no_failsafe_before_a_ground_station_was_ever_heard() -> None:
     v.takeoff()
     v.update(20.0)
     assert v.mode is Mode.HOLD and v.armed and not v.data_link_lost
+
+
+def test_the_failsafe_table_says_how_each_failsafe_ends() -> None:
+    assert set(FAILSAFES) == set(Failsafe)
+    resuming = {f for f, rule in FAILSAFES.items() if rule.resumes}
+    assert resuming == {Failsafe.OFFBOARD_LOSS, Failsafe.DATA_LINK_LOSS}
+    assert {f for f, rule in FAILSAFES.items() if not rule.operator_ends} == {Failsafe.NO_POSITION}
+    assert max(FAILSAFES, key=lambda f: FAILSAFES[f].severity) is Failsafe.NO_POSITION
+
+
+def test_a_geofence_hold_outranks_the_data_link_hold_and_ends_with_the_operator() -> None:
+    cfg = replace(
+        CFG, px4=replace(CFG.px4, gf_action=2, gf_max_hor_dist_m=3.0, nav_dll_act=1,
+                         com_dl_loss_t_s=5.0),
+    )  # fmt: skip
+    v = Vehicle(cfg)
+    v.arm(True)
+    v.takeoff()
+    t = 0.0
+    while t <= 6.0:
+        v.update(t)
+        v.on_gcs_heartbeat(t)
+        t += 1.0
+    stream(v, 6.0, 6.5, pos=(0.0, 0.0, -2.5))
+    assert v.set_mode(Mode.OFFBOARD) is MavResult.ACCEPTED
+    far = (6.0, 0.0, -2.5)  # twice GF_MAX_HOR_DIST from home
+    stream(v, v.t_s, 6.0 + 5.0 - 0.2, pos=far)  # the heartbeats stopped at 6 s
+    assert v.mode is Mode.HOLD and v.failsafe is Failsafe.GEOFENCE_HOLD and v.gf_breaches
+    assert not v.data_link_lost
+    stream(v, v.t_s, v.t_s + 1.0, pos=far)  # the link lost: its Hold, less severe, gives way
+    assert v.data_link_lost and v.failsafe is Failsafe.GEOFENCE_HOLD and v.mode is Mode.HOLD
+    v.on_gcs_heartbeat(v.t_s)
+    stream(v, v.t_s, v.t_s + 1.0, pos=far)  # link and setpoints back: a geofence Hold stays
+    assert v.mode is Mode.HOLD and v.failsafe is Failsafe.GEOFENCE_HOLD
+    assert v.set_mode(Mode.OFFBOARD) is MavResult.ACCEPTED  # the operator takes over
+    assert v.mode is Mode.OFFBOARD and v.failsafe is Failsafe.NONE
 
 
 def test_clock_rate_is_a_fault_of_the_run_passed_on_the_command_line() -> None:

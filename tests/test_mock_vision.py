@@ -19,7 +19,7 @@ import pytest
 from gcs.errors import ProfileError
 from gcs.mock.config import MockConfig, VisionConfig, load_mock_config, mock_config_from_dict
 from gcs.mock.estimator import EV_MAX_INTERVAL_S, NO_AID_TIMEOUT_S, VisionAidedError
-from gcs.mock.vehicle import EV_PREARM_DELAY_S, MavResult, Mode, Vehicle
+from gcs.mock.vehicle import EV_PREARM_DELAY_S, Failsafe, MavResult, Mode, Vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
 VISION = load_mock_config(ROOT / "profiles" / "mock-mocap.yaml")
@@ -321,7 +321,7 @@ def test_vision_lost_on_the_ground_takes_no_failsafe_and_refuses_arming_again() 
     t = ready(v, run(v, 0.0, 0.5))
     assert v.arm(True) is MavResult.ACCEPTED and v.arm(False) is MavResult.ACCEPTED
     t = run(v, t, t + 2.0, vision=False)
-    assert not v.local_position_valid and not v.failsafe and v.mode is Mode.HOLD
+    assert not v.local_position_valid and v.failsafe is Failsafe.NONE and v.mode is Mode.HOLD
     assert v.arm(True) is MavResult.TEMPORARILY_REJECTED
     run(v, t, t + 0.1)  # vision back: fusion restarts, arming allowed
     assert v.local_position_valid and v.arm(True) is MavResult.ACCEPTED

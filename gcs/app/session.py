@@ -26,6 +26,7 @@ from gcs.errors import PathError, ProfileError, TrajectoryError
 from gcs.flight.backend import is_registered
 from gcs.flight.campaign import FlightSession
 from gcs.flight.fence import Fence
+from gcs.flight.mocap.campaign import MocapReport
 from gcs.flight.mocap.link import MocapLink
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import Profile
@@ -376,12 +377,25 @@ def session_record(session: FlightSession) -> dict[str, Any]:
         "fence": None if session.fence is None else asdict(session.fence),
         "geofence": None if session.geofence is None else asdict(session.geofence),
         "abort_reason": session.abort_reason,
-        "mocap": session.mocap,
+        "mocap": None if session.mocap is None else _mocap_record(session.mocap),
         "tolerance_m": session.tolerance_m,
         "speed_tolerance_m_s": session.speed_tolerance_m_s,
         "hovers": [asdict(h) for h in session.hovers],
         "written_utc": datetime.now(UTC).isoformat(timespec="seconds"),
     }
+
+
+def _mocap_record(report: MocapReport) -> dict[str, Any]:
+    """The session's motion capture as the JSON object of its ``mocap`` field: EKF2's
+    parameters and findings, the agreement before arming, the frame checks (when flown), then
+    the link's description (once the session ended)."""
+    out: dict[str, Any] = {"ekf2": report.ekf2.params, "findings": list(report.ekf2.findings)}
+    arming = report.arming
+    out |= {"agreement_m": arming.agreement_m, "origin": list(arming.origin),
+            "origin_set": arming.origin_set}  # fmt: skip
+    if report.moves is not None:
+        out["moves"] = [check.as_record() for check in report.moves]
+    return out | (report.link or {})
 
 
 def flyable_setpoints(run: RunDir, j: int) -> np.ndarray:

@@ -50,6 +50,7 @@ from gcs.flight.hover import HoverStats, HoverVerdict, hover_stats, judge_hover,
 from gcs.flight.interrupts import run_guarded
 from gcs.flight.link import TelemetrySample, sample_arrays
 from gcs.flight.mocap import campaign as mocap_steps
+from gcs.flight.mocap.campaign import MocapReport
 from gcs.flight.mocap.link import MocapLink
 from gcs.flight.prearm import wait_ready_to_arm
 from gcs.flight.preflight import (
@@ -300,9 +301,9 @@ class FlightSession:
     abort_reason : str or None
         Why the session stopped early (a breach, a refused hover, Ctrl-C ...); None if it ran
         to its end (or is still running).
-    mocap : dict or None
-        The motion capture of the session (source, mapping, forwarding, EKF2 findings,
-        pre-flight checks), when there was one.
+    mocap : MocapReport or None
+        The motion capture of the session (EKF2 findings, pre-flight checks, then source,
+        mapping and forwarding), when there was one.
     """
 
     url: str
@@ -314,7 +315,7 @@ class FlightSession:
     fence: Fence | None = None
     geofence: GeofenceState | None = None
     abort_reason: str | None = None
-    mocap: dict | None = None
+    mocap: MocapReport | None = None
 
 
 CampaignEvent = Status | TrialStarted | TrialProgress | TrialFinished
@@ -429,7 +430,6 @@ class _Campaign:
         self.j = plan.first_trial  # the trial in hand
         self.run: TrialRun | None = None  # the trial in flight
         self.session: FlightSession | None = None
-        self.mocap_report: dict | None = None
 
     def emit(self, event: CampaignEvent) -> None:
         """Hand ``event`` to the caller's callback."""
@@ -449,17 +449,18 @@ class _Campaign:
         """Read the vehicle, wait for it, install the fence; the first trial's plan."""
         vehicle, mocap, emit = self.vehicle, self.mocap, self.emit
         hover, setpoints = await asyncio.to_thread(_plan, self.source, self.j, self.fence)
-        if mocap is not None:
-            self.mocap_report = await mocap_steps.before_arming(vehicle, mocap, self.note)
+        ekf2 = None if mocap is None else await mocap_steps.before_arming(vehicle, mocap, self.note)
         for warning in link_loss_warnings(await vehicle.read_int_params(LINK_LOSS_PARAMS)):
             emit(Status(warning, warning=True))
         navigation = navigation_source(await vehicle.read_int_params(NAV_PARAMS))
         emit(Status(navigation.text, warning=navigation.warning))
         emit(Status("waiting for a valid local position"))
         await vehicle.wait_healthy_local_position()
+        report = None
         if mocap is not None:
-            assert self.mocap_report is not None
-            self.mocap_report.update(await mocap_steps.ready_to_arm(vehicle, mocap, self.note))
+            assert ekf2 is not None
+            arming = await mocap_steps.ready_to_arm(vehicle, mocap, self.note)
+            report = MocapReport(ekf2, arming)
             vehicle.add_watch("mocap", mocap.problem)
         await _wait_prearm(vehicle, emit)
         emit(Status(self.fence.describe()))
@@ -467,7 +468,7 @@ class _Campaign:
         emit(Status(geofence.text(self.fence.margin_m), warning=not geofence.ok))
         self.session = FlightSession(
             self.plan.url, self.plan.first_trial, navigation, fence=self.fence,
-            geofence=geofence, mocap=self.mocap_report,
+            geofence=geofence, mocap=report,
         )  # fmt: skip
         await asyncio.to_thread(self.source.record_session, self.session)
         return hover, setpoints
@@ -482,10 +483,10 @@ class _Campaign:
         self.emit(Status("starting offboard"))
         await vehicle.start_offboard_at_current_position()
         if mocap is not None and mocap.settings.check_move_m > 0:
-            assert self.mocap_report is not None and self.session is not None
             moves = await mocap_steps.check_moves(vehicle, mocap, settings, self.note)
-            self.mocap_report["moves"] = moves
-            session = replace(self.session, mocap=self.mocap_report)
+            session = self.session
+            assert session is not None and session.mocap is not None
+            session = replace(session, mocap=replace(session.mocap, moves=moves))
             await self.record_session(session, "recording the mocap checks")
 
     async def fly_trials(self, hover: np.ndarray, setpoints: np.ndarray) -> None:
@@ -572,8 +573,7 @@ class _Campaign:
         await self.vehicle.land_and_disarm()
         self.emit(Status("landed and disarmed"))
         if self.mocap is not None and self.session is not None:
-            mocap = {**(self.mocap_report or {}), **self.mocap.describe()}
-            self.session = replace(self.session, mocap=mocap)
+            self.session = _with_link(self.session, self.mocap)
             await asyncio.to_thread(self.source.record_session, self.session)
 
     async def stop(self, exc: BaseException) -> VehicleError | None:
@@ -590,7 +590,7 @@ class _Campaign:
         session, mocap = self.session, self.mocap
         if session is not None:
             if mocap is not None:
-                session = replace(session, mocap={**(self.mocap_report or {}), **mocap.describe()})
+                session = _with_link(session, mocap)
             try:
                 await asyncio.to_thread(
                     self.source.record_session, replace(session, abort_reason=reason)
@@ -773,6 +773,13 @@ def _with_hover(
         tolerance_m=tolerance_m,
         speed_tolerance_m_s=speed_tolerance_m_s,
     )
+
+
+def _with_link(session: FlightSession, mocap: MocapLink) -> FlightSession:
+    """The session with what the mocap link used and its statistics so far."""
+    if session.mocap is None:  # not reached: a session with a mocap link has its report
+        return session
+    return replace(session, mocap=replace(session.mocap, link=mocap.describe()))
 
 
 def _plan(source: TrialSource, j: int, fence: Fence) -> tuple[np.ndarray, np.ndarray]:

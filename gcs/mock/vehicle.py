@@ -48,6 +48,10 @@ the recorded PX4 SITL MAVLink capture):
   Descend needs only the attitude. The mock takes that end of the chain: LAND mode (PX4
   reports Descend as AUTO.LAND) without horizontal control, level, at ``MPC_LAND_SPEED``,
   then the land detector and auto-disarm as usual.
+- One failsafe is in force at a time (:class:`Failsafe`, PX4's failsafe framework takes the
+  most severe action due): a failsafe gives way to one as severe or more, and each one's
+  ending is its row in :data:`FAILSAFES`. Any failsafe's mode is entered when it is taken,
+  in force or not (the last action wins the mode, as in PX4 when each fires in turn).
 """
 
 from __future__ import annotations
@@ -65,6 +69,9 @@ from gcs.mock.geofence import CHECK_PERIOD_S, FenceItem, Geofence, breach_kinds
 from gcs.mock.physics import QuadPhysics, Target
 
 __all__ = [
+    "FAILSAFES",
+    "Failsafe",
+    "FailsafeRule",
     "Mode",
     "LandedState",
     "MavResult",
@@ -97,6 +104,54 @@ class Mode(enum.Enum):
 
 
 MODE_FROM_CUSTOM = {(m.value[0], m.value[1]): m for m in Mode}
+
+
+class Failsafe(enum.Enum):
+    """The commander's failsafe in force (:data:`FAILSAFES` says what each does)."""
+
+    NONE = "none"
+    OFFBOARD_LOSS = "offboard loss"  # no setpoint for COM_OF_LOSS_T in OFFBOARD
+    DATA_LINK_LOSS = "data-link loss"  # no ground station for COM_DL_LOSS_T, NAV_DLL_ACT 1
+    GEOFENCE_HOLD = "geofence hold"  # a new breach, GF_ACTION 2
+    GEOFENCE_LAND = "geofence land"  # still outside, GF_ACTION 3 or more
+    NO_POSITION = "no local position"  # the local position lost in the air
+
+
+@dataclass(frozen=True)
+class FailsafeRule:
+    """One failsafe: what it commands, what it gives way to, how it ends.
+
+    Parameters
+    ----------
+    mode : Mode or None
+        The mode it commands when taken (None: nothing in force).
+    severity : int
+        Taken over the failsafe in force when at least as severe as it (a less severe one still
+        commands its mode, and leaves the more severe one in force).
+    resumes : bool
+        Ends by itself, OFFBOARD again, when the setpoints are back while the operator's mode is
+        OFFBOARD, the data link is up and the profile's ``px4.offboard_resume`` says so.
+    operator_ends : bool
+        An accepted mode change (the operator's, or the data-link Land) ends it. Disarming
+        ends every failsafe.
+    """
+
+    mode: Mode | None
+    severity: int
+    resumes: bool
+    operator_ends: bool
+
+
+FAILSAFES = {
+    Failsafe.NONE: FailsafeRule(None, 0, resumes=False, operator_ends=True),
+    Failsafe.OFFBOARD_LOSS: FailsafeRule(Mode.HOLD, 1, resumes=True, operator_ends=True),
+    Failsafe.DATA_LINK_LOSS: FailsafeRule(Mode.HOLD, 1, resumes=True, operator_ends=True),
+    Failsafe.GEOFENCE_HOLD: FailsafeRule(Mode.HOLD, 2, resumes=False, operator_ends=True),
+    Failsafe.GEOFENCE_LAND: FailsafeRule(Mode.LAND, 2, resumes=False, operator_ends=True),
+    # Descend (reported as AUTO.LAND): no resuming until disarmed, whatever mode follows
+    Failsafe.NO_POSITION: FailsafeRule(Mode.LAND, 3, resumes=False, operator_ends=False),
+}
+"""The failsafes of the mock's commander, each entered by its trigger in :class:`Vehicle`."""
 
 #: PX4 v1.16 SIH on external vision only: its health and arming checks pass this long after the
 #: first vision sample (measured: 4.3 s, "Horizontal position unstable" until 2.2 s, then
@@ -325,7 +380,6 @@ class Vehicle:
         self.first_armed_t_s: float | None = None
         self.geofence = Geofence()
         self.gf_breach: tuple[str, ...] = ()  # the kinds of the last check's breach
-        self.gf_failsafe = False  # the geofence action is in force
         self.gf_breaches: list[dict[str, object]] = []
         self._gf_next_check_s = 0.0
         self.params = Px4Params(cfg)
@@ -333,7 +387,7 @@ class Vehicle:
         self.mode = Mode[cfg.px4.initial_mode]
         self.user_mode = self.mode
         self._mode_after_disarm = self.mode
-        self.failsafe = False
+        self.failsafe = Failsafe.NONE
         self.landed = True
         self.took_off = False
         self.home_ned_m = (0.0, 0.0, 0.0)
@@ -365,7 +419,6 @@ class Vehicle:
         self.north_aligned = self.vision is None
         self.first_vision_t_s: float | None = None
         self.lpos_log: list[dict[str, object]] = []  # local position validity changes
-        self.lpos_failsafe = False  # descending without a local position
 
     # -- queries --------------------------------------------------------------------------
     @property
@@ -543,12 +596,10 @@ class Vehicle:
                 self.events.append((2, _GF_TEXTS[kind]))
             self.events.append((2, "Failsafe activated"))
             if action == 2:
-                self.gf_failsafe = True
-                self._enter(Mode.HOLD)
+                self._take(Failsafe.GEOFENCE_HOLD)
         if action >= 3 and self.mode is not Mode.LAND:
             # Land (and the unmodelled Return, Terminate): taken again while still outside
-            self.gf_failsafe = True
-            self._enter(Mode.LAND)
+            self._take(Failsafe.GEOFENCE_LAND)
 
     @property
     def landed_state(self) -> LandedState:
@@ -698,8 +749,8 @@ class Vehicle:
         self.user_mode = mode
         if mode is not Mode.LAND:
             self._mode_after_disarm = mode
-        self.failsafe = False
-        self.gf_failsafe = False  # the user takes over (a Land action is taken again if due)
+        if FAILSAFES[self.failsafe].operator_ends:  # (a geofence Land is taken again if due)
+            self.failsafe = Failsafe.NONE
         self._enter(mode)
         return MavResult.ACCEPTED
 
@@ -759,32 +810,20 @@ class Vehicle:
             return
         if self.mode in (Mode.OFFBOARD, Mode.HOLD, Mode.TAKEOFF):
             # Position mode, Hold, Return and Land cannot run: Descend (reported as AUTO.LAND)
-            self.failsafe = self.lpos_failsafe = True
             self.events.append((2, "Failsafe activated: no local position, descending"))
-            self._enter(Mode.LAND)
-        elif self.mode is Mode.LAND:
-            self.lpos_failsafe = True
-            self._apply_mode_target()  # keep descending, now without horizontal control
+        if self.mode in (Mode.OFFBOARD, Mode.HOLD, Mode.TAKEOFF, Mode.LAND):
+            self._take(Failsafe.NO_POSITION)  # landing: on, now without horizontal control
 
     def _commander(self) -> None:
         t = self.t_s
         ph = self.physics
         self._update_lpos(t)
-        # offboard loss and resume
+        # offboard loss, and the end of a failsafe that resumes
         if self.armed and self.mode is Mode.OFFBOARD and not self.offboard_signal(t):
-            self.failsafe = True
             self.events.append((4, "Failsafe activated: no offboard signal, holding"))
-            self._enter(Mode.HOLD)
-        elif (
-            self.failsafe
-            and not self.gf_failsafe
-            and self.user_mode is Mode.OFFBOARD
-            and self.cfg.px4.offboard_resume
-            and not self.data_link_lost
-            and not self.lpos_failsafe
-            and self.offboard_signal(t)
-        ):
-            self.failsafe = False
+            self._take(Failsafe.OFFBOARD_LOSS)
+        elif FAILSAFES[self.failsafe].resumes and self._may_resume(t):
+            self.failsafe = Failsafe.NONE
             self.events.append((6, "Offboard signal regained"))
             self._enter(Mode.OFFBOARD)
         self._check_data_link(t)
@@ -847,20 +886,34 @@ class Vehicle:
         if action == 0:
             self.events.append((4, "No connection to the ground control station"))
         elif action == 1:
-            self.failsafe = True
             self.events.append((4, "Failsafe activated: no connection to ground control, holding"))
-            self._enter(Mode.HOLD)
+            self._take(Failsafe.DATA_LINK_LOSS)
         else:
             self.events.append((4, "Failsafe activated: no connection to ground control, landing"))
             self.set_mode(Mode.LAND)
+
+    def _take(self, failsafe: Failsafe) -> None:
+        """Take ``failsafe`` (in force unless a more severe one is) and enter its mode."""
+        rule = FAILSAFES[failsafe]
+        assert rule.mode is not None
+        if rule.severity >= FAILSAFES[self.failsafe].severity:
+            self.failsafe = failsafe
+        self._enter(rule.mode)
+
+    def _may_resume(self, t: float) -> bool:
+        """A resuming failsafe may give OFFBOARD back now (PX4's mode fallback)."""
+        return (
+            self.user_mode is Mode.OFFBOARD
+            and self.cfg.px4.offboard_resume
+            and not self.data_link_lost
+            and self.offboard_signal(t)
+        )
 
     def _disarm(self, reason: str) -> None:
         self._armed_total_s += self.t_s - self.t_armed_s
         self.armed = False
         self.physics.set_armed(False)
-        self.failsafe = False
-        self.gf_failsafe = False
-        self.lpos_failsafe = False
+        self.failsafe = Failsafe.NONE
         self.events.append((6, reason))
         self.user_mode = self._mode_after_disarm
         if not self._enter(self._mode_after_disarm):

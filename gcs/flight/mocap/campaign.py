@@ -7,6 +7,11 @@ small move along each horizontal axis, the mocap moving with the estimate and th
 following the commands (:func:`check_moves`). Around each trial:
 a mocap sample past its end (:func:`wait_past_end`) and the trial's mocap cut onto its grid
 (:func:`with_mocap`).
+
+Each step returns its part of the session's record, a frozen value: :class:`Ekf2Check`,
+:class:`ArmingAgreement`, the :class:`FrameCheck` of each frame check flown; the campaign
+combines them into one :class:`MocapReport` (``dataclasses.replace``), which
+:func:`gcs.app.session.session_record` writes.
 """
 
 from __future__ import annotations
@@ -14,7 +19,8 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -35,14 +41,73 @@ from gcs.flight.trial import TrialRecording
 from gcs.flight.vehicle import Vehicle
 from gcs.io.settings import FlightSettings
 
-__all__ = ["MOVE_WINDOW_S", "before_arming", "check_moves", "ready_to_arm", "wait_past_end",
-           "with_mocap"]  # fmt: skip
+__all__ = ["MOVE_WINDOW_S", "ArmingAgreement", "Ekf2Check", "MocapReport", "before_arming",
+           "check_moves", "ready_to_arm", "wait_past_end", "with_mocap"]  # fmt: skip
 
 #: Length of the hover windows averaged by the pre-flight move check [s].
 MOVE_WINDOW_S = 1.5
 
 #: ``note(text, warning)``: one line for the operator (a campaign's status).
 Note = Callable[..., None]
+
+
+@dataclass(frozen=True)
+class Ekf2Check:
+    """EKF2's vision settings as :func:`before_arming` read and judged them.
+
+    Parameters
+    ----------
+    params : dict of str to float or int or None
+        The EKF2 parameters read (None: not served), integers first.
+    findings : tuple of str
+        The findings after the summary line, one line each.
+    """
+
+    params: dict[str, float | int | None]
+    findings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ArmingAgreement:
+    """The estimate where the mocap sees the vehicle, as :func:`ready_to_arm` found it.
+
+    Parameters
+    ----------
+    agreement_m : float
+        Distance between the mocap's position and the estimate [m].
+    origin : tuple of float
+        The vehicle's global origin: latitude, longitude [deg], altitude AMSL [m].
+    origin_set : bool
+        gcs set the origin (the vehicle had none).
+    """
+
+    agreement_m: float
+    origin: tuple[float, ...]
+    origin_set: bool
+
+
+@dataclass(frozen=True)
+class MocapReport:
+    """The motion capture of a flight session, as far as the campaign has got.
+
+    Parameters
+    ----------
+    ekf2 : Ekf2Check
+        EKF2's vision settings, before arming.
+    arming : ArmingAgreement
+        The agreement of the estimate with the mocap, before arming.
+    moves : tuple of FrameCheck or None
+        Each frame check flown after take-off; None when none was flown
+        (``mocap.check_move_m`` 0, or not yet).
+    link : dict or None
+        What the link used and its statistics (:meth:`MocapLink.describe`), once the session
+        ends; None before.
+    """
+
+    ekf2: Ekf2Check
+    arming: ArmingAgreement
+    moves: tuple[FrameCheck, ...] | None = None
+    link: dict[str, Any] | None = None
 
 
 def with_mocap(recording: TrialRecording, mocap: MocapLink | None) -> TrialRecording:
@@ -85,7 +150,7 @@ def wait_past_end(mocap: MocapLink, recording: TrialRecording) -> None:
         mocap.client.wait_until(lambda s: s.tracked and s.t_receipt_s > end_local, 0.3)
 
 
-async def before_arming(vehicle: Vehicle, mocap: MocapLink, note: Note) -> dict:
+async def before_arming(vehicle: Vehicle, mocap: MocapLink, note: Note) -> Ekf2Check:
     """Start forwarding, then judge EKF2's vision settings (refusals stop here).
 
     Parameters
@@ -99,7 +164,7 @@ async def before_arming(vehicle: Vehicle, mocap: MocapLink, note: Note) -> dict:
 
     Returns
     -------
-    dict
+    Ekf2Check
         The EKF2 parameters read and the findings, for the session record.
 
     Raises
@@ -121,10 +186,10 @@ async def before_arming(vehicle: Vehicle, mocap: MocapLink, note: Note) -> dict:
     refused = [f.text for f in findings if f.level == "refuse"]
     if refused:
         raise MocapError(f"vehicle settings refused: {refused[0]}")
-    return {"ekf2": params, "findings": [f.text for f in findings[1:]]}
+    return Ekf2Check(params, tuple(f.text for f in findings[1:]))
 
 
-async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> dict:
+async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> ArmingAgreement:
     """A global origin (set when there is none), then the estimate where the mocap sees it.
 
     The agreement is waited for while the estimator settles (bounded), refused if it never
@@ -141,7 +206,7 @@ async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> dict:
 
     Returns
     -------
-    dict
+    ArmingAgreement
         The agreement [m] and the global origin, for the session record.
 
     Raises
@@ -179,12 +244,12 @@ async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> dict:
     distance = float(np.linalg.norm(pos - np.asarray(vehicle.latest.pos_ned_m)))
     note(f"mocap: rigid body tracked at {format_ned(pos)}, {distance:.3f} m from the estimate "
          f"(after {time.monotonic() - started:.1f} s)")  # fmt: skip
-    return {"agreement_m": distance, "origin": list(origin), "origin_set": was_set}
+    return ArmingAgreement(distance, tuple(origin), was_set)
 
 
 async def check_moves(
     vehicle: Vehicle, mocap: MocapLink, settings: FlightSettings, note: Note
-) -> list[dict]:
+) -> tuple[FrameCheck, ...]:
     """The frame check: hover windows at home, a move north, home, a move east, home.
 
     :func:`gcs.flight.mocap.checks.frame_check` judges them: the mocap must move with the
@@ -209,8 +274,8 @@ async def check_moves(
 
     Returns
     -------
-    list of dict
-        Each time the check was flown: its figures (:meth:`FrameCheck.as_record`).
+    tuple of FrameCheck
+        Each time the check was flown: its figures.
 
     Raises
     ------
@@ -218,14 +283,14 @@ async def check_moves(
         The mocap did not move with the estimate, the vehicle did not follow, or the mapping
         could not be judged in both horizontal directions.
     """
-    out: list[dict] = []
+    out: list[FrameCheck] = []
     length_m: float | None = None
     tolerances: tuple[float, float] | None = None
     for attempt in (1, 2):
         check, used_m, tolerances = await _frame_check(
             vehicle, mocap, settings, length_m, tolerances
         )
-        out.append(check.as_record())
+        out.append(check)
         note(f"mocap check: {_figures(check)}", check.problem is not None)
         if check.problem is not None:
             raise MocapError(f"pre-flight frame check: {check.problem}")
@@ -261,7 +326,7 @@ async def check_moves(
     else:
         note(f"mocap check: whether the vehicle follows {moves} was not judged: its hover "
              f"wandered {check.wander_m:.2f} m ({gains})", True)  # fmt: skip
-    return out
+    return tuple(out)
 
 
 def _figures(check: FrameCheck) -> str:
