@@ -123,3 +123,12 @@ def test_required_fields_defaults_and_the_error_class() -> None:
     f.done()
     with pytest.raises(StudyError, match="must be a mapping$"):
         Fields([1], "s.yaml", "", StudyError)  # the whole file is not repeated
+
+
+def test_one_field_is_read_by_its_declaration() -> None:
+    f = Fields({"rate_hz": 1, "mode": "b"}, "f.yaml", "x", ProfileError)
+    assert f.field(Outer, "mode") == "b" and f.field(Outer, "count") == 3  # the default
+    with pytest.raises(ProfileError, match=r"field 'x.rate_hz' must be >= 2 .*got 1$"):
+        f.field(Outer, "rate_hz")
+    with pytest.raises(ProfileError, match=r"field 'x.spare_m' is missing$"):
+        f.field(Outer, "spare_m", required=True)

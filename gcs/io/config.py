@@ -6,7 +6,8 @@ module reads a YAML mapping again.
 
 Every refusal is one line naming the file and the field, raised as :class:`ProfileError` or
 :class:`TrajectoryError` (both ``ValueError``). Unknown fields are refused too: a typo in a
-safety limit must not silently fall back to a default.
+safety limit must not silently fall back to a default. The reading and the messages are
+:mod:`gcs.io.fields`'; the ranges of ``flight`` and ``mocap`` are declared on their dataclasses.
 """
 
 from __future__ import annotations
@@ -32,7 +33,6 @@ from gcs.io.fields import Fields, Rule
 from gcs.io.mocap_source import parse_mocap_url
 from gcs.io.samples_file import read_samples
 from gcs.io.settings import (
-    EXCITATIONS,
     MAPPING_AXES,
     FlightSettings,
     IdentifySettings,
@@ -642,51 +642,41 @@ def _flight(f: Fields, t_ilc_s: float) -> FlightSettings:
 
 
 def _identification(f: Fields, t_ilc_s: float) -> IdentifySettings:
-    """The ``identification`` section: excitation and PBSID settings of ``gcs identify``
-    (unknown fields, types and ranges refused, and the fields of the other excitation)."""
-    d = IdentifySettings()
-    excitation = f.string("excitation", d.excitation, EXCITATIONS)
-    amplitude = f.number("amplitude_m", d.amplitude_m, positive=True)
-    vertical = f.number("vertical_amplitude_m", d.vertical_amplitude_m, positive=True)
+    """The ``identification`` section by :class:`IdentifySettings`' declared ranges, and the
+    rules between its fields: the band of its excitation (and not the other's) below Nyquist,
+    a duration within a trial, the PBSID windows and order."""
+
+    def read(name: str, required: bool = False) -> Any:
+        return f.field(IdentifySettings, name, required=required)
+
+    excitation = read("excitation")
     nyquist = 0.5 / t_ilc_s
     other = ("f_min_hz", "f_max_hz") if excitation == "prbs" else ("bandwidth_hz",)
     for key in other:
         if f.has(key):
             raise f.fail(key, f"does not apply to excitation {excitation}")
-    bandwidth = f_min = f_max = None
     if excitation == "prbs":
-        bandwidth = f.number("bandwidth_hz", d.bandwidth_hz, positive=True)
+        bandwidth = read("bandwidth_hz")
         if bandwidth > nyquist:
             raise f.fail("bandwidth_hz", f"must be <= Nyquist {nyquist:g} Hz, got {bandwidth:g}")
+        band = {"bandwidth_hz": bandwidth}
     else:
-        f_min = f.number("f_min_hz")
-        f_max = f.number("f_max_hz", positive=True)
-        if not 0 <= f_min < f_max:
+        f_min, f_max = read("f_min_hz", True), read("f_max_hz", True)
+        if not f_min < f_max:
             raise f.fail("f_min_hz", f"must be in [0, f_max_hz = {f_max:g}), got {f_min:g}")
         if f_max >= nyquist:
             raise f.fail("f_max_hz", f"must be below Nyquist {nyquist:g} Hz, got {f_max:g}")
-    duration = f.number("duration_s", d.duration_s, positive=True)
+        band = {"bandwidth_hz": None, "f_min_hz": f_min, "f_max_hz": f_max}
+    duration = read("duration_s")
     if duration / t_ilc_s > MAX_SAMPLES:
         raise f.fail("duration_s", f"gives more than {MAX_SAMPLES} samples of {t_ilc_s:g} s")
-    past = f.integer("past", d.past, Rule(ge=1))
-    future = f.integer("future", d.future)
-    if not 2 <= future <= past:
+    past, future, order = read("past"), read("future"), read("order")
+    if future > past:
         raise f.fail("future", f"must be in [2, past = {past}], got {future}")
-    order = f.raw("order", None)
-    if order is not None:
-        order = f.integer("order")
-        if not 1 <= order < future:
-            raise f.fail("order", f"must be in [1, future - 1 = {future - 1}], got {order}")
-    max_delay = f.integer("max_delay", d.max_delay, AT_LEAST_0)
-    base_seed = f.integer("seed", d.seed)
-    center = tuple(f.numbers("center_ned_m", 3, list(d.center_ned_m)))
-    f.done()
-    settings = IdentifySettings(
-        excitation=excitation, amplitude_m=amplitude, bandwidth_hz=bandwidth, f_min_hz=f_min,
-        f_max_hz=f_max, duration_s=duration, past=past, future=future, order=order,
-        max_delay=max_delay, seed=base_seed, center_ned_m=center, vertical_amplitude_m=vertical,
-    )  # fmt: skip
-    return settings
+    if order is not None and order >= future:
+        raise f.fail("order", f"must be in [1, future - 1 = {future - 1}], got {order}")
+    windows = {"past": past, "future": future, "order": order, "duration_s": duration}
+    return f.read(IdentifySettings, excitation=excitation, **band, **windows)
 
 
 def mocap_settings(section: Any, where: str) -> MocapSettings:

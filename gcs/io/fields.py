@@ -94,6 +94,7 @@ class Rule:
 
 FINITE = Rule()
 POSITIVE = Rule(gt=0)
+_UNIONS = (typing.Union, types.UnionType)
 
 
 def ranged(default: Any, **rule: Any) -> Any:
@@ -113,14 +114,14 @@ def ranged(default: Any, **rule: Any) -> Any:
     return dataclasses.field(default=default, metadata={RULE: Rule(**rule)})
 
 
-def _rule(f: dataclasses.Field, default: Rule) -> Rule:
+def _rule(f: dataclasses.Field, default: Rule = FINITE) -> Rule:
     return f.metadata.get(RULE, default)
 
 
 def _typed(value: Any, kind: Any) -> tuple[Any, str | None]:
     """``value`` as ``kind`` (bool, int, float, str, a tuple of floats), or what is wrong."""
     origin = typing.get_origin(kind)
-    if origin in (typing.Union, types.UnionType):
+    if origin in _UNIONS:
         args = [a for a in typing.get_args(kind) if a is not type(None)]
         return (None, None) if value is None else _typed(value, args[0])
     if origin is tuple:
@@ -292,6 +293,28 @@ class Fields:
         if problem:
             raise self.fail(key, problem)
         return value
+
+    def field(self, cls: type, name: str, *, required: bool = False) -> Any:
+        """One field of dataclass ``cls`` read by its declaration (type, rule, default).
+
+        Parameters
+        ----------
+        cls : type
+            The dataclass.
+        name : str
+            The field (the key in the mapping).
+        required : bool
+            Refuse its absence instead of taking the default.
+
+        Returns
+        -------
+        Any
+        """
+        declared = next(f for f in dataclasses.fields(cls) if f.name == name)
+        kind = typing.get_type_hints(cls)[name]
+        if (required or declared.default is not None) and typing.get_origin(kind) in _UNIONS:
+            kind = next(a for a in typing.get_args(kind) if a is not type(None))  # no null
+        return self.value(name, kind, ... if required else declared.default, _rule(declared))
 
     def number(
         self, key: str, default: Any = ..., *, positive: bool = False, rule: Rule = FINITE

@@ -265,19 +265,19 @@ class IdentifySettings:
         Hover point the excitation is added to, local NED [m] [(0, 0, -1.5)].
     """
 
-    excitation: str = "prbs"
-    amplitude_m: float = 0.3
-    bandwidth_hz: float | None = 1.0
-    f_min_hz: float | None = None
-    f_max_hz: float | None = None
-    duration_s: float = 60.0
-    past: int = 20
-    future: int = 10
-    order: int | None = None
-    max_delay: int = 10
+    excitation: str = ranged("prbs", choices=EXCITATIONS)
+    amplitude_m: float = ranged(0.3, gt=0)
+    bandwidth_hz: float | None = ranged(1.0, gt=0)
+    f_min_hz: float | None = ranged(None, ge=0)
+    f_max_hz: float | None = ranged(None, gt=0)
+    duration_s: float = ranged(60.0, gt=0)
+    past: int = ranged(20, ge=1)
+    future: int = ranged(10, ge=2)
+    order: int | None = ranged(None, ge=1)
+    max_delay: int = ranged(10, ge=0)
     seed: int = 1
     center_ned_m: tuple[float, float, float] = (0.0, 0.0, -1.5)
-    vertical_amplitude_m: float = 0.3
+    vertical_amplitude_m: float = ranged(0.3, gt=0)
 
     def n_samples(self, t_ilc_s: float) -> int:
         """Setpoints per experiment, ``round(duration_s / t_ilc_s)``.
