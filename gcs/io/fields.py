@@ -14,6 +14,7 @@ back to a default silently.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import types
 import typing
@@ -95,6 +96,7 @@ class Rule:
 FINITE = Rule()
 POSITIVE = Rule(gt=0)
 _UNIONS = (typing.Union, types.UnionType)
+_hints = functools.cache(typing.get_type_hints)  # a class's resolved annotations
 
 
 def ranged(default: Any, **rule: Any) -> Any:
@@ -179,7 +181,7 @@ def check(obj: Any, section: str, error: type[GcsError], default: Rule = FINITE)
     GcsError
         ``field 'section.name' must be ..., got ...``.
     """
-    hints = typing.get_type_hints(type(obj))
+    hints = _hints(type(obj))
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         if dataclasses.is_dataclass(value):
@@ -311,7 +313,7 @@ class Fields:
         Any
         """
         declared = next(f for f in dataclasses.fields(cls) if f.name == name)
-        kind = typing.get_type_hints(cls)[name]
+        kind = _hints(cls)[name]
         if (required or declared.default is not None) and typing.get_origin(kind) in _UNIONS:
             kind = next(a for a in typing.get_args(kind) if a is not type(None))  # no null
         return self.value(name, kind, ... if required else declared.default, _rule(declared))
@@ -488,7 +490,7 @@ class Fields:
         -------
         cls
         """
-        hints = typing.get_type_hints(cls)
+        hints = _hints(cls)
         values = dict(given)
         for f in dataclasses.fields(cls):
             if f.name in given:
