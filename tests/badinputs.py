@@ -378,8 +378,7 @@ def _profile_cases() -> Iterator[Case]:
             "fly",
             dotted,
             lambda ws, d=dotted: _fly(ws, profile=ws.profile(d, 1.0)),
-            f"'{dotted}' is not {'known' if dotted.startswith('flight.') else 'a known field'}; "
-            f"did you mean '{meant}'?",
+            f"'{dotted}' is not a known field; did you mean '{meant}'?",
         )
     yield Case(
         "trajectory file",
@@ -1529,9 +1528,9 @@ def _output_cases() -> Iterator[Case]:
         "malformed YAML",
     )
     for text, expect in (
-        ("controller: {thrust_xy_margin: 1.0}\n", "controller.thrust_xy_margin' must be < 1"),
+        ("controller: {thrust_xy_margin: 1.0}\n", "controller.thrust_xy_margin' must be in [0, 1)"),
         ("controller: {takeoff_ramp_s: -3}\n", "controller.takeoff_ramp_s' must be >= 0"),
-        ("physics: {thrust_min_g: 1.2}\n", "physics.thrust_min_g' must be < 1"),
+        ("physics: {thrust_min_g: 1.2}\n", "physics.thrust_min_g' must be in [0, 1)"),
     ):
         yield Case(
             k,

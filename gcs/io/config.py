@@ -6,7 +6,8 @@ module reads a YAML mapping again.
 
 Every refusal is one line naming the file and the field, raised as :class:`ProfileError` or
 :class:`TrajectoryError` (both ``ValueError``). Unknown fields are refused too: a typo in a
-safety limit must not silently fall back to a default.
+safety limit must not silently fall back to a default. The reading and the messages are
+:mod:`gcs.io.fields`'; the ranges of ``flight`` and ``mocap`` are declared on their dataclasses.
 """
 
 from __future__ import annotations
@@ -28,18 +29,15 @@ from gcs.core.trajectory import MAX_SAMPLES, Box, EightShape
 from gcs.core.trajectory_sources import PLANES, EllipseShape, SamplesShape, WaypointsShape
 from gcs.core.update import UpdateWeights
 from gcs.errors import GcsError, ProfileError, TrajectoryError
+from gcs.io.fields import Fields, Rule
 from gcs.io.mocap_source import parse_mocap_url
-from gcs.io.records import MEASUREMENTS
 from gcs.io.samples_file import read_samples
 from gcs.io.settings import (
-    EXCITATIONS,
     MAPPING_AXES,
-    MESSAGES,
     FlightSettings,
     IdentifySettings,
     MocapSettings,
 )
-from gcs.io.suggest import did_you_mean
 from gcs.io.yamlfile import read_yaml
 
 __all__ = [
@@ -77,115 +75,7 @@ DEFAULT_MAX_YAW_RATE_DEG_S = 90.0
 TRAJECTORY_TYPES = ("eight", "circle", "ellipse", "waypoints", "samples")
 #: A trajectory's name becomes part of a run directory's name.
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
-
-
-class _Fields:
-    """Strict reader of one YAML mapping; errors name the file and the dotted field path."""
-
-    def __init__(self, data: Any, where: str, path: str, error: type[GcsError]) -> None:
-        if not isinstance(data, dict):
-            raise error(f"{where}: field '{path or '<top>'}' must be a mapping")
-        self.data, self.where, self.path, self.error = data, where, path, error
-        self.used: set[str] = set()
-        self.asked: set[str] = set()  # every field looked for: the known ones
-
-    def _name(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else key
-
-    def fail(self, key: str, message: str) -> GcsError:
-        return self.error(f"{self.where}: field '{self._name(key)}' {message}")
-
-    def has(self, key: str) -> bool:
-        self.asked.add(key)
-        return key in self.data
-
-    def raw(self, key: str, default: Any = ...) -> Any:
-        self.asked.add(key)
-        if key not in self.data:
-            if default is ...:
-                raise self.fail(key, "is missing")
-            return default
-        self.used.add(key)
-        return self.data[key]
-
-    def number(self, key: str, default: Any = ..., *, positive: bool = False) -> float:
-        value = self.raw(key, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(key, f"must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise self.fail(key, f"must be finite, got {value!r}")
-        if positive and value <= 0:
-            raise self.fail(key, f"must be > 0, got {value!r}")
-        return float(value)
-
-    def optional_number(self, key: str) -> float | None:
-        return None if self.raw(key, None) is None else self.number(key, positive=True)
-
-    def integer(self, key: str, default: Any = ...) -> int:
-        value = self.raw(key, default)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(key, f"must be an integer, got {value!r}")
-        return value
-
-    def string(self, key: str, default: Any = ..., choices: tuple[str, ...] = ()) -> str:
-        value = self.raw(key, default)
-        if not isinstance(value, str):
-            raise self.fail(key, f"must be a string, got {value!r}")
-        if choices and value not in choices:
-            raise self.fail(key, f"must be one of {', '.join(choices)}, got {value!r}")
-        return value
-
-    def numbers(self, key: str, length: int | None = None, default: Any = ...) -> list[float]:
-        value = self.raw(key, default)
-        if not isinstance(value, list) or not value:
-            raise self.fail(key, f"must be a non-empty list of numbers, got {value!r}")
-        if length is not None and len(value) != length:
-            raise self.fail(key, f"must have {length} entries, got {len(value)}")
-        for v in value:
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise self.fail(key, f"must contain only finite numbers, got {v!r}")
-        return [float(v) for v in value]
-
-    def matrix(self, key: str) -> list[list[float]]:
-        value = self.raw(key)
-        rows = (
-            value if isinstance(value, list) and value and isinstance(value[0], list) else [value]
-        )
-        out = []
-        for row in rows:
-            if not isinstance(row, list):
-                raise self.fail(key, "must be a matrix (list of lists of numbers)")
-            for v in row:
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                    raise self.fail(key, f"must contain only finite numbers, got {v!r}")
-            out.append([float(v) for v in row])
-        return out
-
-    def mapping(self, key: str) -> dict:
-        """An optional section passed on as a dict (checked by its user), refused if not one."""
-        value = self.raw(key, None)
-        if value is None:
-            return {}
-        if not isinstance(value, dict):
-            raise self.fail(key, f"must be a mapping, got {value!r}")
-        return dict(value)
-
-    def text(self, key: str) -> str | None:
-        """An optional free text (``description``)."""
-        value = self.raw(key, None)
-        if value is not None and not isinstance(value, str):
-            raise self.fail(key, f"must be a string, got {value!r}")
-        return value
-
-    def sub(self, key: str, default: Any = ...) -> _Fields:
-        value = self.raw(key, default)
-        return _Fields({} if value is None else value, self.where, self._name(key), self.error)
-
-    def done(self) -> None:
-        extra = sorted(set(self.data) - self.used)
-        if extra:
-            hint = did_you_mean(str(extra[0]), self.asked)
-            raise self.fail(extra[0], f"is not a known field{hint}")
+AT_LEAST_0 = Rule(ge=0)
 
 
 @dataclass(frozen=True)
@@ -310,7 +200,7 @@ class Profile:
         return tuple(by_axis[a] for a in self.learning.axes)  # type: ignore[misc]
 
 
-def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
+def _model(f: Fields, t_ilc_s: float) -> DiscreteModel:
     try:
         if f.has("num") or f.has("den"):
             delay_s = f.number("delay_s", 0.0)
@@ -341,29 +231,24 @@ def _model(f: _Fields, t_ilc_s: float) -> DiscreteModel:
     return model
 
 
-def _delay_samples(f: _Fields) -> int:
-    delay = f.integer("delay_samples", 0)
-    if not 0 <= delay <= MAX_SAMPLES:
-        raise f.fail("delay_samples", f"must be in [0, {MAX_SAMPLES}], got {delay}")
-    return delay
+def _delay_samples(f: Fields) -> int:
+    return f.integer("delay_samples", 0, Rule(ge=0, le=MAX_SAMPLES))
 
 
-def _interval(f: _Fields, key: str) -> tuple[float, float]:
+def _interval(f: Fields, key: str) -> tuple[float, float]:
     lo, hi = f.numbers(key, 2)
     if lo >= hi:
         raise f.fail(key, f"must be [min, max] with min < max, got [{lo:g}, {hi:g}]")
     return lo, hi
 
 
-def _learning(f: _Fields) -> LearningConfig:
+def _learning(f: Fields) -> LearningConfig:
     w = f.sub("weights", {})
-    values = {"we": w.number("we", 1.0, positive=True)}
-    values |= {"wdu": w.number("wdu", 0.01), "wu": w.number("wu", 0.0)}
-    try:
-        weights = UpdateWeights(**values)
-    except ValueError as exc:  # the numerics' own message names the weight
-        name = next((k for k in values if f".{k} " in str(exc)), "")
-        raise w.fail(name, str(exc).split(" ", 1)[1]) from None
+    weights = UpdateWeights(
+        we=w.number("we", 1.0, positive=True),
+        wdu=w.number("wdu", 0.01, rule=AT_LEAST_0),
+        wu=w.number("wu", 0.0, rule=AT_LEAST_0),
+    )
     w.done()
     settings = {}
     for key, cls in (("smoother", SmootherSettings), ("kilc", KilcSettings)):
@@ -383,9 +268,7 @@ def _learning(f: _Fields) -> LearningConfig:
     limits = f.sub("limits", {})
     history = f.has("adaptive")
     adaptive = f.sub("adaptive", {})
-    repeats = adaptive.integer("repeats", 1 if history else 0)
-    if not 0 <= repeats <= MAX_REPEATS:
-        raise adaptive.fail("repeats", f"must be in [0, {MAX_REPEATS}], got {repeats}")
+    repeats = adaptive.integer("repeats", 1 if history else 0, Rule(ge=0, le=MAX_REPEATS))
     axes = _learned_axes(f)
     if history and 2 in axes:
         raise f.fail(
@@ -396,8 +279,6 @@ def _learning(f: _Fields) -> LearningConfig:
     vertical = {}
     for key, horizontal in (("step", max_step_m), ("deviation", max_deviation_m)):
         value = limits.optional_number(f"max_vertical_{key}_m")
-        if value is not None and value <= 0:
-            raise limits.fail(f"max_vertical_{key}_m", f"must be > 0, got {value:g}")
         vertical[key] = horizontal if value is None else value
     config = LearningConfig(
         algorithm=f.string("algorithm", "smoother", ALGORITHMS),
@@ -417,7 +298,7 @@ def _learning(f: _Fields) -> LearningConfig:
     return config
 
 
-def _learned_axes(f: _Fields) -> tuple[int, ...]:
+def _learned_axes(f: Fields) -> tuple[int, ...]:
     """``learning.axes``: [north, east] (default) or [north, east, down]."""
     value = f.raw("axes", ["north", "east"])
     ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
@@ -427,15 +308,10 @@ def _learned_axes(f: _Fields) -> tuple[int, ...]:
     return LEARNED_AXES[names]
 
 
-def _adaptive(f: _Fields) -> AdaptiveSettings:
+def _adaptive(f: Fields) -> AdaptiveSettings:
     """``learning.adaptive``: the options beyond the paper (absent: the paper's method)."""
     d = AdaptiveSettings()
-    flag = {}
-    for key in ("drift_offset", "refresh", "safeguard"):
-        value = f.raw(key, getattr(d, key))
-        if not isinstance(value, bool):
-            raise f.fail(key, f"must be true or false, got {value!r}")
-        flag[key] = value
+    flag = {k: f.value(k, bool, getattr(d, k)) for k in ("drift_offset", "refresh", "safeguard")}
     cutoff = f.raw("robustness_cutoff_rad_s", None)
     order = f.integer("robustness_order", d.robustness_order)
     try:
@@ -476,7 +352,7 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
     -------
     Profile
     """
-    f = _Fields(data, where, "", ProfileError)
+    f = Fields(data, where, "", ProfileError)
     t_ilc_s = f.number("t_ilc_s", positive=True)
     model_x = _model(f.sub("model"), t_ilc_s)
     model_y = _model(f.sub("model_y"), t_ilc_s) if f.has("model_y") else model_x
@@ -508,11 +384,9 @@ def profile_from_dict(data: Any, where: str = "<profile>") -> Profile:
             "max_yaw_rate_deg_s", DEFAULT_MAX_YAW_RATE_DEG_S, positive=True
         ),
         arena=box,
-        flight=_flight(f.mapping("flight"), where, t_ilc_s),
-        identification=_identification(
-            _Fields(f.mapping("identification"), where, "identification", ProfileError), t_ilc_s
-        ),
-        mocap=mocap_settings(f.mapping("mocap"), where),
+        flight=_flight(f.sub("flight", {}), t_ilc_s),
+        identification=_identification(f.sub("identification", {}), t_ilc_s),
+        mocap=mocap_settings(f.raw("mocap", None), where),
         source=data,
     )
     f.text("description")
@@ -582,7 +456,7 @@ def trajectory_from_dict(
     -------
     TrajectorySpec
     """
-    f = _Fields(data, where, "", TrajectoryError)
+    f = Fields(data, where, "", TrajectoryError)
     kind = f.string("type", "eight", TRAJECTORY_TYPES)
     try:
         shape = _SOURCES[kind](f, base_dir)
@@ -602,11 +476,11 @@ def trajectory_from_dict(
     return TrajectorySpec(name=name, shape=shape, source=data)
 
 
-def _yaw(f: _Fields) -> float | None:
+def _yaw(f: Fields) -> float | None:
     return None if f.raw("yaw_deg", None) is None else f.number("yaw_deg")
 
 
-def _eight(f: _Fields, base_dir: Path | None) -> EightShape:
+def _eight(f: Fields, base_dir: Path | None) -> EightShape:
     defaults = EightShape()
     return EightShape(
         center_ned_m=tuple(f.numbers("center_ned_m", 3, list(defaults.center_ned_m))),
@@ -620,7 +494,7 @@ def _eight(f: _Fields, base_dir: Path | None) -> EightShape:
     )
 
 
-def _ellipse(f: _Fields, base_dir: Path | None) -> EllipseShape:
+def _ellipse(f: Fields, base_dir: Path | None) -> EllipseShape:
     if f.data.get("type") == "circle":
         radius = f.number("radius_m", positive=True)
         radii = (radius, radius)
@@ -653,7 +527,7 @@ def _ellipse(f: _Fields, base_dir: Path | None) -> EllipseShape:
     )
 
 
-def _waypoints(f: _Fields, base_dir: Path | None) -> WaypointsShape:
+def _waypoints(f: Fields, base_dir: Path | None) -> WaypointsShape:
     raw = f.raw("points_ned_m")
     if not isinstance(raw, list) or len(raw) < 3:
         raise f.fail("points_ned_m", "must be a list of at least three [north, east, down]")
@@ -686,11 +560,9 @@ def _waypoints(f: _Fields, base_dir: Path | None) -> WaypointsShape:
         raise f.fail(key, f"is refused: {exc}") from None
 
 
-def _samples(f: _Fields, base_dir: Path | None) -> SamplesShape | None:
+def _samples(f: Fields, base_dir: Path | None) -> SamplesShape | None:
     name = f.string("file")
-    hover_s = f.number("hover_s", 1.0)
-    if hover_s < 0:
-        raise f.fail("hover_s", f"must be >= 0, got {hover_s:g}")
+    hover_s = f.number("hover_s", 1.0, rule=AT_LEAST_0)
     yaw_deg = _yaw(f)
     if base_dir is None:
         return None
@@ -758,76 +630,53 @@ def load_trajectory(path: str | Path) -> TrajectorySpec:
     return trajectory_from_dict(read_yaml(path, TrajectoryError), str(path), path.parent)
 
 
-def _flight(section: dict, where: str, t_ilc_s: float) -> FlightSettings:
-    """The ``flight`` section as :class:`FlightSettings` (unknown keys refused)."""
-    known = {f.name for f in fields(FlightSettings)}
-    for key, value in section.items():
-        if key not in known:
-            hint = did_you_mean(str(key), known)
-            raise ProfileError(f"{where}: field 'flight.{key}' is not known{hint}")
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ProfileError(f"{where}: field 'flight.{key}' must be a number, got {value!r}")
+def _flight(f: Fields, t_ilc_s: float) -> FlightSettings:
+    """The ``flight`` section by :class:`FlightSettings`' declared ranges, and its stream rate
+    against the profile's sample time."""
+    settings = f.read(FlightSettings)
     try:
-        settings = FlightSettings(**{k: float(v) for k, v in section.items()})
         settings.sends_per_sample(t_ilc_s)
-    except ValueError as exc:  # FlightSettings' own messages start with the field's name
-        text = str(exc)
-        name = text.split(":", 1)[0] if text.startswith("flight.") else "flight.stream_rate_hz"
-        detail = text.split(":", 1)[1].strip() if text.startswith("flight.") else text
-        raise ProfileError(f"{where}: field '{name}': {detail}") from None
+    except ProfileError as exc:  # names the field itself
+        raise ProfileError(f"{f.where}: {exc}") from None
     return settings
 
 
-def _identification(f: _Fields, t_ilc_s: float) -> IdentifySettings:
-    """The ``identification`` section: excitation and PBSID settings of ``gcs identify``
-    (unknown fields, types and ranges refused, and the fields of the other excitation)."""
-    d = IdentifySettings()
-    excitation = f.string("excitation", d.excitation, EXCITATIONS)
-    amplitude = f.number("amplitude_m", d.amplitude_m, positive=True)
-    vertical = f.number("vertical_amplitude_m", d.vertical_amplitude_m, positive=True)
+def _identification(f: Fields, t_ilc_s: float) -> IdentifySettings:
+    """The ``identification`` section by :class:`IdentifySettings`' declared ranges, and the
+    rules between its fields: the band of its excitation (and not the other's) below Nyquist,
+    a duration within a trial, the PBSID windows and order."""
+
+    def read(name: str, required: bool = False) -> Any:
+        return f.field(IdentifySettings, name, required=required)
+
+    excitation = read("excitation")
     nyquist = 0.5 / t_ilc_s
     other = ("f_min_hz", "f_max_hz") if excitation == "prbs" else ("bandwidth_hz",)
     for key in other:
         if f.has(key):
             raise f.fail(key, f"does not apply to excitation {excitation}")
-    bandwidth = f_min = f_max = None
     if excitation == "prbs":
-        bandwidth = f.number("bandwidth_hz", d.bandwidth_hz, positive=True)
+        bandwidth = read("bandwidth_hz")
         if bandwidth > nyquist:
             raise f.fail("bandwidth_hz", f"must be <= Nyquist {nyquist:g} Hz, got {bandwidth:g}")
+        band = {"bandwidth_hz": bandwidth}
     else:
-        f_min = f.number("f_min_hz")
-        f_max = f.number("f_max_hz", positive=True)
-        if not 0 <= f_min < f_max:
+        f_min, f_max = read("f_min_hz", True), read("f_max_hz", True)
+        if not f_min < f_max:
             raise f.fail("f_min_hz", f"must be in [0, f_max_hz = {f_max:g}), got {f_min:g}")
         if f_max >= nyquist:
             raise f.fail("f_max_hz", f"must be below Nyquist {nyquist:g} Hz, got {f_max:g}")
-    duration = f.number("duration_s", d.duration_s, positive=True)
+        band = {"bandwidth_hz": None, "f_min_hz": f_min, "f_max_hz": f_max}
+    duration = read("duration_s")
     if duration / t_ilc_s > MAX_SAMPLES:
         raise f.fail("duration_s", f"gives more than {MAX_SAMPLES} samples of {t_ilc_s:g} s")
-    past = f.integer("past", d.past)
-    if past < 1:
-        raise f.fail("past", f"must be >= 1, got {past}")
-    future = f.integer("future", d.future)
-    if not 2 <= future <= past:
+    past, future, order = read("past"), read("future"), read("order")
+    if future > past:
         raise f.fail("future", f"must be in [2, past = {past}], got {future}")
-    order = f.raw("order", None)
-    if order is not None:
-        order = f.integer("order")
-        if not 1 <= order < future:
-            raise f.fail("order", f"must be in [1, future - 1 = {future - 1}], got {order}")
-    max_delay = f.integer("max_delay", d.max_delay)
-    if max_delay < 0:
-        raise f.fail("max_delay", f"must be >= 0, got {max_delay}")
-    base_seed = f.integer("seed", d.seed)
-    center = tuple(f.numbers("center_ned_m", 3, list(d.center_ned_m)))
-    f.done()
-    settings = IdentifySettings(
-        excitation=excitation, amplitude_m=amplitude, bandwidth_hz=bandwidth, f_min_hz=f_min,
-        f_max_hz=f_max, duration_s=duration, past=past, future=future, order=order,
-        max_delay=max_delay, seed=base_seed, center_ned_m=center, vertical_amplitude_m=vertical,
-    )  # fmt: skip
-    return settings
+    if order is not None and order >= future:
+        raise f.fail("order", f"must be in [1, future - 1 = {future - 1}], got {order}")
+    windows = {"past": past, "future": future, "order": order, "duration_s": duration}
+    return f.read(IdentifySettings, excitation=excitation, **band, **windows)
 
 
 def mocap_settings(section: Any, where: str) -> MocapSettings:
@@ -849,90 +698,29 @@ def mocap_settings(section: Any, where: str) -> MocapSettings:
     ProfileError
         One line naming the field.
     """
-    if not isinstance(section, dict):
-        raise ProfileError(f"{where}: field 'mocap' must be a mapping")
-    d = MocapSettings()
-    known = {f.name for f in dataclasses.fields(MocapSettings)} - {"overrides"}
-    known |= set(MAPPING_AXES) | {"right_handed"}
-    for key in section:
-        if key not in known:
-            hint = did_you_mean(str(key), known)
-            raise ProfileError(f"{where}: field 'mocap.{key}' is not known{hint}")
-
-    def fail(key: str, message: str) -> ProfileError:
-        return ProfileError(f"{where}: field 'mocap.{key}' {message}")
-
-    def number(key: str, default: float, minimum: float = -math.inf) -> float:
-        value = section.get(key, default)
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-        if not ok or not math.isfinite(value) or value < minimum:
-            raise fail(key, f"must be a finite number >= {minimum:g}, got {value!r}")
-        return float(value)
-
-    def positive(key: str, default: float) -> float:
-        value = number(key, default, 0.0)
-        if value <= 0:
-            raise fail(key, f"must be > 0, got {value!r}")
-        return value
-
-    def choice(key: str, default: str, choices: tuple[str, ...]) -> str:
-        value = section.get(key, default)
-        if value not in choices:
-            raise fail(key, f"must be one of {', '.join(choices)}, got {value!r}")
-        return value
-
-    def flag(key: str, default: bool) -> bool:
-        value = section.get(key, default)
-        if not isinstance(value, bool):
-            raise fail(key, f"must be true or false, got {value!r}")
-        return value
-
-    url = section.get("url")
+    f = Fields({} if section is None else section, where, "mocap", ProfileError)
+    url = f.text("url")
     if url is not None:
-        if not isinstance(url, str):
-            raise fail("url", f"must be a string, got {url!r}")
         try:
             parse_mocap_url(url)
         except ProfileError as exc:
-            raise fail("url", f"is not usable: {exc}") from None
-    frame = section.get("frame")
+            raise f.fail("url", f"is not usable: {exc}") from None
+    frame = f.raw("frame", None)
     if frame is not None and (not isinstance(frame, str) or frame.lower() not in SYSTEM_FRAMES):
-        raise fail("frame", f"must be one of {', '.join(SYSTEM_FRAMES)}, got {frame!r}")
-    if not flag("right_handed", True):
-        raise fail(
+        raise f.fail("frame", f"must be one of {', '.join(SYSTEM_FRAMES)}, got {frame!r}")
+    if not f.value("right_handed", bool, True):
+        raise f.fail(
             "right_handed",
             "is false: a left-handed mapping mirrors an axis of the room (OptiTrack, Vicon, "
             "Qualisys and VRPN all stream right-handed axes) and the vehicle would fly the "
             "wrong way on it; set up_axis and north_axis instead",
         )
-    overrides = {}
-    for key in MAPPING_AXES:
-        if key in section:
-            if not isinstance(section[key], str):
-                raise fail(key, f"must be one of +x -x +y -y +z -z, got {section[key]!r}")
-            overrides[key] = section[key]
-    origin = section.get("origin_m", [0.0, 0.0, 0.0])
-    if (
-        not isinstance(origin, list)
-        or len(origin) != 3
-        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in origin)
-        or not all(math.isfinite(v) for v in origin)
-    ):
-        raise fail("origin_m", f"must be 3 finite numbers, got {origin!r}")
-    settings = MocapSettings(
-        url=url,
-        frame=None if frame is None else frame.lower(),
-        overrides=overrides,
-        yaw_offset_deg=number("yaw_offset_deg", d.yaw_offset_deg),
-        origin_m=(float(origin[0]), float(origin[1]), float(origin[2])),
-        forward=flag("forward", d.forward),
-        message=choice("message", d.message, MESSAGES),
-        position_std_m=positive("position_std_m", d.position_std_m),
-        angle_std_deg=positive("angle_std_deg", d.angle_std_deg),
-        measurement=choice("measurement", d.measurement, MEASUREMENTS),
-        agreement_m=positive("agreement_m", d.agreement_m),
-        check_move_m=number("check_move_m", d.check_move_m, 0.0),
-    )
+    overrides = {k: f.raw(k) for k in MAPPING_AXES if f.has(k)}
+    for key, axis in overrides.items():
+        if not isinstance(axis, str):
+            raise f.fail(key, f"must be one of +x -x +y -y +z -z, got {axis!r}")
+    frame = None if frame is None else frame.lower()
+    settings = f.read(MocapSettings, url=url, frame=frame, overrides=overrides)
     try:  # the axes: each a signed axis, north and forward horizontal
         system = parse_mocap_url(url).system if url is not None else "optitrack"
         base = mapping_for(settings.frame or system)

@@ -34,11 +34,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from gcs.core.frames import FrameMapping, mapping_for
 from gcs.errors import ProfileError
+from gcs.io.fields import check, ranged
 from gcs.io.mocap_source import MocapSource, parse_mocap_url
+from gcs.io.records import MEASUREMENTS
 
 __all__ = [
     "FlightSettings",
@@ -53,9 +55,6 @@ __all__ = [
 AXES = {"x": 0, "y": 1, "z": 2}
 #: Excitations of ``identification.excitation``.
 EXCITATIONS = ("prbs", "multisine")
-
-#: Fields not required to be positive (checked on their own).
-_SIGNED = ("yaw_deg", "hover_before_trial_s", "min_battery_pct")  # zero allowed
 
 
 @dataclass(frozen=True)
@@ -168,57 +167,35 @@ class FlightSettings:
         on a motion-capture vehicle 0.6 m is safe.
     """
 
-    stream_rate_hz: float = 60.0
-    telemetry_rate_hz: float = 50.0
-    connect_timeout_s: float = 10.0
-    health_timeout_s: float = 30.0
-    takeoff_timeout_s: float = 30.0
-    land_timeout_s: float = 60.0
-    command_timeout_s: float = 5.0
-    settle_tolerance_m: float = 0.05
-    settle_speed_m_s: float = 0.1
-    settle_time_s: float = 1.0
-    settle_timeout_s: float = 20.0
-    hover_measure_s: float = 10.0
-    hover_max_offset_m: float = 1.5
-    hover_max_drift_m_s: float = 0.3
-    hover_max_oscillation_m: float = 0.1
-    hover_before_trial_s: float = 4.0
-    transit_speed_m_s: float = 1.0
-    max_setpoint_late_s: float = 0.1
-    max_telemetry_age_s: float = 0.5
-    link_regain_s: float = 10.0
+    stream_rate_hz: float = ranged(60.0, ge=2, unit="Hz", why="PX4 leaves offboard below 2 Hz")
+    telemetry_rate_hz: float = ranged(50.0, gt=0)
+    connect_timeout_s: float = ranged(10.0, gt=0)
+    health_timeout_s: float = ranged(30.0, gt=0)
+    takeoff_timeout_s: float = ranged(30.0, gt=0)
+    land_timeout_s: float = ranged(60.0, gt=0)
+    command_timeout_s: float = ranged(5.0, gt=0)
+    settle_tolerance_m: float = ranged(0.05, gt=0)
+    settle_speed_m_s: float = ranged(0.1, gt=0)
+    settle_time_s: float = ranged(1.0, gt=0)
+    settle_timeout_s: float = ranged(20.0, gt=0)
+    hover_measure_s: float = ranged(10.0, ge=1, unit="s")
+    hover_max_offset_m: float = ranged(1.5, gt=0)
+    hover_max_drift_m_s: float = ranged(0.3, gt=0)
+    hover_max_oscillation_m: float = ranged(0.1, gt=0)
+    hover_before_trial_s: float = ranged(4.0, ge=0)
+    transit_speed_m_s: float = ranged(1.0, gt=0)
+    max_setpoint_late_s: float = ranged(0.1, gt=0)
+    max_telemetry_age_s: float = ranged(0.5, gt=0)
+    link_regain_s: float = ranged(10.0, gt=0)
     yaw_deg: float = 0.0
-    min_battery_pct: float = 30.0
-    fence_margin_m: float = 1.5
-    fence_speed_factor: float = 1.5
-    fence_jump_m: float = 0.5
-    fence_drift_m: float = 2.0
+    min_battery_pct: float = ranged(30.0, ge=0, le=100, unit="%")
+    fence_margin_m: float = ranged(1.5, gt=0)
+    fence_speed_factor: float = ranged(1.5, ge=1, why="the vehicle's own limits")
+    fence_jump_m: float = ranged(0.5, gt=0)
+    fence_drift_m: float = ranged(2.0, gt=0)
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.name == "yaw_deg" and not math.isfinite(value):
-                raise ProfileError(f"flight.{f.name}: must be finite, got {value}")
-            if f.name == "min_battery_pct" and not 0 <= value <= 100:
-                raise ProfileError(f"flight.{f.name}: must be in [0, 100], got {value}")
-            if f.name == "hover_before_trial_s" and not (math.isfinite(value) and value >= 0):
-                raise ProfileError(f"flight.{f.name}: must be finite and >= 0, got {value}")
-            if f.name not in _SIGNED and not (math.isfinite(value) and value > 0):
-                raise ProfileError(f"flight.{f.name}: must be finite and positive, got {value}")
-        if self.hover_measure_s < 1.0:
-            raise ProfileError(
-                f"flight.hover_measure_s: a hover needs at least 1 s, got {self.hover_measure_s:g}"
-            )
-        if self.fence_speed_factor < 1.0:
-            raise ProfileError(
-                "flight.fence_speed_factor: must be at least 1 (the vehicle's own limits), got "
-                f"{self.fence_speed_factor:g}"
-            )
-        if self.stream_rate_hz < 2.0:
-            raise ProfileError(
-                f"flight.stream_rate_hz: PX4 needs more than 2 Hz, got {self.stream_rate_hz:g}"
-            )
+        check(self, "flight", ProfileError)
 
     @property
     def telemetry_gap_s(self) -> float:
@@ -244,13 +221,13 @@ class FlightSettings:
             If ``stream_rate_hz`` is not an integer multiple of ``1 / t_ilc_s``.
         """
         if not (math.isfinite(t_ilc_s) and t_ilc_s > 0):
-            raise ProfileError(f"t_ilc_s: must be a finite positive number, got {t_ilc_s}")
+            raise ProfileError(f"field 't_ilc_s' must be > 0, got {t_ilc_s}")
         m_float = self.stream_rate_hz * t_ilc_s
         m = round(m_float)
         if m < 1 or abs(m_float - m) > 1e-6 * max(1.0, m_float):
             raise ProfileError(
-                f"flight.stream_rate_hz: {self.stream_rate_hz:g} Hz is not an integer multiple "
-                f"of 1/t_ilc_s = {1.0 / t_ilc_s:g} Hz"
+                f"field 'flight.stream_rate_hz' is {self.stream_rate_hz:g} Hz, not an integer "
+                f"multiple of 1/t_ilc_s = {1.0 / t_ilc_s:g} Hz"
             )
         return m
 
@@ -288,19 +265,19 @@ class IdentifySettings:
         Hover point the excitation is added to, local NED [m] [(0, 0, -1.5)].
     """
 
-    excitation: str = "prbs"
-    amplitude_m: float = 0.3
-    bandwidth_hz: float | None = 1.0
-    f_min_hz: float | None = None
-    f_max_hz: float | None = None
-    duration_s: float = 60.0
-    past: int = 20
-    future: int = 10
-    order: int | None = None
-    max_delay: int = 10
+    excitation: str = ranged("prbs", choices=EXCITATIONS)
+    amplitude_m: float = ranged(0.3, gt=0)
+    bandwidth_hz: float | None = ranged(1.0, gt=0)
+    f_min_hz: float | None = ranged(None, ge=0)
+    f_max_hz: float | None = ranged(None, gt=0)
+    duration_s: float = ranged(60.0, gt=0)
+    past: int = ranged(20, ge=1)
+    future: int = ranged(10, ge=2)
+    order: int | None = ranged(None, ge=1)
+    max_delay: int = ranged(10, ge=0)
     seed: int = 1
     center_ned_m: tuple[float, float, float] = (0.0, 0.0, -1.5)
-    vertical_amplitude_m: float = 0.3
+    vertical_amplitude_m: float = ranged(0.3, gt=0)
 
     def n_samples(self, t_ilc_s: float) -> int:
         """Setpoints per experiment, ``round(duration_s / t_ilc_s)``.
@@ -393,12 +370,12 @@ class MocapSettings:
     yaw_offset_deg: float = 0.0
     origin_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     forward: bool = True
-    message: str = "vision_position_estimate"
-    position_std_m: float = 0.005
-    angle_std_deg: float = 1.0
-    measurement: str = "mocap"
-    agreement_m: float = 0.15
-    check_move_m: float = 0.3
+    message: str = ranged("vision_position_estimate", choices=MESSAGES)
+    position_std_m: float = ranged(0.005, gt=0)
+    angle_std_deg: float = ranged(1.0, gt=0)
+    measurement: str = ranged("mocap", choices=MEASUREMENTS)
+    agreement_m: float = ranged(0.15, gt=0)
+    check_move_m: float = ranged(0.3, ge=0)
 
     def mapping(self, source: MocapSource) -> FrameMapping:
         """The frame mapping for ``source`` (its system's convention unless ``frame`` is set).

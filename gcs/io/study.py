@@ -18,7 +18,8 @@ from pathlib import Path
 from typing import Any
 
 from gcs.errors import GcsError, PathError, StudyError
-from gcs.io.config import Profile, TrajectorySpec, _Fields, load_trajectory, profile_from_dict
+from gcs.io.config import Profile, TrajectorySpec, load_trajectory, profile_from_dict
+from gcs.io.fields import Fields, Rule
 from gcs.io.paths import resolve_named
 from gcs.io.rundir import RunDir
 from gcs.io.yamlfile import read_yaml
@@ -119,7 +120,7 @@ class StudyDefinition:
     source: dict
 
 
-def _named(f: _Fields, key: str, kind: str, default: Any = ...) -> Path:
+def _named(f: Fields, key: str, kind: str, default: Any = ...) -> Path:
     value = f.raw(key, default)
     if not isinstance(value, str):
         raise f.fail(key, f"must be a {kind} name or path, got {value!r}")
@@ -131,7 +132,7 @@ def _named(f: _Fields, key: str, kind: str, default: Any = ...) -> Path:
         raise f.fail(key, str(exc).lstrip()) from None
 
 
-def _profile(f: _Fields, key: str, default: Any = ...) -> tuple[Profile, Path]:
+def _profile(f: Fields, key: str, default: Any = ...) -> tuple[Profile, Path]:
     path = _named(f, key, "profile", default)
     try:
         return profile_from_dict(read_yaml(path, StudyError), str(path)), path
@@ -139,7 +140,7 @@ def _profile(f: _Fields, key: str, default: Any = ...) -> tuple[Profile, Path]:
         raise f.fail(key, f"{exc}") from None
 
 
-def _pair(f: _Fields, key: str, default: float) -> tuple[float, float]:
+def _pair(f: Fields, key: str, default: float) -> tuple[float, float]:
     value = f.raw(key, default)
     v = f.numbers(key, 2) if isinstance(value, list) else [f.number(key, default)] * 2
     if any(x < 0 for x in v):
@@ -147,7 +148,7 @@ def _pair(f: _Fields, key: str, default: float) -> tuple[float, float]:
     return v[0], v[1]
 
 
-def _floor_rms(f: _Fields, run: Path | None, key: str) -> tuple[float, float]:
+def _floor_rms(f: Fields, run: Path | None, key: str) -> tuple[float, float]:
     if run is None:
         raise f.fail(key, "is 'floor': give the run directory with its floor.json in 'run'")
     path = run / RunDir.FLOOR_FILE  # a directory with the file will do: not opened as a run
@@ -162,7 +163,7 @@ def _floor_rms(f: _Fields, run: Path | None, key: str) -> tuple[float, float]:
     return out
 
 
-def _uncertainty(f: _Fields) -> dict:
+def _uncertainty(f: Fields) -> dict:
     levels = f.numbers("levels", None, [0.2])
     if any(v < 0 or v > 1 for v in levels):
         raise f.fail("levels", f"must be relative spreads in [0, 1], got {levels}")
@@ -212,7 +213,7 @@ def _set(doc: dict, path: tuple[str, ...], value: Any) -> None:
     doc[path[-1]] = value
 
 
-def _setting_error(f: _Fields, i: int, combo: dict, profile: str, message: str) -> StudyError:
+def _setting_error(f: Fields, i: int, combo: dict, profile: str, message: str) -> StudyError:
     """A profile's refusal of a setting, said with the setting's own field."""
     m = re.search(r"field '([^']+)'", message)
     path = tuple(m.group(1).split(".")) if m else ()
@@ -229,7 +230,7 @@ def _setting_name(profile: Profile, overrides: dict) -> str:
     return " ".join(parts)
 
 
-def _settings(f: _Fields, study_profile: tuple[Profile, Path]) -> tuple[SettingSpec, ...]:
+def _settings(f: Fields, study_profile: tuple[Profile, Path]) -> tuple[SettingSpec, ...]:
     entries = f.raw("settings", [{}])
     if not isinstance(entries, list) or not entries:
         raise f.fail("settings", "must be a non-empty list of settings (an empty grid)")
@@ -249,10 +250,8 @@ def _settings(f: _Fields, study_profile: tuple[Profile, Path]) -> tuple[SettingS
     out: list[SettingSpec] = []
     names: set[str] = set()
     for i, entry in enumerate(entries):
-        e = _Fields(entry, f.where, f"settings[{i}]", StudyError)
-        given_name = e.raw("name", None)
-        if given_name is not None and not isinstance(given_name, str):
-            raise e.fail("name", f"must be a string, got {given_name!r}")
+        e = Fields(entry, f.where, f"settings[{i}]", StudyError)
+        given_name = e.text("name")
         profile, _ = _profile(e, "profile") if e.has("profile") else study_profile
         own = {k: e.raw(k) for k in list(entry) if k in SETTING_KEYS}
         e.done()  # any other key is not a setting
@@ -274,11 +273,8 @@ def _settings(f: _Fields, study_profile: tuple[Profile, Path]) -> tuple[SettingS
     return tuple(out)
 
 
-def _positive_int(f: _Fields, key: str, default: int, most: int) -> int:
-    value = f.integer(key, default)
-    if not 1 <= value <= most:
-        raise f.fail(key, f"must be in [1, {most}], got {value}")
-    return value
+def _positive_int(f: Fields, key: str, default: int, most: int) -> int:
+    return f.integer(key, default, Rule(ge=1, le=most))
 
 
 def study_from_dict(data: Any, where: str = "<study>") -> StudyDefinition:
@@ -300,7 +296,7 @@ def study_from_dict(data: Any, where: str = "<study>") -> StudyDefinition:
     StudyError
         One line naming the file and the field.
     """
-    f = _Fields(data, where, "", StudyError)
+    f = Fields(data, where, "", StudyError)
     name = f.string("name")
     f.text("description")
     study_profile = _profile(f, "profile")
@@ -309,9 +305,7 @@ def study_from_dict(data: Any, where: str = "<study>") -> StudyDefinition:
         trajectory = load_trajectory(traj_path)
     except GcsError as exc:
         raise f.fail("trajectory", str(exc)) from None
-    seed = f.integer("seed", 1)
-    if seed < 0:
-        raise f.fail("seed", f"must be >= 0, got {seed}")
+    seed = f.integer("seed", 1, Rule(ge=0))
     plants = _positive_int(f, "plants", 20, MAX_PLANTS)
     iterations = _positive_int(f, "iterations", 10, 1000)
     chunk_plants = _positive_int(f, "chunk_plants", 10, MAX_PLANTS)

@@ -16,14 +16,13 @@ Units are SI; frames are local NED (north, east, down) with the origin at the ta
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from gcs.errors import ProfileError
+from gcs.io.fields import Fields, Rule, ranged
 from gcs.io.yamlfile import read_yaml
 
 __all__ = [
@@ -48,6 +47,7 @@ MODES = ("HOLD", "POSCTL")
 
 DLL_ACTIONS = (0, 1, 3)
 """``NAV_DLL_ACT`` values the mock models: disabled, Hold, Land."""
+_DLL = "disabled, Hold or Land: the actions the mock models"
 
 
 @dataclass(frozen=True)
@@ -77,13 +77,13 @@ class PhysicsConfig:
         [s] (link, estimator and mocap latency of a real system).
     """
 
-    dt_s: float = 0.005
+    dt_s: float = ranged(0.005, ge=0.0005, le=0.005, unit="s")
     gravity_m_s2: float = 9.81
     drag_lin_1_s: float = 0.10
     drag_quad_1_m: float = 0.25
-    tilt_lag_s: float = 0.08
-    thrust_max_g: float = 2.03
-    thrust_min_g: float = 0.24
+    tilt_lag_s: float = ranged(0.08, gt=0)
+    thrust_max_g: float = ranged(2.03, gt=1)
+    thrust_min_g: float = ranged(0.24, ge=0, lt=1)
     input_delay_s: float = 0.19
 
 
@@ -148,9 +148,9 @@ class ControllerConfig:
     vel_max_up_m_s: float = 3.0
     vel_max_down_m_s: float = 1.5
     acc_max_xy_m_s2: float = 5.0
-    tilt_max_deg: float = 45.0
-    thrust_xy_margin: float = 0.3
-    yaw_lag_s: float = 0.3
+    tilt_max_deg: float = ranged(45.0, gt=0, lt=80)
+    thrust_xy_margin: float = ranged(0.3, ge=0, lt=1)
+    yaw_lag_s: float = ranged(0.3, gt=0)
     spoolup_s: float = 0.0
     takeoff_ramp_s: float = 0.0
 
@@ -180,11 +180,11 @@ class DisturbanceConfig:
 
     field_amplitude_m_s2: float = 0.12
     field_terms: int = 3
-    field_wavelength_min_m: float = 1.5
+    field_wavelength_min_m: float = ranged(1.5, gt=0)
     field_wavelength_max_m: float = 5.0
     field_seed: int = 7
     gust_sigma_m_s2: float = 0.04
-    gust_tau_s: float = 1.5
+    gust_tau_s: float = ranged(1.5, gt=0)
 
 
 @dataclass(frozen=True)
@@ -248,9 +248,9 @@ class EstimatorConfig:
 
     enabled: bool = False
     vel_sigma_ned_m_s: Ned = (0.0, 0.0, 0.0)
-    vel_tau_ned_s: Ned = (10.0, 10.0, 10.0)
+    vel_tau_ned_s: Ned = ranged((10.0, 10.0, 10.0), gt=0)
     aid_sigma_ned_m: Ned = (0.0, 0.0, 0.0)
-    aid_tau_s: float = 60.0
+    aid_tau_s: float = ranged(60.0, gt=0)
     aid_time_constant_s: float = 0.5
     reset_rate_1_s: float = 0.0
 
@@ -287,8 +287,8 @@ class VisionConfig:
     """
 
     enabled: bool = False
-    time_constant_s: float = 0.1
-    innovation_gate_m: float = 0.5
+    time_constant_s: float = ranged(0.1, gt=0)
+    innovation_gate_m: float = ranged(0.5, gt=0)
     reset_after_s: float = 7.0
     dead_reckoning_accel_m_s2: float = 0.05
 
@@ -309,7 +309,7 @@ class RatesConfig:
         Rate of the message of that name [Hz].
     """
 
-    heartbeat_hz: float = 1.0
+    heartbeat_hz: float = ranged(1.0, gt=0, why="MAVSDK needs it")
     sys_status_hz: float = 5.0
     extended_sys_state_hz: float = 1.0
     local_position_ned_hz: float = 50.0
@@ -394,29 +394,29 @@ class Px4Config:
         ``GF_MAX_VER_DIST``: largest height above home (0: off, PX4's default) [m].
     """
 
-    system_id: int = 1
-    initial_mode: str = "HOLD"
-    mis_takeoff_alt_m: float = 2.5
+    system_id: int = ranged(1, ge=1, le=250)
+    initial_mode: str = ranged("HOLD", choices=MODES)
+    mis_takeoff_alt_m: float = ranged(2.5, gt=0)
     com_of_loss_t_s: float = 1.0
     offboard_min_stream_s: float = 0.0
     offboard_resume: bool = True
     com_disarm_land_s: float = 2.0
     com_disarm_prflt_s: float = 10.0
     land_detect_s: float = 1.0
-    mpc_land_speed_m_s: float = 0.7
-    mpc_tko_speed_m_s: float = 1.5
-    nav_dll_act: int = 0
-    com_dl_loss_t_s: float = 10.0
+    mpc_land_speed_m_s: float = ranged(0.7, gt=0)
+    mpc_tko_speed_m_s: float = ranged(1.5, gt=0)
+    nav_dll_act: int = ranged(0, choices=DLL_ACTIONS, why=_DLL)
+    com_dl_loss_t_s: float = ranged(10.0, gt=0)
     battery_drain_pct_s: float = 0.05
-    home_lat_deg: float = 47.3977431
-    home_lon_deg: float = 8.5455947
-    home_alt_m: float = 489.244
-    ekf2_gps_ctrl: int = 7
-    ekf2_ev_ctrl: int = 0
-    ekf2_hgt_ref: int = 1
-    ekf2_ev_delay_ms: float = 175.0
-    ekf2_noaid_tout_s: float = 5.0
-    gf_action: int = 2
+    home_lat_deg: float = ranged(47.3977431, ge=-90, le=90)
+    home_lon_deg: float = ranged(8.5455947, ge=-180, le=180)
+    home_alt_m: float = ranged(489.244)
+    ekf2_gps_ctrl: int = ranged(7, ge=0, le=15, why="a bitmask")
+    ekf2_ev_ctrl: int = ranged(0, ge=0, le=15, why="a bitmask")
+    ekf2_hgt_ref: int = ranged(1, choices=(0, 1, 2, 3))
+    ekf2_ev_delay_ms: float = ranged(175.0, ge=0, le=300, unit="ms")
+    ekf2_noaid_tout_s: float = ranged(5.0, ge=0.5, le=10, unit="s")
+    gf_action: int = ranged(2, ge=0, le=5, why="PX4's GF_ACTION")
     gf_max_hor_dist_m: float = 0.0
     gf_max_ver_dist_m: float = 0.0
 
@@ -604,61 +604,10 @@ class Faults:
         return (0.0, 0.0)
 
 
-def _check_value(value: Any, annotation: Any, where: str) -> Any:
-    """Validate one YAML scalar against a dataclass field annotation; return the typed value."""
-    if annotation is bool:
-        if not isinstance(value, bool):
-            raise ProfileError(f"{where} must be true or false, got {value!r}")
-        return value
-    if annotation is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ProfileError(f"{where} must be an integer, got {value!r}")
-        return value
-    if annotation is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ProfileError(f"{where} must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ProfileError(f"{where} must be finite, got {value!r}")
-        return float(value)
-    if annotation == Ned:
-        if not (isinstance(value, list | tuple) and len(value) == 3):
-            raise ProfileError(f"{where} must be three numbers [north, east, down], got {value!r}")
-        return tuple(_check_value(v, float, where) for v in value)
-    if annotation is str:
-        if not isinstance(value, str):
-            raise ProfileError(f"{where} must be a string, got {value!r}")
-        return value
-    raise TypeError(f"unsupported field type {annotation!r}")  # programming error
-
-
-def _build(cls: type, data: Any, where: str, path: str) -> Any:
-    """Build dataclass ``cls`` from a mapping, strictly (unknown or ill-typed fields raise)."""
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise ProfileError(f"{where}: field '{path or '<top>'}' must be a mapping")
-    hints = typing.get_type_hints(cls)
-    known = {f.name for f in dataclasses.fields(cls)}
-    for key in data:
-        if key not in known:
-            name = f"{path}.{key}" if path else str(key)
-            raise ProfileError(f"{where}: field '{name}' is not a known field")
-    kwargs = {}
-    for key, value in data.items():
-        name = f"{path}.{key}" if path else key
-        hint = hints[key]
-        if dataclasses.is_dataclass(hint):
-            kwargs[key] = _build(hint, value, where, name)
-        else:
-            kwargs[key] = _check_value(value, hint, f"{where}: field '{name}'")
-    try:
-        return cls(**kwargs)
-    except ValueError as exc:
-        raise ProfileError(f"{where}: field '{path}': {exc}") from exc
-
-
 def mock_config_from_dict(data: Any, where: str = "<dict>") -> MockConfig:
     """Build a :class:`MockConfig` from a parsed YAML mapping.
+
+    Every number is finite and, unless its field declares another range, ``>= 0``.
 
     Parameters
     ----------
@@ -674,82 +623,51 @@ def mock_config_from_dict(data: Any, where: str = "<dict>") -> MockConfig:
     Raises
     ------
     ProfileError
-        On an unknown or ill-typed field, naming ``where`` and the dotted field.
+        On an unknown, ill-typed or out-of-range field, naming ``where`` and the dotted field.
     """
-    cfg = _build(MockConfig, data, where, "")
-    _validate(cfg, where)
+    f = Fields({} if data is None else data, where, "", ProfileError)
+    cfg = f.read(MockConfig, Rule(ge=0))
+    for rule in _CROSS_FIELD:
+        refusal = rule(cfg)
+        if refusal:
+            raise f.fail(*refusal)
     return cfg
 
 
-def _validate(cfg: MockConfig, where: str) -> None:
-    """Range and cross-field checks that a plain type check cannot make."""
-    for section in (
-        "physics", "controller", "disturbance", "noise", "estimator", "vision", "rates",
-    ):  # fmt: skip
-        sub = getattr(cfg, section)
-        for f in dataclasses.fields(sub):
-            value = getattr(sub, f.name)
-            if isinstance(value, float) and value < 0:
-                raise ProfileError(f"{where}: field '{section}.{f.name}' must be >= 0")
-    checks = [
-        ("physics.dt_s", 0.0005 <= cfg.physics.dt_s <= 0.005, "must be in [0.0005, 0.005] s"),
-        ("physics.tilt_lag_s", cfg.physics.tilt_lag_s > 0, "must be > 0"),
-        ("physics.thrust_max_g", cfg.physics.thrust_max_g > 1.0, "must be > 1"),
-        ("physics.thrust_min_g", cfg.physics.thrust_min_g < 1.0, "must be < 1"),
-        ("controller.tilt_max_deg", 0 < cfg.controller.tilt_max_deg < 80, "must be in (0, 80)"),
-        ("controller.yaw_lag_s", cfg.controller.yaw_lag_s > 0, "must be > 0"),
-        ("controller.thrust_xy_margin", cfg.controller.thrust_xy_margin < 1.0, "must be < 1"),
-        ("disturbance.gust_tau_s", cfg.disturbance.gust_tau_s > 0, "must be > 0"),
-        ("estimator.vel_sigma_ned_m_s", min(cfg.estimator.vel_sigma_ned_m_s) >= 0, "must be >= 0"),
-        ("estimator.vel_tau_ned_s", min(cfg.estimator.vel_tau_ned_s) > 0, "must be > 0"),
-        ("estimator.aid_sigma_ned_m", min(cfg.estimator.aid_sigma_ned_m) >= 0, "must be >= 0"),
-        ("estimator.aid_tau_s", cfg.estimator.aid_tau_s > 0, "must be > 0"),
-        (
-            "estimator.aid_time_constant_s",
-            cfg.estimator.aid_time_constant_s >= 2 * cfg.physics.dt_s,
-            "must be >= 2 physics.dt_s (the pull is integrated on the physics grid)",
-        ),
-        (
-            "estimator.reset_rate_1_s",
-            cfg.estimator.reset_rate_1_s * cfg.physics.dt_s <= 1.0,
-            "must be <= 1 / physics.dt_s",
-        ),
-        (
-            "disturbance.field_wavelength_max_m",
-            cfg.disturbance.field_wavelength_max_m >= cfg.disturbance.field_wavelength_min_m > 0,
-            "must be >= field_wavelength_min_m > 0",
-        ),
-        ("px4.initial_mode", cfg.px4.initial_mode in MODES, f"must be one of {', '.join(MODES)}"),
-        ("px4.system_id", 1 <= cfg.px4.system_id <= 250, "must be in [1, 250]"),
-        ("px4.mis_takeoff_alt_m", cfg.px4.mis_takeoff_alt_m > 0, "must be > 0"),
-        ("px4.mpc_land_speed_m_s", cfg.px4.mpc_land_speed_m_s > 0, "must be > 0"),
-        ("px4.mpc_tko_speed_m_s", cfg.px4.mpc_tko_speed_m_s > 0, "must be > 0"),
-        (
-            "px4.nav_dll_act",
-            cfg.px4.nav_dll_act in DLL_ACTIONS,
-            "must be 0 (disabled), 1 (Hold) or 3 (Land): the actions the mock models",
-        ),
-        ("px4.com_dl_loss_t_s", cfg.px4.com_dl_loss_t_s > 0, "must be > 0"),
-        ("px4.ekf2_gps_ctrl", 0 <= cfg.px4.ekf2_gps_ctrl <= 15, "must be a bitmask in [0, 15]"),
-        ("px4.ekf2_ev_ctrl", 0 <= cfg.px4.ekf2_ev_ctrl <= 15, "must be a bitmask in [0, 15]"),
-        ("px4.ekf2_hgt_ref", cfg.px4.ekf2_hgt_ref in (0, 1, 2, 3), "must be 0, 1, 2 or 3"),
-        ("px4.gf_action", 0 <= cfg.px4.gf_action <= 5, "must be in [0, 5] (PX4's GF_ACTION)"),
-        ("px4.gf_max_hor_dist_m", cfg.px4.gf_max_hor_dist_m >= 0, "must be >= 0"),
-        ("px4.gf_max_ver_dist_m", cfg.px4.gf_max_ver_dist_m >= 0, "must be >= 0"),
-        ("rates.heartbeat_hz", cfg.rates.heartbeat_hz > 0, "must be > 0 (MAVSDK needs it)"),
-        ("vision.time_constant_s", cfg.vision.time_constant_s > 0, "must be > 0"),
-        ("vision.innovation_gate_m", cfg.vision.innovation_gate_m > 0, "must be > 0"),
-        ("px4.ekf2_ev_delay_ms", 0 <= cfg.px4.ekf2_ev_delay_ms <= 300, "must be in [0, 300] ms"),
-        ("px4.ekf2_noaid_tout_s", 0.5 <= cfg.px4.ekf2_noaid_tout_s <= 10, "must be in [0.5, 10] s"),
-        (
-            "vision.enabled",
-            not cfg.vision.enabled or not cfg.estimator.enabled,
-            "and estimator.enabled cannot both be true (GPS wander or vision, not both)",
-        ),
-    ]
-    for name, ok, message in checks:
-        if not ok:
-            raise ProfileError(f"{where}: field '{name}' {message}")
+def _pull_on_the_physics_grid(cfg: MockConfig) -> tuple[str, str] | None:
+    if cfg.estimator.aid_time_constant_s >= 2 * cfg.physics.dt_s:
+        return None
+    why = "must be >= 2 physics.dt_s (the pull is integrated on the physics grid)"
+    return "estimator.aid_time_constant_s", why
+
+
+def _resets_within_a_step(cfg: MockConfig) -> tuple[str, str] | None:
+    if cfg.estimator.reset_rate_1_s * cfg.physics.dt_s <= 1.0:
+        return None
+    return "estimator.reset_rate_1_s", "must be <= 1 / physics.dt_s"
+
+
+def _wavelengths_ordered(cfg: MockConfig) -> tuple[str, str] | None:
+    d = cfg.disturbance
+    if d.field_wavelength_max_m >= d.field_wavelength_min_m:
+        return None
+    return "disturbance.field_wavelength_max_m", "must be >= field_wavelength_min_m"
+
+
+def _one_navigation_error(cfg: MockConfig) -> tuple[str, str] | None:
+    if not (cfg.vision.enabled and cfg.estimator.enabled):
+        return None
+    why = "and estimator.enabled cannot both be true (GPS wander or vision, not both)"
+    return "vision.enabled", why
+
+
+#: Rules between fields: each gives the field and what is wrong, or None.
+_CROSS_FIELD = (
+    _pull_on_the_physics_grid,
+    _resets_within_a_step,
+    _wavelengths_ordered,
+    _one_navigation_error,
+)
 
 
 def load_mock_config(path: str | Path | None) -> MockConfig:
