@@ -4,12 +4,16 @@ The user's profile gives the model(s) the learning uses; the true plants of the 
 model perturbed as an :class:`Uncertainty` says (natural frequency, damping and gain of every
 mode, or every Markov parameter; an extra delay; output noise; a repeatable disturbance). Each
 plant then flies the user's reference for ``iterations`` learned trials with every
-:class:`StudySetting`, the learning being the same step ``gcs fly`` takes
-(the public API's :class:`gcs.core.learner.Learner`, one per plant and setting, one
-``step`` per trial); the plant's simulation is on this side.
+:class:`StudySetting`, the learning being the step ``gcs fly`` takes: the plants of a chunk
+fly one trial loop (:func:`run_trials`, also the loop of :mod:`gcs.core.montecarlo`) and learn
+through one :class:`gcs.core.learner.LearnerBatch`, which equals a
+:class:`gcs.core.learner.Learner` per plant (the paper's method batched: what depends on the
+model once for every plant, a QP only for the plants whose optimum breaks a limit; the
+adaptive options a Learner per plant, since a refresh gives each plant its own model). The
+plant's simulation is on this side.
 
-Everything is per plant and linear in the trial length ``N``: the true plant is simulated as a
-difference equation (``scipy.signal.lfilter``) or, for perturbed Markov parameters, by an FFT
+Everything is linear in the trial length ``N``: the true plant is simulated as a difference
+equation (``scipy.signal.lfilter``) or, for perturbed Markov parameters, by an FFT
 convolution, and the learning takes the sparse path of :mod:`gcs.core.update`. No ``N x N``
 operator is formed.
 
