@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.core.estimators import KilcState
+from gcs.core.estimators import KilcState, kilc_init, kilc_update, rts_smoother
 from gcs.core.floor import Floor
 from gcs.core.learning import (
     AdaptiveSettings,
@@ -34,10 +34,10 @@ from gcs.core.learning import (
     newest_step,
     plan_next_trial,
 )
-from gcs.core.model import DiscreteModel
+from gcs.core.model import DiscreteModel, simulate
 from gcs.core.update import InputUpdate, UpdateResult
 
-__all__ = ["Learner", "LearnerStep", "Trial"]
+__all__ = ["Learner", "LearnerBatch", "LearnerStep", "Trial"]
 
 
 @dataclass(frozen=True)
@@ -313,3 +313,171 @@ class Learner:
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name} contains NaN or inf")
         return Trial(u, y)
+
+
+class LearnerBatch:
+    """Many plants learning one reference with one set of settings: :class:`Learner` per
+    plant, with what depends only on the model computed once for them all.
+
+    The plants share the learner's model; only their data differ. The paper's method
+    (``adaptive`` None) therefore runs batched: one residual simulation, one smoother or
+    K-ILC update and one banded solve of eq. (8) for every plant at once (one KKT
+    factorisation per axis), and the QP with the setpoint limits only for the plants whose
+    unconstrained optimum breaks a limit, each from its own last active set, as its own
+    :class:`Learner` would. With ``adaptive`` (noise model from each plant's data, refresh,
+    safeguard) a plant's model and estimator change with its own data, so each plant keeps
+    its own :class:`Learner` inside the batch.
+
+    Every plant's setpoints equal its own :class:`Learner`'s to rounding (``batched=False``
+    runs exactly those).
+
+    Parameters
+    ----------
+    settings : LearnerSettings
+        As :class:`Learner`.
+    reference_m : ndarray, shape (N+1, n_axes)
+        As :class:`Learner`.
+    plants : int
+        Number of plants ``P``.
+    adaptive : AdaptiveSettings, optional
+        As :class:`Learner` (a :class:`Learner` per plant).
+    repeats : int
+        As :class:`Learner`.
+    batched : bool
+        False: a :class:`Learner` per plant for the paper's method too (the reference).
+
+    Raises
+    ------
+    ValueError
+        As :class:`Learner`; ``plants < 1``.
+    """
+
+    def __init__(
+        self,
+        settings: LearnerSettings,
+        reference_m: np.ndarray,
+        plants: int,
+        adaptive: AdaptiveSettings | None = None,
+        repeats: int = 0,
+        *,
+        batched: bool = True,
+    ) -> None:
+        if int(plants) != plants or plants < 1:
+            raise ValueError(f"plants must be an integer >= 1, got {plants}")
+        template = Learner(settings, reference_m, adaptive, repeats)
+        self.settings = settings
+        self.plants = int(plants)
+        self.repeats = template.repeats
+        self._ref = template.reference_m
+        self._each: list[Learner] | None = None
+        if adaptive is not None or not batched:
+            self._each = [template] + [
+                Learner(settings, reference_m, adaptive, repeats) for _ in range(self.plants - 1)
+            ]
+        else:
+            updates = [template._update(a, m) for a, m in enumerate(settings.models)]
+            self._updates = [[u.fork() for u in updates] for _ in range(self.plants)]
+            self._shared = updates
+            self._kilc: list[KilcState] | None = None
+        self.failed: list[str | None] = [None] * self.plants
+        #: Per plant and axis: limits holding with equality after the newest step.
+        self.active_constraints = np.zeros((self.plants, len(settings.models)), dtype=int)
+
+    @property
+    def learning(self) -> np.ndarray:
+        """Plants still learning (their update has not failed), shape (P,) of bool."""
+        return np.array([f is None for f in self.failed])
+
+    def step(self, u_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+        """Learn from one complete trial of every plant still learning.
+
+        Parameters
+        ----------
+        u_m : ndarray, shape (P, N, n_axes)
+            Setpoints flown [m], the reference's frame.
+        y_m : ndarray, shape (P, N, n_axes)
+            Measured positions [m].
+
+        Returns
+        -------
+        ndarray, shape (P, N, n_axes)
+            The next setpoints; NaN for a plant that is not learning. A plant whose update
+            raises ``ValueError`` (no setpoints within the limits) or gives non-finite
+            setpoints stops learning: :attr:`failed` says why.
+        """
+        u = np.asarray(u_m, dtype=float)
+        y = np.asarray(y_m, dtype=float)
+        shape = (self.plants, *self._ref[1:].shape)
+        for name, arr in (("u_m", u), ("y_m", y)):
+            if arr.shape != shape:
+                raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+        out = np.full(u.shape, np.nan)
+        self.active_constraints[:] = 0
+        if self._each is not None:
+            for k, learner in enumerate(self._each):
+                if self.failed[k] is not None:
+                    continue
+                try:
+                    out[k] = learner.step(u[k], y[k])
+                except ValueError as exc:  # no next input within the limits
+                    self.failed[k] = str(exc)
+                    continue
+                for a, update in enumerate(learner.last.updates):
+                    self.active_constraints[k, a] = update.active_constraints
+        else:
+            self._paper(u, y, out)
+        for k in range(self.plants):
+            if self.failed[k] is None and not np.all(np.isfinite(out[k])):
+                self.failed[k] = "non-finite setpoints"
+                out[k] = np.nan
+        return out
+
+    def _paper(self, u_m: np.ndarray, y_m: np.ndarray, out: np.ndarray) -> None:
+        """The paper's step (:func:`gcs.core.learning.newest_step`) for every plant learning."""
+        s = self.settings
+        for k in np.flatnonzero(self.learning):  # as Learner.step refuses a trial
+            for name, arr in (("u_m", u_m[k]), ("y_m", y_m[k])):
+                if self.failed[k] is None and not np.all(np.isfinite(arr)):
+                    self.failed[k] = f"{name} contains NaN or inf"
+        live = np.flatnonzero(self.learning)
+        if live.size == 0:
+            return
+        start = self._ref[0]
+        u = u_m[live] - start
+        y = y_m[live] - start
+        n = u.shape[1]
+        states = []
+        for a, model in enumerate(s.models):
+            z = (y[:, :, a] - simulate(model, u[:, :, a].T).T).T  # (N, plants)
+            if s.algorithm == "smoother":
+                d_hat = rts_smoother(z, s.smoother).d_hat.T
+            else:
+                prior = kilc_init(n, s.kilc) if self._kilc is None else self._kilc[a]
+                d_all = prior.d_hat
+                if d_all.ndim == 1:  # the prior, every plant alike
+                    d_all = np.repeat(d_all[:, None], self.plants, axis=1)
+                prior = KilcState(d_all[:, live], prior.p, prior.trials)
+                state = kilc_update(prior, z, s.kilc)
+                full = d_all.copy()
+                full[:, live] = state.d_hat
+                states.append(KilcState(full, state.p, state.trials))
+                d_hat = state.d_hat.T
+            u_next, within, active = self._shared[a].solve_unconstrained(d_hat, u[:, :, a])
+            for i, k in enumerate(live):
+                if within[i]:
+                    out[k, :, a] = u_next[i]
+                    self.active_constraints[k, a] = active[i]
+                    continue
+                try:
+                    result = self._updates[k][a].solve(d_hat[i], u[i, :, a])
+                except ValueError as exc:  # no next input within the limits
+                    self.failed[k] = str(exc)
+                    continue
+                out[k, :, a] = result.u_m
+                self.active_constraints[k, a] = result.active_constraints
+        if states:
+            self._kilc = states
+        out[live] += start
+        for k in range(self.plants):
+            if self.failed[k] is not None:
+                out[k] = np.nan

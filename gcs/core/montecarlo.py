@@ -39,6 +39,7 @@ from gcs.core.model import DiscreteModel, from_transfer_function, lifted_matrix
 from gcs.core.noise_model import DisturbanceEstimate, drift_scale, estimate_disturbance
 from gcs.core.refresh import refresh_decision, simulate_tf, transfer_function
 from gcs.core.robustness import difference_matrix
+from gcs.core.study import diverged, run_trials
 
 __all__ = [
     "ALGORITHMS",
@@ -425,8 +426,6 @@ def _simulate(
     f_nom = lifted_matrix(_msd_model(settings.wn_rad_s, settings.zeta, dt), n)
     m_y, m_u = update_operator(f_nom, settings.we, settings.wdu, settings.wu)
     f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
-    nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)  # linear, not circular
-    f_true_fft = np.fft.rfft(f_true, nfft, axis=-1)[:, None, :]
     noise_rng = noise_generator(settings, level)  # same stream for both algorithms
     if algorithm == "smoother":
         # d_hat = S (y - F u) + s0 d0 and the update are fixed: fold them into two matrices,
@@ -439,24 +438,43 @@ def _simulate(
         gains = kilc_gains(settings.kilc, settings.iterations)
         d_hat = np.full((p * r, n), settings.kilc.d0)
         f_nom_t, m_y_t, m_u_t = f_nom.T.copy(), m_y.T.copy(), m_u.T.copy()
-    u = np.broadcast_to(u0, (p * r, n)).copy()
+    fly = _flights(settings, f_true, yd, d, noise_rng, norms)
+
+    def learn(j: int, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        if algorithm == "smoother":
+            return c - y @ a_y + u @ a_u
+        d_hat[:] += gains[j] * (y - u @ f_nom_t - d_hat)
+        return (yd - d_hat) @ m_y_t + u @ m_u_t
+
+    run_trials(np.broadcast_to(u0, (p * r, n)).copy(), settings.iterations + 1, fly, learn, step)
+    return norms
+
+
+def _flights(
+    settings: StudySettings,
+    f_true: np.ndarray,
+    yd: np.ndarray,
+    d: np.ndarray,
+    noise_rng: np.random.Generator,
+    norms: np.ndarray,
+) -> Callable[[int, np.ndarray], np.ndarray]:
+    """The flights of every run (P plants x R repeats, plant Markov parameters ``f_true``):
+    ``fly(j, u) -> y`` measured, the error norm of trial ``j`` kept in ``norms[:, :, j]``."""
+    p, r, _ = norms.shape
+    n = yd.size
+    nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)  # linear, not circular
+    f_true_fft = np.fft.rfft(f_true, nfft, axis=-1)[:, None, :]
     measured = settings.error_signal == "measured"
-    for j in range(settings.iterations + 1):
+
+    def fly(j: int, u: np.ndarray) -> np.ndarray:
         u_fft = np.fft.rfft(u.reshape(p, r, n), nfft, axis=-1)
         y_true = np.fft.irfft(f_true_fft * u_fft, nfft, axis=-1)[..., :n].reshape(p * r, n) + d
         y = y_true + settings.noise_std * noise_rng.standard_normal((p * r, n))
         e = yd - (y if measured else y_true)
         norms[:, :, j] = np.sqrt(np.einsum("ij,ij->i", e, e)).reshape(p, r)
-        if j == settings.iterations:
-            break
-        if algorithm == "smoother":
-            u = c - y @ a_y + u @ a_u
-        else:
-            d_hat += gains[j] * (y - u @ f_nom_t - d_hat)
-            u = (yd - d_hat) @ m_y_t + u @ m_u_t
-        if step is not None:
-            step()
-    return norms
+        return y
+
+    return fly
 
 
 def error_norms(settings: StudySettings, level: float, algorithm: str) -> np.ndarray:
@@ -512,9 +530,9 @@ def summarise(
     per_plant = norms.mean(axis=1)  # (P, J): average over repeats first
     first = per_plant[:, settings.first_iteration]
     steady = per_plant[:, settings.steady_from : settings.steady_to + 1].mean(axis=1)
-    diverged = ~(steady <= per_plant[:, 0])  # NaN/inf count as diverged
+    gone = diverged(per_plant[:, 0], steady)  # NaN/inf count as diverged
     if settings.diverged_rule == "exclude":
-        first, steady = first[~diverged], steady[~diverged]
+        first, steady = first[~gone], steady[~gone]
     nan = float("nan")
 
     def stats(x: np.ndarray) -> tuple[float, float]:
@@ -534,7 +552,7 @@ def summarise(
         excluded=int(excluded),
         excluded_rule=_rule_text(settings),
         plants=int(first.size),
-        diverged=int(np.count_nonzero(diverged)),
+        diverged=int(np.count_nonzero(gone)),
     )
 
 
@@ -758,23 +776,19 @@ def _adaptive_simulate(
     h_inv = np.broadcast_to(h_inv, (runs, n, n))  # shared until a refresh changes a run
     d_mat = difference_matrix(n, adaptive.robustness_order)
     f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
-    nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)
-    f_true_fft = np.fft.rfft(f_true, nfft, axis=-1)[:, None, :]
     noise_rng = noise_generator(settings, level)  # the paper's study's noise, draw for draw
     refresh_settings = replace(adaptive.refresh_settings(), delay_search=0)
     u_hist = np.zeros((runs, n_trials, n))
     y_hist = np.zeros((runs, n_trials, n))
-    u = np.broadcast_to(u0, (runs, n)).copy()
-    measured = settings.error_signal == "measured"
-    for j in range(n_trials):
-        u_fft = np.fft.rfft(u.reshape(p, r, n), nfft, axis=-1)
-        y_true = np.fft.irfft(f_true_fft * u_fft, nfft, axis=-1)[..., :n].reshape(runs, n) + d
-        y = y_true + settings.noise_std * noise_rng.standard_normal((runs, n))
-        e = yd - (y if measured else y_true)
-        norms[:, :, j] = np.sqrt(np.einsum("ij,ij->i", e, e)).reshape(p, r)
+    flights = _flights(settings, f_true, yd, d, noise_rng, norms)
+
+    def fly(j: int, u: np.ndarray) -> np.ndarray:
+        y = flights(j, u)
         u_hist[:, j], y_hist[:, j] = u, y
-        if j == settings.iterations:
-            break
+        return y
+
+    def learn(j: int, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        nonlocal b, a, h_inv
         est = _estimate(f_run, u_hist[:, : j + 1], y_hist[:, : j + 1], algorithm, adaptive)
         if adaptive.refresh and j >= 1:
             out = refresh_decision(
@@ -796,9 +810,9 @@ def _adaptive_simulate(
         rhs = settings.we * _conv_transpose(f_run, yd - est.d_hat_m) + settings.wdu * u
         if np.any(lam > 0):
             rhs = rhs + lam[:, None] * (d_mat.T @ (d_mat @ u0))[None, :]
-        u = np.einsum("mij,mj->mi", h_inv, rhs)
-        if step is not None:
-            step()
+        return np.einsum("mij,mj->mi", h_inv, rhs)
+
+    run_trials(np.broadcast_to(u0, (runs, n)).copy(), n_trials, fly, learn, step)
     return norms, refreshed.reshape(p, r)
 
 
@@ -852,7 +866,7 @@ def adaptive_error_norms(
 def _diverged(settings: StudySettings, norms: np.ndarray) -> np.ndarray:
     per_plant = norms.mean(axis=1)
     steady = per_plant[:, settings.steady_from : settings.steady_to + 1].mean(axis=1)
-    return ~(steady <= per_plant[:, 0])
+    return diverged(per_plant[:, 0], steady)
 
 
 def check_adaptive_size(settings: StudySettings) -> None:

@@ -4,12 +4,16 @@ The user's profile gives the model(s) the learning uses; the true plants of the 
 model perturbed as an :class:`Uncertainty` says (natural frequency, damping and gain of every
 mode, or every Markov parameter; an extra delay; output noise; a repeatable disturbance). Each
 plant then flies the user's reference for ``iterations`` learned trials with every
-:class:`StudySetting`, the learning being the same step ``gcs fly`` takes
-(the public API's :class:`gcs.core.learner.Learner`, one per plant and setting, one
-``step`` per trial); the plant's simulation is on this side.
+:class:`StudySetting`, the learning being the step ``gcs fly`` takes: the plants of a chunk
+fly one trial loop (:func:`run_trials`, also the loop of :mod:`gcs.core.montecarlo`) and learn
+through one :class:`gcs.core.learner.LearnerBatch`, which equals a
+:class:`gcs.core.learner.Learner` per plant (the paper's method batched: what depends on the
+model once for every plant, a QP only for the plants whose optimum breaks a limit; the
+adaptive options a Learner per plant, since a refresh gives each plant its own model). The
+plant's simulation is on this side.
 
-Everything is per plant and linear in the trial length ``N``: the true plant is simulated as a
-difference equation (``scipy.signal.lfilter``) or, for perturbed Markov parameters, by an FFT
+Everything is linear in the trial length ``N``: the true plant is simulated as a difference
+equation (``scipy.signal.lfilter``) or, for perturbed Markov parameters, by an FFT
 convolution, and the learning takes the sparse path of :mod:`gcs.core.update`. No ``N x N``
 operator is formed.
 
@@ -22,13 +26,14 @@ split into chunks, nor on which process simulates them.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft
 import scipy.signal
 
-from gcs.core.learner import Learner
+from gcs.core.learner import LearnerBatch
 from gcs.core.learning import AdaptiveSettings, LearnerSettings
 from gcs.core.metrics import epos
 from gcs.core.model import DiscreteModel, markov_parameters
@@ -40,6 +45,9 @@ __all__ = [
     "StudyPlan",
     "TruePlant",
     "draw_plant",
+    "run_trials",
+    "diverged",
+    "fly_plants",
     "fly_plant",
     "PlantResult",
     "run_chunk",
@@ -419,16 +427,158 @@ class PlantResult:
         Share of the updates (both axes) where a setpoint limit was active.
     failed : str or None
         Why the learning stopped early (the update had no solution), None when it did not.
+    setpoints_m : ndarray, shape (N, 2) or None
+        Setpoints of the last flight [m].
     """
 
     epos_m: np.ndarray
     setpoint_rms_m: float
     limit_active: float
     failed: str | None = None
+    setpoints_m: np.ndarray | None = None
+
+
+def run_trials(
+    u0: np.ndarray,
+    flights: int,
+    fly: Callable[[int, np.ndarray], np.ndarray],
+    learn: Callable[[int, np.ndarray, np.ndarray], np.ndarray],
+    step: Callable[[], None] | None = None,
+) -> np.ndarray:
+    """The trial loop of every study: fly, measure, learn, ``flights`` times.
+
+    Parameters
+    ----------
+    u0 : ndarray
+        Setpoints of trial 0 (every plant, every run).
+    flights : int
+        Trials flown (trial 0 included).
+    fly : callable
+        ``fly(f, u) -> y``: flight ``f`` with setpoints ``u``; measures what the study keeps.
+    learn : callable
+        ``learn(f, u, y) -> u_next``: the learning step from flight ``f``.
+    step : callable, optional
+        Called after every learning step (progress).
+
+    Returns
+    -------
+    ndarray
+        The setpoints of the last flight.
+    """
+    u = u0
+    for f in range(flights):
+        y = fly(f, u)
+        if f == flights - 1:
+            break
+        u = learn(f, u, y)
+        if step is not None:
+            step()
+    return u
+
+
+def diverged(first: np.ndarray, steady: np.ndarray) -> np.ndarray:
+    """The divergence rule of every study: the steady state is not below the first trial.
+
+    Parameters
+    ----------
+    first : ndarray
+        Error of trial 0 per plant (e_pos or error norm) [m].
+    steady : ndarray
+        Mean error of the steady-state trials per plant [m].
+
+    Returns
+    -------
+    ndarray of bool
+        True where ``steady > first`` or either is NaN or inf.
+    """
+    with np.errstate(invalid="ignore"):
+        return ~(np.asarray(steady) <= np.asarray(first))
+
+
+def fly_plants(
+    plan: StudyPlan,
+    setting: StudySetting,
+    level_index: int,
+    plants: Sequence[int],
+    *,
+    batched: bool = True,
+) -> list[PlantResult]:
+    """Learn on true plants with one setting: trial 0, its repeats, ``iterations`` more.
+
+    Every plant flies the same trial loop (:func:`run_trials`); the learning is one
+    :class:`gcs.core.learner.LearnerBatch` for them all (the paper's method batched, the
+    adaptive options a :class:`gcs.core.learner.Learner` per plant). A plant's results do
+    not depend on the other plants of the batch (its own plant and noise streams).
+
+    Parameters
+    ----------
+    plan : StudyPlan
+        The study.
+    setting : StudySetting
+        The learning setting.
+    level_index : int
+        Uncertainty level.
+    plants : sequence of int
+        Plant numbers.
+    batched : bool
+        False: a :class:`gcs.core.learner.Learner` per plant (the reference the batch equals).
+
+    Returns
+    -------
+    list of PlantResult
+        One per plant, in order.
+    """
+    plants = list(plants)
+    count = len(plants)
+    true = [draw_plant(plan, level_index, p) for p in plants]
+    noise_rng = [_rng(plan.seed, level_index, p, 1) for p in plants]
+    ref = plan.ref_ne_m
+    start = ref[0]
+    n = plan.n_samples
+    batch = LearnerBatch(
+        setting.settings, ref, count, setting.adaptive, setting.repeats, batched=batched
+    )
+    flights = 1 + batch.repeats + plan.iterations
+    e = np.full((count, flights), np.nan)
+    active = np.zeros(count, dtype=int)
+    updates = np.zeros(count, dtype=int)
+    last = ref[:-1][None].repeat(count, axis=0)
+
+    def fly(f: int, u: np.ndarray) -> np.ndarray:
+        y = np.full_like(u, np.nan)
+        for k in np.flatnonzero(batch.learning):  # a plant whose learning failed lands
+            y[k] = true[k].respond(u[k] - start) + start
+            y[k] += np.asarray(true[k].noise_std_m) * noise_rng[k].standard_normal((n, 2))
+            e[k, f] = epos(ref[1:], y[k])
+            last[k] = u[k]
+        return y
+
+    def learn(f: int, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        u_next = batch.step(u, y)
+        ok = batch.learning
+        if f >= batch.repeats:  # the repeats of trial 0 have no update
+            updates[ok] += batch.active_constraints.shape[1]
+            active[ok] += (batch.active_constraints[ok] > 0).sum(axis=1)
+        return u_next
+
+    run_trials(ref[:-1][None].repeat(count, axis=0), flights, fly, learn)
+    out = []
+    for k in range(count):
+        dev = last[k] - ref[:-1]
+        out.append(
+            PlantResult(
+                epos_m=e[k],
+                setpoint_rms_m=float(np.sqrt(np.mean(dev**2))),
+                limit_active=active[k] / updates[k] if updates[k] else 0.0,
+                failed=batch.failed[k],
+                setpoints_m=last[k].copy(),
+            )
+        )
+    return out
 
 
 def fly_plant(plan: StudyPlan, setting: StudySetting, level_index: int, plant: int) -> PlantResult:
-    """Learn on one true plant with one setting: trial 0, its repeats, ``iterations`` more.
+    """One plant of :func:`fly_plants`.
 
     Parameters
     ----------
@@ -445,42 +595,7 @@ def fly_plant(plan: StudyPlan, setting: StudySetting, level_index: int, plant: i
     -------
     PlantResult
     """
-    true = draw_plant(plan, level_index, plant)
-    noise_rng = _rng(plan.seed, level_index, plant, 1)
-    ref = plan.ref_ne_m
-    start = ref[0]
-    n = plan.n_samples
-    learner = Learner(setting.settings, ref, setting.adaptive, setting.repeats)
-    flights = 1 + learner.repeats + plan.iterations
-    e = np.full(flights, np.nan)
-    u = ref[:-1].copy()  # trial 0 flies the reference
-    active = updates = 0
-    failed = None
-    for f in range(flights):
-        y = true.respond(u - start) + start
-        y += np.asarray(true.noise_std_m) * noise_rng.standard_normal((n, 2))
-        e[f] = epos(ref[1:], y)
-        if f == flights - 1:
-            break
-        try:
-            u_next = learner.step(u, y)
-        except ValueError as exc:  # no next input within the limits
-            failed = str(exc)
-            break
-        if not np.all(np.isfinite(u_next)):
-            failed = "non-finite setpoints"
-            break
-        for update in learner.last.updates:
-            updates += 1
-            active += int(update.active_constraints > 0)
-        u = u_next
-    last = u - ref[:-1]
-    return PlantResult(
-        epos_m=e,
-        setpoint_rms_m=float(np.sqrt(np.mean(last**2))),
-        limit_active=active / updates if updates else 0.0,
-        failed=failed,
-    )
+    return fly_plants(plan, setting, level_index, [plant])[0]
 
 
 def chunk_plants(plan: StudyPlan, chunk: int) -> range:
@@ -518,9 +633,9 @@ def run_chunk(plan: StudyPlan, setting_index: int, level_index: int, chunk: int)
         ``draws``.
     """
     setting = plan.settings[setting_index]
+    numbers = chunk_plants(plan, chunk)
     out = []
-    for p in chunk_plants(plan, chunk):
-        r = fly_plant(plan, setting, level_index, p)
+    for p, r in zip(numbers, fly_plants(plan, setting, level_index, numbers), strict=True):
         out.append(
             {
                 "plant": p,
@@ -680,8 +795,8 @@ def summarise_setting(
     failed = np.array([p["failed"] is not None for p in plants])
     k = steady_window(e.shape[1] - 1, plan.steady_trials)
     steady = e[:, -k:].mean(axis=1)
-    diverged = failed | ~(steady <= e[:, 0])
-    kept = e[~diverged]
+    gone = failed | diverged(e[:, 0], steady)
+    kept = e[~gone]
     floor = noise_floor(plan.uncertainty.noise_std_m)
     nan = float("nan")
     if floor > 0:
@@ -695,7 +810,7 @@ def summarise_setting(
     with np.errstate(invalid="ignore"):
         mean = kept.mean(axis=0) if kept.size else np.full(e.shape[1], nan)
         std = kept.std(axis=0, ddof=1) if kept.shape[0] > 1 else np.zeros(e.shape[1])
-    sk = steady[~diverged]
+    sk = steady[~gone]
     return SettingSummary(
         setting=plan.settings[setting_index].name,
         level=plan.uncertainty.levels[level_index],
@@ -705,7 +820,7 @@ def summarise_setting(
         reached_floor=reached,
         steady_mean_m=float(sk.mean()) if sk.size else nan,
         steady_std_m=float(sk.std(ddof=1)) if sk.size > 1 else 0.0,
-        diverged=int(diverged.sum()),
+        diverged=int(gone.sum()),
         plants=len(plants),
         setpoint_rms_m=float(np.mean([p["setpoint_rms_m"] for p in plants])),
         limit_active=float(np.mean([p["limit_active"] for p in plants])),

@@ -874,6 +874,63 @@ class InputUpdate:
         objective = _objective(s.f, u, s.yd, dh, up, s.weights, prob.r, robustness)
         return UpdateResult(u, status, objective, method, active)
 
+    def fork(self) -> InputUpdate:
+        """A new update of the same axis sharing this one's structure and factorisation, with
+        its own memory of the last active set (one per plant of a batch)."""
+        other = InputUpdate.__new__(InputUpdate)
+        other.__dict__.update(self.__dict__)
+        other._active = None
+        return other
+
+    def solve_unconstrained(
+        self, d_hat_m: np.ndarray, u_prev_m: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The unconstrained optimum of eq. (8) for many trials at once (no robustness weight).
+
+        One factorisation, every trial a column of one banded solve. A trial whose optimum
+        satisfies the limits gets from :meth:`solve` this same input (method ``"direct"``, to
+        rounding); the others need :meth:`solve` (a QP).
+
+        Parameters
+        ----------
+        d_hat_m : ndarray, shape (P, N)
+            Disturbance estimates [m] (Y-indexed), one row per trial.
+        u_prev_m : ndarray, shape (P, N)
+            Inputs of the last trials [m] (U-indexed).
+
+        Returns
+        -------
+        u_m : ndarray, shape (P, N)
+            Unconstrained optima [m], the pinned tail included.
+        within : ndarray of bool, shape (P,)
+            The optimum satisfies every limit (no QP needed).
+        active : ndarray of int, shape (P,)
+            Limits holding with equality at the optimum (as ``UpdateResult.active_constraints``).
+        """
+        s, limits = self._s, self.limits
+        dh = np.atleast_2d(np.asarray(d_hat_m, dtype=float))
+        up = np.atleast_2d(np.asarray(u_prev_m, dtype=float))
+        probs = [s.problem(dh[k], up[k], None) for k in range(dh.shape[0])]
+        if s._kkt is None:
+            s._kkt = _kkt_factor(s.P, s.G, s.stage_z, s.stage_eq)
+        K, lu = s._kkt
+        rows, cols, values, n = K
+        rhs = np.concatenate(
+            [-np.column_stack([p.q for p in probs]), np.repeat(s.h[:, None], len(probs), axis=1)]
+        )
+        sol = lu.solve(rhs)
+        sol += lu.solve(rhs - sp.csr_matrix((values, (rows, cols)), shape=(n, n)) @ sol)
+        if not np.all(np.isfinite(sol)):
+            raise RuntimeError("KKT factorisation of the input update produced NaN")
+        u = np.array([_full_input(p, sol[: s.m, k]) for k, p in enumerate(probs)])
+        if limits is None:
+            return u, np.ones(len(probs), dtype=bool), np.zeros(len(probs), dtype=int)
+        within = np.array([_violations(u[k], p, limits, -_FAST_PATH_TOL_M) == 0
+                           for k, p in enumerate(probs)])  # fmt: skip
+        active = np.array([_violations(u[k], p, limits, _ACTIVE_TOL_M)
+                           for k, p in enumerate(probs)])  # fmt: skip
+        return u, within, active
+
 
 def next_input(
     model: DiscreteModel,

@@ -1,0 +1,112 @@
+"""One engine for every study: the batched learning equals a Learner per plant."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from gcs.app.study_own import build_plan
+from gcs.core.learner import Learner, LearnerBatch
+from gcs.core.metrics import epos
+from gcs.core.study import StudyPlan, _rng, draw_plant, fly_plants
+from gcs.io.study import load_study
+
+STUDY = {
+    "name": "engine",
+    "profile": "antx",
+    "trajectory": "eight-short",
+    "seed": 5,
+    "plants": 4,
+    "iterations": 3,
+    "chunk_plants": 4,
+    "steady_trials": 1,
+    "uncertainty": {"levels": [0.4], "noise_std_m": 0.01, "disturbance_rms_m": 0.05},
+    "settings": [{"profile": "antx"}, {"profile": "antx-adaptive"}],
+}
+
+
+@pytest.fixture(scope="module")
+def plan(tmp_path_factory: pytest.TempPathFactory) -> StudyPlan:
+    path = Path(tmp_path_factory.mktemp("engine")) / "study.yaml"
+    path.write_text(yaml.safe_dump(STUDY))
+    return build_plan(load_study(path))
+
+
+def _setting(plan: StudyPlan, case: str):  # noqa: ANN202
+    paper, adaptive = plan.settings
+    if case == "antx":
+        return paper
+    if case == "antx-adaptive":
+        return adaptive
+    if case == "kilc":
+        return dataclasses.replace(
+            paper, settings=dataclasses.replace(paper.settings, algorithm="kilc")
+        )
+    # active limits: a deviation bound that the optimum of some plants and updates breaks
+    limited = dataclasses.replace(paper.settings, max_deviation_m=0.12, max_step_m=0.05)
+    return dataclasses.replace(paper, settings=limited)
+
+
+def _by_hand(plan: StudyPlan, setting, plant: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+    """Today's Learner on one plant, one step per trial: e_pos per flight, last setpoints."""
+    true = draw_plant(plan, 0, plant)
+    noise = _rng(plan.seed, 0, plant, 1)
+    ref, n = plan.ref_ne_m, plan.n_samples
+    learner = Learner(setting.settings, ref, setting.adaptive, setting.repeats)
+    flights = 1 + learner.repeats + plan.iterations
+    u, e = ref[:-1].copy(), []
+    for f in range(flights):
+        y = true.respond(u - ref[0]) + ref[0]
+        y += np.asarray(true.noise_std_m) * noise.standard_normal((n, 2))
+        e.append(epos(ref[1:], y))
+        if f < flights - 1:
+            u = learner.step(u, y)
+    return np.array(e), u
+
+
+@pytest.mark.parametrize("case", ["antx", "antx-adaptive", "kilc", "active-limits"])
+def test_the_batch_equals_a_learner_per_plant(plan: StudyPlan, case: str) -> None:
+    setting = _setting(plan, case)
+    plants = range(plan.plants)
+    batch = fly_plants(plan, setting, 0, plants)
+    each = fly_plants(plan, setting, 0, plants, batched=False)
+    for b, r in zip(batch, each, strict=True):
+        assert b.failed is None and r.failed is None
+        np.testing.assert_allclose(b.epos_m, r.epos_m, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(b.setpoints_m, r.setpoints_m, rtol=0, atol=1e-9)
+        assert b.limit_active == r.limit_active
+    for p in (0, plan.plants - 1):  # the engine's loop is the plain loop of a Learner
+        e, u = _by_hand(plan, setting, p)
+        np.testing.assert_allclose(batch[p].epos_m, e, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(batch[p].setpoints_m, u, rtol=0, atol=1e-9)
+    assert batch[0].epos_m[-1] < batch[0].epos_m[0]  # it learned
+    shares = [b.limit_active for b in batch]
+    if case == "antx":  # some updates took the QP, others the batched direct solve
+        assert max(shares) > 0 and min(shares) < 1
+    if case == "active-limits":  # a limit held in every update of every plant
+        assert min(shares) == 1
+
+
+def test_a_plant_whose_trial_is_refused_stops_alone(plan: StudyPlan) -> None:
+    paper = plan.settings[0]
+    ref = plan.ref_ne_m
+    u = np.repeat(ref[None, :-1], 3, axis=0)
+    y = u + 0.01
+    y[1, 7, 0] = np.inf  # a plant that blew up
+    with pytest.raises(ValueError, match="NaN or inf") as why:
+        Learner(paper.settings, ref).step(u[1], y[1])
+    for batched in (True, False):
+        batch = LearnerBatch(paper.settings, ref, 3, batched=batched)
+        out = batch.step(u, y)
+        assert batch.failed == [None, str(why.value), None]
+        assert np.isnan(out[1]).all() and np.isfinite(out[[0, 2]]).all()
+        alone = Learner(paper.settings, ref).step(u[2], y[2])
+        np.testing.assert_allclose(out[2], alone, rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="plants"):
+        LearnerBatch(paper.settings, ref, 0)
+    with pytest.raises(ValueError, match="shape"):
+        LearnerBatch(paper.settings, ref, 2).step(u, y)
