@@ -1,105 +1,96 @@
-"""The ``gcs`` command line: thin wiring of profiles, runs, learning, flight and reports.
+"""The ``gcs`` command line: it only wires.
 
-Every command validates everything it will need before it creates, moves or flies anything
-(each command's room in :mod:`gcs.app` does the checking), and every failure is one line on
-stderr: a :class:`gcs.errors.GcsError` (bad input, unreachable vehicle, ...), an operating
-system error naming its file, and a usage error of the command line all exit with code 2;
-Ctrl-C exits with 130; anything else is a bug, reported in one line with exit code 1
-(``GCS_DEBUG=1`` shows its traceback).
+Each command parses its options into one frozen request (:class:`gcs.app.fly.FlyRequest`, ...)
+and hands it to its room in :mod:`gcs.app`, with the view that shows it on this terminal. Every
+command validates everything it will need before it creates, moves or flies anything (its room
+does the checking), and every failure is one line on stderr: how a command ends, its exit code
+and its line, is :mod:`gcs.app.failures` (a :class:`gcs.errors.GcsError`, an operating-system
+error naming its file and a usage error of the command line: 2; Ctrl-C: 130; anything else is a
+bug: 1, ``GCS_DEBUG=1`` shows its traceback). Here: the options, their help, and that line.
 """
 
 from __future__ import annotations
 
 import functools
-import json
-import os
-import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
 from rich.markup import escape
-from typer._click.exceptions import ClickException
-from typer.core import TyperGroup
-from typer.exceptions import Exit
+from typer.core import TyperCommand, TyperGroup
 
 from gcs import __version__
-from gcs.app.study_cli import SchedulerOption, WorkersOption
-from gcs.errors import GcsError
+from gcs.app.failures import EXIT_BAD_INPUT, EXIT_INTERRUPTED, OptionError, failure, one_line
+from gcs.mock.cli import mock_command
 
-#: Exit codes, as every command's --help states them.
-EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 def _say(message: str) -> None:
-    message = " ".join(line.strip() for line in message.splitlines())  # one line, always
     Console(stderr=True).print(
-        f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True
+        f"[bold red]error:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True
     )
 
 
-class OneLineGroup(TyperGroup):
-    """Typer's group, with usage errors (a bad option value, a missing argument) on one line."""
-
-    def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
-        """Run the command line; a usage error is one line and exit code 2.
-
-        Parameters
-        ----------
-        *args, **kwargs
-            As :meth:`typer.core.TyperGroup.main`.
-        standalone_mode : bool
-            Exit with the command's code (True) or return it.
-
-        Returns
-        -------
-        Any
-        """
-        from typer._click import exceptions as click_exc
-        from typer.exceptions import Abort
-
-        _flags_take_no_value(self)
-        try:
-            rv = super().main(*args, standalone_mode=False, **kwargs)
-        except click_exc.NoArgsIsHelpError:  # the help was printed already
-            rv = EXIT_BAD_INPUT
-        except click_exc.ClickException as exc:
-            ctx = getattr(exc, "ctx", None)
-            where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
-            _say(f"{exc.format_message()}{where}")
-            rv = exc.exit_code
-        except Abort:
-            rv = EXIT_INTERRUPTED
-        code = rv if isinstance(rv, int) else EXIT_OK
-        if standalone_mode:
-            sys.exit(code)
-        return code
+@contextmanager
+def _usage_in_one_line() -> Iterator[None]:
+    """A usage error of the command line (a bad option value, a missing argument, an unknown
+    command: what has a message to format and an exit code) as one line, with its exit code."""
+    try:
+        yield
+    except typer.Abort:
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    except Exception as exc:
+        message = getattr(exc, "format_message", None)
+        code = getattr(exc, "exit_code", None)
+        if not callable(message) or not isinstance(code, int):
+            raise
+        ctx = getattr(exc, "ctx", None)
+        where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+        _say(f"{message()}{where}")
+        raise typer.Exit(code) from None
 
 
-def _flags_take_no_value(group: TyperGroup) -> None:
-    """Show a boolean flag as ``--mock``, not ``--mock <bool>``: Typer's help prints the
-    type of every option, flags too, although a flag takes no value."""
-    from types import SimpleNamespace
+class _FlagsAsFlags:
+    """Shows a flag as ``--mock``, not ``--mock <bool>``: Typer shows a type for every option,
+    flags too, although a flag takes no value."""
 
-    for command in (group, *group.commands.values()):
-        # --help itself is made on first use and kept: make it now, with the names in use
-        names = SimpleNamespace(help_option_names=["--help"])
-        for param in [*command.params, command.get_help_option(names)]:  # type: ignore[arg-type]
-            if getattr(param, "is_flag", False):
+    def get_params(self, ctx: Any) -> list[Any]:
+        params = super().get_params(ctx)  # type: ignore[misc]
+        for param in params:
+            if getattr(param, "is_flag", False) and param.metavar is None:
                 param.metavar = ""
+        return params
+
+
+class _Group(_FlagsAsFlags, TyperGroup):
+    """Typer's group, with a usage error in one line: its own options, a command's options and
+    arguments, an unknown command."""
+
+    def make_context(self, *args: Any, **kwargs: Any) -> Any:
+        with _usage_in_one_line():
+            return super().make_context(*args, **kwargs)
+
+    def invoke(self, ctx: Any) -> Any:
+        with _usage_in_one_line():
+            return super().invoke(ctx)
+
+
+class _Command(_FlagsAsFlags, TyperCommand):
+    """Typer's command, its flags shown as flags."""
 
 
 app = typer.Typer(
     name="gcs",
-    cls=OneLineGroup,
+    cls=_Group,
     help=(
         "Ground control station that makes a multirotor fly a repeated manoeuvre more "
         "precisely every time, by learning from its previous flights (smoother-based "
         "iterative learning control, Meraglia and Lovera)."
     ),
-    no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
     rich_markup_mode="markdown",  # reflow docstring paragraphs to the terminal width
@@ -206,6 +197,22 @@ Check = Annotated[
     ),
 ]
 RunArgument = Annotated[Path, typer.Argument(help="Run directory, e.g. logs/latest.")]
+WorkersOption = Annotated[
+    int | None,
+    typer.Option(
+        min=0,
+        help="Dask workers of a local cluster (one thread each); 0: no Dask, in this process. "
+        "Default: in this process for a short study, one worker per core for a long one "
+        "(estimated first). Results do not depend on it.",
+    ),
+]
+SchedulerOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Run on an existing Dask cluster: the scheduler's address tcp://HOST:PORT (what "
+        "`dask scheduler` prints). Its workers need gcs installed.",
+    ),
+]
 
 EXIT_CODES = (
     "Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130 "
@@ -219,36 +226,52 @@ FLIGHT_EXIT_CODES = (
 )
 
 
-def one_line_errors(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Every failure of a command as one line on stderr, with its exit code.
-
-    A GcsError (bad input, the vehicle) and an operating-system error (it names its file)
-    exit with 2, Ctrl-C with 130, anything else, a bug, with 1 (``GCS_DEBUG=1`` re-raises it
-    with its traceback).
-    """
+def _one_line_errors(func: Callable[..., Any]) -> Callable[..., Any]:
+    """Every failure of a command as one line on stderr, with its exit code
+    (:func:`gcs.app.failures.failure`); an :class:`OptionError` as a bad option value."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return func(*args, **kwargs)
-        except GcsError as exc:
-            _say(str(exc))
-            raise typer.Exit(EXIT_BAD_INPUT) from None
-        except KeyboardInterrupt:  # a flight landed the vehicle and said where its run is
-            raise typer.Exit(EXIT_INTERRUPTED) from None
-        except (ClickException, Exit):  # usage errors and exits: OneLineGroup reports them
+        except (typer.Exit, typer.Abort, typer.BadParameter):  # the group reports usage errors
             raise
-        except OSError as exc:
-            where = exc.filename if exc.filename is not None else "operating system"
-            _say(f"{where}: {exc.strerror or exc}")
-            raise typer.Exit(EXIT_BAD_INPUT) from None
-        except Exception as exc:
-            if os.environ.get("GCS_DEBUG"):
+        except OptionError as exc:
+            raise typer.BadParameter(exc.message, param_hint=exc.option) from None
+        except BaseException as exc:
+            ending = failure(exc)
+            if ending is None:
                 raise
-            _say(f"internal error, please report it: {type(exc).__name__}: {exc}")
-            raise typer.Exit(EXIT_INTERNAL) from None
+            if ending.line is not None:
+                _say(ending.line)
+            raise typer.Exit(ending.code) from None
 
     return wrapper
+
+
+def command(name: str | None = None, **settings: Any) -> Callable[[F], F]:
+    """Register a command of ``gcs``: the one way every command is registered.
+
+    Its failures are one line each, with their exit codes; its flags are shown as flags.
+
+    Parameters
+    ----------
+    name : str or None
+        The command's name (default: the function's).
+    **settings
+        As :meth:`typer.Typer.command` (``epilog``, ``help``).
+
+    Returns
+    -------
+    callable
+        The decorator; it returns the function unchanged.
+    """
+
+    def register(func: F) -> F:
+        app.command(name, cls=_Command, **settings)(_one_line_errors(func))
+        return func
+
+    return register
 
 
 def _named(value: str | Path | None, kind: str, option: str) -> Path | None:
@@ -257,17 +280,9 @@ def _named(value: str | Path | None, kind: str, option: str) -> Path | None:
     return None if value is None else resolve_named(value, kind, option)
 
 
-def _check_algorithm(algorithm: str | None) -> None:
-    from gcs.io.config import ALGORITHMS
-
-    if algorithm is not None and algorithm not in ALGORITHMS:
-        raise typer.BadParameter(
-            f"must be one of {', '.join(ALGORITHMS)}", param_hint="--algorithm"
-        )
-
-
 @app.callback(invoke_without_command=True)
 def main(
+    ctx: typer.Context,
     version: Annotated[
         bool, typer.Option("--version", help="Print the version and exit.", is_eager=True)
     ] = False,
@@ -276,6 +291,9 @@ def main(
     if version:
         console.print(f"gcs {__version__}")
         raise typer.Exit()
+    if ctx.invoked_subcommand is None:  # no command: the help, and a usage error's exit code
+        typer.echo(ctx.get_help(), nl=False)
+        raise typer.Exit(EXIT_BAD_INPUT)
 
 
 FLY_DETAILS = """Before anything is created or connected, everything is checked: the profile (every
@@ -317,8 +335,7 @@ More examples: gcs fly --mock --profile antx-adaptive --iter 10 --until-converge
 """ + FLIGHT_EXIT_CODES.format(what="trial", extra="")
 
 
-@app.command(epilog=FLY_DETAILS)
-@one_line_errors
+@command(epilog=FLY_DETAILS)
 def fly(
     mock: Mock = False,
     connect: Connect = None,
@@ -397,13 +414,9 @@ def fly(
     Example: gcs fly --mock --iter 3
     """
     from gcs.app.fly import FlyRequest
-    from gcs.app.fly_view import fly_with_display
+    from gcs.app.fly import fly as fly_room
+    from gcs.app.fly_view import FlyDisplay
 
-    _check_algorithm(algorithm)
-    if mock == (connect is not None):
-        raise typer.BadParameter("give exactly one of --mock and --connect")
-    if resume is not None and run_dir is not None:
-        raise typer.BadParameter("give at most one of --run and --resume")
     if resume is None:
         profile, trajectory = profile or DEFAULT_PROFILE, trajectory or DEFAULT_TRAJECTORY
     request = FlyRequest(
@@ -424,7 +437,7 @@ def fly(
         mocap=mocap,
         again=again,
     )
-    fly_with_display(console, request)
+    fly_room(request, FlyDisplay(console))
 
 
 LEARN_DETAILS = (
@@ -450,8 +463,7 @@ record and model must agree with its name.
 )
 
 
-@app.command(epilog=LEARN_DETAILS)
-@one_line_errors
+@command(epilog=LEARN_DETAILS)
 def learn(
     run_dir: RunArgument,
     algorithm: Algorithm = None,
@@ -470,29 +482,12 @@ def learn(
 
     Example: gcs learn logs/latest
     """
-    from gcs.app.learn import learn_run
-    from gcs.io.rundir import RunDir
+    from gcs.app.learn import LearnRequest
+    from gcs.app.learn import learn as learn_room
+    from gcs.app.learn_view import LearnDisplay
 
-    _check_algorithm(algorithm)
-    run = RunDir.open(run_dir)
-    outcome = learn_run(run, algorithm, _named(profile, "profile", "--profile"))
-    if outcome.repeat_of is not None:
-        console.print(
-            f"trial {outcome.next_trial} repeats trial {outcome.repeat_of} (identical "
-            f"setpoints, j = 0: it measures the floor): {outcome.setpoints_path}"
-        )
-        return
-    console.print(
-        f"learned from trial {outcome.trial} ({run.algorithm}); "
-        f"setpoints for trial {outcome.next_trial}: {outcome.setpoints_path} "
-        f"[dim](solver {'/'.join(outcome.methods)}, "
-        f"{outcome.active_constraints} active limits)[/]"
-    )
-    if outcome.record is not None:
-        from gcs.app.report_view import decision_lines
-
-        for line in decision_lines(outcome.record):
-            console.print(f"  {escape(line)}", highlight=False)
+    request = LearnRequest(run_dir, algorithm, _named(profile, "profile", "--profile"))
+    learn_room(request, LearnDisplay(console))
 
 
 REPORT_DETAILS = (
@@ -526,8 +521,7 @@ logs/latest --json
 )
 
 
-@app.command(epilog=REPORT_DETAILS)
-@one_line_errors
+@command(epilog=REPORT_DETAILS)
 def report(
     run_dirs: Annotated[
         list[Path],
@@ -604,12 +598,14 @@ def report(
 
     Compare: gcs report logs/run-a logs/run-b --plot compare/
     """
-    from gcs.app.report_view import show_report
+    from gcs.app.report_run import ReportRequest
+    from gcs.app.report_run import report as report_room
+    from gcs.app.report_view import ReportDisplay
 
-    show_report(
-        console, err_console, run_dirs, as_json, plot, html, iterations, csv, figure_format,
-        export_setpoints,
-    )  # fmt: skip
+    request = ReportRequest(
+        tuple(run_dirs), as_json, plot, html, iterations, csv, figure_format, export_setpoints
+    )
+    report_room(request, ReportDisplay(console, err_console))
 
 
 def run() -> None:  # pragma: no cover - console-script entry point alias
@@ -646,8 +642,7 @@ More examples: gcs identify --from-log logs/latest --axis x --out x-only.yaml
 """ + FLIGHT_EXIT_CODES.format(what="experiment", extra=", no profile written")
 
 
-@app.command(epilog=IDENTIFY_DETAILS)
-@one_line_errors
+@command(epilog=IDENTIFY_DETAILS)
 def identify(
     mock: Mock = False,
     connect: Connect = None,
@@ -741,8 +736,7 @@ def identify(
     run_identify(request, IdentifyView(console, err_console))
 
 
-@app.command()
-@one_line_errors
+@command()
 def montecarlo(
     levels: Annotated[
         str,
@@ -817,98 +811,86 @@ def montecarlo(
     Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
     interrupted (Ctrl-C); 1 an internal error (a bug; GCS_DEBUG=1 shows the traceback).
     """
-    # OpenBLAS read its thread count when numpy was imported, before this command ran; the
-    # local workers get the same count, so that the rows are the same, bit for bit, as computed
-    # in this process (a sum's order follows the threads)
-    from gcs.app.study_cluster import machine_workers
+    from gcs.app.montecarlo import MontecarloRequest
+    from gcs.app.montecarlo import montecarlo as montecarlo_room
+    from gcs.app.study_view import MontecarloDisplay
 
-    blas = os.environ.get("OPENBLAS_NUM_THREADS")
-    blas_threads = int(blas) if blas and blas.isdigit() else machine_workers()
-    from gcs.app.progress import track
-    from gcs.app.study import run_montecarlo, study_document, study_settings
-    from gcs.app.study_cli import cluster_of
-    from gcs.app.study_view import comparison_lines, study_tables
-    from gcs.io.atomic import atomic_write_text
-    from gcs.io.paths import check_output_file
-
-    try:
-        settings = study_settings(
-            levels, plants, repeats, iterations, samples, seed, keep_diverged, adaptive
-        )
-    except ValueError as exc:
-        raise _study_error(str(exc)) from None
-    cluster = cluster_of(workers, scheduler, blas_threads)
-    if json_path is not None:
-        check_output_file(json_path, "--json")
-    with track(err_console, "montecarlo", "tasks") as follow:
-        outcome = run_montecarlo(
-            settings,
-            adaptive,
-            lambda label: follow,
-            cluster,  # type: ignore[arg-type]
-            lambda line: err_console.print(line, highlight=False),
-        )
-    console.print(study_tables(outcome.rows, settings))
-    for line in comparison_lines(outcome.comparison):
-        console.print(line)
-    console.print(f"[dim]{outcome.seconds:.1f} s[/]")
-    if json_path is not None:
-        document = study_document(outcome, settings)
-        atomic_write_text(json_path, json.dumps(document, indent=2) + "\n")
+    request = MontecarloRequest(
+        levels, plants, repeats, iterations, samples, seed, keep_diverged, adaptive,
+        json_path, workers, scheduler,
+    )  # fmt: skip
+    montecarlo_room(request, MontecarloDisplay(console, err_console))
 
 
-#: StudySettings fields and the options that set them.
-_STUDY_OPTIONS = {
-    "levels": "--levels", "plants": "--plants", "repeats": "--repeats",
-    "iterations": "--iterations", "n_samples": "--samples", "seed": "--seed",
-}  # fmt: skip
+@command()
+def study(
+    definition: Annotated[
+        Path,
+        typer.Argument(
+            help="The study file (YAML; fields in docs/studies.md).", show_default=False
+        ),
+    ],
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            help="Output directory; default study-<name> here. A directory holding the same "
+            "study resumes it: only the missing chunks run.",
+        ),
+    ] = None,
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
+    check: Annotated[
+        bool, typer.Option("--check", help="Check the study file and say its size; run nothing.")
+    ] = False,
+) -> None:
+    """Compare learning settings on simulated copies of your vehicle, before flying.
 
+    The study file names your profile (the model the plants are drawn around), your
+    trajectory, the uncertainty of the true plants (spread of each mode's frequency, damping
+    and gain, or of the Markov parameters; extra delay; output noise and a repeatable
+    disturbance, from a run's floor.json if you like) and the settings to compare (a list and
+    a grid: weights, smoother Q/R, the adaptive options, other profiles). Every plant learns
+    with every setting, as `gcs fly` would, for the given iterations.
 
-def _study_error(message: str) -> typer.BadParameter:
-    """A StudySettings refusal, with the option's name instead of the field's."""
-    if message.startswith("--levels: "):
-        return typer.BadParameter(message.removeprefix("--levels: "), param_hint="--levels")
-    for field, option in _STUDY_OPTIONS.items():
-        if message.startswith(f"StudySettings.{field} "):
-            text = message.removeprefix(f"StudySettings.{field} ")
-            return typer.BadParameter(text, param_hint=option)
-    return typer.BadParameter(message.removeprefix("StudySettings."))
+    Printed: one row per setting and level (e_pos per flight, flights to the floor, steady
+    state, diverged plants, setpoints, limits) and the recommended setting with its reason.
+    Written to the output directory: study.json (definition, summaries, every plant), one
+    file per finished chunk, epos.png and tradeoff.png.
 
+    Runs in this process when the study is short, on a local Dask cluster of one worker per
+    core when it is long enough to gain from it (one plant of each setting is timed first; one
+    line says which, and why; docs/studies.md); --workers N for a local cluster of that size
+    (0: in this process), --scheduler tcp://HOST:PORT for a running cluster. Every chunk of
+    plants is seeded from the study's seed and its index: the results are the same, bit for
+    bit, on any number of workers.
 
-def _register_study() -> None:
-    from gcs.app.study_cli import study
+    Example: gcs study study.yaml --out study-antx
 
-    app.command("study")(one_line_errors(study))
+    Exit codes: 0 done; 2 bad input, named on one line (a file, field or option); 130
+    interrupted (Ctrl-C; finished chunks are kept, run it again to resume); 1 an internal
+    error (a bug; GCS_DEBUG=1 shows the traceback).
+    """
+    from gcs.app.study_own_view import StudyDisplay
+    from gcs.app.study_run import StudyRequest
+    from gcs.app.study_run import study as study_room
 
-
-_register_study()
+    request = StudyRequest(definition, out, workers, scheduler, check)
+    study_room(request, StudyDisplay(Console(), Console(stderr=True)))
 
 
 MOCK_EXIT_CODES = (
     "Exit codes: 0 stopped (SIGTERM or Ctrl-C); 2 bad input, named on one line; 1 an "
     "internal error (a bug; GCS_DEBUG=1 shows the traceback)."
 )
+_MOCK_HEAD, _, _MOCK_TAIL = (mock_command.__doc__ or "").partition("\f")
 
 
-def _register_mock() -> None:
-    from gcs.mock.cli import mock_command
+@command("mock", help=f"{_MOCK_HEAD.rstrip()}\n\n    {MOCK_EXIT_CODES}\n    \f{_MOCK_TAIL}")
+@functools.wraps(mock_command)
+def mock(**kwargs: Any) -> None:
+    # the mock's own command and options; its files checked before it binds or runs
+    from gcs.app.mock_drone import check_mock_files
 
-    @functools.wraps(mock_command)
-    def mock(**kwargs: Any) -> None:
-        # checked before the mock binds or runs: its settings, and where its stats will go
-        from gcs.io.paths import check_output_file
-        from gcs.mock.config import load_mock_config
-
-        if kwargs.get("config") is not None:
-            kwargs["config"] = _named(kwargs["config"], "profile", "--config")
-            load_mock_config(kwargs["config"])
-        if kwargs.get("stats_out") is not None:
-            check_output_file(kwargs["stats_out"], "--stats-out")
-        mock_command(**kwargs)
-
-    head, _, tail = (mock_command.__doc__ or "").partition("\f")
-    text = f"{head.rstrip()}\n\n    {MOCK_EXIT_CODES}\n    \f{tail}"
-    app.command("mock", help=text)(one_line_errors(mock))
-
-
-_register_mock()
+    kwargs["config"] = _named(kwargs.get("config"), "profile", "--config")
+    check_mock_files(kwargs["config"], kwargs.get("stats_out"))
+    mock_command(**kwargs)

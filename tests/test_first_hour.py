@@ -7,8 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs.app.fly import FlyRequest
-from gcs.app.fly_view import mock_session_seed, resume_command
+from gcs.app.fly import FlyRequest, mock_session_seed, resume_command
 from gcs.io.paths import packaged_dir
 
 

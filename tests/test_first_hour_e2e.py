@@ -19,7 +19,7 @@ import pytest
 from test_fly_adaptive_virtual import SHORT, adaptive_ci_profile
 from test_fly_e2e import finish, gcs, wait_for_line
 
-from gcs.app.fly_view import mock_session_seed
+from gcs.app.fly import mock_session_seed
 from gcs.io.rundir import RunDir
 
 pytestmark = pytest.mark.e2e

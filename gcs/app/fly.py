@@ -1,4 +1,9 @@
-"""``gcs fly``: a run directory as the flight layer's trial source, and the live display.
+"""``gcs fly``: the request checked, the flight's sequence, and a run directory as the flight
+layer's trial source.
+
+:func:`fly` is the command: it checks everything (:func:`plan_fly`, the vehicle's options),
+then says what would be flown (``--check``) or sets up the run and flies it, telling a
+:class:`FlyView` (the terminal's is :class:`gcs.app.fly_view.FlyDisplay`) what to show.
 
 The flight layer asks for "the next sequence" and hands back recordings; :class:`RunSource`
 answers from the run directory and learns with :func:`gcs.app.learn.learn_run`, the same function
@@ -10,14 +15,18 @@ view's callbacks.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 
+from gcs.app.failures import OptionError
 from gcs.app.learn import (
     LearnOutcome,
+    check_algorithm,
     check_history,
     check_learnable,
     differing_field,
@@ -27,12 +36,16 @@ from gcs.app.report import drift_sentence
 from gcs.app.session import (
     MocapPlan,
     SessionRecorder,
+    check_mock_config,
+    check_url,
     flight_fence,
     flyable_setpoints,
+    mock_config_for,
     plan_mocap,
     raw_mocap,
     to_record,
     trial_extra,
+    vehicle_url,
 )
 from gcs.app.source_worker import Notify, WorkerSource
 from gcs.core.floor import FloorDrift, FloorVerdict, floor_drift
@@ -44,7 +57,7 @@ from gcs.core.trajectory import (
 )
 from gcs.core.trajectory_sources import sample_reference
 from gcs.core.trials import trial_errors, trial_errors_3d
-from gcs.errors import ProfileError, RunLogError, TrajectoryError
+from gcs.errors import GcsError, ProfileError, RunLogError, TrajectoryError, VehicleError
 from gcs.flight.campaign import CampaignPlan, run_campaign
 from gcs.flight.mocap.link import MocapLink
 from gcs.flight.trial import TrialRecording
@@ -57,6 +70,11 @@ from gcs.io.settings import FlightSettings
 __all__ = [
     "FlyPlan",
     "FlyRequest",
+    "fly",
+    "check_request",
+    "check_vehicle",
+    "mock_session_seed",
+    "resume_command",
     "plan_fly",
     "start_run",
     "RunSource",
@@ -819,3 +837,307 @@ def fly_run(
 
 def _ignore(payload: object) -> None:
     """A callback nobody asked for."""
+
+
+class FlyView(Protocol):
+    """What ``gcs fly`` shows (the terminal's: :class:`gcs.app.fly_view.FlyDisplay`)."""
+
+    def say(self, text: str) -> None:
+        """One line of the flight session's set-up (the mock drone, the mocap, waiting)."""
+
+    def nothing_flown(self, run: RunDir, reason: str) -> None:
+        """``--until-converged`` on a resumed run that converged (or left the floor) already."""
+
+    def checked(self, plan: FlyPlan, iterations: int) -> None:
+        """``--check``: what would be flown, and what it asks of the vehicle."""
+
+    def checklist(self, navigation: str, url: str, verdicts: list[Any]) -> None:
+        """``--check``: the vehicle's parameters judged against the checklist."""
+
+    def started(self, run: RunDir) -> None:
+        """The run about to be flown."""
+
+    def live(
+        self, run: RunDir
+    ) -> tuple[
+        AbstractContextManager[Any],
+        Callable[[object], None],
+        Callable[[list[IterationMetrics]], None],
+    ]:
+        """The live display around the flight, its campaign-event and table-row callbacks."""
+
+    def learned(self, outcome: LearnOutcome, again: str | None) -> None:
+        """What a learning step between trials decided; ``again``: how to fly the best
+        setpoints again once learning left the floor."""
+
+    def interrupted(self, run: RunDir, resume: str) -> None:
+        """Ctrl-C: the vehicle landed; where the run is and how to continue it."""
+
+    def stopped(self, run: RunDir, resume: str) -> None:
+        """A failure mid-flight (said next, in one line): how to continue once it is fixed."""
+
+    def left_floor(self, best_trial: int, again: str) -> None:
+        """``--until-converged`` landed: learning left the floor."""
+
+    def not_converged(self, iterations: int, resume: str) -> None:
+        """``--until-converged``: learning has not converged within ``--iter``."""
+
+    def finished(self, run: RunDir) -> None:
+        """The run's table, its legend and verdict."""
+
+
+def check_request(request: FlyRequest) -> None:
+    """Refuse options that do not go together: one vehicle, one run, a known algorithm.
+
+    Parameters
+    ----------
+    request : FlyRequest
+        The command's options.
+
+    Raises
+    ------
+    OptionError
+    """
+    check_algorithm(request.algorithm)
+    if request.use_mock == (request.connect is not None):
+        raise OptionError("give exactly one of --mock and --connect")
+    if request.resume is not None and request.run is not None:
+        raise OptionError("give at most one of --run and --resume")
+
+
+def mock_session_seed(seed: int, session: int, used: Collection[int] = ()) -> int:
+    """The mock drone's seed for flight session ``session`` of a run, never one flown before.
+
+    ``--seed`` itself when no earlier session of the run flew it (a new run, or a resume given
+    a seed of its own); else a seed drawn from ``(seed, session)`` by NumPy's ``SeedSequence``.
+    A resumed run therefore never replays an earlier session's gusts and noise: a repeat of
+    trial 0 flown after ``--resume`` with the same ``--seed`` would otherwise fly trial 0's
+    gusts again and measure a floor of the replay (millimetres), not of the vehicle. The seed
+    flown is kept in the session's record (``mock_seed``).
+
+    Parameters
+    ----------
+    seed : int
+        ``--seed``.
+    session : int
+        The session's number (1 for the first).
+    used : collection of int
+        The mock seeds the run's earlier sessions flew.
+
+    Returns
+    -------
+    int
+        ``seed``, or a seed in [0, 2**31) that is not in ``used``.
+    """
+    if seed not in used:
+        return seed
+    attempt = 0
+    while True:
+        state = np.random.SeedSequence([seed, session, attempt]).generate_state(1)[0]
+        derived = int(state) % 2**31
+        if derived not in used:
+            return derived
+        attempt += 1
+
+
+def resume_command(
+    run_path: Path, request: FlyRequest, iterations: int, again: int | None = None
+) -> str:
+    """The ``gcs fly --resume`` command that continues ``run_path`` with the same vehicle.
+
+    The vehicle is named as the session named it (``--mock`` with its settings and seed, or
+    ``--connect URL``), and motion capture when ``--mocap`` was given: a resumed run takes its
+    profile and trajectory from its record, but never its vehicle (which is chosen anew by
+    whoever resumes: a port, PX4 SITL or the real vehicle).
+
+    Parameters
+    ----------
+    run_path : Path
+        The run to continue.
+    request : FlyRequest
+        The session's options (``--mock-config`` as given: None for the default; ``--seed``
+        only printed when it is not the default, 0; ``--until-converged`` kept).
+    iterations : int
+        ``--iter`` of the command.
+    again : int or None
+        ``--again``: the trial whose setpoints the next trial flies again.
+
+    Returns
+    -------
+    str
+        One shell command line, quoted where needed.
+    """
+    import shlex
+
+    from gcs.io.paths import packaged_dir
+
+    args = ["gcs", "fly", "--resume", str(run_path)]
+    if request.use_mock:
+        args.append("--mock")
+        if request.mock_config is not None:
+            config = request.mock_config
+            packaged = config.parent.resolve() == packaged_dir("profile").resolve()
+            args += ["--mock-config", config.stem if packaged else str(config)]
+        if request.seed != 0:
+            args += ["--seed", str(request.seed)]
+    elif request.connect is not None:
+        args += ["--connect", request.connect]
+    if request.mocap is not None:
+        args += ["--mocap", request.mocap]
+    args += ["--iter", str(iterations)]
+    if request.until_converged:
+        args.append("--until-converged")
+    if again is not None:
+        args += ["--again", str(again)]
+    return shlex.join(args)
+
+
+def check_vehicle(
+    plan: FlyPlan, request: FlyRequest, mock_config: Path | None, view: FlyView
+) -> None:
+    """Read the vehicle's parameters and judge them against the real-vehicle checklist.
+
+    Connects (or starts the mock drone), reads every parameter, sends nothing, and judges
+    them for the flight's navigation: motion capture when the plan has one, else GPS
+    (:mod:`gcs.flight.checklist`, docs/real-vehicle.md); the view shows the verdicts.
+
+    Parameters
+    ----------
+    plan : FlyPlan
+        The checked flight.
+    request : FlyRequest
+        The vehicle's options (``connect``, ``use_mock``, ``seed``).
+    mock_config : Path or None
+        The mock's settings (:func:`gcs.app.session.mock_config_for`).
+    view : FlyView
+        Where the set-up lines and the verdicts go.
+
+    Raises
+    ------
+    VehicleError
+        A parameter is refused (the line names it and the fix), or the vehicle is unreachable.
+    """
+    import asyncio
+
+    from gcs.flight.checklist import judge, read_params, refusal
+
+    navigation = "mocap" if plan.mocap is not None else "gps"
+    with vehicle_url(request.connect, request.use_mock, mock_config, request.seed, view.say) as (
+        url,
+        _,
+    ):
+        params = asyncio.run(read_params(url, plan.settings))
+    verdicts = judge(params, navigation)
+    view.checklist(navigation, url, verdicts)
+    reason = refusal(verdicts)
+    if reason is not None:
+        raise VehicleError(reason)
+
+
+def fly(request: FlyRequest, view: FlyView) -> RunDir | None:
+    """``gcs fly``: check everything, then say what would be flown or set up the run and fly it.
+
+    Nothing is created, moved or flown before every input has been checked: the options
+    (:func:`check_request`), the profile, trajectory and run (:func:`plan_fly`), the mock's
+    settings or the connection URL. With ``request.check_only`` it says what would be flown
+    (and, unless ``offline``, judges the vehicle's parameters) and stops; with
+    ``until_converged`` a resumed run that has converged (or left the floor) already is not
+    flown. A failure mid-flight (the vehicle landed) leaves the run to be resumed; the view
+    is told how.
+
+    Parameters
+    ----------
+    request : FlyRequest
+        The command's options.
+    view : FlyView
+        What the flight shows.
+
+    Returns
+    -------
+    RunDir or None
+        The run flown (None with ``check_only``).
+    """
+    check_request(request)
+    plan = plan_fly(request)
+    mock_config = mock_config_for(request.mock_config, request.use_mock, plan.mocap)
+    if request.use_mock:
+        check_mock_config(mock_config)
+    else:
+        assert request.connect is not None
+        check_url(request.connect)
+    if request.until_converged and plan.run is not None and request.again is None:
+        record = newest_record(plan.run)
+        drift = record_drift(record)
+        reason = converged_reason(record) or (
+            None
+            if drift is None
+            else f"{drift_sentence(drift)} (--again {drift.best_trial} flies them)"
+        )
+        if reason is not None:
+            view.nothing_flown(plan.run, reason)
+            return plan.run
+    if request.check_only:
+        view.checked(plan, request.iterations)
+        if not request.offline:
+            check_vehicle(plan, request, mock_config, view)
+        return None
+    run = start_run(plan)
+    earlier = run.sessions()
+    used = {s["mock_seed"] for s in earlier if isinstance(s.get("mock_seed"), int)}
+    session_seed = mock_session_seed(request.seed, len(earlier) + 1, used)
+    if request.use_mock and session_seed != request.seed:
+        view.say(
+            f"mock seed {session_seed}: --seed {request.seed} was flown by an earlier session of "
+            "this run, and a resumed run never replays its gusts"
+        )
+
+    def resume(n: int, again: int | None = None) -> str:
+        return resume_command(run.path, request, n, again)
+
+    def left() -> int:
+        return max(1, request.iterations - (run.next_trial() - plan.first_trial))
+
+    def on_learn(outcome: LearnOutcome) -> None:
+        drift = record_drift(outcome.record)
+        view.learned(outcome, None if drift is None else resume(1, drift.best_trial))
+
+    view.started(run)
+    progress, on_event, on_row = view.live(run)
+    if not request.use_mock:  # said at once: a vehicle that is not there is silent until then
+        view.say(
+            f"waiting up to {plan.settings.connect_timeout_s:g} s for a vehicle on "
+            f"{request.connect} (flight.connect_timeout_s)"
+        )
+    try:
+        with (
+            vehicle_url(
+                request.connect, request.use_mock, mock_config, session_seed, view.say, plan.mocap
+            ) as (url, link),
+            progress,
+        ):
+            fly_run(
+                url,
+                run,
+                request.iterations,
+                plan.settings,
+                on_event,
+                on_row,
+                on_learn,
+                request.until_converged,
+                mocap=link,
+                mock_seed=session_seed if request.use_mock else None,
+            )
+    except KeyboardInterrupt:
+        view.interrupted(run, resume(left()))
+        raise
+    except GcsError:
+        view.stopped(run, resume(left()))
+        raise
+    newest = newest_record(run)
+    drift = record_drift(newest)
+    if request.until_converged and drift is not None:
+        view.left_floor(drift.best_trial, resume(1, drift.best_trial))
+    elif request.until_converged and converged_reason(newest) is None:
+        view.not_converged(request.iterations, resume(request.iterations))
+    view.finished(run)
+    return run

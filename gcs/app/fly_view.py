@@ -1,137 +1,37 @@
-"""The terminal side of ``gcs fly``: run set-up, the mock drone, and a rich live display."""
+"""The terminal side of ``gcs fly``: set-up lines, a rich live display, the run's table.
+
+It only shows: :func:`gcs.app.fly.fly` checks and sequences the flight and tells a
+:class:`FlyDisplay` what happened.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection
-from dataclasses import replace
-from pathlib import Path
+from collections.abc import Callable
+from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from gcs.app.fly import (
-    FlyPlan,
-    FlyRequest,
-    converged_reason,
-    fly_run,
-    newest_record,
-    plan_fly,
-    record_drift,
-    start_run,
-)
+from gcs.app.fly import FlyPlan, record_drift
 from gcs.app.learn import LearnOutcome
 from gcs.app.progress import progress_lines
 from gcs.app.report import drift_sentence
 from gcs.app.report_text import decision_lines, metrics_table
-from gcs.app.session import check_mock_config, check_url, vehicle_url
 from gcs.core.metrics import IterationMetrics
 from gcs.core.trials import iteration_of, repeat_of
-from gcs.errors import GcsError
 from gcs.flight.campaign import Status, TrialFinished, TrialProgress, TrialStarted
 from gcs.io.rundir import RunDir
 
 __all__ = [
-    "fly_with_display",
-    "check_vehicle",
+    "FlyDisplay",
     "live_progress",
     "learning_lines",
     "sized_up_lines",
     "SegmentError",
     "SEGMENT_S",
-    "mock_session_seed",
-    "resume_command",
     "say",
 ]
-
-
-def mock_session_seed(seed: int, session: int, used: Collection[int] = ()) -> int:
-    """The mock drone's seed for flight session ``session`` of a run, never one flown before.
-
-    ``--seed`` itself when no earlier session of the run flew it (a new run, or a resume given
-    a seed of its own); else a seed drawn from ``(seed, session)`` by NumPy's ``SeedSequence``.
-    A resumed run therefore never replays an earlier session's gusts and noise: a repeat of
-    trial 0 flown after ``--resume`` with the same ``--seed`` would otherwise fly trial 0's
-    gusts again and measure a floor of the replay (millimetres), not of the vehicle. The seed
-    flown is kept in the session's record (``mock_seed``).
-
-    Parameters
-    ----------
-    seed : int
-        ``--seed``.
-    session : int
-        The session's number (1 for the first).
-    used : collection of int
-        The mock seeds the run's earlier sessions flew.
-
-    Returns
-    -------
-    int
-        ``seed``, or a seed in [0, 2**31) that is not in ``used``.
-    """
-    if seed not in used:
-        return seed
-    import numpy as np
-
-    attempt = 0
-    while True:
-        state = np.random.SeedSequence([seed, session, attempt]).generate_state(1)[0]
-        derived = int(state) % 2**31
-        if derived not in used:
-            return derived
-        attempt += 1
-
-
-def resume_command(
-    run_path: Path, request: FlyRequest, iterations: int, again: int | None = None
-) -> str:
-    """The ``gcs fly --resume`` command that continues ``run_path`` with the same vehicle.
-
-    The vehicle is named as the session named it (``--mock`` with its settings and seed, or
-    ``--connect URL``), and motion capture when ``--mocap`` was given: a resumed run takes its
-    profile and trajectory from its record, but never its vehicle (which is chosen anew by
-    whoever resumes: a port, PX4 SITL or the real vehicle).
-
-    Parameters
-    ----------
-    run_path : Path
-        The run to continue.
-    request : FlyRequest
-        The session's options (``--mock-config`` as given: None for the default; ``--seed``
-        only printed when it is not the default, 0; ``--until-converged`` kept).
-    iterations : int
-        ``--iter`` of the command.
-    again : int or None
-        ``--again``: the trial whose setpoints the next trial flies again.
-
-    Returns
-    -------
-    str
-        One shell command line, quoted where needed.
-    """
-    import shlex
-
-    from gcs.io.paths import packaged_dir
-
-    args = ["gcs", "fly", "--resume", str(run_path)]
-    if request.use_mock:
-        args.append("--mock")
-        if request.mock_config is not None:
-            config = request.mock_config
-            packaged = config.parent.resolve() == packaged_dir("profile").resolve()
-            args += ["--mock-config", config.stem if packaged else str(config)]
-        if request.seed != 0:
-            args += ["--seed", str(request.seed)]
-    elif request.connect is not None:
-        args += ["--connect", request.connect]
-    if request.mocap is not None:
-        args += ["--mocap", request.mocap]
-    args += ["--iter", str(iterations)]
-    if request.until_converged:
-        args.append("--until-converged")
-    if again is not None:
-        args += ["--again", str(again)]
-    return shlex.join(args)
 
 
 #: Length of the trial segments the live error lines summarise [s of trial time].
@@ -326,270 +226,258 @@ def _scatters(z: float) -> str:
     return f"{abs(z):.1f} scatters {side} it (z = (e_pos - floor) / scatter = {z:.1f})"
 
 
-def check_vehicle(
-    console: Console,
-    plan: FlyPlan,
-    connect: str | None,
-    use_mock: bool,
-    mock_config: Path | None,
-    seed: int,
-) -> None:
-    """Read the vehicle's parameters and print the real-vehicle checklist's verdicts.
-
-    Connects (or starts the mock drone), reads every parameter, sends nothing, and judges
-    them for the flight's navigation: motion capture when the plan has one, else GPS
-    (:mod:`gcs.flight.checklist`, docs/real-vehicle.md).
-
-    Parameters
-    ----------
-    console : Console
-        Where the checklist goes.
-    plan : FlyPlan
-        The checked flight.
-    connect : str or None
-        URL of a real vehicle.
-    use_mock : bool
-        Start the mock drone instead.
-    mock_config : Path or None
-        Mock settings.
-    seed : int
-        Mock seed.
-
-    Raises
-    ------
-    VehicleError
-        A parameter is refused (the line names it and the fix), or the vehicle is unreachable.
-    """
-    import asyncio
-
-    from gcs.errors import VehicleError
-    from gcs.flight.checklist import checklist_lines, judge, read_params, refusal
-
-    navigation = "mocap" if plan.mocap is not None else "gps"
-    with vehicle_url(connect, use_mock, mock_config, seed, say(console)) as (url, _):
-        params = asyncio.run(read_params(url, plan.settings))
-    verdicts = judge(params, navigation)
-    console.print(f"checklist for {navigation} (docs/real-vehicle.md), vehicle at {url}:")
-    colour = {"ok": "green", "warn": "yellow", "refuse": "bold red"}
-    for v, line in zip(verdicts, checklist_lines(verdicts), strict=True):
-        console.print(f"[{colour[v.level]}]{escape(line)}[/]", highlight=False)
-    reason = refusal(verdicts)
-    if reason is not None:
-        raise VehicleError(reason)
-
-
-def fly_with_display(console: Console, request: FlyRequest) -> RunDir | None:
-    """Validate everything, then set up (or resume) a run and fly it with a live display.
-
-    Nothing is created, moved or flown before every input has been checked
-    (:func:`gcs.app.fly.plan_fly`, the connection URL, the mock's settings). With
-    ``request.check_only`` it says what would be flown and stops; with ``until_converged`` a
-    resumed run that has converged (or left the floor) already is not flown.
+class FlyDisplay:
+    """``gcs fly`` on the terminal (:class:`gcs.app.fly.FlyView`): set-up lines dimmed, the live
+    progress and rows, learning decisions, and the run's table at the end.
 
     Parameters
     ----------
     console : Console
         Terminal output.
-    request : FlyRequest
-        The command's options.
-
-    Returns
-    -------
-    RunDir or None
-        The run flown (None with ``check_only``).
     """
-    plan = plan_fly(request)
-    mock_config = request.mock_config
-    given_mock_config = mock_config
-    if (
-        request.use_mock
-        and mock_config is None
-        and plan.mocap is not None
-        and plan.mocap.source is None
-    ):
-        from gcs.io.paths import resolve_named
 
-        mock_config = resolve_named("mock-mocap", "profile", "--mock-config")  # vision only
-    if request.use_mock:
-        check_mock_config(mock_config)
-    else:
-        assert request.connect is not None
-        check_url(request.connect)
-    if request.until_converged and plan.run is not None and request.again is None:
-        record = newest_record(plan.run)
-        drift = record_drift(record)
-        reason = converged_reason(record) or (
-            None
-            if drift is None
-            else f"{drift_sentence(drift)} (--again {drift.best_trial} flies them)"
-        )
-        if reason is not None:
-            console.print(f"{plan.run.path}: {reason}; nothing flown", highlight=False)
-            return plan.run
-    if request.check_only:
+    def __init__(self, console: Console) -> None:
+        self.console = console
+
+    def say(self, text: str) -> None:
+        """One set-up line, dimmed (:func:`say`).
+
+        Parameters
+        ----------
+        text : str
+            Plain text.
+        """
+        say(self.console)(text)
+
+    def nothing_flown(self, run: RunDir, reason: str) -> None:
+        """Why a resumed run is not flown.
+
+        Parameters
+        ----------
+        run : RunDir
+            The run.
+        reason : str
+            Learning converged, or left the floor.
+        """
+        self.console.print(f"{run.path}: {reason}; nothing flown", highlight=False)
+
+    def checked(self, plan: FlyPlan, iterations: int) -> None:
+        """What would be flown, and what it asks of the vehicle (:func:`sized_up_lines`).
+
+        Parameters
+        ----------
+        plan : FlyPlan
+            The checked flight.
+        iterations : int
+            Trials to fly.
+        """
         where = plan.run.path if plan.run is not None else (plan.run_path or plan.logs)
-        console.print(
+        self.console.print(
             f"checked: profile '{plan.profile.name}', trajectory '{plan.trajectory.name}' "
             f"({plan.reference.n_samples} samples of {plan.profile.t_ilc_s:g} s), "
-            f"{plan.algorithm}, trials {plan.first_trial}.."
-            f"{plan.first_trial + request.iterations - 1} "
+            f"{plan.algorithm}, trials {plan.first_trial}..{plan.first_trial + iterations - 1} "
             f"in {where}; nothing flown"
         )
         if plan.mocap is not None:
-            console.print(f"checked: {plan.mocap.describe()}")
-        for line in sized_up_lines(plan, request.iterations):
-            console.print(escape(line), highlight=False)
-        if not request.offline:
-            check_vehicle(
-                console, plan, request.connect, request.use_mock, mock_config, request.seed
-            )
-        return None
-    run = start_run(plan)
-    settings = plan.settings
-    earlier = run.sessions()
-    used = {s["mock_seed"] for s in earlier if isinstance(s.get("mock_seed"), int)}
-    session_seed = mock_session_seed(request.seed, len(earlier) + 1, used)
-    if request.use_mock and session_seed != request.seed:
-        say(console)(
-            f"mock seed {session_seed}: --seed {request.seed} was flown by an earlier session of "
-            "this run, and a resumed run never replays its gusts"
+            self.console.print(f"checked: {plan.mocap.describe()}")
+        for line in sized_up_lines(plan, iterations):
+            self.console.print(escape(line), highlight=False)
+
+    def checklist(self, navigation: str, url: str, verdicts: list[Any]) -> None:
+        """The real-vehicle checklist's verdicts, coloured by level.
+
+        Parameters
+        ----------
+        navigation : str
+            ``"gps"`` or ``"mocap"``.
+        url : str
+            The vehicle's URL.
+        verdicts : list of Verdict
+            From :func:`gcs.flight.checklist.judge`.
+        """
+        from gcs.flight.checklist import checklist_lines
+
+        self.console.print(f"checklist for {navigation} (docs/real-vehicle.md), vehicle at {url}:")
+        colour = {"ok": "green", "warn": "yellow", "refuse": "bold red"}
+        for v, line in zip(verdicts, checklist_lines(verdicts), strict=True):
+            self.console.print(f"[{colour[v.level]}]{escape(line)}[/]", highlight=False)
+
+    def started(self, run: RunDir) -> None:
+        """The run about to be flown, and its next trial.
+
+        Parameters
+        ----------
+        run : RunDir
+            The run.
+        """
+        self.console.print(
+            f"run [bold]{run.path}[/] ({run.algorithm}), next trial {run.next_trial()}"
         )
 
-    def resume_hint(n: int, again: int | None = None) -> str:
-        return resume_command(run.path, replace(request, mock_config=given_mock_config), n, again)
+    def live(
+        self, run: RunDir
+    ) -> tuple[Progress, Callable[[object], None], Callable[[list[IterationMetrics]], None]]:
+        """The live progress (:func:`live_progress`) and the printer of each new table row.
 
-    console.print(f"run [bold]{run.path}[/] ({run.algorithm}), next trial {run.next_trial()}")
+        Parameters
+        ----------
+        run : RunDir
+            The run being flown.
 
-    progress, on_event = live_progress(console)
+        Returns
+        -------
+        progress : Progress
+            The display, a context manager around the flight.
+        on_event : callable
+            Campaign event callback.
+        on_row : callable
+            Takes the table's rows after each complete trial; prints the newest.
+        """
+        progress, on_event = live_progress(self.console)
+        ln = run.profile().learning
+        repeats = ln.repeats
+        from gcs.app.report import is_three_d
 
-    ln = run.profile().learning
-    repeats = ln.repeats
-    from gcs.app.report import is_three_d
+        three_d = is_three_d(run)
 
-    three_d = is_three_d(run)
-
-    def on_row(rows: list[IterationMetrics]) -> None:
-        r = rows[-1]
-        delta = ""
-        if len(rows) > 1:  # signed, unlike Table IV's |change|: a worse trial shows as +
-            change = 100.0 * (r.epos_m - rows[-2].epos_m) / rows[-2].epos_m
-            delta = f", {change:+.1f} % vs previous"
-        which, base = f"trial {r.iteration}", "j=0"
-        if ln.adaptive is not None:  # trial number and the paper's j differ after a repeat
-            repeat = ", a repeat" if repeat_of(r.iteration, repeats) is not None else ""
-            which += f" (j = {iteration_of(r.iteration, repeats)}{repeat})"
-            base = "trial 0"
-        progress.console.print(
-            f"{which}: e_pos {r.epos_m:.4f} m ({r.epos_pct:5.1f} % of {base}{delta}), "
-            f"max {r.max_err_m:.3f} m"
-        )
-        if three_d and r.epos_3d_m is not None:
+        def on_row(rows: list[IterationMetrics]) -> None:
+            r = rows[-1]
+            delta = ""
+            if len(rows) > 1:  # signed, unlike Table IV's |change|: a worse trial shows as +
+                change = 100.0 * (r.epos_m - rows[-2].epos_m) / rows[-2].epos_m
+                delta = f", {change:+.1f} % vs previous"
+            which, base = f"trial {r.iteration}", "j=0"
+            if ln.adaptive is not None:  # trial number and the paper's j differ after a repeat
+                repeat = ", a repeat" if repeat_of(r.iteration, repeats) is not None else ""
+                which += f" (j = {iteration_of(r.iteration, repeats)}{repeat})"
+                base = "trial 0"
             progress.console.print(
-                f"  3-D e_pos {r.epos_3d_m:.4f} m; RMS north {r.rms_north_m:.4f}, "
-                f"east {r.rms_east_m:.4f}, down {r.rms_down_m:.4f} m"
+                f"{which}: e_pos {r.epos_m:.4f} m ({r.epos_pct:5.1f} % of {base}{delta}), "
+                f"max {r.max_err_m:.3f} m"
             )
+            if three_d and r.epos_3d_m is not None:
+                progress.console.print(
+                    f"  3-D e_pos {r.epos_3d_m:.4f} m; RMS north {r.rms_north_m:.4f}, "
+                    f"east {r.rms_east_m:.4f}, down {r.rms_down_m:.4f} m"
+                )
 
-    def on_learn(outcome: LearnOutcome) -> None:
+        return progress, on_event, on_row
+
+    def learned(self, outcome: LearnOutcome, again: str | None) -> None:
+        """What a learning step decided (:func:`learning_lines`), and how to fly the best
+        setpoints again once learning left the floor.
+
+        Parameters
+        ----------
+        outcome : LearnOutcome
+            From :func:`gcs.app.learn.learn_run`.
+        again : str or None
+            The command that flies them again.
+        """
         for line in learning_lines(outcome):
-            progress.console.print(line, highlight=False)
-        drift = record_drift(outcome.record)
-        if drift is not None:
-            progress.console.print(
-                f"  [yellow]to fly them again: {escape(resume_hint(1, drift.best_trial))}[/]",
-                highlight=False,
-                soft_wrap=True,
+            self.console.print(line, highlight=False)
+        if again is not None:
+            self.console.print(
+                f"  [yellow]to fly them again: {escape(again)}[/]", highlight=False, soft_wrap=True
             )
 
-    if (
-        not request.use_mock
-    ):  # said at once: a vehicle that is not there is silent until the timeout
-        say(console)(
-            f"waiting up to {settings.connect_timeout_s:g} s for a vehicle on {request.connect} "
-            "(flight.connect_timeout_s)"
-        )
-    try:
-        with (
-            vehicle_url(
-                request.connect,
-                request.use_mock,
-                mock_config,
-                session_seed,
-                say(console),
-                plan.mocap,
-            ) as (
-                url,
-                link,
-            ),
-            progress,
-        ):
-            fly_run(
-                url,
-                run,
-                request.iterations,
-                settings,
-                on_event,
-                on_row,
-                on_learn,
-                request.until_converged,
-                mocap=link,
-                mock_seed=session_seed if request.use_mock else None,
-            )
-    except KeyboardInterrupt:
-        left = max(1, request.iterations - (run.next_trial() - plan.first_trial))
-        console.print(
-            f"interrupted; completed trials are in {run.path}. "
-            f"Continue with: {escape(resume_hint(left))}",
+    def interrupted(self, run: RunDir, resume: str) -> None:
+        """Ctrl-C: where the completed trials are and how to continue.
+
+        Parameters
+        ----------
+        run : RunDir
+            The run.
+        resume : str
+            The command that continues it.
+        """
+        self.console.print(
+            f"interrupted; completed trials are in {run.path}. Continue with: {escape(resume)}",
             highlight=False,
             soft_wrap=True,
         )
-        raise
-    except GcsError as exc:
-        left = max(1, request.iterations - (run.next_trial() - plan.first_trial))
+
+    def stopped(self, run: RunDir, resume: str) -> None:
+        """A failure mid-flight: what was kept and how to continue once the cause is fixed.
+
+        Parameters
+        ----------
+        run : RunDir
+            The run.
+        resume : str
+            The command that continues it.
+        """
         kept = f"completed trials are in {run.path}" if run.complete_trials() else (
             f"no trial was flown; the run is set up in {run.path}"
         )  # fmt: skip
-        console.print(
-            f"[dim]{kept}; once the cause is fixed, continue with: {escape(resume_hint(left))}[/]",
+        self.console.print(
+            f"[dim]{kept}; once the cause is fixed, continue with: {escape(resume)}[/]",
             highlight=False,
             soft_wrap=True,
         )
-        raise exc
-    newest = newest_record(run)
-    drift = record_drift(newest)
-    if request.until_converged and drift is not None:
-        console.print(
-            f"--until-converged: landed, learning left the floor; to fly trial "
-            f"{drift.best_trial}'s setpoints again: {escape(resume_hint(1, drift.best_trial))}",
-            highlight=False,
-            soft_wrap=True,
-        )
-    elif request.until_converged and converged_reason(newest) is None:
-        console.print(
-            f"--until-converged: learning has not converged within --iter {request.iterations}; "
-            f"continue with: {escape(resume_hint(request.iterations))}",
-            highlight=False,
-            soft_wrap=True,
-        )
-    from gcs.app.report import (
-        is_three_d,
-        run_facts,
-        run_learning,
-        run_metrics,
-        run_verdict,
-        trial_clock_rates,
-    )
-    from gcs.app.report_text import shows_step, table_legend
 
-    title = run_facts(run).title()
-    learning = run_learning(run)
-    rates = trial_clock_rates(run)
-    rows = run_metrics(run)
-    three_d = is_three_d(run)
-    console.print(metrics_table(rows, title, rates, learning, console.width, three_d))
-    shown = shows_step(rows, rates, learning, console.width, three_d)
-    for line in table_legend(learning, shown) + run_verdict(rows, learning).lines():
-        console.print(escape(line), highlight=False)
-    return run
+    def left_floor(self, best_trial: int, again: str) -> None:
+        """``--until-converged`` landed because learning left the floor.
+
+        Parameters
+        ----------
+        best_trial : int
+            The trial whose setpoints were best at the floor.
+        again : str
+            The command that flies them again.
+        """
+        self.console.print(
+            f"--until-converged: landed, learning left the floor; to fly trial "
+            f"{best_trial}'s setpoints again: {escape(again)}",
+            highlight=False,
+            soft_wrap=True,
+        )
+
+    def not_converged(self, iterations: int, resume: str) -> None:
+        """``--until-converged`` flew ``--iter`` trials without converging.
+
+        Parameters
+        ----------
+        iterations : int
+            ``--iter``.
+        resume : str
+            The command that continues.
+        """
+        self.console.print(
+            f"--until-converged: learning has not converged within --iter {iterations}; "
+            f"continue with: {escape(resume)}",
+            highlight=False,
+            soft_wrap=True,
+        )
+
+    def finished(self, run: RunDir) -> None:
+        """The run's table (as ``gcs report`` prints it), its legend and verdict.
+
+        Parameters
+        ----------
+        run : RunDir
+            The run flown.
+        """
+        from gcs.app.report import (
+            is_three_d,
+            run_facts,
+            run_learning,
+            run_metrics,
+            run_verdict,
+            trial_clock_rates,
+        )
+        from gcs.app.report_text import shows_step, table_legend
+
+        title = run_facts(run).title()
+        learning = run_learning(run)
+        rates = trial_clock_rates(run)
+        rows = run_metrics(run)
+        three_d = is_three_d(run)
+        width = self.console.width
+        self.console.print(metrics_table(rows, title, rates, learning, width, three_d))
+        shown = shows_step(rows, rates, learning, width, three_d)
+        for line in table_legend(learning, shown) + run_verdict(rows, learning).lines():
+            self.console.print(escape(line), highlight=False)
 
 
 def say(console: Console) -> Callable[[str], None]:

@@ -23,11 +23,12 @@ import contextlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from gcs.api import Learner, learner_settings
+from gcs.app.failures import OptionError
 from gcs.core.estimators import KilcState
 from gcs.core.floor import floor_flights
 from gcs.core.learner import LearnerStep, Trial
@@ -35,12 +36,15 @@ from gcs.core.model import DiscreteModel, relative_degree
 from gcs.core.trajectory import Reference, check_setpoints
 from gcs.core.trials import iteration_of, setpoint_deviation
 from gcs.errors import GcsError, ProfileError, RunLogError, TrajectoryError
-from gcs.io.config import Profile, load_profile
+from gcs.io.config import ALGORITHMS, Profile, load_profile
 from gcs.io.records import TrialRecord
 from gcs.io.rundir import RunDir
 
 __all__ = [
     "LearnOutcome",
+    "LearnRequest",
+    "learn",
+    "check_algorithm",
     "learn_run",
     "models_in_use",
     "check_history",
@@ -83,6 +87,69 @@ class LearnOutcome:
     next_iteration: int
     repeat_of: int | None = None
     record: dict | None = None
+
+
+@dataclass(frozen=True)
+class LearnRequest:
+    """``gcs learn`` as asked: its options, before anything is checked.
+
+    Parameters
+    ----------
+    run : Path
+        The run directory.
+    algorithm : str or None
+        ``--algorithm``: must be the run's own when given.
+    profile : Path or None
+        ``--profile``: must match the profile recorded in the run's manifest.
+    """
+
+    run: Path
+    algorithm: str | None = None
+    profile: Path | None = None
+
+
+class LearnView(Protocol):
+    """What ``gcs learn`` shows (the terminal's: :class:`gcs.app.learn_view.LearnDisplay`)."""
+
+    def learned(self, run: RunDir, outcome: LearnOutcome) -> None:
+        """The setpoints written, and what the learning step decided."""
+
+
+def check_algorithm(algorithm: str | None) -> None:
+    """Refuse an ``--algorithm`` that is not one gcs learns with.
+
+    Parameters
+    ----------
+    algorithm : str or None
+        ``--algorithm`` (None: not given).
+
+    Raises
+    ------
+    OptionError
+    """
+    if algorithm is not None and algorithm not in ALGORITHMS:
+        raise OptionError(f"must be one of {', '.join(ALGORITHMS)}", "--algorithm")
+
+
+def learn(request: LearnRequest, view: LearnView) -> LearnOutcome:
+    """``gcs learn``: learn from the run's newest complete trial, write the next setpoints.
+
+    Parameters
+    ----------
+    request : LearnRequest
+        The command's options.
+    view : LearnView
+        What it shows.
+
+    Returns
+    -------
+    LearnOutcome
+    """
+    check_algorithm(request.algorithm)
+    run = RunDir.open(request.run)
+    outcome = learn_run(run, request.algorithm, request.profile)
+    view.learned(run, outcome)
+    return outcome
 
 
 def differing_field(given: Any, recorded: Any, prefix: str = "") -> str | None:

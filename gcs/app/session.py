@@ -41,6 +41,7 @@ __all__ = [
     "plan_mocap",
     "check_url",
     "check_mock_config",
+    "mock_config_for",
     "flight_fence",
     "vehicle_url",
     "flyable_setpoints",
@@ -205,6 +206,34 @@ def plan_mocap(profile: Profile, where: str, mocap: str | None, use_mock: bool) 
     except ValueError as exc:
         raise ProfileError(f"{where}: field 'mocap': {exc}") from None
     return MocapPlan(settings, source)
+
+
+def mock_config_for(
+    mock_config: Path | None, use_mock: bool, mocap: MocapPlan | None
+) -> Path | None:
+    """The mock drone's settings for a flight: ``--mock-config`` as given, else the default
+    set-up of a flight on the mock's own motion capture (``--mocap mock``): the packaged
+    ``mock-mocap`` profile, vision only (no GPS), as EKF2 indoors.
+
+    Parameters
+    ----------
+    mock_config : Path or None
+        ``--mock-config`` (None: not given).
+    use_mock : bool
+        ``--mock``.
+    mocap : MocapPlan or None
+        The flight's motion capture (:func:`plan_mocap`).
+
+    Returns
+    -------
+    Path or None
+        None: the mock's defaults (or no mock).
+    """
+    if use_mock and mock_config is None and mocap is not None and mocap.source is None:
+        from gcs.io.paths import resolve_named
+
+        return resolve_named("mock-mocap", "profile", "--mock-config")
+    return mock_config
 
 
 @contextlib.contextmanager

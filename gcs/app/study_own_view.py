@@ -4,15 +4,95 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from rich import box
+from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from gcs.app.progress import track
 from gcs.core.study import FLOOR_FACTOR, SettingSummary
 
-__all__ = ["study_table", "write_study_figures"]
+__all__ = ["StudyDisplay", "study_table", "write_study_figures"]
+
+
+class StudyDisplay:
+    """``gcs study`` on the terminal (:class:`gcs.app.study_run.StudyView`).
+
+    Parameters
+    ----------
+    console, err_console : rich.console.Console
+        The table (stdout); the size, placement and progress lines (stderr).
+    """
+
+    def __init__(self, console: Console, err_console: Console) -> None:
+        self.console, self.err = console, err_console
+
+    def say(self, line: str) -> None:
+        """One line on stderr.
+
+        Parameters
+        ----------
+        line : str
+            Plain text.
+        """
+        self.err.print(line, highlight=False)
+
+    @contextmanager
+    def chunks(self, name: str) -> Iterator[Callable[[int, int], None]]:
+        """The progress of the study's chunks.
+
+        Parameters
+        ----------
+        name : str
+            The study's name.
+
+        Yields
+        ------
+        callable
+            ``progress(done, total)``.
+        """
+        with track(self.err, name, "chunks") as follow:
+            yield follow
+
+    def figures(self, summaries: list[SettingSummary], out: Path) -> list[Path]:
+        """Write epos.png and tradeoff.png (:func:`write_study_figures`).
+
+        Parameters
+        ----------
+        summaries : list of SettingSummary
+            Per setting and level.
+        out : Path
+            The output directory.
+
+        Returns
+        -------
+        list of Path
+        """
+        return write_study_figures(summaries, out)
+
+    def show(
+        self, summaries: list[SettingSummary], title: str, recommended: str, written: list[Path]
+    ) -> None:
+        """The table, the recommendation and the files written.
+
+        Parameters
+        ----------
+        summaries : list of SettingSummary
+            Per setting and level.
+        title : str
+            The table's title.
+        recommended : str
+            The recommended setting and its reason, one line.
+        written : list of Path
+            The files written.
+        """
+        self.console.print(study_table(summaries, title))
+        self.console.print(recommended, highlight=False)
+        self.console.print("written: " + ", ".join(str(p) for p in written), highlight=False)
 
 
 def _mm(x: float) -> str:

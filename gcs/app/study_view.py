@@ -2,12 +2,78 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from gcs.app.progress import track
 from gcs.core.montecarlo import PAPER_TABLES, ComparisonRow, StudyRow, StudySettings
 
-__all__ = ["study_tables", "study_json", "comparison_lines"]
+__all__ = ["MontecarloDisplay", "study_tables", "study_json", "comparison_lines"]
+
+
+class MontecarloDisplay:
+    """``gcs montecarlo`` on the terminal (:class:`gcs.app.montecarlo.MontecarloView`).
+
+    Parameters
+    ----------
+    console, err_console : rich.console.Console
+        The tables (stdout); the progress and the placement line (stderr).
+    """
+
+    def __init__(self, console: Console, err_console: Console) -> None:
+        self.console, self.err = console, err_console
+
+    @contextmanager
+    def tasks(self) -> Iterator[Callable[[int, int], None]]:
+        """The progress of the study's tasks.
+
+        Yields
+        ------
+        callable
+            ``progress(done, total)``.
+        """
+        with track(self.err, "montecarlo", "tasks") as follow:
+            yield follow
+
+    def say(self, line: str) -> None:
+        """One line on stderr.
+
+        Parameters
+        ----------
+        line : str
+            Plain text.
+        """
+        self.err.print(line, highlight=False)
+
+    def show(
+        self,
+        rows: list[StudyRow],
+        comparison: list[ComparisonRow],
+        seconds: float,
+        settings: StudySettings,
+    ) -> None:
+        """Tables II and III, the comparison lines (``--adaptive``), the wall time.
+
+        Parameters
+        ----------
+        rows : list of StudyRow
+            The tables' rows.
+        comparison : list of ComparisonRow
+            The new options against the paper's method (empty without ``--adaptive``).
+        seconds : float
+            Wall time of the paper's study [s].
+        settings : StudySettings
+            The study.
+        """
+        self.console.print(study_tables(rows, settings))
+        for line in comparison_lines(comparison):
+            self.console.print(line)
+        self.console.print(f"[dim]{seconds:.1f} s[/]")
+
 
 _NAMES = {"smoother": "smoother", "kilc": "K-ILC"}
 
