@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs.app.session import MocapPlan, check_mock_config, check_url, plan_mocap
+from gcs.app.session import MocapPlan, check_mock_config, check_url, mock_config_for, plan_mocap
 from gcs.core.excitation import multisine, prbs
 from gcs.core.trajectory import Box, points_outside
 from gcs.errors import IdentificationError, PathError, ProfileError, RunLogError, TrajectoryError
 from gcs.io.config import Profile, load_profile
-from gcs.io.paths import check_new_dir, check_output_dir, check_output_file, resolve_named
+from gcs.io.paths import check_new_dir, check_output_dir, check_output_file
 from gcs.io.rundir import RunDir
 from gcs.io.settings import AXES, IdentifySettings
 
@@ -99,9 +99,7 @@ def plan_identify(request: IdentifyRequest) -> IdentifyPlan:
     if request.seed is not None:
         settings = replace(settings, seed=int(request.seed))
     mocap = plan_mocap(profile, where, request.mocap, request.use_mock)
-    mock_config = request.mock_config
-    if request.use_mock and mock_config is None and mocap is not None and not mocap.source:
-        mock_config = resolve_named("mock-mocap", "profile", "--mock-config")
+    mock_config = mock_config_for(request.mock_config, request.use_mock, mocap)
     experiments = plan_experiments(
         settings, profile.t_ilc_s, request.axis or "both", profile.arena, where
     )
