@@ -119,9 +119,17 @@ def test_no_fault_acts_until_the_vehicle_enters_offboard() -> None:
             last = client.wait_until(lambda s: s.t_receipt_s > first.t_receipt_s + 0.3, WAIT_S)
             assert last.tracked and not arena.stats()["faults_placed"]
             arena.on_first_offboard()
-            placed_s = time.monotonic()
-            with pytest.raises(MocapError, match="no matching mocap sample"):  # nothing sent
-                client.wait_until(lambda s: s.t_receipt_s > placed_s + 0.02, 0.3)
+            # the dropout acts: once the frames made before it have arrived (late on a loaded
+            # machine), the 200 Hz stream falls silent
+            heard_s, deadline_s = time.monotonic(), time.monotonic() + WAIT_S
+            while True:
+                try:
+                    late = client.wait_until(lambda s, t=heard_s: s.t_receipt_s > t, 0.3)
+                except MocapError as exc:
+                    assert "no matching mocap sample" in str(exc)
+                    break
+                heard_s = late.t_receipt_s
+                assert time.monotonic() < deadline_s, "the stream never fell silent"
     finally:
         arena.stop()
 

@@ -449,21 +449,23 @@ def run_trials(
 
     Parameters
     ----------
-    u0 : ndarray
-        Setpoints of trial 0 (every plant, every run).
+    u0 : ndarray, shape (R, N) or (R, N, axes)
+        Setpoints of trial 0 [m], one row per run (every plant, every run).
     flights : int
         Trials flown (trial 0 included).
     fly : callable
-        ``fly(f, u) -> y``: flight ``f`` with setpoints ``u``; measures what the study keeps.
+        ``fly(f, u) -> y``: flight ``f`` with setpoints ``u`` (the shape of ``u0``), measures
+        ``y``, shape (R, N) or (R, N, axes) [m], and keeps what the study keeps.
     learn : callable
-        ``learn(f, u, y) -> u_next``: the learning step from flight ``f``.
+        ``learn(f, u, y) -> u_next``: the learning step from flight ``f``; ``u_next`` has
+        the shape of ``u0`` [m].
     step : callable, optional
         Called after every learning step (progress).
 
     Returns
     -------
-    ndarray
-        The setpoints of the last flight.
+    ndarray, shape of ``u0``
+        The setpoints of the last flight [m].
     """
     u = u0
     for f in range(flights):
@@ -481,14 +483,14 @@ def diverged(first: np.ndarray, steady: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    first : ndarray
+    first : ndarray, shape (P,)
         Error of trial 0 per plant (e_pos or error norm) [m].
-    steady : ndarray
+    steady : ndarray, shape (P,)
         Mean error of the steady-state trials per plant [m].
 
     Returns
     -------
-    ndarray of bool
+    ndarray of bool, shape (P,)
         True where ``steady > first`` or either is NaN or inf.
     """
     with np.errstate(invalid="ignore"):

@@ -876,7 +876,13 @@ class InputUpdate:
 
     def fork(self) -> InputUpdate:
         """A new update of the same axis sharing this one's structure and factorisation, with
-        its own memory of the last active set (one per plant of a batch)."""
+        its own memory of the last active set (one per plant of a batch).
+
+        Returns
+        -------
+        InputUpdate
+            The copy; solving with it never changes this one.
+        """
         other = InputUpdate.__new__(InputUpdate)
         other.__dict__.update(self.__dict__)
         other._active = None
