@@ -227,6 +227,15 @@ def rts_smooth(z: np.ndarray, q_m2: np.ndarray, r_m2: np.ndarray) -> tuple[np.nd
     r = np.broadcast_to(r_in if r_in.shape == z.shape else r_in[..., None], z.shape)
     if np.any(~np.isfinite(q)) or np.any(q < 0) or np.any(~np.isfinite(r)) or np.any(r <= 0):
         raise ValueError("rts_smooth needs finite q >= 0 and r > 0")
+    if z[..., 0].size <= _SCALAR_SERIES:
+        # a few series (the learner's one): the same recursion on Python floats, one series
+        # at a time, a hundred times faster than numpy's per-sample calls and equal to them
+        # bit for bit (IEEE double, the same operations in the same order)
+        d_hat = np.empty_like(z)
+        p_s = np.empty(z.shape)
+        for i in np.ndindex(z.shape[:-1]):
+            d_hat[i], p_s[i] = _rts_series(z[i].tolist(), float(q[i]), r[i].tolist())
+        return d_hat, p_s
     n = z.shape[-1]
     d_filt = np.empty_like(z)
     p_post = np.empty(z.shape)
@@ -247,6 +256,32 @@ def rts_smooth(z: np.ndarray, q_m2: np.ndarray, r_m2: np.ndarray) -> tuple[np.nd
         g = np.divide(p_post[..., k], p_next, out=np.zeros_like(p_next), where=p_next > 0)
         d_hat[..., k] = d_filt[..., k] + g * (d_hat[..., k + 1] - d_filt[..., k])
         p_s[..., k] = p_post[..., k] + g * g * (p_s[..., k + 1] - p_next)
+    return d_hat, p_s
+
+
+#: Up to this many series, :func:`rts_smooth` runs its recursion on Python floats.
+_SCALAR_SERIES = 8
+
+
+def _rts_series(z: list[float], q: float, r: list[float]) -> tuple[list[float], list[float]]:
+    """:func:`rts_smooth`'s recursion for one series, on Python floats."""
+    n = len(z)
+    d, p = z[0], r[0]
+    d_filt, p_post = [d] * n, [p] * n
+    for k in range(1, n):
+        p_prior = p + q
+        g = p_prior / (p_prior + r[k])
+        d = d + g * (z[k] - d)
+        p = (1.0 - g) * p_prior
+        d_filt[k], p_post[k] = d, p
+    d_hat, p_s = d_filt.copy(), p_post.copy()
+    for k in range(n - 2, -1, -1):
+        pk = p_post[k]
+        p_next = pk + q
+        g = pk / p_next if p_next > 0 else 0.0
+        dk = d_filt[k]
+        d_hat[k] = dk + g * (d_hat[k + 1] - dk)
+        p_s[k] = pk + g * g * (p_s[k + 1] - p_next)
     return d_hat, p_s
 
 
