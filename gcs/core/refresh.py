@@ -258,11 +258,13 @@ def _iir(b: np.ndarray, a: np.ndarray, u: np.ndarray, delay: int, rowwise: bool)
     m = b.shape[0]
     if not rowwise:
         return _causal_conv(_impulse(b, a, delay, u.shape[-1]), u)
-    out = np.empty(np.broadcast_shapes(u.shape, (m,) + (1,) * (u.ndim - 1)))
+    shape = u.shape if u.shape[0] == m else (m,) + u.shape[1:]
+    out = np.empty(shape)
     lead = np.zeros(delay)
+    one = np.ones(1)
     for i in range(m):
-        num = np.concatenate([lead, b[i]])
-        den = np.concatenate([[1.0], a[i]])
+        num = np.concatenate((lead, b[i]))
+        den = np.concatenate((one, a[i]))
         out[i] = scipy.signal.lfilter(num, den, u[i] if u.shape[0] == m else u[0], axis=-1)
     return out
 
@@ -309,16 +311,25 @@ def _jacobian(
     e1 = np.zeros_like(b)
     e1[:, 0] = 1.0
     w = _iir(e1, a, du, 0, rowwise)  # w = du / A: numerator 1, no delay
+    # the columns written in place: d y / d b_(i+1) is w shifted by delay + i samples,
+    # d y / d a_(i+1) is -s shifted by i + 1 (its leading samples -0.0, as -shift(s) has)
+    jac = np.empty(du.shape + (2 * n,))
     y_hat = np.zeros_like(du)
-    cols = []
+    n_t = du.shape[-1]
+    lead = (-1,) + (1,) * (du.ndim - 1)
     for i in range(n):
-        col = _shift(w, delay + i)  # d y / d b_(i+1)
-        cols.append(col)
-        y_hat = y_hat + b[:, i].reshape((-1,) + (1,) * (du.ndim - 1)) * col
+        k = min(delay + i, n_t)
+        col = jac[..., i]
+        col[..., :k] = 0.0
+        col[..., k:] = w[..., : n_t - k]
+        y_hat = y_hat + b[:, i].reshape(lead) * col
     s = _iir(e1, a, y_hat, 0, rowwise)
     for i in range(n):
-        cols.append(-_shift(s, i + 1))  # d y / d a_(i+1)
-    return y_hat, np.stack(cols, axis=-1)
+        k = min(i + 1, n_t)
+        col = jac[..., n + i]
+        col[..., :k] = -0.0
+        np.negative(s[..., : n_t - k], out=col[..., k:])
+    return y_hat, jac
 
 
 def _quiet(func: Callable[..., T]) -> Callable[..., T]:
@@ -384,31 +395,38 @@ def fit_output_error(
     scale = _sse(dy * w)
     mu = np.full(b.shape[0], 1e-3)
     active = np.isfinite(loss)
+    eye = np.eye(2 * n)
+    every = slice(None)
     for _ in range(max_iter):
-        rows = np.flatnonzero(active)
-        if rows.size == 0:
+        count = int(np.count_nonzero(active))
+        if count == 0:
             break
-        y_hat, jac = _jacobian(b[rows], a[rows], delay, du[rows], rowwise)
-        wr = w[rows]
-        res = ((y_hat - dy[rows]) * wr).reshape(rows.size, -1)
-        jw = (jac * wr[..., None]).reshape(rows.size, -1, 2 * n)
+        # every row active (the learner's one row): views instead of copies, the same values
+        rows = every if count == active.size else np.flatnonzero(active)
+        ur, dr, wr, br, ar = du[rows], dy[rows], w[rows], b[rows], a[rows]
+        y_hat, jac = _jacobian(br, ar, delay, ur, rowwise)
+        res = ((y_hat - dr) * wr).reshape(count, -1)
+        jw = (jac * wr[..., None]).reshape(count, -1, 2 * n)
         jtj = np.einsum("mki,mkj->mij", jw, jw)
         jtr = np.einsum("mki,mk->mi", jw, res)
         d = np.maximum(np.diagonal(jtj, axis1=-2, axis2=-1), 1e-300)
-        lhs = jtj + mu[rows, None, None] * d[:, None, :] * np.eye(2 * n)
+        mur, lossr = mu[rows], loss[rows]
+        lhs = jtj + mur[:, None, None] * d[:, None, :] * eye
         step = -np.linalg.solve(lhs, jtr[..., None])[..., 0]
-        bn, an = b[rows] + step[:, :n], a[rows] + step[:, n:]
-        res_new = (simulate_tf(bn, an, delay, du[rows], rowwise) - dy[rows]) * wr
+        bn, an = br + step[:, :n], ar + step[:, n:]
+        res_new = (simulate_tf(bn, an, delay, ur, rowwise) - dr) * wr
         new = _sse(res_new)
         new = np.where(np.isfinite(new), new, np.inf)
-        better = new < loss[rows]
-        rel = np.where(better, (loss[rows] - new) / np.maximum(loss[rows], 1e-300), 0.0)
-        b[rows] = np.where(better[:, None], bn, b[rows])
-        a[rows] = np.where(better[:, None], an, a[rows])
-        loss[rows] = np.where(better, new, loss[rows])
-        mu[rows] = np.where(better, mu[rows] / 3.0, mu[rows] * 4.0)
-        tiny = loss[rows] <= 1e-24 * np.maximum(scale[rows], 1e-300)
-        active[rows] = ~((better & (rel < 1e-9)) | (mu[rows] > 1e8) | tiny)
+        better = new < lossr
+        rel = np.where(better, (lossr - new) / np.maximum(lossr, 1e-300), 0.0)
+        b[rows] = np.where(better[:, None], bn, br)
+        a[rows] = np.where(better[:, None], an, ar)
+        lossr = np.where(better, new, lossr)
+        loss[rows] = lossr
+        mur = np.where(better, mur / 3.0, mur * 4.0)
+        mu[rows] = mur
+        tiny = lossr <= 1e-24 * np.maximum(scale[rows], 1e-300)
+        active[rows] = ~((better & (rel < 1e-9)) | (mur > 1e8) | tiny)
     return b, a, loss
 
 
