@@ -34,6 +34,7 @@ are in ``docs/learning-floor.md``.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -170,6 +171,22 @@ def _tapered_periodogram(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return per[..., keep], omega[keep]
 
 
+@functools.lru_cache(maxsize=16)
+def _whittle_grid(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What :func:`fit_time_noise`'s grid search needs apart from the data, for series of
+    ``n`` samples (kept: read-only arrays): the ratios ``q / r`` (G,), ``1 / shape`` (G, F)
+    and the mean over frequencies of ``log shape`` (G,)."""
+    omega = 2.0 * np.pi * np.arange((n - 1) // 2 + 1) / (n - 1)  # the periodogram's
+    omega = omega[(omega > 0) & (omega < np.pi)]
+    base = 2.0 * (1.0 - np.cos(omega))  # spectrum of mu(k) - mu(k-1) per unit r
+    ratios = 10.0**_LOG_RATIO_GRID  # (G,)
+    shape = ratios[:, None] + base[None, :]  # (G, F)
+    out = (ratios, 1.0 / shape, np.mean(np.log(shape), axis=1))
+    for arr in out:
+        arr.flags.writeable = False
+    return out
+
+
 def fit_time_noise(z: np.ndarray) -> TimeNoise:
     """Maximum-likelihood ``(q_time, r_white)`` of the random walk plus white noise in time.
 
@@ -187,12 +204,10 @@ def fit_time_noise(z: np.ndarray) -> TimeNoise:
     """
     z = _check_history(z)
     per, omega = _tapered_periodogram(z)  # (..., F), (F,)
-    base = 2.0 * (1.0 - np.cos(omega))  # spectrum of mu(k) - mu(k-1) per unit r
-    ratios = 10.0**_LOG_RATIO_GRID  # (G,)
-    shape = ratios[:, None] + base[None, :]  # (G, F)
+    ratios, inv_shape, mean_log_shape = _whittle_grid(z.shape[-1])
     # r concentrated out: r_hat = mean(I / shape); -loglik / F = log r_hat + mean log shape
-    r_hat = np.einsum("...f,gf->...g", per, 1.0 / shape) / omega.size  # (..., G)
-    nll = np.log(np.maximum(r_hat, 1e-300)) + np.mean(np.log(shape), axis=1)
+    r_hat = np.einsum("...f,gf->...g", per, inv_shape) / omega.size  # (..., G)
+    nll = np.log(np.maximum(r_hat, 1e-300)) + mean_log_shape
     best = np.argmin(nll, axis=-1)
     r = np.take_along_axis(r_hat, best[..., None], axis=-1)[..., 0]
     return TimeNoise(q_m2=ratios[best] * r, r_m2=r)
