@@ -317,14 +317,27 @@ def _restricted_loglik(sigma: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.where(sign > 0, ll, -np.inf)
 
 
-def _sigma(theta: np.ndarray, m: np.ndarray, t: np.ndarray) -> np.ndarray:
-    eye = np.eye(t.shape[0])
-    moved = (m > 0).astype(float)
+def _sigma(
+    theta: np.ndarray, m: np.ndarray, t: np.ndarray, parts: tuple | None = None
+) -> np.ndarray:
+    """The covariance of the residual differences; ``parts``: :func:`_sigma_parts` of
+    ``(m, t)`` when already computed."""
+    d_moved, d_m = _sigma_parts(m, t) if parts is None else parts
     return (
-        theta[..., 0, None, None] * (moved[..., :, None] * eye)
-        + theta[..., 1, None, None] * (m[..., :, None] * eye)
+        theta[..., 0, None, None] * d_moved
+        + theta[..., 1, None, None] * d_m
         + theta[..., 2, None, None] * t
     )
+
+
+def _sigma_parts(m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``diag(m > 0)`` and ``diag(m)``, the covariance's parts that do not depend on theta."""
+    eye = np.eye(t.shape[0])
+    moved = (m > 0).astype(float)
+    return moved[..., :, None] * eye, m[..., :, None] * eye
+
+
+_EYE3 = np.eye(3)
 
 
 def _scoring_step(
@@ -334,9 +347,10 @@ def _scoring_step(
     s: np.ndarray,
     lower: np.ndarray,
     drift_offset: bool = True,
+    parts: tuple | None = None,
 ) -> np.ndarray:
     """One Fisher-scoring step ``theta <- I^-1 b`` with the lower bounds kept (active set)."""
-    inv = np.linalg.inv(_sigma(theta, m, t))  # V = Sigma^-1
+    inv = np.linalg.inv(_sigma(theta, m, t, parts))  # V = Sigma^-1
     # A_0 = diag(moved), A_1 = diag(m), A_2 = T. With W = V o V, G = V T V, Q = V S V:
     # tr(V diag(x) V diag(y)) = y' W x,  tr(V diag(x) V T) = x' diag(G),  tr(V T V T) = sum G o T,
     # b_a = tr(A_a Q): x' diag(Q) for a diagonal A_a, sum Q o T for T.
@@ -363,9 +377,9 @@ def _scoring_step(
         fixed_val = np.where(free, 0.0, lower)
         rhs = b - np.einsum("...ac,...c->...a", info, fixed_val)
         reduced = np.where(free[..., :, None] & free[..., None, :], info, 0.0)
-        reduced = reduced + np.where(free, 0.0, 1.0)[..., :, None] * np.eye(3)
+        reduced = reduced + np.where(free, 0.0, 1.0)[..., :, None] * _EYE3
         scale = np.maximum(np.abs(np.diagonal(reduced, axis1=-2, axis2=-1)), 1e-300)
-        reduced = reduced + 1e-10 * scale[..., :, None] * np.eye(3)  # unidentified directions
+        reduced = reduced + 1e-10 * scale[..., :, None] * _EYE3  # unidentified directions
         sol = np.linalg.solve(reduced, np.where(free, rhs, 0.0)[..., None])[..., 0]
         new = np.where(free, sol, lower)
         crossing = free & (new < lower)
@@ -436,18 +450,19 @@ def fit_iteration_noise(
     lower = np.stack([np.zeros(batch), np.zeros(batch), r_min], axis=-1)
     if not drift_offset:
         theta[..., 0] = 0.0
-    ll = _restricted_loglik(_sigma(theta, m, t), s)
+    parts = _sigma_parts(m, t)
+    ll = _restricted_loglik(_sigma(theta, m, t, parts), s)
     for _ in range(_SCORING_ITER):
-        cand = _scoring_step(theta, m, t, s, lower, drift_offset)
+        cand = _scoring_step(theta, m, t, s, lower, drift_offset, parts)
         step = cand - theta
-        ll_new = _restricted_loglik(_sigma(cand, m, t), s)
+        ll_new = _restricted_loglik(_sigma(cand, m, t, parts), s)
         for _ in range(8):  # step halving where the likelihood went down
             worse = ~(ll_new >= ll - 1e-12 * np.abs(ll))
             if not np.any(worse):
                 break
             step = np.where(worse[..., None], 0.5 * step, step)
             cand = np.maximum(theta + step, lower)
-            ll_new = _restricted_loglik(_sigma(cand, m, t), s)
+            ll_new = _restricted_loglik(_sigma(cand, m, t, parts), s)
         worse = ~(ll_new >= ll - 1e-12 * np.abs(ll))
         cand = np.where(worse[..., None], theta, cand)
         ll_new = np.where(worse, ll, ll_new)
