@@ -181,8 +181,11 @@ class Learner:
             self._history.append(self._trial(trial.u_m, trial.y_m))
         self._updates: list[InputUpdate | None] = [None] * n_axes
         self.last: LearnerStep | None = None
+        zeros = np.zeros((1, self.n_samples))
         for axis, model in enumerate(self._models):  # the structure, once; checks the lengths
-            self._update(axis, model)
+            # and the KKT factorisation, here rather than in the first step (one unconstrained
+            # solve factorises it; its answer is not kept)
+            self._update(axis, model).solve_unconstrained(zeros, zeros)
 
     # ------------------------------------------------------------------ state, read-only
 

@@ -34,6 +34,7 @@ are in ``docs/learning-floor.md``.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -170,6 +171,22 @@ def _tapered_periodogram(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return per[..., keep], omega[keep]
 
 
+@functools.lru_cache(maxsize=16)
+def _whittle_grid(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What :func:`fit_time_noise`'s grid search needs apart from the data, for series of
+    ``n`` samples (kept: read-only arrays): the ratios ``q / r`` (G,), ``1 / shape`` (G, F)
+    and the mean over frequencies of ``log shape`` (G,)."""
+    omega = 2.0 * np.pi * np.arange((n - 1) // 2 + 1) / (n - 1)  # the periodogram's
+    omega = omega[(omega > 0) & (omega < np.pi)]
+    base = 2.0 * (1.0 - np.cos(omega))  # spectrum of mu(k) - mu(k-1) per unit r
+    ratios = 10.0**_LOG_RATIO_GRID  # (G,)
+    shape = ratios[:, None] + base[None, :]  # (G, F)
+    out = (ratios, 1.0 / shape, np.mean(np.log(shape), axis=1))
+    for arr in out:
+        arr.flags.writeable = False
+    return out
+
+
 def fit_time_noise(z: np.ndarray) -> TimeNoise:
     """Maximum-likelihood ``(q_time, r_white)`` of the random walk plus white noise in time.
 
@@ -187,12 +204,10 @@ def fit_time_noise(z: np.ndarray) -> TimeNoise:
     """
     z = _check_history(z)
     per, omega = _tapered_periodogram(z)  # (..., F), (F,)
-    base = 2.0 * (1.0 - np.cos(omega))  # spectrum of mu(k) - mu(k-1) per unit r
-    ratios = 10.0**_LOG_RATIO_GRID  # (G,)
-    shape = ratios[:, None] + base[None, :]  # (G, F)
+    ratios, inv_shape, mean_log_shape = _whittle_grid(z.shape[-1])
     # r concentrated out: r_hat = mean(I / shape); -loglik / F = log r_hat + mean log shape
-    r_hat = np.einsum("...f,gf->...g", per, 1.0 / shape) / omega.size  # (..., G)
-    nll = np.log(np.maximum(r_hat, 1e-300)) + np.mean(np.log(shape), axis=1)
+    r_hat = np.einsum("...f,gf->...g", per, inv_shape) / omega.size  # (..., G)
+    nll = np.log(np.maximum(r_hat, 1e-300)) + mean_log_shape
     best = np.argmin(nll, axis=-1)
     r = np.take_along_axis(r_hat, best[..., None], axis=-1)[..., 0]
     return TimeNoise(q_m2=ratios[best] * r, r_m2=r)
@@ -227,6 +242,15 @@ def rts_smooth(z: np.ndarray, q_m2: np.ndarray, r_m2: np.ndarray) -> tuple[np.nd
     r = np.broadcast_to(r_in if r_in.shape == z.shape else r_in[..., None], z.shape)
     if np.any(~np.isfinite(q)) or np.any(q < 0) or np.any(~np.isfinite(r)) or np.any(r <= 0):
         raise ValueError("rts_smooth needs finite q >= 0 and r > 0")
+    if z[..., 0].size <= _SCALAR_SERIES:
+        # a few series (the learner's one): the same recursion on Python floats, one series
+        # at a time, a hundred times faster than numpy's per-sample calls and equal to them
+        # bit for bit (IEEE double, the same operations in the same order)
+        d_hat = np.empty_like(z)
+        p_s = np.empty(z.shape)
+        for i in np.ndindex(z.shape[:-1]):
+            d_hat[i], p_s[i] = _rts_series(z[i].tolist(), float(q[i]), r[i].tolist())
+        return d_hat, p_s
     n = z.shape[-1]
     d_filt = np.empty_like(z)
     p_post = np.empty(z.shape)
@@ -250,6 +274,32 @@ def rts_smooth(z: np.ndarray, q_m2: np.ndarray, r_m2: np.ndarray) -> tuple[np.nd
     return d_hat, p_s
 
 
+#: Up to this many series, :func:`rts_smooth` runs its recursion on Python floats.
+_SCALAR_SERIES = 8
+
+
+def _rts_series(z: list[float], q: float, r: list[float]) -> tuple[list[float], list[float]]:
+    """:func:`rts_smooth`'s recursion for one series, on Python floats."""
+    n = len(z)
+    d, p = z[0], r[0]
+    d_filt, p_post = [d] * n, [p] * n
+    for k in range(1, n):
+        p_prior = p + q
+        g = p_prior / (p_prior + r[k])
+        d = d + g * (z[k] - d)
+        p = (1.0 - g) * p_prior
+        d_filt[k], p_post[k] = d, p
+    d_hat, p_s = d_filt.copy(), p_post.copy()
+    for k in range(n - 2, -1, -1):
+        pk = p_post[k]
+        p_next = pk + q
+        g = pk / p_next if p_next > 0 else 0.0
+        dk = d_filt[k]
+        d_hat[k] = dk + g * (d_hat[k + 1] - dk)
+        p_s[k] = pk + g * g * (p_s[k + 1] - p_next)
+    return d_hat, p_s
+
+
 # ---------------------------------------------------------------------------------------------
 # Across iterations: restricted likelihood of the residual differences, Fisher scoring
 # ---------------------------------------------------------------------------------------------
@@ -267,14 +317,27 @@ def _restricted_loglik(sigma: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.where(sign > 0, ll, -np.inf)
 
 
-def _sigma(theta: np.ndarray, m: np.ndarray, t: np.ndarray) -> np.ndarray:
-    eye = np.eye(t.shape[0])
-    moved = (m > 0).astype(float)
+def _sigma(
+    theta: np.ndarray, m: np.ndarray, t: np.ndarray, parts: tuple | None = None
+) -> np.ndarray:
+    """The covariance of the residual differences; ``parts``: :func:`_sigma_parts` of
+    ``(m, t)`` when already computed."""
+    d_moved, d_m = _sigma_parts(m, t) if parts is None else parts
     return (
-        theta[..., 0, None, None] * (moved[..., :, None] * eye)
-        + theta[..., 1, None, None] * (m[..., :, None] * eye)
+        theta[..., 0, None, None] * d_moved
+        + theta[..., 1, None, None] * d_m
         + theta[..., 2, None, None] * t
     )
+
+
+def _sigma_parts(m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``diag(m > 0)`` and ``diag(m)``, the covariance's parts that do not depend on theta."""
+    eye = np.eye(t.shape[0])
+    moved = (m > 0).astype(float)
+    return moved[..., :, None] * eye, m[..., :, None] * eye
+
+
+_EYE3 = np.eye(3)
 
 
 def _scoring_step(
@@ -284,9 +347,10 @@ def _scoring_step(
     s: np.ndarray,
     lower: np.ndarray,
     drift_offset: bool = True,
+    parts: tuple | None = None,
 ) -> np.ndarray:
     """One Fisher-scoring step ``theta <- I^-1 b`` with the lower bounds kept (active set)."""
-    inv = np.linalg.inv(_sigma(theta, m, t))  # V = Sigma^-1
+    inv = np.linalg.inv(_sigma(theta, m, t, parts))  # V = Sigma^-1
     # A_0 = diag(moved), A_1 = diag(m), A_2 = T. With W = V o V, G = V T V, Q = V S V:
     # tr(V diag(x) V diag(y)) = y' W x,  tr(V diag(x) V T) = x' diag(G),  tr(V T V T) = sum G o T,
     # b_a = tr(A_a Q): x' diag(Q) for a diagonal A_a, sum Q o T for T.
@@ -313,9 +377,9 @@ def _scoring_step(
         fixed_val = np.where(free, 0.0, lower)
         rhs = b - np.einsum("...ac,...c->...a", info, fixed_val)
         reduced = np.where(free[..., :, None] & free[..., None, :], info, 0.0)
-        reduced = reduced + np.where(free, 0.0, 1.0)[..., :, None] * np.eye(3)
+        reduced = reduced + np.where(free, 0.0, 1.0)[..., :, None] * _EYE3
         scale = np.maximum(np.abs(np.diagonal(reduced, axis1=-2, axis2=-1)), 1e-300)
-        reduced = reduced + 1e-10 * scale[..., :, None] * np.eye(3)  # unidentified directions
+        reduced = reduced + 1e-10 * scale[..., :, None] * _EYE3  # unidentified directions
         sol = np.linalg.solve(reduced, np.where(free, rhs, 0.0)[..., None])[..., 0]
         new = np.where(free, sol, lower)
         crossing = free & (new < lower)
@@ -386,18 +450,19 @@ def fit_iteration_noise(
     lower = np.stack([np.zeros(batch), np.zeros(batch), r_min], axis=-1)
     if not drift_offset:
         theta[..., 0] = 0.0
-    ll = _restricted_loglik(_sigma(theta, m, t), s)
+    parts = _sigma_parts(m, t)
+    ll = _restricted_loglik(_sigma(theta, m, t, parts), s)
     for _ in range(_SCORING_ITER):
-        cand = _scoring_step(theta, m, t, s, lower, drift_offset)
+        cand = _scoring_step(theta, m, t, s, lower, drift_offset, parts)
         step = cand - theta
-        ll_new = _restricted_loglik(_sigma(cand, m, t), s)
+        ll_new = _restricted_loglik(_sigma(cand, m, t, parts), s)
         for _ in range(8):  # step halving where the likelihood went down
             worse = ~(ll_new >= ll - 1e-12 * np.abs(ll))
             if not np.any(worse):
                 break
             step = np.where(worse[..., None], 0.5 * step, step)
             cand = np.maximum(theta + step, lower)
-            ll_new = _restricted_loglik(_sigma(cand, m, t), s)
+            ll_new = _restricted_loglik(_sigma(cand, m, t, parts), s)
         worse = ~(ll_new >= ll - 1e-12 * np.abs(ll))
         cand = np.where(worse[..., None], theta, cand)
         ll_new = np.where(worse, ll, ll_new)

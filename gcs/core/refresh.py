@@ -40,6 +40,9 @@ from gcs.core.model import DiscreteModel
 
 T = TypeVar("T")
 
+#: The compiled direct-form filter behind ``scipy.signal.lfilter`` (see :func:`_lfilter`).
+_LINEAR_FILTER = getattr(getattr(scipy.signal, "_sigtools", None), "_linear_filter", None)
+
 __all__ = [
     "RefreshSettings",
     "RefreshResult",
@@ -247,8 +250,12 @@ def _causal_conv(h: np.ndarray, u: np.ndarray) -> np.ndarray:
     return scipy.fft.irfft(spec, nfft, axis=-1)[..., :n]
 
 
-def _iir(b: np.ndarray, a: np.ndarray, u: np.ndarray, delay: int, rowwise: bool) -> np.ndarray:
+def _iir(
+    b: np.ndarray, a: np.ndarray, u: np.ndarray, delay: int | np.ndarray, rowwise: bool
+) -> np.ndarray:
     """``y = z^-delay (b_1 + b_2 z^-1 + ..) / A u`` along the last axis; b, a (M, n).
+
+    ``delay``: one for every row, or (``rowwise`` only) an array of one per row.
 
     ``rowwise``: the difference equation row by row in compiled code (``scipy.signal.lfilter``,
     tens of microseconds a row: the learner's refresh, one row); otherwise every row at once
@@ -258,13 +265,29 @@ def _iir(b: np.ndarray, a: np.ndarray, u: np.ndarray, delay: int, rowwise: bool)
     m = b.shape[0]
     if not rowwise:
         return _causal_conv(_impulse(b, a, delay, u.shape[-1]), u)
-    out = np.empty(np.broadcast_shapes(u.shape, (m,) + (1,) * (u.ndim - 1)))
-    lead = np.zeros(delay)
+    shape = u.shape if u.shape[0] == m else (m,) + u.shape[1:]
+    out = np.empty(shape)
+    per_row = np.ndim(delay) > 0  # a delay per row (the refresh's batched delay search)
+    lead = None if per_row else np.zeros(delay)
+    one = np.ones(1)
     for i in range(m):
-        num = np.concatenate([lead, b[i]])
-        den = np.concatenate([[1.0], a[i]])
-        out[i] = scipy.signal.lfilter(num, den, u[i] if u.shape[0] == m else u[0], axis=-1)
+        num = np.concatenate((np.zeros(int(delay[i])) if per_row else lead, b[i]))
+        den = np.concatenate((one, a[i]))
+        out[i] = _lfilter(num, den, u[i] if u.shape[0] == m else u[0])
     return out
+
+
+def _lfilter(num: np.ndarray, den: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``scipy.signal.lfilter(num, den, x, axis=-1)`` for float arrays with ``den[0] = 1``.
+
+    The refresh calls it a few hundred times per fit, on short rows, where lfilter's checks
+    and conversions cost three times its filtering: this calls the compiled filter lfilter
+    ends in with the same arguments (it divides ``num`` by ``den[0] = 1``, exactly), and falls
+    back on lfilter itself if that routine is not there.
+    """
+    if _LINEAR_FILTER is None:
+        return scipy.signal.lfilter(num, den, x, axis=-1)
+    return _LINEAR_FILTER(num, den, x, -1)
 
 
 def simulate_tf(
@@ -302,23 +325,37 @@ def _shift(x: np.ndarray, s: int) -> np.ndarray:
 
 
 def _jacobian(
-    b: np.ndarray, a: np.ndarray, delay: int, du: np.ndarray, rowwise: bool
+    b: np.ndarray, a: np.ndarray, delay: int | np.ndarray, du: np.ndarray, rowwise: bool
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Simulation and its Jacobian with respect to ``(b, a)``: (M, P, N), (M, P, N, 2n)."""
+    """Simulation and its Jacobian with respect to ``(b, a)``: (M, P, N), (M, P, N, 2n).
+
+    ``delay``: one for every row, or (``rowwise`` only) an array of one per row."""
     n = b.shape[-1]
     e1 = np.zeros_like(b)
     e1[:, 0] = 1.0
     w = _iir(e1, a, du, 0, rowwise)  # w = du / A: numerator 1, no delay
+    # the columns written in place: d y / d b_(i+1) is w shifted by delay + i samples,
+    # d y / d a_(i+1) is -s shifted by i + 1 (its leading samples -0.0, as -shift(s) has)
+    jac = np.empty(du.shape + (2 * n,))
     y_hat = np.zeros_like(du)
-    cols = []
+    n_t = du.shape[-1]
+    lead = (-1,) + (1,) * (du.ndim - 1)
+    per_row = np.ndim(delay) > 0
     for i in range(n):
-        col = _shift(w, delay + i)  # d y / d b_(i+1)
-        cols.append(col)
-        y_hat = y_hat + b[:, i].reshape((-1,) + (1,) * (du.ndim - 1)) * col
+        col = jac[..., i]
+        for r, d in enumerate(delay if per_row else (delay,)):
+            k = min(int(d) + i, n_t)
+            c, src = (col[r], w[r]) if per_row else (col, w)
+            c[..., :k] = 0.0
+            c[..., k:] = src[..., : n_t - k]
+        y_hat = y_hat + b[:, i].reshape(lead) * col
     s = _iir(e1, a, y_hat, 0, rowwise)
     for i in range(n):
-        cols.append(-_shift(s, i + 1))  # d y / d a_(i+1)
-    return y_hat, np.stack(cols, axis=-1)
+        k = min(i + 1, n_t)
+        col = jac[..., n + i]
+        col[..., :k] = -0.0
+        np.negative(s[..., : n_t - k], out=col[..., k:])
+    return y_hat, jac
 
 
 def _quiet(func: Callable[..., T]) -> Callable[..., T]:
@@ -337,7 +374,7 @@ def _quiet(func: Callable[..., T]) -> Callable[..., T]:
 def fit_output_error(
     b0: np.ndarray,
     a0: np.ndarray,
-    delay: int,
+    delay: int | np.ndarray,
     du: np.ndarray,
     dy: np.ndarray,
     mask: np.ndarray,
@@ -350,8 +387,8 @@ def fit_output_error(
     ----------
     b0, a0 : ndarray, shape (M, n)
         Starting models.
-    delay : int
-        Input delay [samples] (not fitted).
+    delay : int or ndarray of int, shape (M,)
+        Input delay [samples] (not fitted); with ``rowwise``, one per row may be given.
     du : ndarray, shape (M, P, N)
         Input changes of the pairs [m].
     dy : ndarray, shape (M, P, N)
@@ -375,8 +412,13 @@ def fit_output_error(
     w = np.asarray(mask, float)
     n = b.shape[-1]
 
+    per_row = np.ndim(delay) > 0
+    if per_row and not rowwise:
+        raise ValueError("a delay per row needs rowwise=True")
+    delays = np.asarray(delay, dtype=int) if per_row else int(delay)
+
     def loss_of(bb: np.ndarray, aa: np.ndarray) -> np.ndarray:
-        res = (simulate_tf(bb, aa, delay, du, rowwise) - dy) * w
+        res = (_iir(bb, aa, du, delays, rowwise) - dy) * w
         out = _sse(res)
         return np.where(np.isfinite(out), out, np.inf)
 
@@ -384,31 +426,39 @@ def fit_output_error(
     scale = _sse(dy * w)
     mu = np.full(b.shape[0], 1e-3)
     active = np.isfinite(loss)
+    eye = np.eye(2 * n)
+    every = slice(None)
     for _ in range(max_iter):
-        rows = np.flatnonzero(active)
-        if rows.size == 0:
+        count = int(np.count_nonzero(active))
+        if count == 0:
             break
-        y_hat, jac = _jacobian(b[rows], a[rows], delay, du[rows], rowwise)
-        wr = w[rows]
-        res = ((y_hat - dy[rows]) * wr).reshape(rows.size, -1)
-        jw = (jac * wr[..., None]).reshape(rows.size, -1, 2 * n)
+        # every row active (the learner's one row): views instead of copies, the same values
+        rows = every if count == active.size else np.flatnonzero(active)
+        ur, dr, wr, br, ar = du[rows], dy[rows], w[rows], b[rows], a[rows]
+        dl = delays[rows] if per_row else delays
+        y_hat, jac = _jacobian(br, ar, dl, ur, rowwise)
+        res = ((y_hat - dr) * wr).reshape(count, -1)
+        jw = (jac * wr[..., None]).reshape(count, -1, 2 * n)
         jtj = np.einsum("mki,mkj->mij", jw, jw)
         jtr = np.einsum("mki,mk->mi", jw, res)
         d = np.maximum(np.diagonal(jtj, axis1=-2, axis2=-1), 1e-300)
-        lhs = jtj + mu[rows, None, None] * d[:, None, :] * np.eye(2 * n)
+        mur, lossr = mu[rows], loss[rows]
+        lhs = jtj + mur[:, None, None] * d[:, None, :] * eye
         step = -np.linalg.solve(lhs, jtr[..., None])[..., 0]
-        bn, an = b[rows] + step[:, :n], a[rows] + step[:, n:]
-        res_new = (simulate_tf(bn, an, delay, du[rows], rowwise) - dy[rows]) * wr
+        bn, an = br + step[:, :n], ar + step[:, n:]
+        res_new = (_iir(bn, an, ur, dl, rowwise) - dr) * wr
         new = _sse(res_new)
         new = np.where(np.isfinite(new), new, np.inf)
-        better = new < loss[rows]
-        rel = np.where(better, (loss[rows] - new) / np.maximum(loss[rows], 1e-300), 0.0)
-        b[rows] = np.where(better[:, None], bn, b[rows])
-        a[rows] = np.where(better[:, None], an, a[rows])
-        loss[rows] = np.where(better, new, loss[rows])
-        mu[rows] = np.where(better, mu[rows] / 3.0, mu[rows] * 4.0)
-        tiny = loss[rows] <= 1e-24 * np.maximum(scale[rows], 1e-300)
-        active[rows] = ~((better & (rel < 1e-9)) | (mu[rows] > 1e8) | tiny)
+        better = new < lossr
+        rel = np.where(better, (lossr - new) / np.maximum(lossr, 1e-300), 0.0)
+        b[rows] = np.where(better[:, None], bn, br)
+        a[rows] = np.where(better[:, None], an, ar)
+        lossr = np.where(better, new, lossr)
+        loss[rows] = lossr
+        mur = np.where(better, mur / 3.0, mur * 4.0)
+        mu[rows] = mur
+        tiny = lossr <= 1e-24 * np.maximum(scale[rows], 1e-300)
+        active[rows] = ~((better & (rel < 1e-9)) | (mur > 1e8) | tiny)
     return b, a, loss
 
 
@@ -484,6 +534,90 @@ class _Batch:
     snr: np.ndarray
 
 
+def _fold_fits_each(
+    br: np.ndarray,
+    ar: np.ndarray,
+    delays: list[int],
+    du: np.ndarray,
+    dy: np.ndarray,
+    valid: np.ndarray,
+    masks: list[np.ndarray],
+    settings: RefreshSettings,
+    rowwise: bool = False,
+) -> tuple[list[np.ndarray], Callable[[int], tuple[np.ndarray, np.ndarray]]]:
+    """Cross-validated loss of each delay's candidate (two folds), and the fit on every
+    sample of one delay: one delay and one fold at a time (the batch's many rows)."""
+    cvs = []
+    for d in delays:
+        cv = np.zeros(br.shape[0])
+        for f in (0, 1):
+            bf, af, _ = fit_output_error(br, ar, d, du, dy, masks[f], settings.max_iter, rowwise)
+            held = _sse((simulate_tf(bf, af, d, du, rowwise) - dy) * masks[1 - f])
+            ok = _stable(af, settings.stability_margin) & np.isfinite(held)
+            cv += np.where(ok, held, np.inf)
+        cvs.append(cv)
+
+    def full(d: int) -> tuple[np.ndarray, np.ndarray]:
+        every = np.broadcast_to(valid, du.shape)
+        bd, ad, _ = fit_output_error(br, ar, d, du, dy, every, settings.max_iter, rowwise)
+        return bd, ad
+
+    return cvs, full
+
+
+def _fold_fits(
+    br: np.ndarray,
+    ar: np.ndarray,
+    delays: list[int],
+    du: np.ndarray,
+    dy: np.ndarray,
+    valid: np.ndarray,
+    masks: list[np.ndarray],
+    settings: RefreshSettings,
+) -> tuple[list[np.ndarray], Callable[[int], tuple[np.ndarray, np.ndarray]]]:
+    """:func:`_fold_fits_each` for a few rows (the learner's one), simulated row by row: every
+    delay's and fold's fit in one Levenberg-Marquardt call (a row each, iterated as alone),
+    then the fits on every sample of the delays that improve the loss in one more call."""
+    m = br.shape[0]
+    nd = len(delays)
+    k = 2 * nd  # rows (delay, fold), each a copy of the m rows
+    row_delay = np.repeat(np.asarray(delays, dtype=int), 2 * m)
+    b0, a0 = np.tile(br, (k, 1)), np.tile(ar, (k, 1))
+    u, y = np.tile(du, (k, 1, 1)), np.tile(dy, (k, 1, 1))
+    fit_mask = np.concatenate([masks[0], masks[1]] * nd)
+    held_mask = np.concatenate([masks[1], masks[0]] * nd)
+    bf, af, _ = fit_output_error(b0, a0, row_delay, u, y, fit_mask, settings.max_iter, True)
+    held = _sse((_iir(bf, af, u, row_delay, True) - y) * held_mask)
+    ok = _stable(af, settings.stability_margin) & np.isfinite(held)
+    term = np.where(ok, held, np.inf).reshape(nd, 2, m)
+    cvs = []
+    for i in range(nd):
+        cv = np.zeros(m)
+        cv += term[i, 0]
+        cv += term[i, 1]
+        cvs.append(cv)
+    # the delays whose candidate improves on every earlier one for some row: fitted together
+    best = np.full(m, np.inf)
+    wanted = []
+    for d, cv in zip(delays, cvs, strict=True):
+        better = cv < best
+        if np.any(better):
+            wanted.append(d)
+            best = np.where(better, cv, best)
+    fitted: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    if wanted:
+        kw = len(wanted)
+        every = np.broadcast_to(valid, du.shape)
+        bd, ad, _ = fit_output_error(
+            np.tile(br, (kw, 1)), np.tile(ar, (kw, 1)), np.repeat(np.asarray(wanted), m),
+            np.tile(du, (kw, 1, 1)), np.tile(dy, (kw, 1, 1)), np.tile(every, (kw, 1, 1)),
+            settings.max_iter, True,
+        )  # fmt: skip
+        for i, d in enumerate(wanted):
+            fitted[d] = (bd[i * m : (i + 1) * m], ad[i * m : (i + 1) * m])
+    return cvs, fitted.__getitem__
+
+
 @_quiet
 def refresh_decision(
     b: np.ndarray,
@@ -556,19 +690,14 @@ def refresh_decision(
     best_cv = np.full(rows.size, np.inf)
     best_d = np.full(rows.size, delay)
     bc, ac = br.copy(), ar.copy()
-    for d in range(max(0, delay - settings.delay_search), delay + settings.delay_search + 1):
-        cv = np.zeros(rows.size)
-        for f in (0, 1):
-            bf, af, _ = fit_output_error(br, ar, d, dur, dyr, masks[f], settings.max_iter, rowwise)
-            held = _sse((simulate_tf(bf, af, d, dur, rowwise) - dyr) * masks[1 - f])
-            ok = _stable(af, settings.stability_margin) & np.isfinite(held)
-            cv += np.where(ok, held, np.inf)
+    delays = range(max(0, delay - settings.delay_search), delay + settings.delay_search + 1)
+    fits = _fold_fits if rowwise else _fold_fits_each
+    cvs, full = fits(br, ar, list(delays), dur, dyr, valid, masks, settings)
+    for d, cv in zip(delays, cvs, strict=True):
         better = cv < best_cv
         if not np.any(better):
             continue
-        bd, ad, _ = fit_output_error(
-            br, ar, d, dur, dyr, np.broadcast_to(valid, dur.shape), settings.max_iter, rowwise
-        )
+        bd, ad = full(d)
         best_cv = np.where(better, cv, best_cv)
         best_d = np.where(better, d, best_d)
         bc = np.where(better[:, None], bd, bc)
