@@ -40,9 +40,6 @@ from gcs.core.model import DiscreteModel
 
 T = TypeVar("T")
 
-#: The compiled direct-form filter behind ``scipy.signal.lfilter`` (see :func:`_lfilter`).
-_LINEAR_FILTER = getattr(getattr(scipy.signal, "_sigtools", None), "_linear_filter", None)
-
 __all__ = [
     "RefreshSettings",
     "RefreshResult",
@@ -273,21 +270,8 @@ def _iir(
     for i in range(m):
         num = np.concatenate((np.zeros(int(delay[i])) if per_row else lead, b[i]))
         den = np.concatenate((one, a[i]))
-        out[i] = _lfilter(num, den, u[i] if u.shape[0] == m else u[0])
+        out[i] = scipy.signal.lfilter(num, den, u[i] if u.shape[0] == m else u[0], axis=-1)
     return out
-
-
-def _lfilter(num: np.ndarray, den: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``scipy.signal.lfilter(num, den, x, axis=-1)`` for float arrays with ``den[0] = 1``.
-
-    The refresh calls it a few hundred times per fit, on short rows, where lfilter's checks
-    and conversions cost three times its filtering: this calls the compiled filter lfilter
-    ends in with the same arguments (it divides ``num`` by ``den[0] = 1``, exactly), and falls
-    back on lfilter itself if that routine is not there.
-    """
-    if _LINEAR_FILTER is None:
-        return scipy.signal.lfilter(num, den, x, axis=-1)
-    return _LINEAR_FILTER(num, den, x, -1)
 
 
 def simulate_tf(
@@ -543,7 +527,6 @@ def _fold_fits_each(
     valid: np.ndarray,
     masks: list[np.ndarray],
     settings: RefreshSettings,
-    rowwise: bool = False,
 ) -> tuple[list[np.ndarray], Callable[[int], tuple[np.ndarray, np.ndarray]]]:
     """Cross-validated loss of each delay's candidate (two folds), and the fit on every
     sample of one delay: one delay and one fold at a time (the batch's many rows)."""
@@ -551,15 +534,15 @@ def _fold_fits_each(
     for d in delays:
         cv = np.zeros(br.shape[0])
         for f in (0, 1):
-            bf, af, _ = fit_output_error(br, ar, d, du, dy, masks[f], settings.max_iter, rowwise)
-            held = _sse((simulate_tf(bf, af, d, du, rowwise) - dy) * masks[1 - f])
+            bf, af, _ = fit_output_error(br, ar, d, du, dy, masks[f], settings.max_iter)
+            held = _sse((simulate_tf(bf, af, d, du) - dy) * masks[1 - f])
             ok = _stable(af, settings.stability_margin) & np.isfinite(held)
             cv += np.where(ok, held, np.inf)
         cvs.append(cv)
 
     def full(d: int) -> tuple[np.ndarray, np.ndarray]:
         every = np.broadcast_to(valid, du.shape)
-        bd, ad, _ = fit_output_error(br, ar, d, du, dy, every, settings.max_iter, rowwise)
+        bd, ad, _ = fit_output_error(br, ar, d, du, dy, every, settings.max_iter)
         return bd, ad
 
     return cvs, full
