@@ -10,6 +10,9 @@ printed table within one unit of its last digit (docs/results.md, "Reproducibili
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -144,3 +147,27 @@ def test_workers_and_scheduler_given_are_obeyed_without_an_estimate() -> None:
         placed = place(given, never, tasks=8, cores=2, cluster_cost_s=14.0)
         assert placed.cluster == given and placed.estimate_s is None
         assert placed.line == given.describe() + " (as asked)"
+
+
+@pytest.mark.parametrize(
+    ("argv", "given", "expected"),
+    [
+        (["gcs", "montecarlo", "--levels", "0.05"], None, "1"),  # set before numpy is imported
+        (["gcs", "montecarlo"], "2", "2"),  # the user's own value is kept
+        (["gcs", "study", "montecarlo.yaml"], None, "None"),  # other commands are left alone
+        (["gcs", "--help"], None, "None"),
+    ],
+)
+def test_gcs_montecarlo_computes_with_one_blas_thread_unless_told(
+    argv: list[str], given: str | None, expected: str
+) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    code = (
+        f"import sys; sys.argv = {argv!r}; import gcs.cli, os; "
+        "print(os.environ.get('OPENBLAS_NUM_THREADS'), 'numpy' in sys.modules)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == [expected, "True"]  # gcs.cli imports numpy after the policy
