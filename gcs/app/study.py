@@ -280,14 +280,18 @@ def _run_placed(
     say: Callable[[str], None] | None,
 ) -> None:
     """The default placement: the first tasks start here, one per thread (one per core);
-    the first one done gives the estimate, :func:`gcs.app.study_cluster.place` decides where
-    the tasks not started yet go: to these threads, or to a local cluster."""
+    the first one done gives the estimate of the rest on these threads (its wall time per
+    thread), :func:`gcs.app.study_cluster.place` decides where the tasks not started yet go:
+    to these threads, or to a local cluster."""
     n = max(1, min(study_cluster.machine_workers(), len(tasks)))
     pool = ThreadPoolExecutor(n, "gcs-task")
     try:
         running = start_here(pool, tasks[:n])
         finished, _ = wait(running, return_when=FIRST_COMPLETED)
-        first_s = time.perf_counter() - start  # with n tasks sharing the cores: an upper bound
+        # n tasks ran at once: the rest costs about first_s per n tasks here, on these threads
+        # (timed per task it counted the others' share of the cores: under load it sent a
+        # short study to a cluster that cost it 3 times the time)
+        first_s = (time.perf_counter() - start) / n
         for future in finished:
             done(running.pop(future), future.result())
         rest = tasks[n:]
