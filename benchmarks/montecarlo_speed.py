@@ -2,16 +2,18 @@
 
 Prints one JSON line per case::
 
-    {"n": N, "blas_threads": "default"|"1", "seconds": median, "runs": k,
+    {"n": N, "blas_threads": "default"|"1", "threads": 1|2, "seconds": median, "runs": k,
      "trial_iterations": ..., "us_per_trial_iteration": ..., "load_avg_1min": ...}
 
 Each case is the whole default study (4 levels x 2 algorithms x 100 plants x 10 repeats x 30
 iterations, 31 trials each) with trial length N = 200 (the default), 400 and 800; the cost per
 trial iteration should grow no faster than N^2 (dense fixed operators) - the N = 400 and 800
-lines show it. Every case runs in a fresh subprocess so that ``OPENBLAS_NUM_THREADS`` can be
-set before numpy is imported: on a 2-core machine shared with other jobs, OpenBLAS's two
-threads can be much slower than one (busy-waiting threads); both are reported. The machine's
-1-minute load average is recorded next to each line.
+lines show it. At N = 200 the batches also run on as many threads as cores
+(``run_study(threads=...)``, what ``gcs montecarlo`` does by default). Every case runs in a
+fresh subprocess so that ``OPENBLAS_NUM_THREADS`` can be set before numpy is imported: on a
+2-core machine shared with other jobs, OpenBLAS's two threads can be much slower than one
+(busy-waiting threads); both are reported. The machine's 1-minute load average is recorded
+next to each line.
 
 ``--placement [runs]`` times the command itself, start-up included: the default ``gcs
 montecarlo`` (which decides between this process and a local cluster, docs/studies.md), then
@@ -20,7 +22,7 @@ JSON line per case (median and every wall time, the decision line of the default
 ``--json`` rows equal those of ``--workers 0``) and one with the ratios to ``--workers 0``.
 
 Usage: ``python benchmarks/montecarlo_speed.py`` (all cases),
-``python benchmarks/montecarlo_speed.py --case N [runs]`` or
+``python benchmarks/montecarlo_speed.py --case N [runs [threads]]`` or
 ``python benchmarks/montecarlo_speed.py --placement [runs]``.
 """
 
@@ -39,14 +41,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 CASES = [(200, 3), (400, 1), (800, 1)]
 
 
-def run_case(n: int, runs: int) -> dict:
+def run_case(n: int, runs: int, threads: int = 1) -> dict:
     from gcs.core.montecarlo import StudySettings, run_study
 
     settings = StudySettings(n_samples=n)
     times = []
     for _ in range(runs):
         t0 = time.perf_counter()
-        run_study(settings)
+        run_study(settings, threads=threads)
         times.append(time.perf_counter() - t0)
     trial_iterations = (
         len(settings.levels)
@@ -59,6 +61,7 @@ def run_case(n: int, runs: int) -> dict:
     return {
         "n": n,
         "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "default"),
+        "threads": threads,
         "seconds": round(seconds, 3),
         "runs": runs,
         "min_seconds": round(min(times), 3),
@@ -113,16 +116,19 @@ def main() -> None:
         return
     if len(sys.argv) >= 3 and sys.argv[1] == "--case":
         runs = int(sys.argv[3]) if len(sys.argv) > 3 else 1
-        print(json.dumps(run_case(int(sys.argv[2]), runs)), flush=True)
+        threads = int(sys.argv[4]) if len(sys.argv) > 4 else 1
+        print(json.dumps(run_case(int(sys.argv[2]), runs, threads)), flush=True)
         return
     for threads in (None, "1"):
         env = dict(os.environ)
         env.pop("OPENBLAS_NUM_THREADS", None)
         if threads is not None:
             env["OPENBLAS_NUM_THREADS"] = threads
-        for n, runs in CASES:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+        cases = [(n, runs, 1) for n, runs in CASES] + [(CASES[0][0], CASES[0][1], cores)]
+        for n, runs, threads in cases:
             out = subprocess.run(
-                [sys.executable, __file__, "--case", str(n), str(runs)],
+                [sys.executable, __file__, "--case", str(n), str(runs), str(threads)],
                 env=env,
                 capture_output=True,
                 text=True,

@@ -12,6 +12,7 @@ bug: 1, ``GCS_DEBUG=1`` shows its traceback). Here: the options, their help, and
 from __future__ import annotations
 
 import functools
+import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,7 +25,11 @@ from typer.core import TyperCommand, TyperGroup
 
 from gcs import __version__
 from gcs.app.failures import EXIT_BAD_INPUT, EXIT_INTERRUPTED, OptionError, failure, one_line
-from gcs.mock.cli import mock_command
+from gcs.app.montecarlo import blas_policy
+
+blas_policy(sys.argv)  # before numpy is imported (by the next line): OpenBLAS reads it once
+
+from gcs.mock.cli import mock_command  # noqa: E402
 
 F = TypeVar("F", bound=Callable[..., Any])
 

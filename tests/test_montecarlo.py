@@ -197,6 +197,18 @@ def test_diverged_rule_counts_and_excludes() -> None:
     assert row.diverged == 1 and row.plants == 1 and row.steady_mean == pytest.approx(1.0)
 
 
+def test_the_rows_do_not_depend_on_the_threads_that_run_the_batches() -> None:
+    settings = dataclasses.replace(SMALL, levels=(0.05, 0.1, 0.2))
+    calls: list[tuple[int, int]] = []
+    serial = mc.run_study(settings)
+    threaded = mc.run_study(settings, lambda done, total: calls.append((done, total)), threads=3)
+    assert threaded == serial  # every bit, rows in the order of the levels
+    total = 3 * 2 * settings.iterations
+    assert [c[0] for c in calls] == list(range(1, total + 1)) and calls[-1][1] == total
+    with pytest.raises(ValueError, match="threads"):
+        mc.run_study(settings, threads=0)
+
+
 def test_result_structure_and_progress() -> None:
     settings = dataclasses.replace(SMALL, levels=(0.05, 0.2))
     calls: list[tuple[int, int]] = []

@@ -10,6 +10,9 @@ printed table within one unit of its last digit (docs/results.md, "Reproducibili
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -79,7 +82,11 @@ def test_a_scheduler_that_is_not_an_address_is_one_line() -> None:
 SMALL = ["montecarlo", "--levels", "0.05,0.4", "--plants", "6", "--repeats", "2", "--samples", "60"]
 
 
-def test_a_short_study_runs_here_by_default_with_the_rows_of_workers_0(tmp_path: Path) -> None:
+def test_a_short_study_runs_here_on_threads_by_default_with_the_rows_of_workers_0(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # two threads here (one per core) against --workers 0, the tasks one after the other
+    monkeypatch.setattr(study_cluster, "machine_workers", lambda: 2)
     rows, lines = {}, {}
     for name, extra in (("default", []), ("0", ["--workers", "0"])):
         out = tmp_path / f"mc-{name}.json"
@@ -87,7 +94,7 @@ def test_a_short_study_runs_here_by_default_with_the_rows_of_workers_0(tmp_path:
         assert code == 0, output
         rows[name] = json.loads(out.read_text())
         lines[name] = " ".join(output.split())
-    assert "in this process: the study is short (est. " in lines["default"]
+    assert "in this process on 2 threads: the study is short (est. " in lines["default"]
     assert "in this process (as asked)" in lines["0"]
     assert rows["default"] == rows["0"]  # every bit
 
@@ -114,6 +121,12 @@ def test_a_short_study_is_placed_here_and_a_long_one_on_a_cluster() -> None:
     short = place(Cluster(), lambda: 3.0, tasks=8, cores=2, cluster_cost_s=14.0)
     assert short.cluster.workers == 0 and short.estimate_s == 3.0
     assert short.line.startswith("in this process: the study is short (est. 3.0 s")
+    # on threads here when the tasks release the GIL: one per core, no more than the tasks
+    threads = place(Cluster(), lambda: 3.0, tasks=8, cores=2, cluster_cost_s=14.0, threads=True)
+    assert threads.cluster == Cluster(workers=0, threads=2)
+    assert threads.line.startswith("in this process on 2 threads: the study is short (est. 3.0")
+    assert place(Cluster(), lambda: 3.0, 1, cores=2, threads=True).cluster.threads == 1
+    assert place(Cluster(), lambda: 1e4, 8, cores=2, threads=True).cluster.workers == 2
     long = place(Cluster(blas_threads=2), lambda: 100.0, tasks=8, cores=2, cluster_cost_s=14.0)
     assert long.cluster == Cluster(workers=2, blas_threads=2)
     assert long.line.startswith("on a local Dask cluster of 2 workers: the study is long")
@@ -134,3 +147,27 @@ def test_workers_and_scheduler_given_are_obeyed_without_an_estimate() -> None:
         placed = place(given, never, tasks=8, cores=2, cluster_cost_s=14.0)
         assert placed.cluster == given and placed.estimate_s is None
         assert placed.line == given.describe() + " (as asked)"
+
+
+@pytest.mark.parametrize(
+    ("argv", "given", "expected"),
+    [
+        (["gcs", "montecarlo", "--levels", "0.05"], None, "1"),  # set before numpy is imported
+        (["gcs", "montecarlo"], "2", "2"),  # the user's own value is kept
+        (["gcs", "study", "montecarlo.yaml"], None, "None"),  # other commands are left alone
+        (["gcs", "--help"], None, "None"),
+    ],
+)
+def test_gcs_montecarlo_computes_with_one_blas_thread_unless_told(
+    argv: list[str], given: str | None, expected: str
+) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    code = (
+        f"import sys; sys.argv = {argv!r}; import gcs.cli, os; "
+        "print(os.environ.get('OPENBLAS_NUM_THREADS'), 'numpy' in sys.modules)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == [expected, "True"]  # gcs.cli imports numpy after the policy

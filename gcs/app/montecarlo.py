@@ -3,26 +3,30 @@
 The study itself (plants, tasks, rows, the JSON document) is :mod:`gcs.app.study`; its tables
 are :mod:`gcs.app.study_view`. Here: the options become :class:`StudySettings` (a refusal names
 the option, not the field), the cluster they describe with the BLAS threads of this process,
-the ``--json`` file checked, then the study run and shown, then the JSON written.
+the ``--json`` file checked, then the study run and shown, then the JSON written; and the
+BLAS threads the command computes with (:func:`blas_policy`, before numpy is imported: this
+module imports the numerics only when the study runs).
 """
 
 from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, MutableMapping, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from gcs.app.failures import OptionError
-from gcs.app.study import run_montecarlo, study_document, study_settings
-from gcs.app.study_run import cluster_of
-from gcs.core.montecarlo import ComparisonRow, StudyRow, StudySettings
+
+if TYPE_CHECKING:
+    from gcs.core.montecarlo import ComparisonRow, StudyRow, StudySettings
 
 __all__ = [
     "MontecarloRequest",
+    "blas_policy",
     "blas_threads",
     "montecarlo",
     "montecarlo_settings",
@@ -107,6 +111,8 @@ def montecarlo_settings(request: MontecarloRequest) -> StudySettings:
     OptionError
         Naming the option (``--levels``, ``--plants``, ...) whose value is refused.
     """
+    from gcs.app.study import study_settings
+
     try:
         return study_settings(
             request.levels, request.plants, request.repeats, request.iterations,
@@ -120,6 +126,35 @@ def montecarlo_settings(request: MontecarloRequest) -> StudySettings:
         if message.startswith(f"StudySettings.{field} "):
             raise OptionError(message.removeprefix(f"StudySettings.{field} "), option) from None
     raise OptionError(message.removeprefix("StudySettings.")) from None
+
+
+#: BLAS threads of ``gcs montecarlo`` unless ``OPENBLAS_NUM_THREADS`` says otherwise.
+MONTECARLO_BLAS_THREADS = 1
+
+
+def blas_policy(argv: Sequence[str], environ: MutableMapping[str, str] | None = None) -> None:
+    """The BLAS threads of ``gcs montecarlo``: one, unless ``OPENBLAS_NUM_THREADS`` is set.
+
+    In this process the study's tasks share the cores on threads, one per core
+    (:func:`gcs.app.study_cluster.place`); OpenBLAS's own threads on top of them only contend
+    for the same cores (docs/montecarlo.md, "Speed"). OpenBLAS reads
+    ``OPENBLAS_NUM_THREADS`` once, when numpy is imported: the command line calls this first,
+    and it does nothing once numpy is imported (the variable would then misstate the threads
+    that :func:`blas_threads` gives the local workers). Other commands are left alone.
+
+    Parameters
+    ----------
+    argv : sequence of str
+        The command line (``sys.argv``): the policy applies when its command is ``montecarlo``.
+    environ : mutable mapping, optional
+        The environment to set; default ``os.environ``.
+    """
+    if "numpy" in sys.modules:
+        return
+    command = next((a for a in argv[1:] if not a.startswith("-")), None)
+    if command == "montecarlo":
+        env = os.environ if environ is None else environ
+        env.setdefault("OPENBLAS_NUM_THREADS", str(MONTECARLO_BLAS_THREADS))
 
 
 def blas_threads() -> int:
@@ -149,6 +184,8 @@ def montecarlo(request: MontecarloRequest, view: MontecarloView) -> None:
     view : MontecarloView
         Where the progress, the tables and the placement line go.
     """
+    from gcs.app.study import run_montecarlo, study_document
+    from gcs.app.study_run import cluster_of
     from gcs.io.atomic import atomic_write_text
     from gcs.io.paths import check_output_file
 

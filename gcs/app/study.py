@@ -10,10 +10,20 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
 from typing import Any
 
-from gcs.app.study_cluster import Cluster, Task, connect, place, run_tasks
+from gcs.app import study_cluster
+from gcs.app.study_cluster import (
+    Cluster,
+    Task,
+    connect,
+    finish_here,
+    place,
+    run_tasks,
+    start_here,
+)
 from gcs.app.study_view import study_json
 from gcs.core.learning import AdaptiveSettings
 from gcs.core.montecarlo import (
@@ -196,10 +206,11 @@ def run_montecarlo(
     :func:`gcs.core.montecarlo.compare_study`, bit for bit, wherever they run.
 
     Where: ``--workers`` / ``--scheduler`` as given. Otherwise (``Cluster()``, neither
-    given) the first task runs here, timed; the rest of the study is estimated from it (the
-    paper's tasks alike; the new options' from :func:`estimate_adaptive_s`) and
-    :func:`gcs.app.study_cluster.place` decides whether a local cluster gains more than it
-    costs for the rest. ``say`` receives the decision in one line.
+    given) the first tasks start here, one per thread, one thread per core; the rest of the
+    study is estimated from the first one done (the paper's tasks alike; the new options'
+    from :func:`estimate_adaptive_s`) and :func:`gcs.app.study_cluster.place` decides whether
+    a local cluster gains more than it costs for the tasks not started yet; if not, they run
+    on these threads. ``say`` receives the decision in one line.
 
     Parameters
     ----------
@@ -240,26 +251,14 @@ def run_montecarlo(
 
     start = time.perf_counter()
     cluster = cluster or Cluster(workers=0)
-    rest = tasks
-    if cluster.scheduler is None and cluster.workers is None:
-        run_tasks(None, tasks[:1], done)
-        first_s = time.perf_counter() - start
-        rest = tasks[1:]
-        paper_left = sum(1 for t in rest if t.fn is paper_row)
-
-        def estimate() -> float:
-            left = first_s * paper_left
-            return left + (estimate_adaptive_s(settings) if adaptive else 0.0)
-
-        placement = place(cluster, estimate, len(rest))
-        cluster = placement.cluster
-        line = placement.line
-    else:
+    if cluster.scheduler is not None or cluster.workers is not None:
         line = place(cluster, lambda: 0.0, len(tasks)).line
-    with connect(cluster) as client:
-        if say is not None:
-            say(line)
-        run_tasks(client, rest, done)
+        with connect(cluster) as client:
+            if say is not None:
+                say(line)
+            run_tasks(client, tasks, done, cluster.threads)
+    else:
+        _run_placed(settings, adaptive, tasks, cluster, done, start, say)
     seconds = time.perf_counter() - start
     rows = [results[t.key] for t in tasks if t.fn is paper_row]
     comparison: list[ComparisonRow] = []
@@ -269,6 +268,52 @@ def run_montecarlo(
             rows.append(row)
             comparison.append(comp)
     return StudyOutcome(rows, comparison, seconds)
+
+
+def _run_placed(
+    settings: StudySettings,
+    adaptive: bool,
+    tasks: list[Task],
+    cluster: Cluster,
+    done: Callable[[Task, Any], None],
+    start: float,
+    say: Callable[[str], None] | None,
+) -> None:
+    """The default placement: the first tasks start here, one per thread (one per core);
+    the first one done gives the estimate of the rest on these threads (its wall time per
+    thread), :func:`gcs.app.study_cluster.place` decides where the tasks not started yet go:
+    to these threads, or to a local cluster."""
+    n = max(1, min(study_cluster.machine_workers(), len(tasks)))
+    pool = ThreadPoolExecutor(n, "gcs-task")
+    try:
+        running = start_here(pool, tasks[:n])
+        finished, _ = wait(running, return_when=FIRST_COMPLETED)
+        # n tasks ran at once: the rest costs about first_s per n tasks here, on these threads
+        # (timed per task it counted the others' share of the cores: under load it sent a
+        # short study to a cluster that cost it 3 times the time)
+        first_s = (time.perf_counter() - start) / n
+        for future in finished:
+            done(running.pop(future), future.result())
+        rest = tasks[n:]
+        left = [*running.values(), *rest]
+        paper_left = sum(1 for t in left if t.fn is paper_row)
+
+        def estimate() -> float:
+            return first_s * paper_left + (estimate_adaptive_s(settings) if adaptive else 0.0)
+
+        placement = place(cluster, estimate, len(left), threads=True)
+        if placement.cluster.workers == 0:
+            if say is not None:
+                say(placement.line)
+            running |= start_here(pool, rest)
+        else:
+            with connect(placement.cluster) as client:
+                if say is not None:
+                    say(placement.line)
+                run_tasks(client, rest, done)
+        finish_here(running, done)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def study_document(outcome: StudyOutcome, settings: StudySettings) -> Any:

@@ -3,10 +3,10 @@
 A study is a list of independent tasks (chunks of plants); each task's result depends only on
 its arguments (its seeds are derived from the study's seed and the chunk's index), so the
 results are the same whatever the number of workers, their order of completion, or a worker
-that died and whose tasks the scheduler gave to another. ``workers = 0`` runs the tasks one
-after the other in this process, without Dask (for debugging and for short studies:
-:func:`place` decides, for the commands' default, whether a local cluster would gain more than
-it costs to start).
+that died and whose tasks the scheduler gave to another. ``workers = 0`` runs the tasks in this
+process, without Dask: one after the other (``threads = 1``, for debugging), or on a pool of
+threads (numpy's matrix products and FFTs release the GIL); :func:`place` decides, for the
+commands' default, whether a local cluster would gain more than it costs to start.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import os
 import re
 import uuid
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any
@@ -30,7 +31,9 @@ __all__ = [
     "machine_workers",
     "place",
     "connect",
+    "finish_here",
     "run_tasks",
+    "start_here",
 ]
 
 #: ``tcp://HOST:PORT`` or ``tls://HOST:PORT``; HOST a name, an IPv4 or a bracketed IPv6 address.
@@ -65,19 +68,23 @@ class Cluster:
         (the order of a sum); ``gcs montecarlo`` gives its workers the threads this process
         computes with, so that its rows are those computed in one process, bit for bit. The
         workers of a running cluster keep their own setting.
+    threads : int
+        With ``workers == 0``: threads of this process that run the tasks (1: one after the
+        other). A task's result depends only on its arguments, not on the thread that runs it.
     """
 
     scheduler: str | None = None
     workers: int | None = None
     connect_timeout_s: float = CONNECT_TIMEOUT_S
     blas_threads: int | None = None
+    threads: int = 1
 
     def describe(self) -> str:
         """One phrase for the terminal: where the work runs."""
         if self.scheduler is not None:
             return f"on the Dask scheduler at {self.scheduler}"
         if self.workers == 0:
-            return "in this process"
+            return "in this process" + (f" on {self.threads} threads" if self.threads > 1 else "")
         n = self.workers or machine_workers()
         return f"on a local Dask cluster of {n} worker{'s' if n != 1 else ''}"
 
@@ -127,13 +134,16 @@ def place(
     tasks: int,
     cores: int | None = None,
     cluster_cost_s: float | None = None,
+    threads: bool = False,
 ) -> Placement:
     """In this process or on a local cluster: a cluster only when the study gains from it.
 
     ``--workers`` or ``--scheduler`` given: obeyed, nothing estimated. Otherwise the study's
     computing time in this process, ``T = estimate_s()``, decides: shared among
     ``n = min(cores, tasks)`` local workers it would save ``T (1 - 1/n)``; a cluster starts only
-    when that saving is more than the cluster's own cost (``LOCAL_CLUSTER_COST_S``).
+    when that saving is more than the cluster's own cost (``LOCAL_CLUSTER_COST_S``). What
+    ``threads`` saves in this process is not counted (it depends on how much of a task holds
+    the GIL): a study goes to a cluster only when the cluster pays even against one thread.
 
     Parameters
     ----------
@@ -148,6 +158,9 @@ def place(
         Cores this process may use; default :func:`machine_workers`.
     cluster_cost_s : float, optional
         A local cluster's start-up cost [s]; default ``LOCAL_CLUSTER_COST_S``.
+    threads : bool
+        In this process, run the tasks on ``n`` threads (``Cluster.threads``) rather than one
+        after the other: for tasks whose work releases the GIL (numpy's products and FFTs).
 
     Returns
     -------
@@ -172,11 +185,9 @@ def place(
         if n >= 2
         else "one core or one task: nothing to share"
     )
-    return Placement(
-        replace(cluster, workers=0),
-        f"in this process: the study is short (est. {total:.1f} s; {why})",
-        total,
-    )
+    here = replace(cluster, workers=0, threads=n if threads else 1)
+    line = f"{here.describe()}: the study is short (est. {total:.1f} s; {why})"
+    return Placement(here, line, total)
 
 
 def check_scheduler(url: str) -> str:
@@ -275,22 +286,70 @@ def connect(cluster: Cluster) -> Iterator[Any]:
         local.close()
 
 
+def start_here(pool: ThreadPoolExecutor, tasks: Sequence[Task]) -> dict[Future, Task]:
+    """Submit ``tasks`` to a pool of threads of this process.
+
+    Parameters
+    ----------
+    pool : concurrent.futures.ThreadPoolExecutor
+        The threads.
+    tasks : sequence of Task
+        The work.
+
+    Returns
+    -------
+    dict
+        Each task's future -> the task.
+    """
+    return {pool.submit(t.fn, *t.args): t for t in tasks}
+
+
+def finish_here(futures: dict[Future, Task], on_result: Callable[[Task, Any], None]) -> None:
+    """``on_result(task, result)`` in the calling thread as each future of :func:`start_here`
+    finishes (a task's exception is raised here, the tasks not yet started are cancelled).
+
+    Parameters
+    ----------
+    futures : dict
+        From :func:`start_here`.
+    on_result : callable
+        Called once per task, in the order they finish.
+    """
+    pending = set(futures)
+    try:
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for future in finished:
+                on_result(futures[future], future.result())
+    finally:
+        for future in pending:
+            future.cancel()
+
+
 def run_tasks(
     client: Any,
     tasks: Sequence[Task],
     on_result: Callable[[Task, Any], None],
+    threads: int = 1,
 ) -> None:
     """Run every task; ``on_result(task, result)`` in this process as each one finishes.
 
     Parameters
     ----------
     client : distributed.Client or None
-        From :func:`connect`; None runs the tasks here, in order.
+        From :func:`connect`; None runs the tasks here: in order (``threads = 1``) or on
+        ``threads`` threads of this process.
     tasks : sequence of Task
         The work.
     on_result : callable
         Called once per task, in the order they finish.
+    threads : int
+        Threads of this process when ``client`` is None (``Cluster.threads``).
     """
+    if client is None and threads > 1 and len(tasks) > 1:
+        with ThreadPoolExecutor(min(threads, len(tasks)), "gcs-task") as pool:
+            finish_here(start_here(pool, tasks), on_result)
+        return
     if client is None:
         for task in tasks:
             on_result(task, task.fn(*task.args))

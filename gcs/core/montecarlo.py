@@ -26,7 +26,9 @@ gives the evidence for each default.
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -570,9 +572,15 @@ def _counter(total: int, progress: Callable[[int, int], None] | None) -> Callabl
 
 
 def run_study(
-    settings: StudySettings, progress: Callable[[int, int], None] | None = None
+    settings: StudySettings,
+    progress: Callable[[int, int], None] | None = None,
+    threads: int = 1,
 ) -> list[StudyRow]:
     """Run the Monte Carlo study: one row per (level, algorithm), levels in order.
+
+    Every (level, algorithm) batch is independent: it draws its plants and its noise from
+    generators of its own, seeded by ``settings.seed`` and its level alone, so the rows are the
+    same, bit for bit, whatever the number of threads that run the batches.
 
     Parameters
     ----------
@@ -580,20 +588,44 @@ def run_study(
         The study.
     progress : callable, optional
         ``progress(done, total)`` after every learning iteration of every (level, algorithm)
-        batch; ``total = len(levels) * len(algorithms) * iterations``.
+        batch; ``total = len(levels) * len(algorithms) * iterations``. Called from the thread
+        that ran the iteration, one call at a time.
+    threads : int
+        Threads of this process that run the batches (1: one after the other). numpy's matrix
+        products and FFTs release the GIL, so the batches share the cores; with more than one
+        thread, give BLAS one thread (``OPENBLAS_NUM_THREADS=1`` before numpy is imported),
+        or its own threads contend for the same cores.
 
     Returns
     -------
     list of StudyRow
     """
+    if threads < 1:
+        raise ValueError(f"threads must be at least 1, got {threads}")
     step = _counter(len(settings.levels) * len(settings.algorithms) * settings.iterations, progress)
-    rows = []
-    for level in settings.levels:
+    if threads > 1:
+        lock = threading.Lock()
+        counted = step
+
+        def step() -> None:
+            with lock:
+                counted()
+
+    def batch(level: float, algorithm: str) -> StudyRow:
         plants = sample_plants(settings, level)
-        for algorithm in settings.algorithms:
-            norms = _simulate(settings, plants, level, algorithm, step)
-            rows.append(summarise(settings, norms, level, algorithm, plants.excluded))
-    return rows
+        norms = _simulate(settings, plants, level, algorithm, step)
+        return summarise(settings, norms, level, algorithm, plants.excluded)
+
+    jobs = [(level, algorithm) for level in settings.levels for algorithm in settings.algorithms]
+    if threads == 1 or len(jobs) == 1:
+        return [batch(*job) for job in jobs]
+    with ThreadPoolExecutor(min(threads, len(jobs))) as pool:
+        futures = [pool.submit(batch, *job) for job in jobs]
+        try:
+            return [f.result() for f in futures]
+        finally:
+            for f in futures:
+                f.cancel()
 
 
 # =============================================================================================
