@@ -77,7 +77,7 @@ def _until(client: MocapClient, seq: int) -> MocapSeries:
     )
 
 
-def test_pose_round_trip_rate_and_timestamps_at_240_hz() -> None:
+def test_pose_round_trip_order_and_timestamps_at_240_hz() -> None:
     circle = Circle(radius_m=1.0, period_s=4.0)
     server = serve(circle, rate_hz=240.0, noise_m=3e-4)
     try:
@@ -100,9 +100,9 @@ def test_pose_round_trip_rate_and_timestamps_at_240_hz() -> None:
     # in-process server at the start once made the receipts span 0.99 s for 1.11 s of frames);
     # under load the library keeps only the newest frame when it falls behind
     sent_s = np.array([f.t_send_s for f in frames])
+    # (how many frames arrive, and at what rate, are measured there too: a machine at load 8-15
+    # delivered a third of them)
     assert np.all(got.t_receipt_s[got.tracked] >= sent_s)
-    assert len(numbers) >= 0.6 * (numbers[-1] - numbers[0] + 1)
-    assert np.median(np.diff(got.t_receipt_s)) == pytest.approx(1 / 240, rel=0.25)
     # poses: the client's samples, mapped to NED, are the circle within the noise
     errors, turns = [], []
     for frame, pos, quat in zip(
@@ -249,13 +249,16 @@ def test_no_server_times_out_without_freezing_this_process() -> None:
     try:
         with pytest.raises(MocapError, match=r"no answer from optitrack server 127\.0\.0\.1"):
             MocapClient(source, connect_timeout_s=1.0).start()
+        t_end = time.monotonic()
     finally:
         stop.set()
         ticker.join()
         silent.close()
-    assert 1.0 <= time.monotonic() - t0 < 4.0
-    gaps = np.diff([t0, *ticks])
-    assert len(ticks) > 50 and gaps.max() < 0.5  # this process kept running meanwhile
+    assert 1.0 <= t_end - t0 < 4.0
+    # this process kept running while the client waited: the ticker ran through the wait (a
+    # wait that held the interpreter for its second would let it tick once at most); how
+    # often it ran depends on the machine's load, so only that it ran is asserted
+    assert sum(t0 < t < t_end for t in ticks) >= 5
 
 
 def test_refused_connection_fails_at_once_with_the_library_s_reason() -> None:
