@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import select
 import signal
+import subprocess
 import sys
 
 import pytest
@@ -53,3 +57,31 @@ def test_a_program_that_ignores_sigterm_is_killed() -> None:
     assert child.returncode is None
     child.stop()
     assert child.returncode == -signal.SIGKILL
+
+
+def test_the_program_ends_when_its_parent_is_killed() -> None:
+    """A parent killed without stopping its child (SIGKILL: no handler runs) leaves no
+    program serving: the child's end of the parent's pipe reads EOF and it stops as on
+    SIGTERM."""
+    child_code = (
+        "import time; from gcs.mock.child import end_with_parent; end_with_parent();"
+        "print('READY ok', flush=True); time.sleep(60)"
+    )
+    parent_code = (
+        "import sys, time; from gcs.mock.child import ChildProgram;"
+        f"c = ChildProgram([sys.executable, '-c', {child_code!r}], ready_timeout_s=20.0);"
+        "c.start(); print(c.pid, flush=True); time.sleep(60)"
+    )
+    parent = subprocess.Popen(program(parent_code), stdout=subprocess.PIPE, text=True)
+    assert parent.stdout is not None
+    pid = int(parent.stdout.readline())
+    pidfd = os.pidfd_open(pid)  # readable once that process has ended
+    try:
+        assert not select.select([pidfd], [], [], 0.0)[0]  # serving while its parent lives
+        parent.kill()
+        parent.wait()
+        assert select.select([pidfd], [], [], 20.0)[0], "the child outlived its killed parent"
+    finally:
+        os.close(pidfd)
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)

@@ -6,6 +6,13 @@ starts such a program in a session of its own (a Ctrl-C in the terminal reaches 
 lands the mock, and not the mock, which would die before it could be landed), waits for that
 line (an event set by a reader thread: no polling), hands every other stdout line to a
 callback, and stops it with SIGTERM, then SIGKILL if it does not end in time.
+
+A parent that dies without stopping it (killed, crashed) would leave it serving for ever, its
+own session out of reach of the terminal. So the child is handed the read end of a pipe whose
+only write end the parent holds: when the parent ends, however it ends, the pipe reads EOF and
+the program stops as on SIGTERM (:func:`end_with_parent`, called by each mock's main). A pipe
+rather than Linux's ``PR_SET_PDEATHSIG``, which follows the parent's *thread* (the mock is often
+started from a worker thread) and exists on Linux alone.
 """
 
 from __future__ import annotations
@@ -18,7 +25,10 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import IO
 
-__all__ = ["ChildProgram", "ChildNotReady"]
+__all__ = ["ChildProgram", "ChildNotReady", "end_with_parent"]
+
+#: The environment variable that names the child's end of the parent's pipe.
+PARENT_PIPE_ENV = "GCS_PARENT_PIPE_FD"
 
 #: Box-drawing characters of the panels Typer prints errors in.
 _FRAME = "│╭╮╰╯─┃┏┓┗┛━ "
@@ -56,6 +66,7 @@ class ChildProgram:
         self.pid = 0
         self.stderr_text = ""
         self._proc: subprocess.Popen[str] | None = None
+        self._parent_end: int | None = None
         self._event = threading.Event()
         self._stderr: IO[str] | None = None
         self._reader: threading.Thread | None = None
@@ -69,15 +80,20 @@ class ChildProgram:
         silent for ``ready_timeout_s``; it is stopped before this is raised.
         """
         self._stderr = tempfile.TemporaryFile("w+")  # noqa: SIM115 (closed in stop())
-        self._proc = subprocess.Popen(
-            self.argv,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
-            stderr=self._stderr,
-            text=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            start_new_session=True,
-        )
+        read_end, self._parent_end = os.pipe()  # neither inherited by other children
+        try:
+            self._proc = subprocess.Popen(
+                self.argv,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=self._stderr,
+                text=True,
+                env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_PIPE_ENV: str(read_end)},
+                start_new_session=True,
+                pass_fds=(read_end,),
+            )
+        finally:
+            os.close(read_end)
         self.pid = self._proc.pid
         self._reader = threading.Thread(target=self._read_stdout, daemon=True)
         self._reader.start()
@@ -113,6 +129,9 @@ class ChildProgram:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+        if self._parent_end is not None:
+            os.close(self._parent_end)
+            self._parent_end = None
         if self._reader is not None:
             self._reader.join(1.0)
         if proc is not None and proc.stdout is not None:
@@ -152,3 +171,22 @@ class ChildProgram:
         if code is None:
             return f"no READY line within {self.ready_timeout_s:g} s"
         return f"exited with code {code}" + (f" ({tail})" if tail else "")
+
+
+def end_with_parent() -> None:
+    """In a program started by :class:`ChildProgram`: SIGTERM to this process once the parent
+    has ended (its pipe reads EOF), so that the program's own SIGTERM handling stops it. Does
+    nothing in a program started otherwise (a user's terminal)."""
+    fd = os.environ.pop(PARENT_PIPE_ENV, None)
+    if fd is None or not fd.isdigit():
+        return
+
+    def watch() -> None:
+        try:
+            while os.read(int(fd), 64):  # the parent never writes: only EOF returns
+                pass
+        except OSError:
+            pass
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=watch, name="end-with-parent", daemon=True).start()

@@ -12,6 +12,7 @@ import typer
 
 from gcs.errors import GcsError
 from gcs.io.scheduling import freeze_heap, raise_thread
+from gcs.mock.child import end_with_parent
 from gcs.mock.config import Faults, load_mock_config
 from gcs.mock.mocap.arena import ArenaOptions, parse_arena_fault
 
@@ -147,6 +148,7 @@ def run_mock(
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: server.stop())
     signal.signal(signal.SIGUSR1, lambda *_: server.lose_link_now())
+    end_with_parent()  # a killed parent does not leave it flying
     if server.arena is not None:
         sys.stdout.write(f"MOCAP {server.arena.url}\n")
         print(

@@ -11,6 +11,7 @@ import typer
 
 from gcs.core.frames import SYSTEM_FRAMES, mapping_for
 from gcs.io.scheduling import raise_thread
+from gcs.mock.child import end_with_parent
 from gcs.mock.mocap.natnet import VERSIONS
 from gcs.mock.mocap.scripted import Circle, Hover, in_room
 from gcs.mock.mocap.server import FaultWindow, NatNetServer, PoseFn, parse_fault_window
@@ -200,6 +201,7 @@ def serve(
     )
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: server.stop())
+    end_with_parent()  # a killed parent does not leave it serving
     print(f"READY {server.url}", flush=True)
     print(
         f"mock Motive (NatNet {version[0]}.{version[1]}) on 127.0.0.1:{server.command_port}, "
