@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.linalg
 import scipy.signal
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from gcs.core.model import (
@@ -344,3 +345,32 @@ def test_frequency_response_is_the_transfer_function_on_the_unit_circle():
     _, h = scipy.signal.freqz(np.ravel(system[0]), system[1], worN=w * dt)
     expected = h * np.exp(-1j * w * dt * 2)  # the whole-sample delay of 0.1 s
     np.testing.assert_allclose(frequency_response(model, w), expected, rtol=1e-9, atol=1e-12)
+
+
+coefficient = st.floats(0.1, 10.0) | st.floats(-10.0, -0.1)
+
+
+@settings(deadline=None)
+@given(
+    st.lists(coefficient, min_size=1, max_size=3),
+    st.lists(coefficient, min_size=2, max_size=4),
+    st.integers(0, 3),
+)
+def test_a_transfer_function_is_scipys_state_space_held_bit_for_bit(
+    num: list[float], den: list[float], delay: int
+) -> None:
+    """The model of ``num / den`` is scipy.signal.tf2ss's canonical form under the zero-order
+    hold (one matrix exponential of the augmented matrix), every bit: gcs builds that form
+    itself, to spare a study the import of scipy.signal."""
+    num_a, den_a = np.array(num), np.array(den)
+    assume(num_a.size < den_a.size)
+    ac, bc, cc, _ = scipy.signal.tf2ss(num_a, den_a)
+    n = ac.shape[0]
+    m = np.zeros((n + 1, n + 1))
+    m[:n, :n], m[:n, n:] = ac * DT, bc * DT
+    e = scipy.linalg.expm(m)
+    model = from_transfer_function(num_a, den_a, delay * DT, DT)
+    assert model.delay_samples == delay
+    np.testing.assert_array_equal(model.A, e[:n, :n])
+    np.testing.assert_array_equal(model.B, e[:n, n:])
+    np.testing.assert_array_equal(model.C, cc)

@@ -17,7 +17,6 @@ enough; use either of these.
 from __future__ import annotations
 
 import numpy as np
-import scipy.signal
 
 from gcs.errors import IdentificationError
 
@@ -78,7 +77,9 @@ def prbs(
     state = rng.integers(0, 2, size=nbits)
     if not state.any():
         state[rng.integers(0, nbits)] = 1
-    bits, _ = scipy.signal.max_len_seq(nbits, state=state, length=n_clock)
+    from scipy.signal import max_len_seq  # on first use: a second to import
+
+    bits, _ = max_len_seq(nbits, state=state, length=n_clock)
     levels = np.where(bits > 0, amplitude_m, -amplitude_m).astype(float)
     return np.repeat(levels, hold)[: int(n_samples)]
 

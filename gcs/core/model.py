@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from gcs.errors import ModelError
 
@@ -133,6 +132,20 @@ def frequency_response(model: DiscreteModel, omega_rad_s: np.ndarray) -> np.ndar
     return out * z ** (-model.delay_samples)
 
 
+def _controllable_form(num: np.ndarray, den: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The controllable canonical form of a strictly proper ``num / den``: ``A`` (n, n),
+    ``B`` (n, 1), ``C`` (1, n), the same arithmetic as ``scipy.signal.tf2ss`` (so bit for bit
+    its matrices), without importing ``scipy.signal`` (a second or more, with ``scipy.stats``)
+    where a study needs nothing else of it."""
+    lead = den[0]
+    den, num = den / lead, num / lead
+    n = den.size - 1
+    a = np.vstack([-den[1:][np.newaxis, :], np.eye(n - 1, n)])
+    b = np.eye(n, 1)
+    c = np.concatenate([np.zeros(n - num.size), num])[np.newaxis, :]
+    return a, b, c
+
+
 def from_transfer_function(
     num: list[float], den: list[float], delay_s: float, dt_s: float
 ) -> DiscreteModel:
@@ -171,7 +184,7 @@ def from_transfer_function(
         raise ModelError(f"delay_s must be >= 0, got {delay_s}")
     if not (dt_s > 0 and np.isfinite(dt_s)):
         raise ModelError(f"dt_s must be positive and finite, got {dt_s}")
-    Ac, Bc, Cc, _ = scipy.signal.tf2ss(num, den)
+    Ac, Bc, Cc = _controllable_form(num, den)
     n_whole = int(np.floor(delay_s / dt_s + 1e-9))
     tau = delay_s - n_whole * dt_s
     if tau <= 1e-9 * dt_s:
@@ -304,7 +317,9 @@ def simulate(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
         x = model.A @ x
     b = np.array([f[k] + a[1 : k + 1] @ f[k - 1 :: -1][:k] for k in range(n)])
     num = np.concatenate([np.zeros(model.delay_samples), b])
-    return scipy.signal.lfilter(num, a, u, axis=0)
+    from scipy.signal import lfilter  # on first use: a second to import
+
+    return lfilter(num, a, u, axis=0)
 
 
 def relative_degree(model: DiscreteModel, rtol: float = 1e-9) -> int:

@@ -34,7 +34,6 @@ from typing import Any, TypeVar
 
 import numpy as np
 import scipy.fft
-import scipy.signal
 
 from gcs.core.model import DiscreteModel
 
@@ -267,10 +266,12 @@ def _iir(
     per_row = np.ndim(delay) > 0  # a delay per row (the refresh's batched delay search)
     lead = None if per_row else np.zeros(delay)
     one = np.ones(1)
+    from scipy.signal import lfilter  # on first use: a second to import
+
     for i in range(m):
         num = np.concatenate((np.zeros(int(delay[i])) if per_row else lead, b[i]))
         den = np.concatenate((one, a[i]))
-        out[i] = scipy.signal.lfilter(num, den, u[i] if u.shape[0] == m else u[0], axis=-1)
+        out[i] = lfilter(num, den, u[i] if u.shape[0] == m else u[0], axis=-1)
     return out
 
 

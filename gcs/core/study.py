@@ -31,7 +31,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft
-import scipy.signal
 
 from gcs.core.learner import LearnerBatch
 from gcs.core.learning import AdaptiveSettings, LearnerSettings
@@ -247,6 +246,8 @@ class TruePlant:
         """
         n = u_ne_m.shape[0]
         y = np.empty_like(u_ne_m)
+        from scipy.signal import lfilter  # on first use: a second to import
+
         for axis in range(2):
             d = self.delay_samples[axis]
             u = np.zeros(n)
@@ -257,7 +258,7 @@ class TruePlant:
                 nfft = scipy.fft.next_fast_len(2 * n, real=True)
                 y[:, axis] = np.fft.irfft(np.fft.rfft(f, nfft) * np.fft.rfft(u, nfft), nfft)[:n]
             else:  # strictly proper: b[0] = 0, so b[1:] maps u(k) to y(k + 1)
-                y[:, axis] = scipy.signal.lfilter(self.b[axis][1:], self.a[axis], u)
+                y[:, axis] = lfilter(self.b[axis][1:], self.a[axis], u)
         return y + self.disturbance_ne_m
 
 
@@ -277,7 +278,9 @@ def _modal_perturb(
     the static gain is the model's times ``1 + bias + level g``.
     """
     dt = model.dt_s
-    bnum, aden = scipy.signal.ss2tf(model.A, model.B, model.C, np.zeros((1, 1)))
+    from scipy.signal import ss2tf  # on first use: a second to import
+
+    bnum, aden = ss2tf(model.A, model.B, model.C, np.zeros((1, 1)))
     bnum, aden = np.atleast_1d(bnum[0]), np.atleast_1d(aden)
     f_wn = 1.0 + bias[0] + level * g[0]
     f_zeta = 1.0 + bias[1] + level * g[1]
@@ -397,9 +400,11 @@ def draw_plant(plan: StudyPlan, level_index: int, plant: int) -> TruePlant:
     if any(v > 0 for v in u.disturbance_rms_m):
         nyq = 0.5 / dt
         wc = min(u.disturbance_bandwidth_hz / nyq, 0.99)
-        bf, af = scipy.signal.butter(2, wc)
+        from scipy.signal import butter, lfilter  # on first use: a second to import
+
+        bf, af = butter(2, wc)
         white = rng.standard_normal((n + 200, 2))
-        shaped = scipy.signal.lfilter(bf, af, white, axis=0)[200:]
+        shaped = lfilter(bf, af, white, axis=0)[200:]
         rms = np.sqrt(np.mean(shaped**2, axis=0))
         dist = shaped / np.where(rms > 0, rms, 1.0) * np.asarray(u.disturbance_rms_m)
     return TruePlant(

@@ -39,7 +39,6 @@ from dataclasses import dataclass
 import clarabel
 import numpy as np
 import scipy.linalg
-import scipy.signal
 import scipy.sparse as sp
 
 from gcs.core.model import (
@@ -760,7 +759,9 @@ def _objective(
     r: int,
     robust: RobustnessWeight | None = None,
 ) -> float:
-    y = scipy.signal.oaconvolve(f, u)[: u.size] if u.size > 64 else np.convolve(f, u)[: u.size]
+    from scipy.signal import oaconvolve  # on first use: a second to import
+
+    y = oaconvolve(f, u)[: u.size] if u.size > 64 else np.convolve(f, u)[: u.size]
     e = (y - yd + dh)[r - 1 :]
     du = u - up
     value = float(weights.we * e @ e + weights.wdu * du @ du + weights.wu * u @ u)
