@@ -1,337 +1,183 @@
-"""``gcs montecarlo``: the paper's Sec. IV study, and the options beyond it on the same plants.
+"""``gcs study`` as asked: its request and the sequence that runs it; and the cluster that the
+Dask options of ``gcs study`` and ``gcs montecarlo`` describe.
 
-The command line parses its options and prints; this room builds the study from them, runs it
-(the paper's method, then, with ``adaptive``, the new options on the same plants and noise) and
-turns the outcome into the JSON document ``--json`` writes.
+Light on imports: the numerics are imported when the study runs. The study itself (plan,
+chunks, summaries, the recommendation) is :mod:`gcs.app.study_own`; its table and figures
+are :mod:`gcs.app.study_own_view`.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import time
+import json
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-from dataclasses import dataclass, replace
-from typing import Any
+from contextlib import AbstractContextManager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
-from gcs.app import study_cluster
-from gcs.app.study_cluster import (
-    Cluster,
-    Task,
-    connect,
-    finish_here,
-    place,
-    run_tasks,
-    start_here,
-)
-from gcs.app.study_view import study_json
-from gcs.core.learning import AdaptiveSettings
-from gcs.core.montecarlo import (
-    ComparisonRow,
-    StudyRow,
-    StudySettings,
-    check_adaptive_size,
-    check_study_size,
-    compare_study,
-    error_norms,
-    sample_plants,
-    summarise,
-)
+if TYPE_CHECKING:
+    from gcs.core.study import SettingSummary
 
-__all__ = [
-    "StudyOutcome",
-    "study_settings",
-    "paper_row",
-    "adaptive_level",
-    "estimate_adaptive_s",
-    "run_montecarlo",
-    "study_document",
-]
-
-#: Progress callback: ``progress(done, total)``.
-Progress = Callable[[int, int], None]
+__all__ = ["StudyRequest", "cluster_of", "study"]
 
 
-@dataclass(frozen=True)
-class StudyOutcome:
-    """What :func:`run_montecarlo` computed.
+def cluster_of(
+    workers: int | None, scheduler: str | None, blas_threads: int | None = None
+) -> object:
+    """The :class:`gcs.app.study_cluster.Cluster` the options describe, checked.
 
     Parameters
     ----------
-    rows : list of StudyRow
-        Tables II/III rows: the paper's method, then the new options' rows when asked for.
-    comparison : list of ComparisonRow
-        One per level when the new options were run, else empty.
-    seconds : float
-        Wall time of the paper's study [s].
-    """
-
-    rows: list[StudyRow]
-    comparison: list[ComparisonRow]
-    seconds: float
-
-
-def study_settings(
-    levels: str,
-    plants: int,
-    repeats: int,
-    iterations: int,
-    samples: int,
-    seed: int,
-    keep_diverged: bool,
-    adaptive: bool,
-) -> StudySettings:
-    """The study the options describe, checked before anything is simulated.
-
-    Parameters
-    ----------
-    levels : str
-        Comma-separated uncertainty levels (fractions of the nominal wn and zeta).
-    plants, repeats, iterations, samples, seed : int
-        As :class:`gcs.core.montecarlo.StudySettings` (``samples`` is ``n_samples``).
-    keep_diverged : bool
-        Keep plants whose learning diverged in the statistics.
-    adaptive : bool
-        The new options will run too: their per-run operators must fit in memory.
+    workers : int or None
+        ``--workers``.
+    scheduler : str or None
+        ``--scheduler``.
+    blas_threads : int or None
+        BLAS threads of each local worker (None: one).
 
     Returns
     -------
-    StudySettings
+    Cluster
 
     Raises
     ------
-    ValueError
-        ``"--levels: ..."`` for the level list, else StudySettings' own message naming its
-        field (``"StudySettings.<field> ..."``); or the study would not fit in memory.
+    ClusterError
+        ``--scheduler`` is not an address, or both options are given.
     """
-    try:
-        values = tuple(float(v) for v in levels.split(",") if v.strip())
-    except ValueError:
-        raise ValueError(f"--levels: not a list of numbers: {levels!r}") from None
-    if not values:
-        raise ValueError("--levels: give at least one level, e.g. 0.05")
-    settings = StudySettings(
-        levels=values, plants=plants, repeats=repeats, iterations=iterations,
-        n_samples=samples, seed=seed, diverged_rule="include" if keep_diverged else "exclude",
-    )  # fmt: skip
-    check_study_size(settings)
-    if adaptive:
-        check_adaptive_size(settings)
-    return settings
+    from gcs.app import study_cluster
+    from gcs.errors import ClusterError
+
+    if scheduler is not None:
+        if workers is not None:
+            raise ClusterError("--workers: the workers are the scheduler's; give one of the two")
+        return study_cluster.Cluster(
+            scheduler=study_cluster.check_scheduler(scheduler),
+            connect_timeout_s=study_cluster.CONNECT_TIMEOUT_S,
+        )
+    return study_cluster.Cluster(workers=workers, blas_threads=blas_threads)
 
 
-def paper_row(settings: StudySettings, level: float, algorithm: str) -> StudyRow:
-    """One row of Tables II/III: one level with one algorithm (a task of the study).
+@dataclass(frozen=True)
+class StudyRequest:
+    """``gcs study`` as asked: its options, before anything is checked.
 
     Parameters
     ----------
-    settings : StudySettings
-        The study.
-    level : float
-        Uncertainty level.
-    algorithm : str
-        ``"smoother"`` or ``"kilc"``.
-
-    Returns
-    -------
-    StudyRow
-        What :func:`gcs.core.montecarlo.run_study` gives for this level and algorithm.
+    definition : Path
+        The study file.
+    out : Path or None
+        ``--out``: the output directory (None: ``study-<name>`` here).
+    workers : int or None
+        ``--workers``: LocalCluster size (0: in this process).
+    scheduler : str or None
+        ``--scheduler``: address of a running Dask scheduler.
+    check : bool
+        ``--check``: check the study file and say its size; run nothing.
     """
-    plants = sample_plants(settings, level)
-    norms = error_norms(settings, level, algorithm)
-    return summarise(settings, norms, level, algorithm, plants.excluded)
+
+    definition: Path
+    out: Path | None = None
+    workers: int | None = None
+    scheduler: str | None = None
+    check: bool = False
 
 
-def adaptive_level(
-    settings: StudySettings, level: float, options: AdaptiveSettings
-) -> tuple[StudyRow, ComparisonRow]:
-    """The new options against the paper's method at one level (a task of ``--adaptive``).
+class StudyView(Protocol):
+    """What ``gcs study`` shows (:class:`gcs.app.study_own_view.StudyDisplay`)."""
+
+    def say(self, line: str) -> None:
+        """One line on stderr: the study's size, where it runs, its estimate."""
+
+    def chunks(self, name: str) -> AbstractContextManager[Callable[[int, int], None]]:
+        """The progress of the study's chunks, ``progress(done, total)``."""
+
+    def figures(self, summaries: list[SettingSummary], out: Path) -> list[Path]:
+        """Write the study's figures into ``out``; the files written."""
+
+    def show(
+        self, summaries: list[SettingSummary], title: str, recommended: str, written: list[Path]
+    ) -> None:
+        """The table, the recommended setting with its reason, the files written."""
+
+
+def study(request: StudyRequest, view: StudyView) -> None:
+    """Check the study file, then say its size (``check``) or run it, resuming finished chunks.
 
     Parameters
     ----------
-    settings : StudySettings
-        The study.
-    level : float
-        Uncertainty level.
-    options : AdaptiveSettings
-        The new options.
-
-    Returns
-    -------
-    row : StudyRow
-        The new options' row.
-    comparison : ComparisonRow
-        The comparison at this level.
+    request : StudyRequest
+        The options.
+    view : StudyView
+        Where the lines, the progress, the table and the figures go.
     """
-    rows, comparison = compare_study(replace(settings, levels=(level,)), options, "smoother")
-    return rows[0], comparison[0]
+    from gcs.app.study_cluster import connect
+    from gcs.app.study_own import (
+        build_plan,
+        check_study_memory,
+        definition_document,
+        open_output,
+        place_study,
+        run_study_chunks,
+        study_document,
+        summarise_study,
+    )
+    from gcs.io.atomic import atomic_write_text
+    from gcs.io.paths import check_output_dir
+    from gcs.io.study import load_study
 
+    cluster = cluster_of(request.workers, request.scheduler)
+    spec = load_study(request.definition)
+    plan = build_plan(spec)
+    check_study_memory(plan)
+    runs = len(plan.settings) * len(plan.uncertainty.levels) * plan.plants
+    tasks = len(plan.settings) * len(plan.uncertainty.levels) * plan.chunks
+    size = (
+        f"{spec.name}: {len(plan.settings)} settings x {len(plan.uncertainty.levels)} levels x "
+        f"{plan.plants} plants = {runs} plant-runs of {plan.iterations} iterations at "
+        f"N = {plan.n_samples}, in {tasks} chunks"
+    )
+    target = request.out if request.out is not None else Path(f"study-{spec.name}")
+    if request.check:
+        from gcs.app.study_cluster import machine_workers
+        from gcs.app.study_own import estimate_study
 
-def estimate_adaptive_s(settings: StudySettings) -> float:
-    """Computing time of the new options' tasks in this process, from a small unit [s].
-
-    One task of the new options on 2 plants x 1 repeat at the first level, timed here and
-    scaled by the study's plant-runs and levels: an upper bound (its fixed part, the
-    operators, is counted once per plant-run).
-
-    Parameters
-    ----------
-    settings : StudySettings
-        The study.
-
-    Returns
-    -------
-    float
-    """
-    level = settings.levels[0]
-    unit = replace(settings, levels=(level,), plants=2, repeats=1)
-    start = time.perf_counter()
-    adaptive_level(unit, level, AdaptiveSettings(noise="data", refresh=True))
-    unit_s = time.perf_counter() - start
-    return len(settings.levels) * unit_s * settings.plants * settings.repeats / 2.0
-
-
-def run_montecarlo(
-    settings: StudySettings,
-    adaptive: bool,
-    progress: Callable[[str], Progress],
-    cluster: Cluster | None = None,
-    say: Callable[[str], None] | None = None,
-) -> StudyOutcome:
-    """Run the paper's study and, with ``adaptive``, the new options on the same plants.
-
-    Every (level, algorithm) row of the paper's study, and every level of the new options, is
-    one task; each task draws its plants and noise from the seed and its level alone, so the
-    rows are those of :func:`gcs.core.montecarlo.run_study` and
-    :func:`gcs.core.montecarlo.compare_study`, bit for bit, wherever they run.
-
-    Where: ``--workers`` / ``--scheduler`` as given. Otherwise (``Cluster()``, neither
-    given) the first tasks start here, one per thread, one thread per core; the rest of the
-    study is estimated from the first one done (the paper's tasks alike; the new options'
-    from :func:`estimate_adaptive_s`) and :func:`gcs.app.study_cluster.place` decides whether
-    a local cluster gains more than it costs for the tasks not started yet; if not, they run
-    on these threads. ``say`` receives the decision in one line.
-
-    Parameters
-    ----------
-    settings : StudySettings
-        The study.
-    adaptive : bool
-        Also learn with the noise model from the data and the model refresh
-        (``AdaptiveSettings(noise="data", refresh=True)``, docs/learning-floor.md).
-    progress : callable
-        ``progress(label)`` returns the callback that follows the tasks.
-    cluster : Cluster, optional
-        Where to run; default: in this process. ``Cluster()`` (no workers, no scheduler):
-        decided as above.
-    say : callable, optional
-        Receives the line saying where the study runs and why.
-
-    Returns
-    -------
-    StudyOutcome
-    """
-    options = AdaptiveSettings(noise="data", refresh=True)
-    tasks = [
-        Task(f"montecarlo-{level:g}-{algorithm}", paper_row, (settings, level, algorithm))
-        for level in settings.levels
-        for algorithm in settings.algorithms
-    ]
-    if adaptive:
-        tasks += [
-            Task(f"montecarlo-{level:g}-adaptive", adaptive_level, (settings, level, options))
-            for level in settings.levels
-        ]
-    results: dict[str, Any] = {}
-    follow = progress("simulating" + (" (with the adaptive options)" if adaptive else ""))
-
-    def done(task: Task, result: Any) -> None:
-        results[task.key] = result
-        follow(len(results), len(tasks))
-
-    start = time.perf_counter()
-    cluster = cluster or Cluster(workers=0)
-    if cluster.scheduler is not None or cluster.workers is not None:
-        line = place(cluster, lambda: 0.0, len(tasks)).line
-        with connect(cluster) as client:
-            if say is not None:
-                say(line)
-            run_tasks(client, tasks, done, cluster.threads)
-    else:
-        _run_placed(settings, adaptive, tasks, cluster, done, start, say)
-    seconds = time.perf_counter() - start
-    rows = [results[t.key] for t in tasks if t.fn is paper_row]
-    comparison: list[ComparisonRow] = []
-    for t in tasks:
-        if t.fn is adaptive_level:
-            row, comp = results[t.key]
-            rows.append(row)
-            comparison.append(comp)
-    return StudyOutcome(rows, comparison, seconds)
-
-
-def _run_placed(
-    settings: StudySettings,
-    adaptive: bool,
-    tasks: list[Task],
-    cluster: Cluster,
-    done: Callable[[Task, Any], None],
-    start: float,
-    say: Callable[[str], None] | None,
-) -> None:
-    """The default placement: the first tasks start here, one per thread (one per core);
-    the first one done gives the estimate of the rest on these threads (its wall time per
-    thread), :func:`gcs.app.study_cluster.place` decides where the tasks not started yet go:
-    to these threads, or to a local cluster."""
-    n = max(1, min(study_cluster.machine_workers(), len(tasks)))
-    pool = ThreadPoolExecutor(n, "gcs-task")
-    try:
-        running = start_here(pool, tasks[:n])
-        finished, _ = wait(running, return_when=FIRST_COMPLETED)
-        # n tasks ran at once: the rest costs about first_s per n tasks here, on these threads
-        # (timed per task it counted the others' share of the cores: under load it sent a
-        # short study to a cluster that cost it 3 times the time)
-        first_s = (time.perf_counter() - start) / n
-        for future in finished:
-            done(running.pop(future), future.result())
-        rest = tasks[n:]
-        left = [*running.values(), *rest]
-        paper_left = sum(1 for t in left if t.fn is paper_row)
-
-        def estimate() -> float:
-            return first_s * paper_left + (estimate_adaptive_s(settings) if adaptive else 0.0)
-
-        placement = place(cluster, estimate, len(left), threads=True)
-        if placement.cluster.workers == 0:
-            if say is not None:
-                say(placement.line)
-            running |= start_here(pool, rest)
+        view.say(size)
+        n = 1 if cluster.workers == 0 else cluster.workers or machine_workers()  # type: ignore[attr-defined]
+        if cluster.scheduler is None:  # type: ignore[attr-defined]
+            view.say(estimate_study(plan, n).line())
         else:
-            with connect(placement.cluster) as client:
-                if say is not None:
-                    say(placement.line)
-                run_tasks(client, rest, done)
-        finish_here(running, done)
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-
-
-def study_document(outcome: StudyOutcome, settings: StudySettings) -> Any:
-    """The JSON document of ``--json``: the rows, and the comparison when there is one.
-
-    Parameters
-    ----------
-    outcome : StudyOutcome
-        What :func:`run_montecarlo` computed.
-    settings : StudySettings
-        The study (for the rules in the rows).
-
-    Returns
-    -------
-    list or dict
-        The rows (the paper's study alone), or ``{"rows": ..., "comparison": ...}``.
-    """
-    rows = study_json(outcome.rows, settings)
-    if not outcome.comparison:
-        return rows
-    return {"rows": rows, "comparison": [dataclasses.asdict(c) for c in outcome.comparison]}
+            view.say(
+                "estimate: "
+                + estimate_study(plan, 1).line().removeprefix("estimate: ")
+                + " (one worker; divide by the scheduler's workers)"
+            )
+        return
+    check_output_dir(target, "--out")
+    document = definition_document(spec, plan)
+    placement = place_study(plan, cluster, tasks)  # type: ignore[arg-type]
+    with connect(placement.cluster) as client:
+        output = open_output(target, document)
+        view.say(size)
+        view.say(placement.line)
+        if output.resumed:
+            view.say(f"resuming: {output.resumed} of {tasks} chunks already in {target}")
+        try:
+            with view.chunks(spec.name) as follow:
+                results = run_study_chunks(plan, output, client, follow)
+        except KeyboardInterrupt:
+            kept = sum(1 for _ in output.chunks.glob("s*-l*-c*.json"))
+            view.say(
+                f"interrupted: {kept} of {tasks} chunks kept in {target}; the same command resumes"
+            )
+            raise
+    outcome = summarise_study(plan, results)
+    atomic_write_text(
+        target / "study.json", json.dumps(study_document(document, plan, outcome), indent=1) + "\n"
+    )
+    figures = view.figures(outcome.summaries, target)
+    view.show(
+        outcome.summaries,
+        f"{spec.name}: {plan.plants} plants per level, N = {plan.n_samples}",
+        f"recommended: {outcome.recommended} ({outcome.reason})",
+        [target / "study.json", *figures],
+    )

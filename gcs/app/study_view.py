@@ -1,43 +1,35 @@
-"""The terminal side of ``gcs montecarlo``: Tables II and III next to the paper's numbers."""
+"""The terminal and the figures of ``gcs study``: one row per setting and level."""
 
 from __future__ import annotations
 
+import math
+import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
+from rich import box
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
 from gcs.app.progress import track
-from gcs.core.montecarlo import PAPER_TABLES, ComparisonRow, StudyRow, StudySettings
+from gcs.core.study import FLOOR_FACTOR, SettingSummary
 
-__all__ = ["MontecarloDisplay", "study_tables", "study_json", "comparison_lines"]
+__all__ = ["StudyDisplay", "study_table", "write_study_figures"]
 
 
-class MontecarloDisplay:
-    """``gcs montecarlo`` on the terminal (:class:`gcs.app.montecarlo.MontecarloView`).
+class StudyDisplay:
+    """``gcs study`` on the terminal (:class:`gcs.app.study_run.StudyView`).
 
     Parameters
     ----------
     console, err_console : rich.console.Console
-        The tables (stdout); the progress and the placement line (stderr).
+        The table (stdout); the size, placement and progress lines (stderr).
     """
 
     def __init__(self, console: Console, err_console: Console) -> None:
         self.console, self.err = console, err_console
-
-    @contextmanager
-    def tasks(self) -> Iterator[Callable[[int, int], None]]:
-        """The progress of the study's tasks.
-
-        Yields
-        ------
-        callable
-            ``progress(done, total)``.
-        """
-        with track(self.err, "montecarlo", "tasks") as follow:
-            yield follow
 
     def say(self, line: str) -> None:
         """One line on stderr.
@@ -49,137 +41,200 @@ class MontecarloDisplay:
         """
         self.err.print(line, highlight=False)
 
-    def show(
-        self,
-        rows: list[StudyRow],
-        comparison: list[ComparisonRow],
-        seconds: float,
-        settings: StudySettings,
-    ) -> None:
-        """Tables II and III, the comparison lines (``--adaptive``), the wall time.
+    @contextmanager
+    def chunks(self, name: str) -> Iterator[Callable[[int, int], None]]:
+        """The progress of the study's chunks.
 
         Parameters
         ----------
-        rows : list of StudyRow
-            The tables' rows.
-        comparison : list of ComparisonRow
-            The new options against the paper's method (empty without ``--adaptive``).
-        seconds : float
-            Wall time of the paper's study [s].
-        settings : StudySettings
-            The study.
+        name : str
+            The study's name.
+
+        Yields
+        ------
+        callable
+            ``progress(done, total)``.
         """
-        self.console.print(study_tables(rows, settings))
-        for line in comparison_lines(comparison):
-            self.console.print(line)
-        self.console.print(f"[dim]{seconds:.1f} s[/]")
+        with track(self.err, name, "chunks") as follow:
+            yield follow
+
+    def figures(self, summaries: list[SettingSummary], out: Path) -> list[Path]:
+        """Write epos.png and tradeoff.png (:func:`write_study_figures`).
+
+        Parameters
+        ----------
+        summaries : list of SettingSummary
+            Per setting and level.
+        out : Path
+            The output directory.
+
+        Returns
+        -------
+        list of Path
+        """
+        return write_study_figures(summaries, out)
+
+    def show(
+        self, summaries: list[SettingSummary], title: str, recommended: str, written: list[Path]
+    ) -> None:
+        """The table, the recommendation and the files written.
+
+        Parameters
+        ----------
+        summaries : list of SettingSummary
+            Per setting and level.
+        title : str
+            The table's title.
+        recommended : str
+            The recommended setting and its reason, one line.
+        written : list of Path
+            The files written.
+        """
+        self.console.print(study_table(summaries, title))
+        self.console.print(recommended, highlight=False)
+        self.console.print("written: " + ", ".join(str(p) for p in written), highlight=False)
 
 
-_NAMES = {"smoother": "smoother", "kilc": "K-ILC"}
+def _mm(x: float) -> str:
+    if not math.isfinite(x):
+        return "-"
+    return f"{1000 * x:.0f}" if abs(x) >= 0.1 else f"{1000 * x:.1f}"
 
 
 def _pm(mean: float, std: float) -> str:
-    return f"{mean:.2f}±{std:.2f}" if abs(mean) < 1e3 else f"{mean:.1e}±{std:.0e}"
+    return "-" if not math.isfinite(mean) else f"{_mm(mean)}±{_mm(std)}"
 
 
-def study_tables(rows: list[StudyRow], settings: StudySettings) -> Table:
-    """One rich table: every (algorithm, level) row with the paper's values beside ours.
+def _flights(s: SettingSummary) -> str:
+    """Median flights to the floor of the plants that got there, and how many did."""
+    if not s.floor_m > 0:
+        return "-"
+    if s.reached_floor == 0:
+        return "never"
+    median = f"{s.flights_to_floor:g}"
+    return median if s.reached_floor == s.plants else f"{median} ({s.reached_floor}/{s.plants})"
+
+
+def study_table(summaries: list[SettingSummary], title: str) -> Table:
+    """Every setting at every level: e_pos, floor, divergence, setpoints and limits.
 
     Parameters
     ----------
-    rows : list of StudyRow
-        Results of :func:`gcs.core.montecarlo.run_study`.
-    settings : StudySettings
-        The study (for the title).
+    summaries : list of SettingSummary
+        The study's summaries.
+    title : str
+        Table title.
 
     Returns
     -------
     rich.table.Table
     """
-    title = (
-        f"||E_j||_2 [m], {settings.plants} plants x {settings.repeats} repeats, "
-        f"N = {settings.n_samples} (paper: Tables II, III)"
-    )
-    table = Table(title=escape(title))
-    for header in ("method", "level", "first", "paper", "steady", "paper", "diverged"):
-        table.add_column(header, justify="left" if header == "method" else "right", no_wrap=True)
-    for r in sorted(rows, key=lambda r: (r.algorithm != "smoother", r.uncertainty)):
-        paper = PAPER_TABLES.get((r.algorithm, round(r.uncertainty, 4)))
+    table = Table(title=escape(title), box=box.SIMPLE_HEAD, padding=(0, 1), pad_edge=False)
+    headers = ("setting", "±", "j=0", "j=1", "steady", "floor", "div.", "u rms", "limit")
+    for h in headers:
+        table.add_column(h, justify="left" if h == "setting" else "right", no_wrap=h != "setting")
+    for s in summaries:
         table.add_row(
-            _NAMES.get(r.algorithm, r.algorithm),
-            f"±{100 * r.uncertainty:g} %",
-            _pm(r.first_mean, r.first_std),
-            _pm(paper[0], paper[1]) if paper else "-",
-            _pm(r.steady_mean, r.steady_std),
-            _pm(paper[2], paper[3]) if paper else "-",
-            f"{r.diverged}/{r.plants + (r.diverged if settings.diverged_rule == 'exclude' else 0)}",
+            escape(s.setting),
+            f"{100 * s.level:g}%",
+            _mm(s.epos_mean_m[0]),
+            _mm(s.epos_mean_m[1]) if len(s.epos_mean_m) > 1 else "-",
+            _pm(s.steady_mean_m, s.steady_std_m),
+            _flights(s),
+            f"{s.diverged}/{s.plants}",
+            _mm(s.setpoint_rms_m),
+            f"{100 * s.limit_active:.0f}%",
         )
+    table.caption = escape(
+        "e_pos [mm], mean over the plants that did not diverge (steady: ± std over them) of "
+        "trial 0, the first learned trial and the steady state (the last learned trials, "
+        "docs/studies.md); floor: median flights until e_pos <= "
+        f"{FLOOR_FACTOR:g} x the noise's own e_pos over the plants that got there (n/m: how "
+        "many did; never: none); div.: diverged plants; u rms: the "
+        "last setpoints' distance from the reference [mm]; limit: updates with a limit active"
+    )
     return table
 
 
-def study_json(rows: list[StudyRow], settings: StudySettings) -> list[dict]:
-    """Rows as JSON objects (the study's keys plus the counts behind ``excluded``).
+def write_study_figures(summaries: list[SettingSummary], out: Path) -> list[Path]:
+    """``epos.png`` (e_pos per trial, one panel per level) and ``tradeoff.png``.
 
-    ``excluded`` is the number of plants left out of the statistics: plants whose learning
-    diverged when ``diverged_rule`` is "exclude", plus non-physical draws when
-    ``invalid_plant_rule`` is "exclude".
-
-    Parameters
-    ----------
-    rows : list of StudyRow
-        Results.
-    settings : StudySettings
-        The study (for the rules).
-
-    Returns
-    -------
-    list of dict
-    """
-    out = []
-    for r in rows:
-        left_out_diverged = r.diverged if settings.diverged_rule == "exclude" else 0
-        left_out_invalid = r.excluded if settings.invalid_plant_rule == "exclude" else 0
-        rule = (
-            f"{r.excluded_rule}; plants whose learning diverged (mean error of trials "
-            f"{settings.steady_from}-{settings.steady_to} above trial 0's) "
-            + ("left out" if settings.diverged_rule == "exclude" else "kept")
-        )
-        out.append(
-            {
-                "algorithm": r.algorithm,
-                "uncertainty": r.uncertainty,
-                "first_mean": r.first_mean,
-                "first_std": r.first_std,
-                "steady_mean": r.steady_mean,
-                "steady_std": r.steady_std,
-                "excluded": left_out_diverged + left_out_invalid,
-                "excluded_rule": rule,
-                "plants": r.plants,
-                "diverged": r.diverged,
-                "rejected_draws": r.excluded,
-            }
-        )
-    return out
-
-
-def comparison_lines(comparison: list[ComparisonRow]) -> list[str]:
-    """One line per level: the paper's method against the new options (``--adaptive``).
+    The trade-off plots, per setting and level, the e_pos of the first learned trial (how fast
+    the learning goes) against the steady e_pos (how far it gets), the marker's size growing
+    with the diverged plants.
 
     Parameters
     ----------
-    comparison : list of ComparisonRow
-        Results of :func:`gcs.core.montecarlo.compare_study`.
+    summaries : list of SettingSummary
+        The study's summaries.
+    out : Path
+        Directory.
 
     Returns
     -------
-    list of str
+    list of Path
+        The files written.
     """
-    return [
-        f"±{100 * c.uncertainty:g} %: mean ||E_j||_2 over j = 2..5 {c.paper_mean_2_5:.3f} "
-        f"(paper's method) -> {c.new_mean_2_5:.3f} (adaptive), {c.change_pct:+.1f} % "
-        f"(plants that diverge under neither: {c.paper_kept_2_5:.3f} -> "
-        f"{c.new_kept_2_5:.3f}); diverged {c.paper_diverged} -> {c.new_diverged} of "
-        f"{c.plants}; models refreshed in {c.refreshed_pct:.0f} % of the runs; "
-        f"{c.seconds:.0f} s"
-        for c in comparison
-    ]
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from matplotlib.ticker import MaxNLocator
+
+    levels = list(dict.fromkeys(s.level for s in summaries))
+    names = list(dict.fromkeys(s.setting for s in summaries))
+    colours = {n: plt.get_cmap("tab10")(i % 10) for i, n in enumerate(names)}
+    fig, axes = plt.subplots(1, len(levels), figsize=(5.5 * len(levels), 4.2), squeeze=False)
+    for ax, level in zip(axes[0], levels, strict=True):
+        for s in (s for s in summaries if s.level == level):
+            mean = 1000 * np.asarray(s.epos_mean_m)
+            std = 1000 * np.asarray(s.epos_std_m)
+            j = np.arange(mean.size)
+            ax.plot(j, mean, marker="o", ms=3, color=colours[s.setting], label=s.setting)
+            low = np.maximum(mean - std, 0.0)
+            ax.fill_between(j, low, mean + std, color=colours[s.setting], alpha=0.12)
+        floor = next(s.floor_m for s in summaries if s.level == level)
+        if floor > 0:
+            ax.axhline(1000 * floor, color="k", ls=":", lw=1, label="noise floor")
+        ax.set_title(f"±{100 * level:g} % uncertainty")
+        ax.set_xlabel("trial j (0: the reference; the repeats of trial 0 left out)")
+        ax.set_ylabel("e_pos [mm], mean ± std over the plants")
+        ax.set_ylim(bottom=0.0)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # trials are whole numbers
+        ax.grid(True, alpha=0.3)
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    paths = []
+    for name, figure in (("epos.png", fig), ("tradeoff.png", _tradeoff(plt, summaries, colours))):
+        path = out / name
+        tmp = out / f".{name}.tmp"
+        figure.savefig(tmp, format="png", dpi=110)
+        plt.close(figure)
+        os.replace(tmp, path)  # atomic: a reader never sees half a figure
+        paths.append(path)
+    return paths
+
+
+def _tradeoff(plt: object, summaries: list[SettingSummary], colours: dict) -> object:
+    fig, ax = plt.subplots(figsize=(6.5, 4.8))  # type: ignore[attr-defined]
+    markers = "osD^v<>"
+    levels = list(dict.fromkeys(s.level for s in summaries))
+    for s in summaries:
+        if len(s.epos_mean_m) < 2 or not math.isfinite(s.steady_mean_m):
+            continue
+        ax.scatter(
+            1000 * s.epos_mean_m[1],
+            1000 * s.steady_mean_m,
+            s=30 + 15 * s.diverged,
+            color=colours[s.setting],
+            marker=markers[levels.index(s.level) % len(markers)],
+            label=f"{s.setting}, ±{100 * s.level:g} %",
+        )
+    ax.set_xlabel("e_pos of the first learned flight [mm] (lower: faster)")
+    ax.set_ylabel("steady e_pos [mm] (lower: closer)")
+    ax.set_title("Speed against accuracy; larger markers: more diverged plants")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=6)
+    fig.tight_layout()
+    return fig

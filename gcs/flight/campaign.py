@@ -556,7 +556,9 @@ class _Campaign:
         recording = await self.run.fly()
         if mocap is not None:  # y(N) needs a mocap sample on both sides
             await asyncio.to_thread(mocap_steps.wait_past_end, mocap, recording)
-        recording = mocap_steps.with_mocap(recording, mocap)
+            # the trial's raw mocap onto the grid, in a thread: on this loop it held the frames
+            # forwarded to the vehicle for tens of milliseconds on a loaded machine
+            recording = await asyncio.to_thread(mocap_steps.with_mocap, recording, mocap)
         self.run = None  # handed over below: no longer "in flight"
         emit(TrialFinished(j, recording))
         if recording.clock is not None:
