@@ -58,7 +58,7 @@ def write_inputs(tmp: Path, loops: int) -> tuple[Path, Path]:
 
 
 def plan_of(tmp: Path, loops: int, plants: int, iterations: int, chunk: int):  # noqa: ANN201
-    from gcs.app.study_own import build_plan, definition_document
+    from gcs.app.study_chunks import build_plan, definition_document
     from gcs.io.study import study_from_dict
 
     p, t = write_inputs(tmp, loops)
@@ -79,8 +79,8 @@ def plan_of(tmp: Path, loops: int, plants: int, iterations: int, chunk: int):  #
 
 
 def run_on(workers: int, spec, plan, document, out: Path) -> tuple[float, float, str]:  # noqa: ANN001
+    from gcs.app.study_chunks import open_output, run_study_chunks, study_document, summarise_study
     from gcs.app.study_cluster import Cluster, connect
-    from gcs.app.study_own import open_output, run_study_chunks, study_document, summarise_study
 
     start = time.perf_counter()
     with connect(Cluster(workers=workers)) as client:
@@ -105,8 +105,8 @@ def montecarlo_cost(n: int, plants: int) -> float:
 
 
 def study_cost(tmp: Path, loops: int, plants: int, iterations: int) -> tuple[int, float]:
+    from gcs.app.study_chunks import open_output, run_study_chunks
     from gcs.app.study_cluster import Cluster, connect
-    from gcs.app.study_own import open_output, run_study_chunks
 
     spec, plan, document = plan_of(tmp, loops, plants, iterations, plants)
     out = tmp / f"growth-{loops}"

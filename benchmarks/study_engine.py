@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def main() -> None:
     import numpy as np
 
-    from gcs.app.study_own import build_plan
+    from gcs.app.study_chunks import build_plan
     from gcs.core.study import fly_plants
     from gcs.io.study import load_study
 

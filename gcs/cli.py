@@ -818,7 +818,7 @@ def montecarlo(
     """
     from gcs.app.montecarlo import MontecarloRequest
     from gcs.app.montecarlo import montecarlo as montecarlo_room
-    from gcs.app.study_view import MontecarloDisplay
+    from gcs.app.montecarlo_view import MontecarloDisplay
 
     request = MontecarloRequest(
         levels, plants, repeats, iterations, samples, seed, keep_diverged, adaptive,
@@ -875,9 +875,9 @@ def study(
     interrupted (Ctrl-C; finished chunks are kept, run it again to resume); 1 an internal
     error (a bug; GCS_DEBUG=1 shows the traceback).
     """
-    from gcs.app.study_own_view import StudyDisplay
-    from gcs.app.study_run import StudyRequest
-    from gcs.app.study_run import study as study_room
+    from gcs.app.study import StudyRequest
+    from gcs.app.study import study as study_room
+    from gcs.app.study_view import StudyDisplay
 
     request = StudyRequest(definition, out, workers, scheduler, check)
     study_room(request, StudyDisplay(Console(), Console(stderr=True)))

@@ -82,7 +82,7 @@ def test_a_scheduler_that_is_not_an_address_is_one_line() -> None:
 SMALL = ["montecarlo", "--levels", "0.05,0.4", "--plants", "6", "--repeats", "2", "--samples", "60"]
 
 
-def test_a_short_study_runs_here_on_threads_by_default_with_the_rows_of_workers_0(
+def test_a_short_studys_here_on_threads_by_default_with_the_rows_of_workers_0(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # two threads here (one per core) against --workers 0, the tasks one after the other

@@ -10,7 +10,7 @@ import pytest
 import yaml
 from synthetic import ROOT
 
-from gcs.app.study_own import build_plan, check_study_memory
+from gcs.app.study_chunks import build_plan, check_study_memory
 from gcs.core.model import from_transfer_function, markov_parameters, simulate
 from gcs.core.study import (
     StudyPlan,

@@ -20,8 +20,7 @@ import yaml
 from typer.testing import CliRunner
 
 from gcs.app import study_cluster
-from gcs.app.study_cluster import Cluster, connect
-from gcs.app.study_own import (
+from gcs.app.study_chunks import (
     build_plan,
     definition_document,
     open_output,
@@ -29,6 +28,7 @@ from gcs.app.study_own import (
     study_document,
     summarise_study,
 )
+from gcs.app.study_cluster import Cluster, connect
 from gcs.cli import app
 from gcs.io.study import load_study
 
@@ -214,7 +214,7 @@ def test_an_unreachable_scheduler_is_one_line(
     assert code == 2 and "unreachable" in output and len(output.strip().splitlines()) == 1
 
 
-def test_a_short_study_runs_here_by_default_with_the_json_of_workers_0(
+def test_a_short_studys_here_by_default_with_the_json_of_workers_0(
     study_file: Path, tmp_path: Path
 ) -> None:
     documents = {}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from gcs.app.study_own import build_plan
+from gcs.app.study_chunks import build_plan
 from gcs.core.learner import Learner, LearnerBatch
 from gcs.core.metrics import epos
 from gcs.core.study import StudyPlan, _rng, draw_plant, fly_plants

@@ -49,7 +49,7 @@ def test_the_steady_state_is_the_last_learned_trials_never_the_first(tmp_path: P
 
 
 def test_the_study_plot_numbers_its_trials_in_whole_numbers(tmp_path: Path) -> None:
-    from gcs.app.study_own_view import write_study_figures
+    from gcs.app.study_view import write_study_figures
 
     plan = plan_of(tmp_path, iterations=2, steady_trials=1)
     s = summarise_setting(plan, 0, 0, [_plant([0.5, 0.1, 0.05])] * 2)

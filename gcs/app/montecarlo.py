@@ -1,7 +1,8 @@
 """``gcs montecarlo`` as asked: its request, checked, and the sequence that runs it.
 
-The study itself (plants, tasks, rows, the JSON document) is :mod:`gcs.app.study`; its tables
-are :mod:`gcs.app.study_view`. Here: the options become :class:`StudySettings` (a refusal names
+The study itself (plants, tasks, rows, the JSON document) is
+:mod:`gcs.app.montecarlo_study`; its tables are :mod:`gcs.app.montecarlo_view`. Here: the
+options become :class:`StudySettings` (a refusal names
 the option, not the field), the cluster they describe with the BLAS threads of this process,
 the ``--json`` file checked, then the study run and shown, then the JSON written; and the
 BLAS threads the command computes with (:func:`blas_policy`, before numpy is imported: this
@@ -69,7 +70,7 @@ class MontecarloRequest:
 
 
 class MontecarloView(Protocol):
-    """What ``gcs montecarlo`` shows (:class:`gcs.app.study_view.MontecarloDisplay`)."""
+    """What ``gcs montecarlo`` shows (:class:`gcs.app.montecarlo_view.MontecarloDisplay`)."""
 
     def tasks(self) -> AbstractContextManager[Callable[[int, int], None]]:
         """The progress of the study's tasks, ``progress(done, total)``."""
@@ -111,7 +112,7 @@ def montecarlo_settings(request: MontecarloRequest) -> StudySettings:
     OptionError
         Naming the option (``--levels``, ``--plants``, ...) whose value is refused.
     """
-    from gcs.app.study import study_settings
+    from gcs.app.montecarlo_study import study_settings
 
     try:
         return study_settings(
@@ -184,8 +185,8 @@ def montecarlo(request: MontecarloRequest, view: MontecarloView) -> None:
     view : MontecarloView
         Where the progress, the tables and the placement line go.
     """
-    from gcs.app.study import run_montecarlo, study_document
-    from gcs.app.study_run import cluster_of
+    from gcs.app.montecarlo_study import run_montecarlo, study_document
+    from gcs.app.study import cluster_of
     from gcs.io.atomic import atomic_write_text
     from gcs.io.paths import check_output_file
 

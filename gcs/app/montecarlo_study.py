@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from gcs.app import study_cluster
+from gcs.app.montecarlo_view import study_json
 from gcs.app.study_cluster import (
     Cluster,
     Task,
@@ -24,7 +25,6 @@ from gcs.app.study_cluster import (
     run_tasks,
     start_here,
 )
-from gcs.app.study_view import study_json
 from gcs.core.learning import AdaptiveSettings
 from gcs.core.montecarlo import (
     ComparisonRow,

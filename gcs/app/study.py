@@ -2,8 +2,8 @@
 Dask options of ``gcs study`` and ``gcs montecarlo`` describe.
 
 Light on imports: the numerics are imported when the study runs. The study itself (plan,
-chunks, summaries, the recommendation) is :mod:`gcs.app.study_own`; its table and figures
-are :mod:`gcs.app.study_own_view`.
+chunks, summaries, the recommendation) is :mod:`gcs.app.study_chunks`; its table and figures
+are :mod:`gcs.app.study_view`.
 """
 
 from __future__ import annotations
@@ -83,7 +83,7 @@ class StudyRequest:
 
 
 class StudyView(Protocol):
-    """What ``gcs study`` shows (:class:`gcs.app.study_own_view.StudyDisplay`)."""
+    """What ``gcs study`` shows (:class:`gcs.app.study_view.StudyDisplay`)."""
 
     def say(self, line: str) -> None:
         """One line on stderr: the study's size, where it runs, its estimate."""
@@ -110,8 +110,7 @@ def study(request: StudyRequest, view: StudyView) -> None:
     view : StudyView
         Where the lines, the progress, the table and the figures go.
     """
-    from gcs.app.study_cluster import connect
-    from gcs.app.study_own import (
+    from gcs.app.study_chunks import (
         build_plan,
         check_study_memory,
         definition_document,
@@ -121,6 +120,7 @@ def study(request: StudyRequest, view: StudyView) -> None:
         study_document,
         summarise_study,
     )
+    from gcs.app.study_cluster import connect
     from gcs.io.atomic import atomic_write_text
     from gcs.io.paths import check_output_dir
     from gcs.io.study import load_study
@@ -138,8 +138,8 @@ def study(request: StudyRequest, view: StudyView) -> None:
     )
     target = request.out if request.out is not None else Path(f"study-{spec.name}")
     if request.check:
+        from gcs.app.study_chunks import estimate_study
         from gcs.app.study_cluster import machine_workers
-        from gcs.app.study_own import estimate_study
 
         view.say(size)
         n = 1 if cluster.workers == 0 else cluster.workers or machine_workers()  # type: ignore[attr-defined]

@@ -20,7 +20,7 @@ __all__ = ["StudyDisplay", "study_table", "write_study_figures"]
 
 
 class StudyDisplay:
-    """``gcs study`` on the terminal (:class:`gcs.app.study_run.StudyView`).
+    """``gcs study`` on the terminal (:class:`gcs.app.study.StudyView`).
 
     Parameters
     ----------
