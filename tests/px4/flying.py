@@ -20,6 +20,7 @@ FLIGHT_TIMEOUT_S = 420  # an upper bound for a whole session on a loaded machine
 # PX4's own log shows its estimate every 8 ms of its time without a gap. The shipped 0.5 s and
 # 0.2 s are for a real vehicle, whose clock never stops.
 SITL_LIMITS = {"max_telemetry_age_s": 1.0, "max_setpoint_late_s": 0.4}
+ON_GROUND, IN_AIR = 1, 2  # MAV_LANDED_STATE
 
 
 _started: list[subprocess.Popen] = []
@@ -136,3 +137,13 @@ def sitl_profile(tmp: Path, name: str = "antx", **sections: dict) -> Path:
     path = tmp / f"{name}-sitl.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
+
+
+def since(t0: float, t: float) -> float:
+    """Seconds from the monotonic time ``t0`` to ``t``, to 0.1 s."""
+    return round(t - t0, 1)
+
+
+def first(events: list[tuple[float, str]], what: str) -> float:
+    """When ``what`` first happened in a monitor's events [s after their start]."""
+    return next(t for t, said in events if said == what)
