@@ -234,7 +234,7 @@ def test_a_mirrored_mapping_is_refused_before_take_off(
             "fly", "--connect", lab_px4.url, "--mocap", server.url, "--trajectory", tiny,
             "--profile", lab_profile(tmp_path, right_handed=False), "--run", run_path,
         )  # fmt: skip
-        code = gcs.wait(60)
+        code = gcs.wait()  # bounded as a flight: at load 20 gcs said nothing within 60 s
         mon.wait("a heartbeat", lambda s: s.armed is not None, 30)
         armed_ever = any(c[1] == "armed" and c[2] for c in mon.state.changes)
     lines = [ln for ln in gcs.output().splitlines() if ln.strip()]
