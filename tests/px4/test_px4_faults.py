@@ -31,9 +31,7 @@ def test_gcs_killed_mid_trial_px4_lands_and_keeps_the_arena_fence(
     lands and disarms on its own (the modes and messages it went through are recorded); the
     geofence gcs uploaded, read back from PX4 afterwards,
     is the arena plus the fence margin around PX4's local origin."""
-    px4 = px4_booting
-    # no hold at the start point: the trial is cut at its start, its quality is not asked
-    profile = sitl_profile(tmp_path, flight={"hover_before_trial_s": 0.0})
+    px4, profile = px4_booting, sitl_profile(tmp_path)
     with px4.monitor() as mon:
         mon.set_param("NAV_DLL_ACT", 3)
         run = tmp_path / "run"
@@ -50,7 +48,7 @@ def test_gcs_killed_mid_trial_px4_lands_and_keeps_the_arena_fence(
         t_disarm = mon.wait("disarmed", lambda s: s.armed is False, FAILSAFE_S)
         origin = mon.global_origin()
         fence = mon.download_fence()
-        events = mon.eventssince(t_kill)
+        events = mon.events_since(t_kill)
     px4_figures["fault"] = {
         "offboard_left_s": since(t_kill, t_off),
         "on_ground_s": since(t_kill, t_ground),

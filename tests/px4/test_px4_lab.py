@@ -154,11 +154,9 @@ class Gcs:
             return "\n".join(self.lines)
 
 
-def lab_profile(tmp: Path, flight: dict | None = None, **mocap: object) -> Path:
-    """profiles/antx.yaml with :data:`synthetic.CI_FLIGHT` (and ``flight``) and ``mocap`` as its
-    mocap section, written to ``tmp``."""
+def lab_profile(tmp: Path, **mocap: object) -> Path:
     data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
-    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT, **(flight or {}))
+    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
     data["mocap"] = mocap
     path = tmp / "antx-lab.yaml"
     path.write_text(yaml.safe_dump(data))
@@ -261,8 +259,7 @@ def test_a_rotated_room_passes_the_frame_check_and_losing_the_mocap_mid_trial_la
     rotated = replace(lab_conditions, yaw_offset_deg=lab_conditions.yaw_offset_deg + 180.0)
     lab_px4 = px4_factory(params=rotated.px4_params(EKF2_BARO_CTRL=1), ready=STARTED_LINE)
     run_path = tmp_path / "run"
-    # no hold before the trial: it is cut at its start, its quality is not asked
-    profile = lab_profile(tmp_path, flight={"hover_before_trial_s": 0.0}, check_move_m=1.0)
+    profile = lab_profile(tmp_path, check_move_m=1.0)
     with lab_rig(lab_px4, rotated) as rig, lab_px4.monitor() as mon:
         gcs = Gcs(
             "fly", "--connect", lab_px4.url, "--mocap", rig.url, "--iter", 1,
