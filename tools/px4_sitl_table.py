@@ -83,11 +83,9 @@ to one port). To fly it by hand: start PX4 the same way with `-i 0`, then
   position telemetry for 0.5 s while PX4's own log has its estimate every 8 ms of its time
   without a gap; gcs's shipped watchdog (0.5 s telemetry age, 0.2 s late setpoint) is for a
   real vehicle, whose clock never stops. The tests fly the shipped profiles with the watchdog
-  limits of the mock's end-to-end flights (1.0 s, 0.4 s); nothing else in them changes but what
-  the behaviour under test does not use: the identify test's experiment length, no hold at the
-  start point before a trial that is cut as it starts (gcs killed; the mocap lost), and the
-  rotated room's frame check flown at once with the 1 m moves it flies again with when a hover
-  wanders by decimetres.
+  limits of the mock's end-to-end flights (1.0 s, 0.4 s); nothing else in them changes but the
+  identify test's experiment length and the rotated room's frame check, flown at once with the
+  1 m moves it flies again with when a hover wanders by decimetres.
 - **gcs killed mid-trial.** With the offboard stream gone PX4 leaves OFFBOARD for its
   offboard-loss action, Position mode (`COM_OBL_RC_ACT` 0); with no RC that mode cannot run,
   and PX4 descends and lands where it is, then disarms: on the ground before its data-link-loss
@@ -103,6 +101,23 @@ to one port). To fly it by hand: start PX4 the same way with `-i 0`, then
 - **Learning on GPS** sits at this vehicle's floor: GPS-aided EKF2 wanders 0.1-0.3 m in hover and
   identical setpoints flown twice differ by 0.36-0.68 m RMS, about 40 % of e_pos,0 on the
   default eight. The flight test asks e_pos to fall from j = 0 to j = 1, nothing finer.
+
+## Where a flight's time goes
+
+Measured from the lines gcs and PX4 print, on the 2-core machine at load 12-32 (2026-11-29):
+PX4 boots to its start-up script's end in 1-9 s and to "Ready for takeoff!" in 5-10 s, and
+stops at once on SIGTERM. A GPS flight then spends about 6 s taking off, 14 s on the hover
+measured at the start point (its 4 s hold, then 10 s measured: GPS wander has correlation times
+of seconds, so it stays at the shipped length; with no hold the hover measured is not yet
+settled and the settle at the start point then runs out its 20 s), 2-8 s settling, and per
+trial the 4 s hold, the trial (6.5 s eight-short, 14 s eight) and its learning (1-30 s: the
+source worker runs nicer than the flight, so under load it waits); landing to disarmed takes
+8-10 s. The frame check of a lab flight takes 28-47 s per attempt (five settled hover
+windows). What grows most with the load is each gcs process's start, its imports and then its
+source worker's: 25-210 s at load 12-32, for a few seconds of CPU. So the tests start few gcs
+processes and fly few flights: the two-trial flight goes on into the Ctrl-C and the resume, the
+rotated room's flight is the one that loses its mocap, the report's rows are made in the
+test's process, and gcs starts as soon as PX4's start-up script has returned.
 
 ## The tests and their figures
 
