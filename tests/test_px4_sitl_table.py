@@ -52,3 +52,10 @@ def test_a_gps_hover_record_and_a_table_cell_pipe() -> None:
         "t", {"hover": {"stats": {"offset_m": 0.3, "distance_p95_m": 0.6}}, "settle": "a|b"}
     )
     assert text == "hover 0.30 m off (95 % within 0.60 m); settle a\\|b"
+
+
+def test_the_frame_check_line_shows_without_its_prefix() -> None:
+    text = table.figures_text(
+        "t", {"check": "mocap check: 1.00 m moves; wander 0.2 m", "reason": "r"}
+    )
+    assert text == "frame check 1.00 m moves; wander 0.2 m; gcs: r"

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from px4.flying import forget_transcripts, keep_transcripts, kill_leftovers
-from px4.sitl import FAILURES, READY_LINE, ROOT, Px4Build, Px4Sitl, build_dir
+from px4.sitl import FAILURES, READY_LINE, ROOT, STARTED_LINE, Px4Build, Px4Sitl, build_dir
 
 FIGURES = ROOT / "logs" / "px4-sitl"
 
@@ -83,6 +83,15 @@ def px4_factory(px4_build: Px4Build, tmp_path: Path, request) -> Iterator:
 def px4(px4_factory) -> Px4Sitl:
     """One ready PX4 SITL vehicle (GPS, the default airframe)."""
     return px4_factory()
+
+
+@pytest.fixture
+def px4_booting(px4_factory) -> Px4Sitl:
+    """One PX4 SITL vehicle (GPS, the default airframe) whose start-up script has run (its
+    MAVLink links up) while EKF2 may still be initialising: gcs, started at once, waits for a
+    valid position and PX4's pre-arm checks as on any vehicle just powered up, and PX4's last
+    seconds of boot overlap gcs's own start."""
+    return px4_factory(ready=STARTED_LINE)
 
 
 @pytest.fixture

@@ -12,6 +12,15 @@ import yaml
 from test_fly_e2e import ROOT
 from test_fly_e2e import gcs as _gcs
 
+from gcs.app.report import (
+    report_document,
+    run_learning,
+    run_metrics,
+    trial_clock_rates,
+    trial_overview,
+)
+from gcs.io.rundir import RunDir
+
 FLIGHT_TIMEOUT_S = 420  # an upper bound for a whole session on a loaded machine, not a wait
 # The watchdog limits of the mock's end-to-end flights (tests/synthetic.py's CI_FLIGHT), and
 # for the same reason: PX4 SITL runs in lockstep with its simulator, so when the machine
@@ -20,6 +29,7 @@ FLIGHT_TIMEOUT_S = 420  # an upper bound for a whole session on a loaded machine
 # PX4's own log shows its estimate every 8 ms of its time without a gap. The shipped 0.5 s and
 # 0.2 s are for a real vehicle, whose clock never stops.
 SITL_LIMITS = {"max_telemetry_age_s": 1.0, "max_setpoint_late_s": 0.4}
+ON_GROUND, IN_AIR = 1, 2  # MAV_LANDED_STATE
 
 
 _started: list[subprocess.Popen] = []
@@ -120,10 +130,14 @@ def finish(proc: subprocess.Popen, before: list[str] = ()) -> tuple[int, str]:
 
 
 def report_rows(run: Path) -> list[dict]:
-    """The rows of ``gcs report --json`` of a run: one per trial (docs/report.md)."""
-    code, out = finish(gcs("report", run, "--json"))
-    assert code == 0, out
-    return json.loads(out)["rows"]
+    """The rows of ``gcs report --json`` of a run: one per trial (docs/report.md), made in this
+    process by the functions the command calls (a gcs process costs its start-up, tens of
+    seconds on a loaded machine; the command itself is tested on the mock's runs)."""
+    rd = RunDir.open(run)
+    learning = run_learning(rd) if rd.kind == "learning" else None
+    rows = run_metrics(rd)
+    document = report_document(rd, rows, trial_clock_rates(rd), trial_overview(rd), learning)
+    return json.loads(json.dumps(document, allow_nan=False))["rows"]
 
 
 def sitl_profile(tmp: Path, name: str = "antx", **sections: dict) -> Path:
@@ -136,3 +150,13 @@ def sitl_profile(tmp: Path, name: str = "antx", **sections: dict) -> Path:
     path = tmp / f"{name}-sitl.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
+
+
+def since(t0: float, t: float) -> float:
+    """Seconds from the monotonic time ``t0`` to ``t``, to 0.1 s."""
+    return round(t - t0, 1)
+
+
+def first(events: list[tuple[float, str]], what: str) -> float:
+    """When ``what`` first happened in a monitor's events [s after their start]."""
+    return next(t for t, said in events if said == what)

@@ -44,7 +44,6 @@ READY_LINE = "Ready for takeoff!"
 #: The start-up script done: what a vehicle set up for motion capture prints before vision
 #: arrives (it is not ready for take-off until then).
 STARTED_LINE = "Startup script returned successfully"
-STARTED_LINE = "Startup script returned successfully"
 # instances 0-9 only: from 10 on PX4 sends every vehicle's API link to the same port 14549
 INSTANCES = range(10)
 START_TIMEOUT_S = 90.0  # boot to "Ready for takeoff!" takes 5-10 s; a loaded machine, more

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import re
+import signal
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from test_fly_e2e import wait_for_line
 
 from gcs.core.model import dc_gain
 from gcs.core.pbsid import natural_frequency_damping
 from gcs.io.config import load_profile
 from gcs.io.rundir import RunDir
-from px4.flying import finish, gcs, report_rows, sitl_profile
+from px4.flying import IN_AIR, ON_GROUND, finish, first, gcs, report_rows, since, sitl_profile
 
 pytestmark = pytest.mark.px4
 EXPERIMENT_S = 30.0  # each identification experiment
@@ -36,28 +39,54 @@ def session_figures(run: Path, out: str) -> dict:
     return figures
 
 
-def test_fly_two_trials_with_the_shipped_profile(px4, px4_figures, tmp_path: Path) -> None:
-    """The README's `gcs fly --connect ... --iter 2` with the shipped profile and eight: take-off,
-    hover, two trials, landing, disarm; e_pos falls from j = 0 to j = 1."""
-    run = tmp_path / "run"
-    code, out = finish(
-        gcs("fly", "--connect", px4.url, "--iter", 2, "--run", run, "--profile",
-            sitl_profile(tmp_path))
-    )  # fmt: skip
-    assert code == 0, out
-    for line in ("hover at the start point: ", "trial 0 flown", "trial 1 flown"):
-        assert line in out, out
-    assert "landed and disarmed" in out, out
-    assert RunDir.open(run).complete_trials() == [0, 1]
+def test_fly_two_trials_then_ctrl_c_lands_and_resume_completes_on_the_same_vehicle(
+    px4_booting, px4_figures, tmp_path: Path
+) -> None:
+    """The README's `gcs fly --connect ...` with the shipped profile and eight: take-off,
+    hover, two trials; e_pos falls from j = 0 to j = 1. Then Ctrl-C (SIGINT) as trial 2 starts:
+    gcs lands and disarms and exits 130, trials 0 and 1 stay complete and trial 2 is marked
+    interrupted; `gcs fly --resume` then flies trial 2 on the same vehicle, lands and disarms."""
+    px4, run = px4_booting, tmp_path / "run"
+    with px4.monitor() as mon:
+        proc = gcs("fly", "--connect", px4.url, "--iter", 3, "--run", run, "--profile",
+                   sitl_profile(tmp_path))  # fmt: skip
+        seen = wait_for_line(proc, "trial 2 started")
+        mon.wait("in the air", lambda s: s.landed_state == IN_AIR and s.armed, 10)
+        proc.send_signal(signal.SIGINT)
+        t_int = time.monotonic()
+        code, out = finish(proc, seen)
+        t_exit = time.monotonic()
+        mon.wait("disarmed", lambda s: s.armed is False and s.landed_state == ON_GROUND, 10)
+        events = mon.events_since(t_int)
+        assert code == 130, out
+        for line in ("hover at the start point: ", "trial 0 flown", "trial 1 flown"):
+            assert line in out, out
+        assert "landed and disarmed" in out, out
+        rd = RunDir.open(run)
+        assert rd.complete_trials() == [0, 1]
+        status = rd.read_status(2)
+        assert not status.complete and "interrupt" in status.reason, status
+        fault = {
+            "gcs_exit_s": since(t_int, t_exit),
+            "on_ground_s": first(events, "on ground"),
+            "disarmed_s": first(events, "disarmed"),
+            "events": events,
+        }
+
+        code, resumed = finish(gcs("fly", "--connect", px4.url, "--resume", run, "--iter", 1))
+        assert code == 0, resumed
+        assert "trial 2 flown" in resumed and "landed and disarmed" in resumed, resumed
+        mon.wait("disarmed after the resumed run", lambda s: s.armed is False, 10)
+    assert RunDir.open(run).complete_trials() == [0, 1, 2]
     figures = session_figures(run, out)
-    px4_figures.update(figures)
-    e0, e1 = figures["e_pos_m"]
+    px4_figures.update(figures, fault=fault)
+    e0, e1, _ = figures["e_pos_m"]
     # GPS-aided EKF2 wanders: identical setpoints flown twice differ by 0.36-0.68 m RMS, about
     # 40 % of e_pos,0 here, so one learning step can only be asked to make e_pos fall.
     assert e1 < e0, figures
 
 
-def test_identify_with_short_experiments(px4, px4_figures, tmp_path: Path) -> None:
+def test_identify_with_short_experiments(px4_booting, px4_figures, tmp_path: Path) -> None:
     """`gcs identify` with two 30 s PRBS experiments (60 s shipped): the profile it writes loads;
     per axis the model is stable, a position loop (steady-state gain within a factor of 2 of 1)
     and explains part of the validation experiment (VAF above 0). Short experiments on a GPS
@@ -65,6 +94,7 @@ def test_identify_with_short_experiments(px4, px4_figures, tmp_path: Path) -> No
     and in four the gains 1.1-1.8 (north: VAF 91 %), where the shipped 60 s gave 80-90 %."""
     profile_path = sitl_profile(tmp_path, identification={"duration_s": EXPERIMENT_S})
     out_path = tmp_path / "identified.yaml"
+    px4 = px4_booting
     code, out = finish(
         gcs("identify", "--connect", px4.url, "--profile", profile_path, "--run",
             tmp_path / "ident", "--out", out_path)
@@ -93,11 +123,11 @@ def test_identify_with_short_experiments(px4, px4_figures, tmp_path: Path) -> No
         assert m["vaf_pct"] > 0.0, (axis, m)
 
 
-def test_until_converged_reaches_a_verdict(px4, px4_figures, tmp_path: Path) -> None:
+def test_until_converged_reaches_a_verdict(px4_booting, px4_figures, tmp_path: Path) -> None:
     """`gcs fly --profile antx-adaptive --until-converged --iter 4` on eight-short: a repeat
     measures the floor, learning runs until it says it has converged or the bound is reached
     (and says that), and the run ends landed and disarmed either way."""
-    run = tmp_path / "run"
+    px4, run = px4_booting, tmp_path / "run"
     code, out = finish(
         gcs("fly", "--connect", px4.url, "--profile", sitl_profile(tmp_path, "antx-adaptive"),
             "--trajectory", "eight-short", "--iter", 4, "--until-converged", "--run", run)
