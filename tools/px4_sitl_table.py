@@ -26,7 +26,7 @@ ORDER = [  # the table's rows in reading order; tests not listed follow by name
     "test_until_converged_reaches_a_verdict",
     "test_gcs_killed_mid_trial_px4_lands_and_keeps_the_arena_fence",
     "test_two_vehicles_run_side_by_side_with_their_parameters",
-    "test_lab_flight_arms_first_time_flies_two_trials_on_mocap_and_lands",
+    "test_learning_between_trials_does_not_delay_vision_or_setpoints_at_px4",
     "test_a_rotated_room_passes_the_frame_check_and_losing_the_mocap_mid_trial_lands",
     "test_a_mirrored_mapping_is_refused_before_take_off",
 ]

@@ -185,43 +185,6 @@ def lab_px4(px4_factory, lab_conditions: LabConditions) -> Px4Sitl:
     return px4_factory(params=lab_conditions.px4_params(), ready=STARTED_LINE)
 
 
-def test_lab_flight_arms_first_time_flies_two_trials_on_mocap_and_lands(
-    lab_px4: Px4Sitl, lab_conditions: LabConditions, tmp_path: Path, tiny: Path, px4_figures: dict
-) -> None:
-    """gcs fly --mocap on a fresh PX4 set up for vision only: arms on the first attempt (after
-    setting the global origin and waiting for PX4's pre-arm checks), two trials measured by
-    the mocap, landed and disarmed."""
-    run_path = tmp_path / "run"
-    with lab_rig(lab_px4, lab_conditions) as server, lab_px4.monitor() as mon:
-        gcs = Gcs(
-            "fly", "--connect", lab_px4.url, "--mocap", server.url, "--iter", 2,
-            "--trajectory", tiny, "--profile", lab_profile(tmp_path), "--run", run_path,
-        )  # fmt: skip
-        code = gcs.wait()
-        out = gcs.output()
-        assert code == 0, out
-        mon.wait(
-            "disarmed on the ground", lambda s: s.armed is False and s.landed_state == LANDED, 30
-        )
-        arms = [c for c in mon.state.changes if c[1] == "armed" and c[2] is True]
-        texts = [t for _, t in mon.state.statustext]
-    assert "global origin set to" in out
-    assert len(arms) == 1, texts  # armed once: the first attempt
-    assert not any("Arming denied" in t for t in texts), texts
-    assert "as vision_position_estimate" in out and "landed and disarmed" in out
-    run = RunDir.open(run_path)
-    assert run.complete_trials() == [0, 1]
-    e_pos = [run.read_status(j).epos_m for j in (0, 1)]
-    ready = next(ln for ln in out.splitlines() if "ready to arm (after" in ln)
-    px4_figures.update(
-        e_pos_m=[round(e, 4) for e in e_pos],
-        prearm_wait=ready.strip(),
-        hover=next(
-            (ln.strip() for ln in out.splitlines() if "hover at the start point:" in ln), None
-        ),
-    )
-
-
 def test_a_mirrored_mapping_is_refused_before_take_off(
     lab_px4: Px4Sitl, lab_conditions: LabConditions, tmp_path: Path, tiny: Path, px4_figures: dict
 ) -> None:
