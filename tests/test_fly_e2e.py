@@ -159,17 +159,16 @@ def test_out_of_arena_trajectory_is_refused_before_connecting(tmp_path: Path) ->
 
 
 def test_unreachable_vehicle_is_one_clear_line(tmp_path: Path, tiny: Path) -> None:
-    code, out = finish(
-        gcs(
-            "fly",
-            "--connect",
-            "udpout://127.0.0.1:9",
-            "--trajectory",
-            tiny,
-            "--run",
-            tmp_path / "run",
-        )  # fmt: skip
-    )
+    # the profile's connect timeout (antx's 10 s) is not what is tested: the line is
+    data = yaml.safe_load(ci_profile(tmp_path).read_text())
+    data["flight"]["connect_timeout_s"] = 1.0
+    profile = tmp_path / "quick.yaml"
+    profile.write_text(yaml.safe_dump(data))
+    proc = gcs(
+        "fly", "--connect", "udpout://127.0.0.1:9", "--trajectory", tiny,
+        "--profile", profile, "--run", tmp_path / "run",
+    )  # fmt: skip
+    code, out = finish(proc)
     assert code == 2
     # the error names the link it waited on: not a traceback, not another failure's message
     assert "error:" in out and "no autopilot answered on udpout://127.0.0.1:9" in out, out
