@@ -17,6 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from click.testing import Result
 from typer.testing import CliRunner
 
 from gcs.cli import app
@@ -28,26 +29,32 @@ from gcs.sim.loop import virtual_time
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run_gcs(*args: object) -> tuple[int, str]:
+def run_gcs(*args: object, cwd: Path = ROOT) -> tuple[int, str]:
     """``gcs ARGS`` in this process on virtual time: (exit code, output)."""
+    result = invoke_gcs(*args, cwd=cwd)
+    return result.exit_code, result.output
+
+
+def invoke_gcs(*args: object, cwd: Path = ROOT) -> Result:
+    """``gcs ARGS`` in this process on virtual time, run in ``cwd``: click's result (its
+    ``stdout`` alone is what a shell's ``> FILE`` would write)."""
     from gcs import cli
 
     runner = CliRunner()
-    cwd = os.getcwd()
-    os.chdir(ROOT)  # as the subprocesses of the e2e tests: logs/ of the checkout
+    before = os.getcwd()
+    os.chdir(cwd)  # by default as the subprocesses of the e2e tests: logs/ of the checkout
     # wide enough that no temporary path (pytest-xdist's are longer) is wrapped; the command
     # line's consoles read COLUMNS once, when gcs.cli is first imported, so set them here
     widths = (cli.console.width, cli.err_console.width)
     cli.console.width = cli.err_console.width = 400
     try:
         with virtual_time():
-            result = runner.invoke(
+            return runner.invoke(
                 app, [str(a) for a in args], env={"COLUMNS": "400"}, catch_exceptions=False
             )
     finally:
         cli.console.width, cli.err_console.width = widths
-        os.chdir(cwd)
-    return result.exit_code, result.output
+        os.chdir(before)
 
 
 def fly_virtual(main) -> object:  # type: ignore[no-untyped-def]
