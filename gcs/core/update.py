@@ -42,6 +42,7 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 import scipy.sparse as sp
+import scipy.sparse.csgraph
 
 from gcs.core.model import (
     DiscreteModel,
@@ -697,21 +698,24 @@ def _rows_of(A_in: sp.csc_matrix, b_in: np.ndarray, m: int) -> _Rows:
 
 def _independent(rows: _Rows, order: np.ndarray, m: int) -> np.ndarray:
     """Mask of the rows of ``order`` (taken in that order) whose edges do not close a cycle
-    with those taken before: a linearly independent subset (union-find over the inputs)."""
-    parent = list(range(m + 1))
+    with those taken before: a linearly independent subset.
 
-    def root(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
+    Taking edges in a given order and keeping those that join two trees is Kruskal's
+    algorithm with the order as the weights: the minimum spanning forest of the graph whose
+    edge weights are the positions in ``order`` (distinct, so the forest is unique), computed
+    by :func:`scipy.sparse.csgraph.minimum_spanning_tree`. Of edges joining the same two nodes
+    only the first can be kept (a later one closes a cycle with it).
+    """
     keep = np.zeros(rows.b.size, dtype=bool)
-    for i in order.tolist():
-        a, b = root(int(rows.ends[i, 0])), root(int(rows.ends[i, 1]))
-        if a != b:
-            parent[a] = b
-            keep[i] = True
+    if order.size == 0:
+        return keep
+    ends = rows.ends[order]
+    lo, hi = ends.min(axis=1), ends.max(axis=1)
+    _, first = np.unique(lo * (m + 1) + hi, return_index=True)
+    weight = first + 1.0  # positions in order, from 1 (a zero would be no edge)
+    graph = sp.csr_matrix((weight, (lo[first], hi[first])), shape=(m + 1, m + 1))
+    tree = scipy.sparse.csgraph.minimum_spanning_tree(graph)
+    keep[order[tree.data.astype(np.intp) - 1]] = True
     return keep
 
 
