@@ -645,3 +645,42 @@ def test_kept_update_equals_a_fresh_clarabel_solve(seed, trials):
         u_prev = a.u_m
         d_hat = d_hat + 0.05 * np.cumsum(rng.normal(size=n)) / np.sqrt(n)
     assert methods[0] == "clarabel" and "active-set" in methods[1:]
+
+
+@settings(max_examples=5, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_clarabel_solver_is_built_once_and_given_each_new_linear_term(seed):
+    """Clarabel's solver of a kept update is built once and shared with its forks (the plants
+    of a batch): a fork with no active set yet solves by Clarabel with its own disturbance
+    estimate through the same solver, only the linear term replaced, and lands on the same
+    minimiser as a fresh solve with a solver of its own, to rounding (both satisfy the KKT
+    conditions of the dense QP)."""
+    model = from_transfer_function([0.08, 1.94], [1, 1.752, 2.01], 0.25, 0.05)
+    n = 120
+    yd, d_hat, u_prev = signals(seed, n)
+    limits = SetpointLimits(-1.9, 2.0, 0.15, 0.5)
+    w = UpdateWeights()
+    built = []
+    solver_class = clarabel.DefaultSolver
+
+    def counting(*args, **kwargs):
+        built.append(args)
+        return solver_class(*args, **kwargs)
+
+    kept = InputUpdate(model, yd, w, limits)
+    rng = np.random.default_rng(seed)
+    plants = []
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(clarabel, "DefaultSolver", counting)
+        first = kept.solve(d_hat, u_prev)
+        for _ in range(2):
+            d_plant = d_hat + 0.2 * np.cumsum(rng.normal(size=n)) / np.sqrt(n)
+            plants.append((d_plant, kept.fork().solve(d_plant, u_prev)))
+    assert first.method == "clarabel" and len(built) == 1
+    assert [res.method for _, res in plants] == ["clarabel", "clarabel"]
+    for d_plant, res in plants:
+        fresh = next_input(model, yd, d_plant, u_prev, w, limits)
+        scale = max(1.0, float(np.max(np.abs(fresh.u_m))))
+        np.testing.assert_allclose(res.u_m, fresh.u_m, rtol=0, atol=1e-9 * scale)
+        stationarity, infeasibility = kkt_violation(model, yd, d_plant, u_prev, w, limits, res.u_m)
+        assert stationarity < 1e-10 and infeasibility < 1e-10

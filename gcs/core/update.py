@@ -28,7 +28,8 @@ LAPACK's banded LU (``dgbtrf`` / ``dgbtrs``), linear in ``N``. With active limit
 plus linear inequalities goes to Clarabel (``ZeroConeT`` for the dynamics,
 ``NonnegativeConeT`` for the limits) the first time; a kept :class:`InputUpdate` then starts
 the next trial from the active set of the last one (an active-set iteration on the banded KKT
-system, Clarabel again when it does not settle in a few rounds). See ``docs/update.md``.
+system, Clarabel again when it does not settle in a few rounds, its solver kept: only the
+linear term is replaced). See ``docs/update.md``.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ import clarabel
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
+import scipy.sparse.csgraph
 
 from gcs.core.model import (
     DiscreteModel,
@@ -304,6 +306,13 @@ class _Structure:
         q = np.concatenate([qU, qX.ravel()])
         return _Problem(N, self.r, m, self.y_final, P, q, self.G, self.h, self.yd_u,
                         self.stage_z, self.stage_eq)  # fmt: skip
+
+    def kkt_base(self) -> _Triplets:
+        """The KKT matrix ``[P G'; G 0]`` of the structure's own Hessian as triplets (the
+        active-set method adds the limits held with equality to it)."""
+        if self._kkt is None:
+            self._kkt = _kkt_factor(self.P, self.G, self.stage_z, self.stage_eq)
+        return self._kkt[0]
 
     def solve_direct(self, prob: _Problem) -> np.ndarray:
         """Unconstrained optimum (equality-constrained QP); the free inputs. The KKT matrix
@@ -573,6 +582,10 @@ def _inequalities(prob: _Problem, limits: SetpointLimits) -> tuple[sp.csc_matrix
 def _clarabel_settings() -> clarabel.DefaultSettings:
     settings = clarabel.DefaultSettings()
     settings.verbose = False
+    # data updates (a kept solver, a new linear term per trial) need both off; every limit row
+    # has a finite bound, so the presolve had nothing to remove
+    settings.presolve_enable = False
+    settings.chordal_decomposition_enable = False
     settings.tol_gap_abs = 1e-10
     settings.tol_gap_rel = 1e-10
     settings.tol_feas = 1e-10
@@ -581,33 +594,72 @@ def _clarabel_settings() -> clarabel.DefaultSettings:
     return settings
 
 
+class _ClarabelQP:
+    """Clarabel's solver of one structure's QP with its limit rows, built once.
+
+    Between trials (and between the plants of a batch) only the linear term ``q`` changes:
+    the Hessian, the dynamics and the limit rows are the structure's. The first solve sets
+    the solver up (equilibration, the symbolic factorisation of its KKT matrix); every later
+    one replaces ``q`` (Clarabel's data update, presolve off) and solves again.
+
+    Parameters
+    ----------
+    prob : _Problem
+        The QP of a trial without the robustness weight (the structure's ``P``).
+    rows : _Rows
+        The limits' inequality rows.
+    """
+
+    def __init__(self, prob: _Problem, rows: _Rows) -> None:
+        A = sp.vstack([prob.G, rows.A], format="csc")
+        b = np.concatenate([prob.h, rows.b])
+        cones = [clarabel.ZeroConeT(prob.G.shape[0]), clarabel.NonnegativeConeT(rows.b.size)]
+        P = sp.triu(prob.P, format="csc")
+        self._solver = clarabel.DefaultSolver(P, prob.q, A, b, cones, _clarabel_settings())
+        self._q = prob.q
+
+    def solve(self, q: np.ndarray) -> clarabel.DefaultSolution:
+        """Clarabel's solution of the QP with the linear term ``q``, shape (nz,)."""
+        if q is not self._q:
+            self._solver.update(q=q)
+            self._q = q
+        return self._solver.solve()
+
+
 def _solve_clarabel(
     prob: _Problem,
     limits: SetpointLimits | None,
-    rows: tuple[sp.csc_matrix, np.ndarray] | None = None,
+    rows: _Rows | None = None,
+    qp: _ClarabelQP | None = None,
+    base: _Triplets | None = None,
 ) -> tuple[np.ndarray, str, clarabel.DefaultSolution]:
     """Solve the QP with the limits' inequalities (``rows``, default from ``limits``) by
-    Clarabel; return free inputs and status."""
+    Clarabel (the kept solver ``qp`` when given: the QP without the robustness weight);
+    return free inputs and status. ``base``: the KKT triplets of ``prob.P`` and ``prob.G``
+    when already built (for the polish)."""
     nz = prob.P.shape[0]
     if rows is None:
-        rows = _inequalities(prob, limits) if limits is not None else (sp.csc_matrix((0, nz)), [])
-    A_in, b_in = rows
-    A = sp.vstack([prob.G, A_in], format="csc")
-    b = np.concatenate([prob.h, b_in])
-    cones = [clarabel.ZeroConeT(prob.G.shape[0])]
-    if A_in.shape[0]:
-        cones.append(clarabel.NonnegativeConeT(A_in.shape[0]))
-    P = sp.triu(prob.P, format="csc")
-    solver = clarabel.DefaultSolver(P, prob.q, A, b, cones, _clarabel_settings())
-    solution = solver.solve()
+        A_in, b_in = (_inequalities(prob, limits) if limits is not None
+                      else (sp.csc_matrix((0, nz)), np.zeros(0)))  # fmt: skip
+        rows = _rows_of(A_in, b_in, prob.m)
+    if qp is not None:
+        solution = qp.solve(prob.q)
+    else:
+        A = sp.vstack([prob.G, rows.A], format="csc")
+        b = np.concatenate([prob.h, rows.b])
+        cones = [clarabel.ZeroConeT(prob.G.shape[0])]
+        if rows.b.size:
+            cones.append(clarabel.NonnegativeConeT(rows.b.size))
+        P = sp.triu(prob.P, format="csc")
+        solution = clarabel.DefaultSolver(P, prob.q, A, b, cones, _clarabel_settings()).solve()
     status = str(solution.status)
     if status in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
         raise UpdateInfeasible(f"Clarabel reports the setpoint limits infeasible ({status})")
     if status not in ("Solved", "AlmostSolved"):
         raise RuntimeError(f"Clarabel failed on the input update (status {status})")
     x = np.asarray(solution.x, dtype=float)
-    if A_in.shape[0]:
-        x = _polish(prob, A_in, np.asarray(b_in), x, solution)
+    if rows.b.size:
+        x = _polish(prob, rows, x, solution, base)
     return x[: prob.m], ("solved" if status == "Solved" else status), solution
 
 
@@ -622,42 +674,47 @@ class _Rows:
 
     A: sp.csc_matrix  # (rows, nz)
     b: np.ndarray  # (rows,)
+    csr: sp.csr_matrix  # A by rows, duplicates summed (the active-set method's row access)
     stage: np.ndarray  # latest input sample of each row, (rows,)
     ends: np.ndarray  # the two nodes of each row's edge, (rows, 2); node m is the fixed values
 
 
 def _rows_of(A_in: sp.csc_matrix, b_in: np.ndarray, m: int) -> _Rows:
     csr = sp.csr_matrix(A_in)
+    csr.sum_duplicates()
     count = np.diff(csr.indptr)
     if np.any((count < 1) | (count > 2)):
         raise ValueError("each limit row must involve one or two inputs")
     if csr.shape[0] == 0:
         empty = np.zeros(0, dtype=np.intp)
-        return _Rows(sp.csc_matrix(A_in), np.zeros(0), empty, np.zeros((0, 2), dtype=np.intp))
+        return _Rows(sp.csc_matrix(A_in), np.zeros(0), csr, empty, np.zeros((0, 2), dtype=np.intp))
     first = csr.indices[csr.indptr[:-1]]
     last = csr.indices[csr.indptr[1:] - 1]
     stage = np.maximum(first, last).astype(np.intp)
     ends = np.column_stack([np.minimum(first, last), np.where(count == 2, stage, m)])
-    return _Rows(sp.csc_matrix(A_in), np.asarray(b_in, dtype=float), stage, ends)
+    return _Rows(sp.csc_matrix(A_in), np.asarray(b_in, dtype=float), csr, stage, ends)
 
 
 def _independent(rows: _Rows, order: np.ndarray, m: int) -> np.ndarray:
     """Mask of the rows of ``order`` (taken in that order) whose edges do not close a cycle
-    with those taken before: a linearly independent subset (union-find over the inputs)."""
-    parent = list(range(m + 1))
+    with those taken before: a linearly independent subset.
 
-    def root(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
+    Taking edges in a given order and keeping those that join two trees is Kruskal's
+    algorithm with the order as the weights: the minimum spanning forest of the graph whose
+    edge weights are the positions in ``order`` (distinct, so the forest is unique), computed
+    by :func:`scipy.sparse.csgraph.minimum_spanning_tree`. Of edges joining the same two nodes
+    only the first can be kept (a later one closes a cycle with it).
+    """
     keep = np.zeros(rows.b.size, dtype=bool)
-    for i in order.tolist():
-        a, b = root(int(rows.ends[i, 0])), root(int(rows.ends[i, 1]))
-        if a != b:
-            parent[a] = b
-            keep[i] = True
+    if order.size == 0:
+        return keep
+    ends = rows.ends[order]
+    lo, hi = ends.min(axis=1), ends.max(axis=1)
+    _, first = np.unique(lo * (m + 1) + hi, return_index=True)
+    weight = first + 1.0  # positions in order, from 1 (a zero would be no edge)
+    graph = sp.csr_matrix((weight, (lo[first], hi[first])), shape=(m + 1, m + 1))
+    tree = scipy.sparse.csgraph.minimum_spanning_tree(graph)
+    keep[order[tree.data.astype(np.intp) - 1]] = True
     return keep
 
 
@@ -677,7 +734,7 @@ def _most_negative_per_run(rows: _Rows, lam: np.ndarray, negative: np.ndarray) -
 
 
 def _active_set(
-    prob: _Problem, rows: _Rows, act: np.ndarray, rounds: int
+    prob: _Problem, rows: _Rows, act: np.ndarray, rounds: int, base: _Triplets | None = None
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The QP's minimiser from a guess of its active set, or None.
 
@@ -689,14 +746,14 @@ def _active_set(
     cycle), for at most ``rounds`` rounds. A point
     is returned (with its active set) only when it is primal feasible and its multipliers are
     non-negative: it then satisfies the KKT conditions of the full problem to rounding, and
-    the problem being strictly convex, it is the minimiser.
+    the problem being strictly convex, it is the minimiser. ``base``: the KKT triplets of
+    ``prob.P`` and ``prob.G`` when already built.
     """
-    n_eq, A_in, b_in = prob.G.shape[0], rows.A, rows.b
+    n_eq, b_in, A_csr = prob.G.shape[0], rows.b, rows.csr
     scale = max(1.0, float(np.max(np.abs(b_in), initial=0.0)))
     act = _independent(rows, np.flatnonzero(act), prob.m)
-    base = _kkt_triplets(prob.P, prob.G)  # the KKT system without the limits, built once
-    A_csr = sp.csr_matrix(A_in)
-    A_csr.sum_duplicates()
+    if base is None:  # the KKT system without the limits, built once
+        base = _kkt_triplets(prob.P, prob.G)
     for _ in range(rounds):
         K = _with_rows(base, A_csr, act)
         h = np.concatenate([prob.h, b_in[act]])
@@ -726,10 +783,10 @@ def _active_set(
 
 def _polish(
     prob: _Problem,
-    A_in: sp.csc_matrix,
-    b_in: np.ndarray,
+    rows: _Rows,
     x: np.ndarray,
     solution: clarabel.DefaultSolution,
+    base: _Triplets | None = None,
 ) -> np.ndarray:
     """Refine Clarabel's answer on its active set (as OSQP's polishing does).
 
@@ -740,7 +797,7 @@ def _polish(
     n_eq = prob.G.shape[0]
     s = np.asarray(solution.s, dtype=float)[n_eq:]
     zd = np.asarray(solution.z, dtype=float)[n_eq:]
-    found = _active_set(prob, _rows_of(A_in, b_in, prob.m), zd > s, _POLISH_ROUNDS)
+    found = _active_set(prob, rows, zd > s, _POLISH_ROUNDS, base)
     return x if found is None else found[0]
 
 
@@ -771,6 +828,16 @@ def _objective(
     return value
 
 
+class _LimitData:
+    """What the limits of one :class:`InputUpdate` need, built on the first trial with an
+    active limit (the feasibility checked then) and shared with its forks: the inequality
+    rows and Clarabel's kept solver of the QP without the robustness weight."""
+
+    def __init__(self) -> None:
+        self.rows: _Rows | None = None
+        self.qp: _ClarabelQP | None = None
+
+
 class InputUpdate:
     """Eq. (8) of one axis for a fixed model, reference, weights and limits; one call per trial.
 
@@ -779,8 +846,9 @@ class InputUpdate:
     inequality rows. :meth:`solve` then costs one linear term and two banded triangular solves;
     when a limit is active, the first time one Clarabel solve, later a few banded KKT
     factorisations started from the last trial's active set (Clarabel when they do not
-    settle). The minimiser is that of :func:`next_input` (strictly convex QP): equal to
-    rounding when both find its active set (a fresh :func:`next_input` asks Clarabel).
+    settle). Clarabel's solver is kept too: a later solve replaces only its linear term. The
+    minimiser is that of :func:`next_input` (strictly convex QP): equal to rounding when both
+    find its active set (a fresh :func:`next_input` asks Clarabel).
 
     Parameters
     ----------
@@ -810,9 +878,8 @@ class InputUpdate:
     ) -> None:
         self._s = _Structure(model, yd_m, weights)
         self.limits = limits
-        self._feasible = False
-        self._rows: tuple[sp.csc_matrix, np.ndarray] | None = None
-        self._limit_rows: _Rows | None = None
+        # built on the first trial with an active limit, shared with the forks
+        self._limit_data = _LimitData()
         self._active: np.ndarray | None = None  # the limits active at the last solution
 
     @property
@@ -847,27 +914,29 @@ class InputUpdate:
         u = _full_input(prob, s.solve_direct(prob))
         method, status = "direct", "solved"
         if limits is not None and _violations(u, prob, limits, -_FAST_PATH_TOL_M) > 0:
-            if not self._feasible:
+            shared = self._limit_data
+            if shared.rows is None:
                 _check_feasible(prob, limits)
-                self._feasible = True
-            if self._rows is None:
-                self._rows = _inequalities(prob, limits)
-                self._limit_rows = _rows_of(*self._rows, prob.m)
-            A_in, b_in = self._rows
+                shared.rows = _rows_of(*_inequalities(prob, limits), prob.m)
+            rows = shared.rows
+            own = prob.P is s.P  # no robustness weight: the structure's KKT and Clarabel's QP
+            base = s.kkt_base() if own else None
             found = None
-            if self._active is not None and self._limit_rows is not None:
-                # the last trial's active set, refined
-                found = _active_set(prob, self._limit_rows, self._active, _WARM_ROUNDS)
+            if self._active is not None:  # the last trial's active set, refined
+                found = _active_set(prob, rows, self._active, _WARM_ROUNDS, base)
             if found is not None:
                 z, self._active = found
                 u_free, method = z[: prob.m], "active-set"
             else:
-                u_free, status, _ = _solve_clarabel(prob, limits, self._rows)
+                if own and shared.qp is None:
+                    shared.qp = _ClarabelQP(prob, rows)
+                qp = shared.qp if own else None
+                u_free, status, _ = _solve_clarabel(prob, limits, rows, qp, base)
                 method = "clarabel"
                 z = np.zeros(prob.P.shape[0])
                 z[: prob.m] = u_free
-                scale = max(1.0, float(np.max(np.abs(b_in), initial=0.0)))
-                self._active = A_in @ z > b_in - _ACTIVE_TOL_M * scale
+                scale = max(1.0, float(np.max(np.abs(rows.b), initial=0.0)))
+                self._active = rows.A @ z > rows.b - _ACTIVE_TOL_M * scale
             u = _full_input(prob, u_free)
         active = 0 if limits is None else _violations(u, prob, limits, _ACTIVE_TOL_M)
         dh = np.asarray(d_hat_m, dtype=float)
@@ -876,13 +945,16 @@ class InputUpdate:
         return UpdateResult(u, status, objective, method, active)
 
     def fork(self) -> InputUpdate:
-        """A new update of the same axis sharing this one's structure and factorisation, with
-        its own memory of the last active set (one per plant of a batch).
+        """A new update of the same axis sharing this one's structure and factorisation, the
+        limits' rows and Clarabel's kept solver, with its own memory of the last active set
+        (one per plant of a batch).
 
         Returns
         -------
         InputUpdate
-            The copy; solving with it never changes this one.
+            The copy; solving with it never changes this one's answers (the kept solver's
+            interior point depends on the first linear term it was built with only within
+            Clarabel's tolerance, and is refined to the KKT point of the QP).
         """
         other = InputUpdate.__new__(InputUpdate)
         other.__dict__.update(self.__dict__)
