@@ -38,7 +38,7 @@ sys.path.insert(0, os.environ.get("GCS_BENCH_CODE", str(REPO)))
 def record(study: Path, out: Path) -> dict:
     """Run the study's learning here, recording every update; the recording to ``out``."""
     import gcs.core.update as update
-    from gcs.app.study_own import build_plan
+    from gcs.app.study_chunks import build_plan
     from gcs.core.study import chunk_plants, fly_plants
     from gcs.io.study import load_study
 
