@@ -15,6 +15,7 @@ import dataclasses
 import json
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -101,34 +102,71 @@ def _px4_replay(tmp: Path, name: str) -> RunDir:
     return run
 
 
+def _fresh(tmp: Path, name: str) -> Path:
+    path = tmp / name
+    path.mkdir()
+    return path
+
+
+def _smoother(tmp: Path) -> dict[str, np.ndarray]:
+    return _arrays(make_run(_fresh(tmp, "smoother"), "smoother", trials=5), "smoother")
+
+
+def _kilc(tmp: Path) -> dict[str, np.ndarray]:
+    return _arrays(make_run(_fresh(tmp, "kilc"), "kilc", trials=5), "kilc")
+
+
+def _adaptive(tmp: Path) -> dict[str, np.ndarray]:
+    return _arrays(make_adaptive_run(_fresh(tmp, "adaptive"), trials=6, gust_m=0.01), "adaptive")
+
+
+def _auto(tmp: Path) -> dict[str, np.ndarray]:
+    prof = load_profile(_profile_file(tmp, ADAPTIVE, "auto", robustness_cutoff_rad_s="auto",
+                                      repeats=2))  # fmt: skip
+    run = make_adaptive_run(_fresh(tmp, "auto"), 7, seed=3, gust_m=0.005, prof=prof)
+    return _arrays(run, "auto")
+
+
+def _table1(tmp: Path) -> dict[str, np.ndarray]:
+    prof = load_profile(_profile_file(tmp, ADAPTIVE, "table1", noise="table1", refresh=False))
+    return _arrays(make_adaptive_run(_fresh(tmp, "table1"), 5, seed=5, prof=prof), "table1")
+
+
+def _mocap(tmp: Path) -> dict[str, np.ndarray]:
+    run = RunDir.create(_fresh(tmp, "mocap"), profile(), trajectory_from_dict(SHORT), "smoother",
+                        run_id="run")  # fmt: skip
+    for j in range(4):
+        _with_mocap(run, j, 0.02)
+        _learn(run)
+    return _arrays(run, "mocap")
+
+
+def _px4(name: str) -> Callable[[Path], dict[str, np.ndarray]]:
+    def build(tmp: Path) -> dict[str, np.ndarray]:
+        return _arrays(_px4_replay(_fresh(tmp, f"px4-{name}"), name), f"px4-{name}")
+
+    return build
+
+
+ADAPTIVE = ROOT.parent / "profiles" / "antx-adaptive.yaml"
+#: every case by the prefix of its arrays' keys; each builds its runs in a directory of its own
+CASES: dict[str, Callable[[Path], dict[str, np.ndarray]]] = {
+    "smoother": _smoother, "kilc": _kilc, "adaptive": _adaptive, "auto": _auto,
+    "table1": _table1, "mocap": _mocap, **{f"px4-{name}": _px4(name) for name in PX4_RUNS},
+}  # fmt: skip
+
+
+def learned_case(name: str) -> dict[str, np.ndarray]:
+    """The learned arrays of the case ``name`` (a key of ``CASES``), by ``case/file``."""
+    with tempfile.TemporaryDirectory() as tmp_str:
+        return CASES[name](Path(tmp_str))
+
+
 def learned() -> dict[str, np.ndarray]:
     """Every case's learned arrays, by ``case/file``."""
     out: dict[str, np.ndarray] = {}
-    with tempfile.TemporaryDirectory() as tmp_str:
-        tmp = Path(tmp_str)
-
-        def fresh(name: str) -> Path:
-            path = tmp / name
-            path.mkdir()
-            return path
-
-        out |= _arrays(make_run(fresh("smoother"), "smoother", trials=5), "smoother")
-        out |= _arrays(make_run(fresh("kilc"), "kilc", trials=5), "kilc")
-        out |= _arrays(make_adaptive_run(fresh("adaptive"), trials=6, gust_m=0.01), "adaptive")
-        base = ROOT.parent / "profiles" / "antx-adaptive.yaml"
-        prof = load_profile(_profile_file(tmp, base, "auto", robustness_cutoff_rad_s="auto",
-                                          repeats=2))  # fmt: skip
-        out |= _arrays(make_adaptive_run(fresh("auto"), 7, seed=3, gust_m=0.005, prof=prof), "auto")
-        prof = load_profile(_profile_file(tmp, base, "table1", noise="table1", refresh=False))
-        out |= _arrays(make_adaptive_run(fresh("table1"), 5, seed=5, prof=prof), "table1")
-        run = RunDir.create(fresh("mocap"), profile(), trajectory_from_dict(SHORT), "smoother",
-                            run_id="run")  # fmt: skip
-        for j in range(4):
-            _with_mocap(run, j, 0.02)
-            _learn(run)
-        out |= _arrays(run, "mocap")
-        for name in PX4_RUNS:
-            out |= _arrays(_px4_replay(fresh(f"px4-{name}"), name), f"px4-{name}")
+    for name in CASES:
+        out |= learned_case(name)
     assert adaptive_profile().learning.adaptive is not None
     return out
 
