@@ -39,7 +39,9 @@ def _msd(wn: float, zeta: float, dt: float):
     return from_transfer_function([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], 0.0, dt)
 
 
-def learner_norms(s: mc.StudySettings, algorithm: str, plants: int, repeats: int) -> np.ndarray:
+def learner_norms(
+    s: mc.MontecarloSettings, algorithm: str, plants: int, repeats: int
+) -> np.ndarray:
     """e_j norms of the first plants x repeats, one learner each, the study's noise stream."""
     n, dt = s.n_samples, s.t_ilc_s
     sample = mc.sample_plants(s, LEVEL)
@@ -74,7 +76,7 @@ def main() -> None:
     parser.add_argument("--plants", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=2)
     args = parser.parse_args()
-    s = mc.StudySettings(levels=(LEVEL,))
+    s = mc.MontecarloSettings(levels=(LEVEL,))
     for algorithm in mc.ALGORITHMS:
         t0 = time.perf_counter()
         batched = mc.error_norms(s, LEVEL, algorithm)

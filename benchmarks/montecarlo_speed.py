@@ -42,9 +42,9 @@ CASES = [(200, 3), (400, 1), (800, 1)]
 
 
 def run_case(n: int, runs: int, threads: int = 1) -> dict:
-    from gcs.core.montecarlo import StudySettings, run_study
+    from gcs.core.montecarlo import MontecarloSettings, run_study
 
-    settings = StudySettings(n_samples=n)
+    settings = MontecarloSettings(n_samples=n)
     times = []
     for _ in range(runs):
         t0 = time.perf_counter()

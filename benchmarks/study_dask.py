@@ -94,9 +94,9 @@ def run_on(workers: int, spec, plan, document, out: Path) -> tuple[float, float,
 
 
 def montecarlo_cost(n: int, plants: int) -> float:
-    from gcs.core.montecarlo import StudySettings, run_study
+    from gcs.core.montecarlo import MontecarloSettings, run_study
 
-    s = StudySettings(
+    s = MontecarloSettings(
         levels=(0.2,), plants=plants, repeats=1, n_samples=n, algorithms=("smoother",)
     )
     t0 = time.perf_counter()

@@ -276,10 +276,10 @@ def test_montecarlo_iterations_help_and_validation_agree() -> None:
     assert "x>=30" in text and "at least 30" in text
     result = invoke("montecarlo", "--iterations", "29")
     assert result.exit_code == 2 and "'--iterations'" in result.output
-    assert "StudySettings" not in result.output
+    assert "MontecarloSettings" not in result.output
     result = invoke("montecarlo", "--levels", "nan")
     assert result.exit_code == 2 and "--levels" in result.output
-    assert "StudySettings" not in result.output
+    assert "MontecarloSettings" not in result.output
 
 
 def test_an_internal_error_is_one_line_with_exit_code_1(

@@ -36,7 +36,7 @@ def test_the_cli_uses_typers_public_api_and_registers_commands_one_way() -> None
     assert not re.search(r"typer\._|from click|import click", source)  # no private modules
     assert "def main(self" not in source  # Typer's own main runs, unchanged
     assert source.count("app.command(") == 1  # inside command(), the one way to register
-    assert "OPENBLAS" not in source and "StudySettings" not in source
+    assert "OPENBLAS" not in source and "MontecarloSettings" not in source
     names = {c.name or c.callback.__name__ for c in gcs.cli.app.registered_commands}
     assert names == {"fly", "learn", "report", "identify", "montecarlo", "study", "mock"}
 
@@ -60,7 +60,7 @@ def test_a_failure_ends_as_one_line_and_its_exit_code(monkeypatch: pytest.Monkey
 def test_montecarlo_refusals_name_the_option_not_the_field() -> None:
     with pytest.raises(OptionError) as exc:
         montecarlo_settings(MontecarloRequest(repeats=0))
-    assert exc.value.option == "--repeats" and "StudySettings" not in exc.value.message
+    assert exc.value.option == "--repeats" and "MontecarloSettings" not in exc.value.message
     with pytest.raises(OptionError) as exc:
         montecarlo_settings(MontecarloRequest(levels="0.1,x"))
     assert exc.value.option == "--levels" and "not a list of numbers" in exc.value.message

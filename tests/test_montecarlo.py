@@ -12,7 +12,7 @@ from gcs.core import montecarlo as mc
 from gcs.core.estimators import kilc_init, kilc_update, rts_smoother
 from gcs.core.model import from_transfer_function, lifted_matrix, simulate
 
-SMALL = mc.StudySettings(
+SMALL = mc.MontecarloSettings(
     levels=(0.1,),
     plants=3,
     repeats=2,
@@ -35,7 +35,7 @@ def _msd(wn: float, zeta: float, dt: float):
     return from_transfer_function([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], 0.0, dt)
 
 
-def _reference_norms(settings: mc.StudySettings, level: float, algorithm: str) -> np.ndarray:
+def _reference_norms(settings: mc.MontecarloSettings, level: float, algorithm: str) -> np.ndarray:
     """Trial-by-trial loop with the per-trial reference functions (no batching)."""
     n, dt = settings.n_samples, settings.t_ilc_s
     plants = mc.sample_plants(settings, level)
@@ -127,7 +127,7 @@ def test_batched_plants_respond_as_their_models(wn: float, zeta: float) -> None:
 
 @pytest.mark.parametrize("algorithm", mc.ALGORITHMS)
 def test_nominal_noise_free_learning_converges(algorithm: str) -> None:
-    settings = mc.StudySettings(
+    settings = mc.MontecarloSettings(
         levels=(0.0,), plants=2, repeats=1, iterations=30, n_samples=200, noise_std=0.0
     )
     norms = mc.error_norms(settings, 0.0, algorithm)
@@ -161,7 +161,7 @@ def test_deterministic_for_a_fixed_seed() -> None:
 
 
 def test_invalid_plant_rules() -> None:
-    settings = mc.StudySettings(
+    settings = mc.MontecarloSettings(
         levels=(1.0,), plants=200, repeats=1, iterations=2, steady_from=1, steady_to=2, seed=1
     )
     resampled = mc.sample_plants(settings, 1.0)
@@ -183,7 +183,7 @@ def test_invalid_plant_rules() -> None:
         in mc.run_study(dataclasses.replace(small, invalid_plant_rule="resample"))[0].excluded_rule
     )
     # at 5 % a negative parameter needs a 20-sigma draw
-    assert mc.sample_plants(mc.StudySettings(), 0.05).excluded == 0
+    assert mc.sample_plants(mc.MontecarloSettings(), 0.05).excluded == 0
 
 
 def test_diverged_rule_counts_and_excludes() -> None:
@@ -253,4 +253,4 @@ def test_result_structure_and_progress() -> None:
 )
 def test_settings_validation(field: str, value: object) -> None:
     with pytest.raises(ValueError, match=field.split("_")[0]):
-        mc.StudySettings(**{field: value})
+        mc.MontecarloSettings(**{field: value})

@@ -15,7 +15,7 @@ from gcs.core.refresh import refresh_model
 from gcs.core.robustness import robustness_weight
 from gcs.core.update import UpdateWeights, next_input
 
-SMALL = mc.StudySettings(
+SMALL = mc.MontecarloSettings(
     levels=(0.3,), plants=2, repeats=2, iterations=4, steady_from=3, steady_to=4, n_samples=150
 )
 OPTIONS = AdaptiveSettings(noise="data", refresh=True)
@@ -28,7 +28,7 @@ def _estimate(model, uh: np.ndarray, yh: np.ndarray, adaptive: AdaptiveSettings)
     return estimate_disturbance(z, drift_scale(change), True, adaptive.drift_offset)
 
 
-def paper_signals(settings: mc.StudySettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def paper_signals(settings: mc.MontecarloSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sec. IV's reference yd(1..N), disturbance d(1..N) and first input U_0(0..N-1)."""
     n, dt = settings.n_samples, settings.t_ilc_s
     t_out, t_in = dt * np.arange(1, n + 1), dt * np.arange(n)
@@ -42,7 +42,7 @@ def mass_spring_damper(wn: float, zeta: float, dt_s: float):
     return from_transfer_function([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], 0.0, dt_s)
 
 
-def reference_norms(settings: mc.StudySettings, level: float, adaptive: AdaptiveSettings):
+def reference_norms(settings: mc.MontecarloSettings, level: float, adaptive: AdaptiveSettings):
     """Run by run with the one-axis functions the learning step uses (no batching)."""
     n, dt = settings.n_samples, settings.t_ilc_s
     plants = mc.sample_plants(settings, level)

@@ -2,7 +2,7 @@
 
 The study itself (plants, tasks, rows, the JSON document) is
 :mod:`gcs.app.montecarlo_study`; its tables are :mod:`gcs.app.montecarlo_view`. Here: the
-options become :class:`StudySettings` (a refusal names
+options become :class:`MontecarloSettings` (a refusal names
 the option, not the field), the cluster they describe with the BLAS threads of this process,
 the ``--json`` file checked, then the study run and shown, then the JSON written; and the
 BLAS threads the command computes with (:func:`blas_policy`, before numpy is imported: this
@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Protocol
 from gcs.app.failures import OptionError
 
 if TYPE_CHECKING:
-    from gcs.core.montecarlo import ComparisonRow, StudyRow, StudySettings
+    from gcs.core.montecarlo import ComparisonRow, MontecarloSettings, StudyRow
 
 __all__ = [
     "MontecarloRequest",
@@ -83,19 +83,19 @@ class MontecarloView(Protocol):
         rows: list[StudyRow],
         comparison: list[ComparisonRow],
         seconds: float,
-        settings: StudySettings,
+        settings: MontecarloSettings,
     ) -> None:
         """Tables II and III, the comparison of the new options, the wall time."""
 
 
-#: StudySettings fields and the options that set them.
+#: MontecarloSettings fields and the options that set them.
 _OPTIONS = {
     "levels": "--levels", "plants": "--plants", "repeats": "--repeats",
     "iterations": "--iterations", "n_samples": "--samples", "seed": "--seed",
 }  # fmt: skip
 
 
-def montecarlo_settings(request: MontecarloRequest) -> StudySettings:
+def montecarlo_settings(request: MontecarloRequest) -> MontecarloSettings:
     """The study the options describe; a refusal names the option that set the field.
 
     Parameters
@@ -105,7 +105,7 @@ def montecarlo_settings(request: MontecarloRequest) -> StudySettings:
 
     Returns
     -------
-    StudySettings
+    MontecarloSettings
 
     Raises
     ------
@@ -124,9 +124,11 @@ def montecarlo_settings(request: MontecarloRequest) -> StudySettings:
     if message.startswith("--levels: "):
         raise OptionError(message.removeprefix("--levels: "), "--levels") from None
     for field, option in _OPTIONS.items():
-        if message.startswith(f"StudySettings.{field} "):
-            raise OptionError(message.removeprefix(f"StudySettings.{field} "), option) from None
-    raise OptionError(message.removeprefix("StudySettings.")) from None
+        if message.startswith(f"MontecarloSettings.{field} "):
+            raise OptionError(
+                message.removeprefix(f"MontecarloSettings.{field} "), option
+            ) from None
+    raise OptionError(message.removeprefix("MontecarloSettings.")) from None
 
 
 #: BLAS threads of ``gcs montecarlo`` unless ``OPENBLAS_NUM_THREADS`` says otherwise.

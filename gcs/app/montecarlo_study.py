@@ -28,8 +28,8 @@ from gcs.app.study_cluster import (
 from gcs.core.learning import AdaptiveSettings
 from gcs.core.montecarlo import (
     ComparisonRow,
+    MontecarloSettings,
     StudyRow,
-    StudySettings,
     check_adaptive_size,
     check_study_size,
     compare_study,
@@ -80,7 +80,7 @@ def study_settings(
     seed: int,
     keep_diverged: bool,
     adaptive: bool,
-) -> StudySettings:
+) -> MontecarloSettings:
     """The study the options describe, checked before anything is simulated.
 
     Parameters
@@ -88,7 +88,7 @@ def study_settings(
     levels : str
         Comma-separated uncertainty levels (fractions of the nominal wn and zeta).
     plants, repeats, iterations, samples, seed : int
-        As :class:`gcs.core.montecarlo.StudySettings` (``samples`` is ``n_samples``).
+        As :class:`gcs.core.montecarlo.MontecarloSettings` (``samples`` is ``n_samples``).
     keep_diverged : bool
         Keep plants whose learning diverged in the statistics.
     adaptive : bool
@@ -96,13 +96,13 @@ def study_settings(
 
     Returns
     -------
-    StudySettings
+    MontecarloSettings
 
     Raises
     ------
     ValueError
-        ``"--levels: ..."`` for the level list, else StudySettings' own message naming its
-        field (``"StudySettings.<field> ..."``); or the study would not fit in memory.
+        ``"--levels: ..."`` for the level list, else MontecarloSettings' own message naming its
+        field (``"MontecarloSettings.<field> ..."``); or the study would not fit in memory.
     """
     try:
         values = tuple(float(v) for v in levels.split(",") if v.strip())
@@ -110,7 +110,7 @@ def study_settings(
         raise ValueError(f"--levels: not a list of numbers: {levels!r}") from None
     if not values:
         raise ValueError("--levels: give at least one level, e.g. 0.05")
-    settings = StudySettings(
+    settings = MontecarloSettings(
         levels=values, plants=plants, repeats=repeats, iterations=iterations,
         n_samples=samples, seed=seed, diverged_rule="include" if keep_diverged else "exclude",
     )  # fmt: skip
@@ -120,12 +120,12 @@ def study_settings(
     return settings
 
 
-def paper_row(settings: StudySettings, level: float, algorithm: str) -> StudyRow:
+def paper_row(settings: MontecarloSettings, level: float, algorithm: str) -> StudyRow:
     """One row of Tables II/III: one level with one algorithm (a task of the study).
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study.
     level : float
         Uncertainty level.
@@ -143,13 +143,13 @@ def paper_row(settings: StudySettings, level: float, algorithm: str) -> StudyRow
 
 
 def adaptive_level(
-    settings: StudySettings, level: float, options: AdaptiveSettings
+    settings: MontecarloSettings, level: float, options: AdaptiveSettings
 ) -> tuple[StudyRow, ComparisonRow]:
     """The new options against the paper's method at one level (a task of ``--adaptive``).
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study.
     level : float
         Uncertainty level.
@@ -167,7 +167,7 @@ def adaptive_level(
     return rows[0], comparison[0]
 
 
-def estimate_adaptive_s(settings: StudySettings) -> float:
+def estimate_adaptive_s(settings: MontecarloSettings) -> float:
     """Computing time of the new options' tasks in this process, from a small unit [s].
 
     One task of the new options on 2 plants x 1 repeat at the first level, timed here and
@@ -176,7 +176,7 @@ def estimate_adaptive_s(settings: StudySettings) -> float:
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study.
 
     Returns
@@ -192,7 +192,7 @@ def estimate_adaptive_s(settings: StudySettings) -> float:
 
 
 def run_montecarlo(
-    settings: StudySettings,
+    settings: MontecarloSettings,
     adaptive: bool,
     progress: Callable[[str], Progress],
     cluster: Cluster | None = None,
@@ -214,7 +214,7 @@ def run_montecarlo(
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study.
     adaptive : bool
         Also learn with the noise model from the data and the model refresh
@@ -271,7 +271,7 @@ def run_montecarlo(
 
 
 def _run_placed(
-    settings: StudySettings,
+    settings: MontecarloSettings,
     adaptive: bool,
     tasks: list[Task],
     cluster: Cluster,
@@ -316,14 +316,14 @@ def _run_placed(
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def study_document(outcome: StudyOutcome, settings: StudySettings) -> Any:
+def study_document(outcome: StudyOutcome, settings: MontecarloSettings) -> Any:
     """The JSON document of ``--json``: the rows, and the comparison when there is one.
 
     Parameters
     ----------
     outcome : StudyOutcome
         What :func:`run_montecarlo` computed.
-    settings : StudySettings
+    settings : MontecarloSettings
         The study (for the rules in the rows).
 
     Returns

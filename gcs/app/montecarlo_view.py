@@ -10,7 +10,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from gcs.app.progress import track
-from gcs.core.montecarlo import PAPER_TABLES, ComparisonRow, StudyRow, StudySettings
+from gcs.core.montecarlo import PAPER_TABLES, ComparisonRow, MontecarloSettings, StudyRow
 
 __all__ = ["MontecarloDisplay", "study_tables", "study_json", "comparison_lines"]
 
@@ -54,7 +54,7 @@ class MontecarloDisplay:
         rows: list[StudyRow],
         comparison: list[ComparisonRow],
         seconds: float,
-        settings: StudySettings,
+        settings: MontecarloSettings,
     ) -> None:
         """Tables II and III, the comparison lines (``--adaptive``), the wall time.
 
@@ -66,7 +66,7 @@ class MontecarloDisplay:
             The new options against the paper's method (empty without ``--adaptive``).
         seconds : float
             Wall time of the paper's study [s].
-        settings : StudySettings
+        settings : MontecarloSettings
             The study.
         """
         self.console.print(study_tables(rows, settings))
@@ -82,14 +82,14 @@ def _pm(mean: float, std: float) -> str:
     return f"{mean:.2f}±{std:.2f}" if abs(mean) < 1e3 else f"{mean:.1e}±{std:.0e}"
 
 
-def study_tables(rows: list[StudyRow], settings: StudySettings) -> Table:
+def study_tables(rows: list[StudyRow], settings: MontecarloSettings) -> Table:
     """One rich table: every (algorithm, level) row with the paper's values beside ours.
 
     Parameters
     ----------
     rows : list of StudyRow
         Results of :func:`gcs.core.montecarlo.run_study`.
-    settings : StudySettings
+    settings : MontecarloSettings
         The study (for the title).
 
     Returns
@@ -117,7 +117,7 @@ def study_tables(rows: list[StudyRow], settings: StudySettings) -> Table:
     return table
 
 
-def study_json(rows: list[StudyRow], settings: StudySettings) -> list[dict]:
+def study_json(rows: list[StudyRow], settings: MontecarloSettings) -> list[dict]:
     """Rows as JSON objects (the study's keys plus the counts behind ``excluded``).
 
     ``excluded`` is the number of plants left out of the statistics: plants whose learning
@@ -128,7 +128,7 @@ def study_json(rows: list[StudyRow], settings: StudySettings) -> list[dict]:
     ----------
     rows : list of StudyRow
         Results.
-    settings : StudySettings
+    settings : MontecarloSettings
         The study (for the rules).
 
     Returns

@@ -19,7 +19,7 @@ and one batched FFT: ``O(N^2)`` per trial, no Python loop over plants, repeats o
 Conventions (as in :mod:`gcs.core.model`): ``Y = [y(1) .. y(N)] = F U + D``,
 ``U = [u(0) .. u(N-1)]``, trial ``j = 0`` flies ``U_0`` before any learning, trial ``j >= 1``
 flies the input computed from the data of trial ``j - 1``. The readings of the details the
-paper leaves open are explicit fields of :class:`StudySettings`; ``docs/montecarlo.md``
+paper leaves open are explicit fields of :class:`MontecarloSettings`; ``docs/montecarlo.md``
 gives the evidence for each default.
 """
 
@@ -46,7 +46,7 @@ from gcs.core.study import diverged, run_trials
 __all__ = [
     "ALGORITHMS",
     "PAPER_TABLES",
-    "StudySettings",
+    "MontecarloSettings",
     "StudyRow",
     "PlantSample",
     "sample_plants",
@@ -84,7 +84,7 @@ _DIVERGED = ("include", "exclude")
 
 
 @dataclass(frozen=True)
-class StudySettings:
+class MontecarloSettings:
     """Configuration of the Monte Carlo study (defaults: the paper's Sec. IV and Table I).
 
     Parameters
@@ -177,32 +177,36 @@ class StudySettings:
         object.__setattr__(self, "algorithms", tuple(self.algorithms))
         for name in ("plants", "repeats", "iterations", "n_samples"):
             if int(getattr(self, name)) < 1:
-                raise ValueError(f"StudySettings.{name} must be >= 1, got {getattr(self, name)}")
+                raise ValueError(
+                    f"MontecarloSettings.{name} must be >= 1, got {getattr(self, name)}"
+                )
         if any(not np.isfinite(x) or x < 0 for x in self.levels):
-            raise ValueError(f"StudySettings.levels must be finite and >= 0, got {self.levels}")
+            raise ValueError(
+                f"MontecarloSettings.levels must be finite and >= 0, got {self.levels}"
+            )
         if not self.t_ilc_s > 0:
-            raise ValueError(f"StudySettings.t_ilc_s must be > 0, got {self.t_ilc_s}")
+            raise ValueError(f"MontecarloSettings.t_ilc_s must be > 0, got {self.t_ilc_s}")
         if not self.noise_std >= 0:
-            raise ValueError(f"StudySettings.noise_std must be >= 0, got {self.noise_std}")
+            raise ValueError(f"MontecarloSettings.noise_std must be >= 0, got {self.noise_std}")
         if self.error_signal not in _SIGNALS:
-            raise ValueError(f"StudySettings.error_signal must be one of {_SIGNALS}")
+            raise ValueError(f"MontecarloSettings.error_signal must be one of {_SIGNALS}")
         if self.u0 not in _U0:
-            raise ValueError(f"StudySettings.u0 must be one of {_U0}")
+            raise ValueError(f"MontecarloSettings.u0 must be one of {_U0}")
         if self.diverged_rule not in _DIVERGED:
-            raise ValueError(f"StudySettings.diverged_rule must be one of {_DIVERGED}")
+            raise ValueError(f"MontecarloSettings.diverged_rule must be one of {_DIVERGED}")
         if self.invalid_plant_rule not in _RULES:
-            raise ValueError(f"StudySettings.invalid_plant_rule must be one of {_RULES}")
+            raise ValueError(f"MontecarloSettings.invalid_plant_rule must be one of {_RULES}")
         if not 0 <= self.first_iteration <= self.iterations:
-            raise ValueError("StudySettings.first_iteration must lie in 0 .. iterations")
+            raise ValueError("MontecarloSettings.first_iteration must lie in 0 .. iterations")
         if not 0 <= self.steady_from <= self.steady_to <= self.iterations:
-            raise ValueError("StudySettings.steady_from/steady_to must lie in 0 .. iterations")
+            raise ValueError("MontecarloSettings.steady_from/steady_to must lie in 0 .. iterations")
         bad = [a for a in self.algorithms if a not in ALGORITHMS]
         if bad or not self.algorithms:
-            raise ValueError(f"StudySettings.algorithms must be a subset of {ALGORITHMS}")
+            raise ValueError(f"MontecarloSettings.algorithms must be a subset of {ALGORITHMS}")
         if not (self.we > 0 and self.wdu >= 0 and self.wu >= 0):
-            raise ValueError("StudySettings weights need we > 0, wdu >= 0, wu >= 0")
+            raise ValueError("MontecarloSettings weights need we > 0, wdu >= 0, wu >= 0")
         if not (self.wn_rad_s > 0 and self.zeta > 0):
-            raise ValueError("StudySettings.wn_rad_s and zeta must be > 0")
+            raise ValueError("MontecarloSettings.wn_rad_s and zeta must be > 0")
 
     @property
     def duration_s(self) -> float:
@@ -233,7 +237,7 @@ class StudyRow:
         Plants the statistics are over.
     diverged : int
         Plants whose learning diverged (steady-state error norm above the trial-0 one),
-        included in or excluded from the statistics by ``StudySettings.diverged_rule``.
+        included in or excluded from the statistics by ``MontecarloSettings.diverged_rule``.
     """
 
     algorithm: str
@@ -271,11 +275,11 @@ def _level_key(level: float) -> int:
     return int(round(level * 1_000_000))
 
 
-def _rng(settings: StudySettings, level: float, stream: int) -> np.random.Generator:
+def _rng(settings: MontecarloSettings, level: float, stream: int) -> np.random.Generator:
     return np.random.default_rng([settings.seed, _level_key(level), stream])
 
 
-def sample_plants(settings: StudySettings, level: float) -> PlantSample:
+def sample_plants(settings: MontecarloSettings, level: float) -> PlantSample:
     """Draw the plants of one uncertainty level.
 
     ``wn = wn_nom (1 + level g1)``, ``zeta = zeta_nom (1 + level g2)`` with independent
@@ -285,7 +289,7 @@ def sample_plants(settings: StudySettings, level: float) -> PlantSample:
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         Seed, plant count, nominal values and rule.
     level : float
         Relative standard deviation of both parameters.
@@ -313,7 +317,7 @@ def sample_plants(settings: StudySettings, level: float) -> PlantSample:
     return PlantSample(wn, zeta, excluded)
 
 
-def noise_generator(settings: StudySettings, level: float) -> np.random.Generator:
+def noise_generator(settings: MontecarloSettings, level: float) -> np.random.Generator:
     """The generator of the output noise of one uncertainty level.
 
     Every trial ``j = 0 .. iterations`` of the level, in order, draws
@@ -325,7 +329,7 @@ def noise_generator(settings: StudySettings, level: float) -> np.random.Generato
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The seed (the draws' shapes follow from ``plants``, ``repeats`` and ``n_samples``).
     level : float
         Uncertainty level (fraction of the nominal values).
@@ -395,7 +399,7 @@ def update_operator(
     return sol[:, :n], sol[:, n:]
 
 
-def _signals(settings: StudySettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _signals(settings: MontecarloSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Reference ``yd(1..N)``, disturbance ``d(1..N)`` and ``U_0``, each shape (N,)."""
     n, dt = settings.n_samples, settings.t_ilc_s
     t_out = dt * np.arange(1, n + 1)
@@ -410,7 +414,7 @@ def _signals(settings: StudySettings) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 
 def _simulate(
-    settings: StudySettings,
+    settings: MontecarloSettings,
     plants: PlantSample,
     level: float,
     algorithm: str,
@@ -453,7 +457,7 @@ def _simulate(
 
 
 def _flights(
-    settings: StudySettings,
+    settings: MontecarloSettings,
     f_true: np.ndarray,
     yd: np.ndarray,
     d: np.ndarray,
@@ -479,7 +483,7 @@ def _flights(
     return fly
 
 
-def error_norms(settings: StudySettings, level: float, algorithm: str) -> np.ndarray:
+def error_norms(settings: MontecarloSettings, level: float, algorithm: str) -> np.ndarray:
     """Error 2-norms ``||Yd - Y_j||_2`` of every trial of one level and algorithm.
 
     The plants and the noise are those :func:`run_study` uses for the same ``settings`` and
@@ -487,7 +491,7 @@ def error_norms(settings: StudySettings, level: float, algorithm: str) -> np.nda
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study.
     level : float
         Uncertainty level.
@@ -502,19 +506,19 @@ def error_norms(settings: StudySettings, level: float, algorithm: str) -> np.nda
     return _simulate(settings, sample_plants(settings, level), level, algorithm)
 
 
-def _rule_text(settings: StudySettings) -> str:
+def _rule_text(settings: MontecarloSettings) -> str:
     action = "resampled" if settings.invalid_plant_rule == "resample" else "excluded"
     return f"draws with wn <= 0 or zeta <= 0 {action}"
 
 
 def summarise(
-    settings: StudySettings, norms: np.ndarray, level: float, algorithm: str, excluded: int
+    settings: MontecarloSettings, norms: np.ndarray, level: float, algorithm: str, excluded: int
 ) -> StudyRow:
     """Reduce an :func:`error_norms` array to one table row.
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         Gives ``first_iteration``, ``steady_from`` and ``steady_to``.
     norms : ndarray, shape (P, R, iterations + 1)
         Error norms [m].
@@ -572,7 +576,7 @@ def _counter(total: int, progress: Callable[[int, int], None] | None) -> Callabl
 
 
 def run_study(
-    settings: StudySettings,
+    settings: MontecarloSettings,
     progress: Callable[[int, int], None] | None = None,
     threads: int = 1,
 ) -> list[StudyRow]:
@@ -584,7 +588,7 @@ def run_study(
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study.
     progress : callable, optional
         ``progress(done, total)`` after every learning iteration of every (level, algorithm)
@@ -645,7 +649,7 @@ def _physical_memory() -> float:
         return 16e9
 
 
-def check_study_size(settings: StudySettings, memory_bytes: float | None = None) -> None:
+def check_study_size(settings: MontecarloSettings, memory_bytes: float | None = None) -> None:
     """Refuse a study whose fixed operators and batch would not fit in memory.
 
     The paper's study keeps about ten ``N x N`` operators (the lifted model, the update and the
@@ -653,7 +657,7 @@ def check_study_size(settings: StudySettings, memory_bytes: float | None = None)
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study.
     memory_bytes : float, optional
         The memory it may use; default half of this machine's.
@@ -661,7 +665,7 @@ def check_study_size(settings: StudySettings, memory_bytes: float | None = None)
     Raises
     ------
     ValueError
-        ``"StudySettings.n_samples ..."`` naming the size and the memory.
+        ``"MontecarloSettings.n_samples ..."`` naming the size and the memory.
     """
     n = float(settings.n_samples)
     runs = float(settings.plants * settings.repeats)
@@ -669,7 +673,7 @@ def check_study_size(settings: StudySettings, memory_bytes: float | None = None)
     limit = 0.5 * _physical_memory() if memory_bytes is None else memory_bytes
     if need > limit:
         raise ValueError(
-            f"StudySettings.n_samples {settings.n_samples} with {settings.plants} x "
+            f"MontecarloSettings.n_samples {settings.n_samples} with {settings.plants} x "
             f"{settings.repeats} runs needs about {need / 1e9:.3g} GB (N x N operators), more "
             f"than the {limit / 1e9:.3g} GB it may use on this machine; use fewer samples"
         )
@@ -743,7 +747,7 @@ def _conv(f: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def _update_inverses(
-    f: np.ndarray, settings: StudySettings, robust_lam: np.ndarray, order: int
+    f: np.ndarray, settings: MontecarloSettings, robust_lam: np.ndarray, order: int
 ) -> np.ndarray:
     """``H^-1`` per run, ``H = we F'F + (wdu + wu) I + lam D'D``: shape (M, N, N)."""
     m, n = f.shape
@@ -765,7 +769,7 @@ def _update_inverses(
 
 
 def _robust_lam(
-    b: np.ndarray, a: np.ndarray, settings: StudySettings, adaptive: AdaptiveSettings
+    b: np.ndarray, a: np.ndarray, settings: MontecarloSettings, adaptive: AdaptiveSettings
 ) -> np.ndarray:
     """Robustness weight per run (0 when off): ``we |F(w_c)|^2 / (2 sin(w_c T / 2))^(2p)``."""
     cutoff = adaptive.robustness_cutoff_rad_s
@@ -783,7 +787,7 @@ def _robust_lam(
 
 
 def _adaptive_simulate(
-    settings: StudySettings,
+    settings: MontecarloSettings,
     plants: PlantSample,
     level: float,
     algorithm: str,
@@ -869,13 +873,13 @@ def _estimate(
 
 
 def adaptive_error_norms(
-    settings: StudySettings, level: float, algorithm: str, adaptive: AdaptiveSettings
+    settings: MontecarloSettings, level: float, algorithm: str, adaptive: AdaptiveSettings
 ) -> tuple[np.ndarray, np.ndarray]:
     """Error 2-norms of every trial with the new options, on the paper's plants and noise.
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study (the plants and noise of ``level`` are :func:`error_norms`'s).
     level : float
         Uncertainty level.
@@ -895,18 +899,18 @@ def adaptive_error_norms(
     return _adaptive_simulate(settings, sample_plants(settings, level), level, algorithm, adaptive)
 
 
-def _diverged(settings: StudySettings, norms: np.ndarray) -> np.ndarray:
+def _diverged(settings: MontecarloSettings, norms: np.ndarray) -> np.ndarray:
     per_plant = norms.mean(axis=1)
     steady = per_plant[:, settings.steady_from : settings.steady_to + 1].mean(axis=1)
     return diverged(per_plant[:, 0], steady)
 
 
-def check_adaptive_size(settings: StudySettings) -> None:
+def check_adaptive_size(settings: MontecarloSettings) -> None:
     """Refuse an adaptive study whose per-run update operators would not fit in memory.
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study.
 
     Raises
@@ -925,7 +929,7 @@ def check_adaptive_size(settings: StudySettings) -> None:
 
 
 def compare_study(
-    settings: StudySettings,
+    settings: MontecarloSettings,
     adaptive: AdaptiveSettings,
     algorithm: str = "smoother",
     progress: Callable[[int, int], None] | None = None,
@@ -934,7 +938,7 @@ def compare_study(
 
     Parameters
     ----------
-    settings : StudySettings
+    settings : MontecarloSettings
         The study.
     adaptive : AdaptiveSettings
         The new options (``noise = "data"``).
