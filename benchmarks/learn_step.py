@@ -71,6 +71,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from baseline import baseline_tree
 
 REPO = Path(__file__).resolve().parents[1]
 # the code under test: this tree, or another commit's checkout (the "code" lines)
@@ -387,20 +388,9 @@ def run_code_case(case: str, out: Path) -> dict:
     return line
 
 
-def _baseline_tree(commit: str) -> Path:
-    """A detached checkout of ``commit`` (made once, kept under the temporary directory)."""
-    sha = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", commit], check=True,
-                         capture_output=True, text=True).stdout.strip()  # fmt: skip
-    path = Path(tempfile.gettempdir()) / f"gcs-bench-{sha}"
-    if not (path / "gcs").is_dir():
-        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(path), sha],
-                       check=True, capture_output=True)  # fmt: skip
-    return path
-
-
 def run_code(commit: str, rounds: int) -> None:
     """The ``code`` lines: this tree against ``commit``, alternated, ``rounds`` of each."""
-    base = _baseline_tree(commit)
+    base = baseline_tree(commit)
     with tempfile.TemporaryDirectory() as tmp:
         for case in CODE_CASES:
             runs: dict[str, list[dict]] = {"new": [], "baseline": []}

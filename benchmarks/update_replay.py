@@ -30,6 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from baseline import baseline_tree
+
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the Dask workers run
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, os.environ.get("GCS_BENCH_CODE", str(REPO)))
@@ -114,17 +116,6 @@ def replay(path: Path) -> dict:
     }
 
 
-def _baseline_tree(commit: str) -> Path:
-    """A detached checkout of ``commit`` (made once, kept under the temporary directory)."""
-    sha = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", commit], check=True,
-                         capture_output=True, text=True).stdout.strip()  # fmt: skip
-    path = Path(tempfile.gettempdir()) / f"gcs-bench-{sha}"
-    if not (path / "gcs").is_dir():
-        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(path), sha],
-                       check=True, capture_output=True)  # fmt: skip
-    return path
-
-
 def main() -> None:
     if len(sys.argv) == 3 and sys.argv[1] == "--replay":
         print(json.dumps(replay(Path(sys.argv[2]))))
@@ -134,7 +125,7 @@ def main() -> None:
     parser.add_argument("--commit", default="4a34af6")
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
-    base = _baseline_tree(args.commit)
+    base = baseline_tree(args.commit)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "updates.pkl"
         print(json.dumps({"recorded": record(args.study, path)}), flush=True)
