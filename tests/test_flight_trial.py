@@ -1,14 +1,14 @@
 """Pure parts of the flight layer: settings, deadline schedule, grid alignment, trial loop.
 
 The trial loop is exercised against a fake vehicle (no MAVSDK, no sockets) that records the
-setpoints it is sent and feeds position samples from a task.
+setpoints it is sent and feeds position samples from a task, on virtual time
+(:func:`gcs.sim.loop.virtual_time`): a send's lateness is the loop's, not the machine's load.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import time
 
 import numpy as np
 import pytest
@@ -16,7 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from gcs.errors import ProfileError, TrajectoryError, TrialAborted
-from gcs.flight.clock import WALL_CLOCK, VehicleClock
+from gcs.flight.clock import LoopClock, VehicleClock
 from gcs.flight.link import TelemetrySample
 from gcs.flight.manoeuvres import heading_deg, min_jerk
 from gcs.flight.trial import (
@@ -26,6 +26,7 @@ from gcs.flight.trial import (
     send_schedule,
 )
 from gcs.io.settings import FlightSettings
+from gcs.sim.loop import virtual_time
 
 # ---------------------------------------------------------------- settings
 
@@ -172,7 +173,8 @@ def test_align_rejects_unsorted_and_handles_empty() -> None:
 class FakeVehicle:
     """Just enough of Vehicle for TrialRun: first-order response, telemetry at 50 Hz.
 
-    Its clock runs at ``rate`` times the wall clock; telemetry comes every ``1 / telemetry_hz``
+    Local time is the running loop's (virtual in :func:`run`). Its clock runs at ``rate``
+    times the local clock; telemetry comes every ``1 / telemetry_hz``
     of vehicle time, stamped with it. ``motion(t_vehicle_s)``, when given, is the position
     reported instead of the first-order response.
     """
@@ -196,15 +198,15 @@ class FakeVehicle:
         self.t_first: float | None = None
         self.rate = rate
         self.motion = motion
-        self.boot_s = time.monotonic() - 100.0  # booted a while ago
+        self.local_clock = LoopClock()
+        self.boot_s = -100.0  # booted a while before the loop's time 0
         self.clock = VehicleClock()
-        self.local_clock = WALL_CLOCK
 
     def vehicle_time(self, wall_s: float) -> float:
         return (wall_s - self.boot_s) * self.rate
 
     async def send_setpoint(self, pos_ned_m: np.ndarray, yaw_deg: float | None = None) -> None:
-        now = time.monotonic()
+        now = self.local_clock.now()
         self.t_first = self.t_first if self.t_first is not None else now
         self.sent.append((now, np.array(pos_ned_m)))
         self.yaws.append(yaw_deg)
@@ -228,14 +230,14 @@ class FakeVehicle:
             self._recorders.remove(samples)
 
     async def telemetry(self) -> None:
-        t0 = time.monotonic()
+        t0 = self.local_clock.now()
         i = 0
         while True:
             i += 1
-            delay = t0 + i * self.period_s / self.rate - time.monotonic()
+            delay = t0 + i * self.period_s / self.rate - self.local_clock.now()
             await asyncio.sleep(max(delay, 0))
             self.pos = self.pos + 0.5 * (self.target - self.pos)
-            now = time.monotonic()
+            now = self.local_clock.now()
             if self.drop and self.t_first is not None:
                 rel = now - self.t_first
                 if self.drop[0] <= rel < self.drop[1]:
@@ -247,6 +249,12 @@ class FakeVehicle:
             self.latest = sample
             for r in self._recorders:
                 r.append(sample)
+
+
+def run(coro):  # type: ignore[no-untyped-def]
+    """``asyncio.run(coro)`` on virtual time."""
+    with virtual_time():
+        return asyncio.run(coro)
 
 
 async def _with_telemetry(vehicle: FakeVehicle, coro):  # type: ignore[no-untyped-def]
@@ -269,7 +277,7 @@ def test_trial_streams_on_deadlines_and_records_grid() -> None:
     sp = _circle(12)
     vehicle = FakeVehicle()
     progress: list[tuple[int, int, float]] = []
-    rec = asyncio.run(
+    rec = run(
         _with_telemetry(
             vehicle,
             fly_trial(vehicle, sp, 0.05, settings, lambda *a: progress.append(a)),  # type: ignore[arg-type]
@@ -299,7 +307,7 @@ def test_trial_sends_each_setpoint_with_its_own_yaw_and_none_without_one() -> No
     sp = _circle(12)
     yaw = np.linspace(0.0, 330.0, 12)  # a turn: one heading per setpoint
     vehicle = FakeVehicle()
-    rec = asyncio.run(
+    rec = run(
         _with_telemetry(vehicle, fly_trial(vehicle, sp, 0.05, settings, yaw_deg=yaw))  # type: ignore[arg-type]
     )
     assert rec.complete
@@ -308,7 +316,7 @@ def test_trial_sends_each_setpoint_with_its_own_yaw_and_none_without_one() -> No
     np.testing.assert_array_equal(sent[:36], np.repeat(yaw, 3))
     assert np.all(sent[36:] == yaw[-1])
     held = FakeVehicle()
-    asyncio.run(_with_telemetry(held, fly_trial(held, sp, 0.05, settings)))  # type: ignore[arg-type]
+    run(_with_telemetry(held, fly_trial(held, sp, 0.05, settings)))  # type: ignore[arg-type]
     assert held.yaws and all(y is None for y in held.yaws)  # the profile's flight.yaw_deg
 
 
@@ -323,7 +331,7 @@ def test_trial_refuses_a_yaw_not_one_finite_value_per_setpoint(yaw: np.ndarray, 
 def test_trial_flags_telemetry_gap() -> None:
     settings = FlightSettings(stream_rate_hz=20, telemetry_rate_hz=50, max_telemetry_age_s=1.0)
     vehicle = FakeVehicle(drop=(0.20, 0.32))
-    rec = asyncio.run(_with_telemetry(vehicle, fly_trial(vehicle, _circle(10), 0.05, settings)))
+    rec = run(_with_telemetry(vehicle, fly_trial(vehicle, _circle(10), 0.05, settings)))
     assert rec.complete
     flagged = rec.t_s[rec.interpolated]
     assert flagged.size >= 1
@@ -345,7 +353,7 @@ def test_trial_watchdog_aborts_with_partial_recording() -> None:
             await fly
         return info.value
 
-    exc = asyncio.run(_with_telemetry(vehicle, scenario()))
+    exc = run(_with_telemetry(vehicle, scenario()))
     rec = exc.recording
     assert not rec.complete and "HOLD" in rec.abort_reason
     assert rec.pos_ned_m.shape == (41, 3)
@@ -362,11 +370,12 @@ def test_trial_aborts_on_late_setpoint() -> None:
         fly = asyncio.create_task(fly_trial(vehicle, _circle(40), 0.05, settings))
         while len(vehicle.sent) < 5:
             await asyncio.sleep(0.005)
-        time.sleep(0.2)  # block the loop on purpose: the next send is late
+        # the loop blocked for 0.2 s (as by a heavy call in it): the next send is late
+        asyncio.get_running_loop().advance(0.2)  # type: ignore[attr-defined]
         with pytest.raises(TrialAborted, match="late"):
             await fly
 
-    asyncio.run(_with_telemetry(vehicle, scenario()))
+    run(_with_telemetry(vehicle, scenario()))
 
 
 def test_trial_streams_and_records_on_the_vehicle_clock() -> None:
@@ -375,7 +384,7 @@ def test_trial_streams_and_records_on_the_vehicle_clock() -> None:
     settings = FlightSettings(stream_rate_hz=60, telemetry_rate_hz=50)
     vehicle = FakeVehicle(rate=0.9, motion=lambda v: (v, 0.0, -2.0))
     sp = _circle(16)
-    rec = asyncio.run(_with_telemetry(vehicle, fly_trial(vehicle, sp, 0.05, settings)))
+    rec = run(_with_telemetry(vehicle, fly_trial(vehicle, sp, 0.05, settings)))
     assert rec.complete and rec.clock is not None
     assert rec.clock.rate == pytest.approx(0.9, abs=0.01)
     first_sends = np.array([t for t, _ in vehicle.sent][::3][:16])
