@@ -28,10 +28,9 @@ from typing import Any
 
 import numpy as np
 import yaml
+from cli_runner import invoke as gcs_invoke
 from synthetic import ROOT, fly_synthetic, make_run
-from typer.testing import CliRunner
 
-from gcs.cli import app
 from gcs.core.model import from_transfer_function, simulate
 from gcs.io.config import profile_from_dict
 from gcs.io.records import TrialRecord, TrialStatus
@@ -1773,7 +1772,7 @@ def run_case(case: Case, root: Path, templates: Templates) -> Outcome:
         argv = case.build(ws)
         before = snapshot(ws_path)
         with _cwd(ws_path):
-            result = CliRunner().invoke(app, argv, env={"COLUMNS": "400"})
+            result = gcs_invoke(argv, env={"COLUMNS": "400"})
         after = snapshot(ws_path)
     finally:
         for undo in reversed(ws.cleanups):

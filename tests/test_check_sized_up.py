@@ -10,18 +10,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from cli_runner import invoke as gcs_invoke
 from synthetic import ROOT
-from typer.testing import CliRunner
 
 from gcs.app.fly import flown_reference
-from gcs.cli import app
 from gcs.io.config import load_profile, load_trajectory
-
-runner = CliRunner()
 
 
 def invoke(*args: object):
-    return runner.invoke(app, [str(a) for a in args], env={"COLUMNS": "300"})
+    return gcs_invoke([str(a) for a in args], env={"COLUMNS": "300"})
 
 
 def _flat(text: str) -> str:

@@ -7,17 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import invoke as gcs_invoke
 from synthetic import fly_synthetic, make_run
-from typer.testing import CliRunner
 
-from gcs.cli import app
 from gcs.io.rundir import RunDir
-
-runner = CliRunner()
 
 
 def invoke(*args: str):
-    return runner.invoke(app, [str(a) for a in args], env={"COLUMNS": "200"})
+    return gcs_invoke([str(a) for a in args], env={"COLUMNS": "200"})
 
 
 def files(path: Path) -> dict[str, bytes]:

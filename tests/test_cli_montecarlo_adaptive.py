@@ -5,18 +5,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from typer.testing import CliRunner
-
-from gcs.cli import app
-
-runner = CliRunner()
+from cli_runner import invoke as gcs_invoke
 
 
 def test_montecarlo_adaptive_prints_the_comparison_and_writes_json(tmp_path: Path) -> None:
     out = tmp_path / "mc.json"
     args = ["montecarlo", "--levels", "0.05,0.4", "--plants", "3", "--repeats", "2",
             "--iterations", "30", "--adaptive", "--json", str(out)]  # fmt: skip
-    result = runner.invoke(app, args)
+    result = gcs_invoke(args)
     assert result.exit_code == 0, result.output
     assert "(adaptive)" in result.output  # the comparison line of each level
     assert "j = 2..5" in result.output and "diverged" in result.output
@@ -31,7 +27,7 @@ def test_montecarlo_default_output_has_no_adaptive_rows(tmp_path: Path) -> None:
     out = tmp_path / "mc.json"
     args = ["montecarlo", "--levels", "0.05", "--plants", "3", "--repeats", "2",
             "--iterations", "30", "--json", str(out)]  # fmt: skip
-    result = runner.invoke(app, args)
+    result = gcs_invoke(args)
     assert result.exit_code == 0, result.output
     assert "adaptive" not in result.output
     assert isinstance(json.loads(out.read_text()), list)
@@ -39,5 +35,5 @@ def test_montecarlo_default_output_has_no_adaptive_rows(tmp_path: Path) -> None:
 
 def test_montecarlo_adaptive_refuses_a_study_too_large_for_memory() -> None:
     args = ["montecarlo", "--samples", "2000", "--adaptive"]
-    result = runner.invoke(app, args)
+    result = gcs_invoke(args)
     assert result.exit_code == 2 and "GB" in result.output

@@ -7,8 +7,8 @@ import re
 from pathlib import Path
 
 import pytest
+from cli_runner import invoke as gcs_invoke
 from synthetic import make_adaptive_run, make_run
-from typer.testing import CliRunner
 
 import gcs.cli
 from gcs.app.failures import (
@@ -20,15 +20,12 @@ from gcs.app.failures import (
 )
 from gcs.app.fly import FlyRequest, fly
 from gcs.app.montecarlo import MontecarloRequest, blas_threads, montecarlo_settings
-from gcs.cli import app
 from gcs.errors import ProfileError
 from gcs.io.paths import packaged_dir
 
-runner = CliRunner()
-
 
 def invoke(*args: object):
-    return runner.invoke(app, [str(a) for a in args], env={"COLUMNS": "200"})
+    return gcs_invoke([str(a) for a in args], env={"COLUMNS": "200"})
 
 
 def test_the_cli_uses_typers_public_api_and_registers_commands_one_way() -> None:

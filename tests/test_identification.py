@@ -10,13 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from cli_runner import invoke as gcs_invoke
 from synthetic import ROOT
-from typer.testing import CliRunner
 
 from gcs.app.identify import create_identification_run, run_identify
 from gcs.app.identify_fit import identify_run
 from gcs.app.identify_plan import IdentifyRequest, plan_experiments
-from gcs.cli import app
 from gcs.core.model import frequency_response, from_transfer_function, markov_parameters, simulate
 from gcs.core.pbsid import continuous_poles
 from gcs.errors import ProfileError, TrajectoryError
@@ -25,7 +24,6 @@ from gcs.io.records import TrialRecord, TrialStatus
 from gcs.io.rundir import RunDir
 from gcs.io.settings import IdentifySettings
 
-runner = CliRunner()
 DT = 0.05
 # Truth: a second-order-plus-delay closed loop (wn 1.6 rad/s, zeta 0.55, gain 1, 0.25 s),
 # x and y different so that a mix-up of the axes shows.
@@ -38,7 +36,7 @@ NOISE_M = 0.003
 
 
 def invoke(*args: object):
-    return runner.invoke(app, [str(a) for a in args])
+    return gcs_invoke([str(a) for a in args])
 
 
 def antx_data(**identification) -> dict:

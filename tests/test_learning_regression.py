@@ -18,11 +18,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import invoke as gcs_invoke
 from learning_cases import CASES, RECORD, learned_case
 from records import NUMBER, assert_close, assert_json_close, assert_text_close, printed_unit
-from typer.testing import CliRunner
-
-from gcs.cli import app
 
 DATA = Path(__file__).resolve().parent / "data"
 RTOL_LEARNED = 1e-9  # of a learned file's largest magnitude, after several trials
@@ -96,7 +94,7 @@ def test_montecarlo_tables_are_those_recorded(tmp_path: Path, record: str, args:
     # rows of one process (tests/test_montecarlo_dask.py)
     out = tmp_path / "mc.json"
     argv = ["montecarlo", *args, "--workers", "0", "--json", str(out)]
-    result = CliRunner().invoke(app, argv)
+    result = gcs_invoke(argv)
     assert result.exit_code == 0, result.output
     now = _without_seconds(json.loads(out.read_text()))
     recorded = _without_seconds(json.loads((DATA / record).read_text()))

@@ -16,20 +16,19 @@ import sys
 from pathlib import Path
 
 import pytest
+from cli_runner import invoke as gcs_invoke
 from records import assert_json_close, assert_text_close
 from test_learning_regression import study_atol
-from typer.testing import CliRunner
 
 from gcs.app import study_cluster
 from gcs.app.study_cluster import Cluster, place
-from gcs.cli import app
 
 DATA = Path(__file__).parent / "data"
 TABLE_ATOL = 0.0101  # the table prints 2 decimals: a last-bit change may flip one rounding
 
 
 def run_cli(*args: str) -> tuple[int, str]:
-    result = CliRunner().invoke(app, list(args), env={"COLUMNS": "80"})
+    result = gcs_invoke(list(args), env={"COLUMNS": "80"})
     return result.exit_code, result.output
 
 

@@ -9,22 +9,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import invoke as gcs_invoke
 from synthetic import make_run
-from typer.testing import CliRunner
 
 from gcs.app.report import rounded, run_metrics
 from gcs.app.report_figures import report_figures
 from gcs.app.report_html import write_html
-from gcs.cli import app
 from gcs.core.trials import trial_errors
 from gcs.errors import RunLogError
 
-runner = CliRunner()
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
 def invoke(*args: object):
-    return runner.invoke(app, [str(a) for a in args], env={"COLUMNS": "200"})
+    return gcs_invoke([str(a) for a in args], env={"COLUMNS": "200"})
 
 
 def test_missing_and_incomplete_trials_are_listed_not_dropped(tmp_path: Path) -> None:
@@ -373,7 +371,7 @@ def test_the_table_is_never_cut_at_80_columns_or_in_a_pipe(tmp_path: Path, width
 
     run = make_adaptive_run(tmp_path, trials=4, gust_m=0.01)
     env = {"COLUMNS": str(width)} if width else {}
-    result = runner.invoke(app, ["report", str(run.path)], env=env)  # CliRunner: not a tty
+    result = gcs_invoke(["report", str(run.path)], env=env)  # CliRunner: not a tty
     assert result.exit_code == 0, result.output
     assert "…" not in result.output
     for header in ("e_pos", "e/e0", "change", "verdict", "learning step"):

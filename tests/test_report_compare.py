@@ -9,19 +9,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import invoke as gcs_invoke
 from synthetic import make_adaptive_run, make_run
-from typer.testing import CliRunner
 
 from gcs.app.report_export import setpoints_samples
-from gcs.cli import app
 from gcs.core.trials import trial_errors
 from gcs.io.config import load_trajectory
 
-runner = CliRunner()
-
 
 def invoke(*args: object):
-    return runner.invoke(app, [str(a) for a in args], env={"COLUMNS": "200"})
+    return gcs_invoke([str(a) for a in args], env={"COLUMNS": "200"})
 
 
 @pytest.fixture(scope="module")

@@ -9,20 +9,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import invoke as gcs_invoke
 from synthetic import make_adaptive_run, make_run
-from typer.testing import CliRunner
 
 from gcs.app.report import run_learning, run_metrics, run_verdict
 from gcs.app.report_html import write_html
-from gcs.cli import app
 from gcs.core.trials import trial_errors
 
-runner = CliRunner()
 SCHEMA = Path(__file__).resolve().parents[1] / "docs" / "report.schema.json"
 
 
 def invoke(*args: object, columns: int = 200):
-    return runner.invoke(app, [str(a) for a in args], env={"COLUMNS": str(columns)})
+    return gcs_invoke([str(a) for a in args], env={"COLUMNS": str(columns)})
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from typer.testing import CliRunner
+from cli_runner import invoke as gcs_invoke
 
 from gcs.app import study_cluster
 from gcs.app.study_chunks import (
@@ -29,7 +29,6 @@ from gcs.app.study_chunks import (
     summarise_study,
 )
 from gcs.app.study_cluster import Cluster, connect
-from gcs.cli import app
 from gcs.io.study import load_study
 
 BIN = Path(sys.executable).parent
@@ -61,7 +60,7 @@ def study_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def run_cli(*args: str) -> tuple[int, str]:
-    result = CliRunner().invoke(app, list(args), env={"COLUMNS": "120"})
+    result = gcs_invoke(list(args), env={"COLUMNS": "120"})
     return result.exit_code, result.output
 
 

@@ -17,10 +17,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from cli_runner import invoke as gcs_invoke
 from click.testing import Result
-from typer.testing import CliRunner
 
-from gcs.cli import app
 from gcs.flight import campaign
 from gcs.mock.config import load_mock_config
 from gcs.sim.drone import SimulatedDrone
@@ -40,7 +39,6 @@ def invoke_gcs(*args: object, cwd: Path = ROOT) -> Result:
     ``stdout`` alone is what a shell's ``> FILE`` would write)."""
     from gcs import cli
 
-    runner = CliRunner()
     before = os.getcwd()
     os.chdir(cwd)  # by default as the subprocesses of the e2e tests: logs/ of the checkout
     # wide enough that no temporary path (pytest-xdist's are longer) is wrapped; the command
@@ -49,8 +47,8 @@ def invoke_gcs(*args: object, cwd: Path = ROOT) -> Result:
     cli.console.width = cli.err_console.width = 400
     try:
         with virtual_time():
-            return runner.invoke(
-                app, [str(a) for a in args], env={"COLUMNS": "400"}, catch_exceptions=False
+            return gcs_invoke(
+                [str(a) for a in args], env={"COLUMNS": "400"}, catch_exceptions=False
             )
     finally:
         cli.console.width, cli.err_console.width = widths
