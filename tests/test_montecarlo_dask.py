@@ -86,6 +86,7 @@ def test_a_short_studys_here_on_threads_by_default_with_the_rows_of_workers_0(
 ) -> None:
     # two threads here (one per core) against --workers 0, the tasks one after the other
     monkeypatch.setattr(study_cluster, "machine_workers", lambda: 2)
+    monkeypatch.setattr(study_cluster, "busy_cores", lambda: 0.0)  # not the machine's load
     rows, lines = {}, {}
     for name, extra in (("default", []), ("0", ["--workers", "0"])):
         out = tmp_path / f"mc-{name}.json"
@@ -105,6 +106,7 @@ def test_a_study_judged_long_moves_its_other_tasks_to_a_local_cluster(
     # go to a local cluster; the rows are still those of one process
     monkeypatch.setattr(study_cluster, "LOCAL_CLUSTER_COST_S", 0.0)
     monkeypatch.setattr(study_cluster, "machine_workers", lambda: 2)
+    monkeypatch.setattr(study_cluster, "busy_cores", lambda: 0.0)  # not the machine's load
     out, here = tmp_path / "mc.json", tmp_path / "mc-0.json"
     code, output = run_cli(*SMALL, "--json", str(out))
     assert code == 0, output
@@ -117,25 +119,46 @@ def test_a_study_judged_long_moves_its_other_tasks_to_a_local_cluster(
 
 
 def test_a_short_study_is_placed_here_and_a_long_one_on_a_cluster() -> None:
-    short = place(Cluster(), lambda: 3.0, tasks=8, cores=2, cluster_cost_s=14.0)
+    short = place(Cluster(), lambda: 3.0, tasks=8, cores=2, busy=0, cluster_cost_s=14.0)
     assert short.cluster.workers == 0 and short.estimate_s == 3.0
     assert short.line.startswith("in this process: the study is short (est. 3.0 s")
     # on threads here when the tasks release the GIL: one per core, no more than the tasks
-    threads = place(Cluster(), lambda: 3.0, tasks=8, cores=2, cluster_cost_s=14.0, threads=True)
+    threads = place(
+        Cluster(), lambda: 3.0, tasks=8, cores=2, busy=0, cluster_cost_s=14.0, threads=True
+    )
     assert threads.cluster == Cluster(workers=0, threads=2)
     assert threads.line.startswith("in this process on 2 threads: the study is short (est. 3.0")
-    assert place(Cluster(), lambda: 3.0, 1, cores=2, threads=True).cluster.threads == 1
-    assert place(Cluster(), lambda: 1e4, 8, cores=2, threads=True).cluster.workers == 2
-    long = place(Cluster(blas_threads=2), lambda: 100.0, tasks=8, cores=2, cluster_cost_s=14.0)
+    assert place(Cluster(), lambda: 3.0, 1, cores=2, busy=0, threads=True).cluster.threads == 1
+    assert place(Cluster(), lambda: 1e4, 8, cores=2, busy=0, threads=True).cluster.workers == 2
+    long = place(
+        Cluster(blas_threads=2), lambda: 100.0, tasks=8, cores=2, busy=0, cluster_cost_s=14.0
+    )
     assert long.cluster == Cluster(workers=2, blas_threads=2)
     assert long.line.startswith("on a local Dask cluster of 2 workers: the study is long")
     # the saving (half of 30 s on two workers) is just above the cost, then just below
-    assert place(Cluster(), lambda: 30.0, 8, cores=2, cluster_cost_s=14.0).cluster.workers == 2
-    assert place(Cluster(), lambda: 26.0, 8, cores=2, cluster_cost_s=14.0).cluster.workers == 0
+    assert (
+        place(Cluster(), lambda: 30.0, 8, cores=2, busy=0, cluster_cost_s=14.0).cluster.workers == 2
+    )
+    assert (
+        place(Cluster(), lambda: 26.0, 8, cores=2, busy=0, cluster_cost_s=14.0).cluster.workers == 0
+    )
     # no more workers than tasks; one core or one task: nothing to share
-    assert place(Cluster(), lambda: 1e4, 3, cores=8, cluster_cost_s=14.0).cluster.workers == 3
-    assert place(Cluster(), lambda: 1e4, 8, cores=1, cluster_cost_s=14.0).cluster.workers == 0
-    assert place(Cluster(), lambda: 1e4, 1, cores=8, cluster_cost_s=14.0).cluster.workers == 0
+    assert (
+        place(Cluster(), lambda: 1e4, 3, cores=8, busy=0, cluster_cost_s=14.0).cluster.workers == 3
+    )
+    assert (
+        place(Cluster(), lambda: 1e4, 8, cores=1, busy=0, cluster_cost_s=14.0).cluster.workers == 0
+    )
+    assert (
+        place(Cluster(), lambda: 1e4, 1, cores=8, busy=0, cluster_cost_s=14.0).cluster.workers == 0
+    )
+    # cores other work keeps busy are not the study's: at load 3 on 2 cores the long study
+    # stays here, and says why; on 8 cores at load 5 (4 busy besides this process) 4 workers
+    loaded = place(Cluster(), lambda: 1e4, 8, cores=2, busy=2.4, cluster_cost_s=14.0)
+    assert loaded.cluster.workers == 0
+    assert "2 cores, about 2 kept busy by other work: nothing to share" in loaded.line
+    assert place(Cluster(), lambda: 1e4, 8, cores=8, busy=4.0).cluster.workers == 4
+    assert place(Cluster(), lambda: 1e4, 8, cores=8, busy=40.0).cluster.workers == 0
 
 
 def test_workers_and_scheduler_given_are_obeyed_without_an_estimate() -> None:
@@ -143,7 +166,7 @@ def test_workers_and_scheduler_given_are_obeyed_without_an_estimate() -> None:
         raise AssertionError("estimated although the options decided")
 
     for given in (Cluster(workers=0), Cluster(workers=3), Cluster(scheduler="tcp://h:8786")):
-        placed = place(given, never, tasks=8, cores=2, cluster_cost_s=14.0)
+        placed = place(given, never, tasks=8, cores=2, cluster_cost_s=14.0, busy=0)
         assert placed.cluster == given and placed.estimate_s is None
         assert placed.line == given.describe() + " (as asked)"
 
