@@ -69,6 +69,40 @@ def test_scatter_is_the_spread_of_a_single_flights_epos() -> None:
     assert estimated == pytest.approx(truth, rel=0.25)
 
 
+def test_the_spread_between_three_or_more_flights_is_a_single_flights_scatter() -> None:
+    rng = np.random.default_rng(3)
+    v = ou_noise(rng, (3000, 4, 280, 2), 0.95) * 0.02
+    truth = np.var(np.mean(np.hypot(v[:, 0, :, 0], v[:, 0, :, 1]), axis=1))
+    for k in (3, 4):
+        floors = [floor_from_flights(v[i, :k]) for i in range(v.shape[0])]
+        between = np.array([f.scatter_between_m for f in floors])
+        # the variance, not the sd, is what the estimate is unbiased for
+        assert np.mean(between**2) == pytest.approx(truth, rel=0.1), k
+        assert all(f.scatter_m == max(f.scatter_within_m, f.scatter_between_m) for f in floors)
+    pair = floor_from_flights(v[0, :2])
+    assert pair.scatter_between_m is None and pair.scatter_m == pair.scatter_within_m
+
+
+def test_a_wander_slower_than_a_trial_is_seen_only_between_flights() -> None:
+    """The lab on firmware: a slow swing of the vehicle, of an amplitude that differs from
+    flight to flight, over a trial that holds two of its periods. Within one trial the
+    scatter comes out far below the true spread of e_pos; measured between four flights it
+    does not."""
+    rng = np.random.default_rng(4)
+    t = np.arange(280) * 0.05  # a 14 s trial
+    campaigns, k = 1500, 4
+    amplitude = 0.1 * rng.lognormal(0.0, 0.5, size=(campaigns, k, 1, 2))  # [m]
+    phase = rng.uniform(0, 2 * np.pi, size=(campaigns, k, 1, 2))
+    v = amplitude * np.sin(2 * np.pi * t[:, None] / 6.0 + phase)  # a 6 s period
+    v = v + 0.01 * rng.standard_normal(v.shape)
+    truth = np.std(np.mean(np.hypot(v[:, 0, :, 0], v[:, 0, :, 1]), axis=1))
+    floors = [floor_from_flights(v[i]) for i in range(campaigns)]
+    within = np.median([f.scatter_within_m for f in floors])
+    scatter = np.median([f.scatter_m for f in floors])
+    assert within < 0.5 * truth
+    assert scatter == pytest.approx(truth, rel=0.3)
+
+
 def test_integrated_autocorrelation() -> None:
     rng = np.random.default_rng(3)
     white = rng.standard_normal(20000)
