@@ -1,0 +1,261 @@
+"""Learning at the floor on real PX4 v1.16 firmware (SIH) in lab rigs as real labs are.
+
+Each flight is a fresh PX4 set up for vision only (``tests/px4/test_px4_lab.py``'s
+``LAB_PARAMS``) and a fresh rig (``tests/px4/lab_rig.py``: PX4's ground truth served as an
+OptiTrack rigid body) under one point of the lab's conditions: frame rate, latency from motion
+to frame (EKF2_EV_DELAY told or left at 0), marker noise and the room's heading. Then the
+README's flight, ``gcs fly --mocap ... --profile P --iter J`` on the default eight, with the
+tests' watchdog limits. Per flight: e_pos of every trial in floors (the floor from trial 0 and
+its repeat), the model refresh's changes and the safeguard's decisions, from the run's records.
+
+Points are given (``--point RATE:LATENCY:NOISE:HEADING:MATCH``) or drawn across the ranges
+with a seed (``--draw K --seed S``: printed, so any run can be flown again). Run directories
+are kept under ``--out``; a point and profile already flown there is not flown again.
+
+    .venv/bin/python benchmarks/lab_floor_px4.py --point 100:30:1:30:1 --profiles antx-adaptive
+    .venv/bin/python benchmarks/lab_floor_px4.py --draw 6 --seed 1 --parallel 2
+    .venv/bin/python benchmarks/lab_floor_px4.py --table        # the table of what was flown
+
+Nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+from px4.flying import report_rows  # noqa: E402
+from px4.lab_rig import LabRig  # noqa: E402
+from px4.sitl import STARTED_LINE, Px4Build, Px4Sitl, build_dir  # noqa: E402
+from px4.test_px4_lab import LabConditions  # noqa: E402
+from synthetic import CI_FLIGHT  # noqa: E402
+
+from gcs.core.floor import floor_from_flights  # noqa: E402
+from gcs.io.rundir import RunDir  # noqa: E402
+
+FLY_TIMEOUT_S = 1800
+#: the ranges the points are drawn from (docs/learning-floor.md says where they come from)
+RANGES = {"rate_hz": (50.0, 360.0), "latency_ms": (0.0, 50.0), "noise_mm": (0.1, 2.0)}
+
+
+def parse_point(text: str) -> LabConditions:
+    rate, latency, noise, heading, match = text.split(":")
+    return LabConditions(float(rate), float(latency), float(noise), float(heading), match == "1")
+
+
+def draw_points(count: int, seed: int) -> list[LabConditions]:
+    """``count`` points, uniform over :data:`RANGES`, any heading, EKF2_EV_DELAY told or not."""
+    rng = np.random.default_rng(seed)
+    points = []
+    for _ in range(count):
+        rate, latency, noise = (float(rng.uniform(*RANGES[k])) for k in RANGES)
+        heading = float(rng.uniform(-180.0, 180.0))
+        points.append(
+            LabConditions(
+                round(rate), round(latency), round(noise, 1), round(heading), bool(rng.integers(2))
+            )
+        )
+    return points
+
+
+def name_of(point: LabConditions, profile: str) -> str:
+    return (
+        f"{profile}-r{point.rate_hz:g}-l{point.latency_ms:g}-n{point.noise_mm:g}"
+        f"-h{point.yaw_offset_deg:g}-m{int(point.match_ev_delay)}"
+    )
+
+
+def profile_file(dest: Path, spec: str) -> Path:
+    """The shipped profile of ``spec`` (``NAME`` or ``NAME+a.b.c=VALUE+...``: fields set) with
+    the tests' watchdog limits, written to ``dest``."""
+    name, *fields = spec.split("+")
+    data = yaml.safe_load((ROOT / "profiles" / f"{name}.yaml").read_text())
+    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
+    data["mocap"] = {}
+    for field in fields:
+        keys, value = field.split("=")
+        *parents, last = keys.split(".")
+        section = data
+        for key in parents:
+            section = section.setdefault(key, {})
+        section[last] = yaml.safe_load(value)
+    path = dest / "profile-lab.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def fly(
+    build: Px4Build,
+    out: Path,
+    point: LabConditions,
+    profile: str,
+    iterations: int,
+    again: int | None = None,
+) -> None:
+    """One flight into ``out/NAME`` (kept), its output in ``out/NAME.log``: a new run, or the
+    run resumed for ``iterations`` more trials (the first flying trial ``again``'s setpoints)."""
+    name = name_of(point, profile)
+    run = out / name
+    work = out / f".{name}-px4"
+    work.mkdir(parents=True, exist_ok=True)
+    vehicle = Px4Sitl(build, work, point.px4_params(), ready=STARTED_LINE)
+    t0 = time.monotonic()
+    load = os.getloadavg()[0]
+    try:
+        vehicle.start()
+        with LabRig(vehicle.instance, point.rig_args()) as rig:
+            args = ["fly", "--connect", vehicle.url, "--mocap", rig.url, "--iter", str(iterations),
+                    "--profile", str(profile_file(work, profile)), "--run", str(run)]  # fmt: skip
+            if run.exists():
+                args = ["fly", "--connect", vehicle.url, "--mocap", rig.url, "--resume", str(run),
+                        "--iter", str(iterations)]  # fmt: skip
+                args += [] if again is None else ["--again", str(again)]
+            try:
+                proc = subprocess.run(
+                    [sys.executable, "-m", "gcs", *args], cwd=ROOT, capture_output=True,
+                    text=True, timeout=FLY_TIMEOUT_S,
+                    env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
+                )  # fmt: skip
+                text = proc.stdout + proc.stderr
+            except subprocess.TimeoutExpired as exc:
+                text = f"{exc.stdout or ''}{exc.stderr or ''}\nno end after {FLY_TIMEOUT_S} s"
+    finally:
+        vehicle.stop()
+    meta = {"load_before": round(load, 2), "load_after": round(os.getloadavg()[0], 2),
+            "wall_s": round(time.monotonic() - t0, 1)}  # fmt: skip
+    with (out / f"{name}.log").open("a") as log:
+        log.write(text + "\n" + json.dumps(meta) + "\n")
+
+
+def identical_groups(rd: RunDir) -> list[list[int]]:
+    """Groups of two or more complete trials flown with identical setpoints (a repeat, a
+    flight of ``--again K`` and trial K)."""
+    groups: dict[bytes, list[int]] = {}
+    for j in rd.complete_trials():
+        sp = rd.read_trial(j).sp_ned_m[:-1, :2]
+        groups.setdefault(np.ascontiguousarray(sp).tobytes(), []).append(j)
+    return [g for g in groups.values() if len(g) >= 2]
+
+
+def group_floors(rd: RunDir, epos_m: dict[int, float]) -> list[dict]:
+    """Per group of identical setpoints: its floor and the scatter gcs estimates within the
+    trials (:func:`gcs.core.floor.floor_from_flights`), the floor of each pair, and the
+    e_pos of its flights (their spread is the scatter between flights)."""
+    out = []
+    for group in identical_groups(rd):
+        pos = {j: rd.measured_trial(j).pos_ned_m[1:, :2] for j in group}
+        floor = floor_from_flights(np.array([pos[j] for j in group]))
+        pairs = {
+            f"{a}/{b}": round(floor_from_flights(np.array([pos[a], pos[b]])).epos_m, 4)
+            for i, a in enumerate(group)
+            for b in group[i + 1 :]
+        }
+        e = [epos_m[j] for j in group]
+        out.append({
+            "trials": group, "floor_m": round(floor.epos_m, 4),
+            "scatter_m": round(floor.scatter_m, 4),
+            "scatter_within_m": round(floor.scatter_within_m, 4),
+            "scatter_between_m": floor.scatter_between_m and round(floor.scatter_between_m, 4),
+            "pair_floors_m": pairs,
+            "epos_m": [round(x, 4) for x in e],
+        })  # fmt: skip
+    return out
+
+
+def summary(run: Path) -> dict:
+    """Per trial e_pos [m] and in floors, the refresh's changes, the safeguard's decisions and
+    the floors of every group of identical setpoints."""
+    rows = report_rows(run)
+    rd = RunDir.open(run)
+    floor = next((r.get("floor_m") for r in rows if r.get("floor_m")), None)
+    decisions = []
+    for j, record in sorted(rd.learn_records().items()):
+        decision = record.get("decision") or {}
+        refresh = {}
+        for axis in decision.get("axes") or []:
+            r = axis.get("refresh")
+            if r is not None:
+                refresh[axis["axis"]] = {
+                    "accepted": r["accepted"], "moved": r["moved"],
+                    "candidate_moved": r["candidate_moved"], "reason": r["reason"],
+                }  # fmt: skip
+        guard = decision.get("safeguard")
+        decisions.append(
+            {
+                "after_trial": j,
+                "refresh": refresh,
+                "safeguard": guard
+                and {k: guard[k] for k in ("action", "anchor_trial", "step", "reason")},
+            }
+        )
+    return {
+        "run": run.name,
+        "trial": [r["trial"] for r in rows],
+        "iteration": [r["iteration"] for r in rows],
+        "epos_m": [round(r["epos_m"], 4) for r in rows],
+        "floor_m": floor,
+        "floors": [round(r["epos_m"] / floor, 2) for r in rows] if floor else None,
+        "decisions": decisions,
+        "identical": group_floors(rd, {r["trial"]: r["epos_m"] for r in rows}),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--point", action="append", default=[], help="RATE:LATENCY:NOISE:HEADING:MATCH"
+    )
+    parser.add_argument("--draw", type=int, default=0, help="points drawn across the ranges")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--profiles",
+        default="antx-adaptive,antx",
+        help="comma-separated; NAME+a.b=VALUE sets a field (learning.limits.max_step_m=0.2)",
+    )
+    parser.add_argument("--iter", type=int, default=8)
+    parser.add_argument("--parallel", type=int, default=1, help="PX4 instances at a time")
+    parser.add_argument("--out", type=Path, default=ROOT / "logs" / "lab-floor")
+    parser.add_argument("--table", action="store_true", help="only the table of what was flown")
+    parser.add_argument(
+        "--again", type=int, help="resume each run, flying trial K's setpoints again first"
+    )
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    if not args.table:
+        points = [parse_point(p) for p in args.point] + draw_points(args.draw, args.seed)
+        for p in points:
+            print("point", json.dumps(p.__dict__), flush=True)
+        build = Px4Build(build_dir()[0])
+        build.runnable()
+        plan = [(p, prof) for p in points for prof in args.profiles.split(",")]
+        with ThreadPoolExecutor(args.parallel) as pool:
+            list(
+                pool.map(
+                    lambda item: fly(build, args.out, item[0], item[1], args.iter, args.again),
+                    plan,
+                )
+            )
+    for run in sorted(
+        p
+        for p in args.out.iterdir()
+        if p.is_dir() and not p.is_symlink() and not p.name.startswith(".")
+    ):
+        try:
+            print(json.dumps(summary(run)), flush=True)
+        except Exception as exc:  # noqa: BLE001 - a run that did not fly a trial is a line too
+            print(json.dumps({"run": run.name, "error": f"{type(exc).__name__}: {exc}"[:200]}))
+
+
+if __name__ == "__main__":
+    main()
