@@ -11,7 +11,7 @@ from synthetic import make_run, true_plants
 from gcs.app.fly import RunSource, prepare_run
 from gcs.app.session import to_record
 from gcs.core.model import simulate
-from gcs.errors import ProfileError, TrajectoryError
+from gcs.errors import ProfileError, RunLogError, TrajectoryError
 from gcs.flight.trial import TrialRecording
 from gcs.io.config import profile_from_dict
 from gcs.io.rundir import RunDir
@@ -74,6 +74,38 @@ def test_record_incomplete_is_kept_but_never_learned_from(tmp_path: Path) -> Non
     assert not status.complete and status.reason == "interrupted"
     assert run.next_trial() == 0
     assert not (run.path / "setpoints-001.csv").exists()
+
+
+def test_a_flown_trial_whose_mocap_misses_a_grid_time_is_kept_and_flown_again(
+    tmp_path: Path,
+) -> None:
+    """A complete flight whose mocap has no position at k = 0 (a stream that paused across
+    the trial's start): learning cannot use it, and the flight's data are kept, marked
+    incomplete, so that a resume flies the trial again."""
+    from dataclasses import replace
+
+    from gcs.io.mocap_samples import MocapSeries, MocapTrial
+
+    run = make_run(tmp_path, trials=0)
+    flown = recording(run, run.read_setpoints(0))
+    on_grid = flown.pos_ned_m.copy()
+    on_grid[0] = np.nan
+    t = flown.t_s[1:]
+    series = MocapSeries(
+        seq=np.arange(t.size), t_receipt_s=t, t_mocap_s=np.full(t.size, np.nan),
+        tracked=np.ones(t.size, dtype=bool), pos_m=flown.pos_ned_m[1:],
+        quat_wxyz=np.tile([1.0, 0.0, 0.0, 0.0], (t.size, 1)),
+    )  # fmt: skip
+    holed = replace(flown, mocap=MocapTrial(series, on_grid, None))
+    with pytest.raises(RunLogError, match="no mocap position at k = 0"):
+        RunSource(run).record(0, holed)
+    status = run.read_status(0)
+    assert not status.complete and "no mocap position at k = 0" in status.reason
+    assert run.next_trial() == 0 and not (run.path / "setpoints-001.csv").exists()
+    kept = np.genfromtxt(run.trial_path(0), delimiter=",", names=True)
+    np.testing.assert_allclose(kept["pos_north_m"], flown.pos_ned_m[:, 0])  # as flown
+    assert np.isnan(kept["mocap_north_m"][0]) and np.isfinite(kept["mocap_north_m"][1:]).all()
+    assert (run.path / "mocap-000.csv").exists()  # and the raw stream
 
 
 def test_setpoints_outside_the_arena_are_refused(tmp_path: Path) -> None:

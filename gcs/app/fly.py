@@ -612,7 +612,13 @@ class RunSource(SessionRecorder):
         """
         record = to_record(self.run, recording)
         extra = trial_extra(recording, self.session)
-        measured = record.measured(self.run.profile().mocap.measurement)
+        try:
+            measured = record.measured(self.run.profile().mocap.measurement)
+        except RunLogError as exc:
+            # flown, but the measurement learning needs has a hole (the mocap stream missed a
+            # grid time): kept as flown, marked incomplete, so that a resume flies it again
+            self.record_incomplete(j, recording, f"flown, but {exc}")
+            raise
         e, m = trial_errors(measured)
         extra["epos_3d_m"], *rms = trial_errors_3d(measured)
         extra["rms_ned_m"] = rms
