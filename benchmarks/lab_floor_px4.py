@@ -8,9 +8,16 @@ README's flight, ``gcs fly --mocap ... --profile P --iter J`` on the default eig
 tests' watchdog limits. Per flight: e_pos of every trial in floors (the floor from trial 0 and
 its repeat), the model refresh's changes and the safeguard's decisions, from the run's records.
 
-Points are given (``--point RATE:LATENCY:NOISE:HEADING:MATCH``) or drawn across the ranges
-with a seed (``--draw K --seed S``: printed, so any run can be flown again). Run directories
-are kept under ``--out``; a point and profile already flown there is not flown again.
+Points are given (``--point RATE:LATENCY:NOISE:HEADING:MATCH``; ``--point gps``: PX4's
+default airframe on GPS, no rig) or drawn across the ranges with a seed (``--draw K --seed
+S``: printed, so any run can be flown again). A profile ``NAME+a.b=VALUE`` sets a field of
+the shipped one (``antx-adaptive+learning.adaptive.repeats=3``). Run directories are kept
+under ``--out``: a run there is resumed for the trials it lacks, or with ``--again K``
+resumed flying trial K's setpoints again (the same setpoints twice: their floor). For every
+group of flights of identical setpoints the table gives the floor of the group and of each
+pair, the scatter within the trials and between the flights. The load average before and
+after each flight is in its log: the rig and PX4 each take a good part of a core, so fly one
+point at a time on a 2-core machine and nothing else beside it.
 
     .venv/bin/python benchmarks/lab_floor_px4.py --point 100:30:1:30:1 --profiles antx-adaptive
     .venv/bin/python benchmarks/lab_floor_px4.py --draw 6 --seed 1 --parallel 2
@@ -22,6 +29,7 @@ Nothing is asserted.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -49,7 +57,13 @@ FLY_TIMEOUT_S = 1800
 RANGES = {"rate_hz": (50.0, 360.0), "latency_ms": (0.0, 50.0), "noise_mm": (0.1, 2.0)}
 
 
-def parse_point(text: str) -> LabConditions:
+#: the point of a GPS flight: PX4's default airframe (SIH with GPS), no rig, no mocap
+GPS = None
+
+
+def parse_point(text: str) -> LabConditions | None:
+    if text == "gps":
+        return GPS
     rate, latency, noise, heading, match = text.split(":")
     return LabConditions(float(rate), float(latency), float(noise), float(heading), match == "1")
 
@@ -69,20 +83,23 @@ def draw_points(count: int, seed: int) -> list[LabConditions]:
     return points
 
 
-def name_of(point: LabConditions, profile: str) -> str:
+def name_of(point: LabConditions | None, profile: str) -> str:
+    if point is GPS:
+        return f"{profile}-gps"
     return (
         f"{profile}-r{point.rate_hz:g}-l{point.latency_ms:g}-n{point.noise_mm:g}"
         f"-h{point.yaw_offset_deg:g}-m{int(point.match_ev_delay)}"
     )
 
 
-def profile_file(dest: Path, spec: str) -> Path:
+def profile_file(dest: Path, spec: str, mocap: bool = True) -> Path:
     """The shipped profile of ``spec`` (``NAME`` or ``NAME+a.b.c=VALUE+...``: fields set) with
     the tests' watchdog limits, written to ``dest``."""
     name, *fields = spec.split("+")
     data = yaml.safe_load((ROOT / "profiles" / f"{name}.yaml").read_text())
     data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
-    data["mocap"] = {}
+    if mocap:
+        data["mocap"] = {}
     for field in fields:
         keys, value = field.split("=")
         *parents, last = keys.split(".")
@@ -95,10 +112,18 @@ def profile_file(dest: Path, spec: str) -> Path:
     return path
 
 
+def flown(run: Path) -> int:
+    """Complete trials of a run directory (0 when it holds none)."""
+    try:
+        return len(RunDir.open(run).complete_trials())
+    except Exception:  # noqa: BLE001 - a run set up but never flown
+        return 0
+
+
 def fly(
     build: Px4Build,
     out: Path,
-    point: LabConditions,
+    point: LabConditions | None,
     profile: str,
     iterations: int,
     again: int | None = None,
@@ -109,17 +134,25 @@ def fly(
     run = out / name
     work = out / f".{name}-px4"
     work.mkdir(parents=True, exist_ok=True)
-    vehicle = Px4Sitl(build, work, point.px4_params(), ready=STARTED_LINE)
+    params = {} if point is GPS else point.px4_params()
+    vehicle = Px4Sitl(build, work, params, ready=STARTED_LINE)
     t0 = time.monotonic()
     load = os.getloadavg()[0]
     try:
         vehicle.start()
-        with LabRig(vehicle.instance, point.rig_args()) as rig:
-            args = ["fly", "--connect", vehicle.url, "--mocap", rig.url, "--iter", str(iterations),
-                    "--profile", str(profile_file(work, profile)), "--run", str(run)]  # fmt: skip
-            if run.exists():
-                args = ["fly", "--connect", vehicle.url, "--mocap", rig.url, "--resume", str(run),
-                        "--iter", str(iterations)]  # fmt: skip
+        with contextlib.ExitStack() as stack:
+            source = ["--connect", vehicle.url]
+            if point is not GPS:
+                rig = stack.enter_context(LabRig(vehicle.instance, point.rig_args()))
+                source += ["--mocap", rig.url]
+            args = ["fly", *source, "--iter", str(iterations),
+                    "--profile", str(profile_file(work, profile, mocap=point is not GPS)),
+                    "--run", str(run)]  # fmt: skip
+            if run.exists():  # the trials still to fly (all of them again with --again)
+                left = iterations if again is not None else iterations - flown(run)
+                if left <= 0:
+                    return
+                args = ["fly", *source, "--resume", str(run), "--iter", str(left)]
                 args += [] if again is None else ["--again", str(again)]
             try:
                 proc = subprocess.run(
@@ -214,7 +247,7 @@ def summary(run: Path) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--point", action="append", default=[], help="RATE:LATENCY:NOISE:HEADING:MATCH"
+        "--point", action="append", default=[], help="RATE:LATENCY:NOISE:HEADING:MATCH, or gps"
     )
     parser.add_argument("--draw", type=int, default=0, help="points drawn across the ranges")
     parser.add_argument("--seed", type=int, default=0)
@@ -235,7 +268,7 @@ def main() -> None:
     if not args.table:
         points = [parse_point(p) for p in args.point] + draw_points(args.draw, args.seed)
         for p in points:
-            print("point", json.dumps(p.__dict__), flush=True)
+            print("point", json.dumps("gps" if p is GPS else p.__dict__), flush=True)
         build = Px4Build(build_dir()[0])
         build.runnable()
         plan = [(p, prof) for p in points for prof in args.profiles.split(",")]
