@@ -236,9 +236,9 @@ def summary(run: Path) -> dict:
         "run": run.name,
         "trial": [r["trial"] for r in rows],
         "iteration": [r["iteration"] for r in rows],
-        "epos_m": [round(r["epos_m"], 4) for r in rows],
+        "epos_m": [r["epos_m"] and round(r["epos_m"], 4) for r in rows],
         "floor_m": floor,
-        "floors": [round(r["epos_m"] / floor, 2) for r in rows] if floor else None,
+        "floors": [r["epos_m"] and round(r["epos_m"] / floor, 2) for r in rows] if floor else None,
         "decisions": decisions,
         "identical": group_floors(rd, {r["trial"]: r["epos_m"] for r in rows}),
     }
