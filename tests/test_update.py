@@ -596,6 +596,40 @@ def test_kept_update_solves_on_its_active_set_to_the_exact_minimiser(seed, delay
     assert stationarity < 1e-10 and infeasibility < 1e-10
 
 
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000), delay=st.integers(0, 3), order=st.integers(1, 3))
+def test_a_refreshed_models_update_starts_from_the_old_ones_active_set(seed, delay, order):
+    """The update of a refreshed model (the same axis, limits and reference) takes the old
+    model's active set as its first guess: where it holds it needs no Clarabel, and whatever
+    the guess its answer is the new problem's minimiser (the KKT conditions to rounding, and
+    a fresh update's answer within Clarabel's tolerance)."""
+    n = 30
+    old = random_stable_model(seed, delay, order)
+    yd, d_hat, u_prev = signals(seed, n)
+    w = UpdateWeights(1.0, 0.01, 0.001)
+    limits = binding_limits(next_input(old, yd, d_hat, u_prev, w).u_m, yd, relative_degree(old))
+    before = InputUpdate(old, yd, w, limits)
+    assert before.solve(d_hat, u_prev).active_constraints > 0
+    # the same model again (a refresh that moved nothing): the guess is the answer
+    same = InputUpdate(old, yd, w, limits)
+    same.start_from(before)
+    assert same.solve(d_hat, u_prev).method == "active-set"
+    # a moved model: a guess only
+    new = random_stable_model(seed + 1, delay, order)
+    started = InputUpdate(new, yd, w, limits)
+    started.start_from(before)
+    res = started.solve(d_hat, u_prev)
+    stationarity, infeasibility = kkt_violation(new, yd, d_hat, u_prev, w, limits, res.u_m)
+    assert stationarity < 1e-10 and infeasibility < 1e-10
+    fresh = InputUpdate(new, yd, w, limits).solve(d_hat, u_prev)
+    scale = max(1.0, float(np.max(np.abs(fresh.u_m))))
+    np.testing.assert_allclose(res.u_m, fresh.u_m, rtol=0, atol=1e-9 * scale)
+    # other limits: no guess taken
+    other = InputUpdate(old, yd, w, None)
+    other.start_from(before)
+    assert other.solve(d_hat, u_prev).method == "direct"
+
+
 def test_degenerate_active_set_is_solved_without_clarabel():
     """More limits hold with equality than there are inputs: the reference climbs at the rate
     limit and the optimum rides the deviation bound above it, so at every sample the bound

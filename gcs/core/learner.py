@@ -303,6 +303,8 @@ class Learner:
         s = self.settings
         limits = axis_limits(s.arena, self._start[axis], s.axes[axis], *s.limits_of(s.axes[axis]))
         update = InputUpdate(model, self._yd[:, axis], s.weights, limits)
+        if cached is not None:  # a refreshed model: its limits first guessed from the old one's
+            update.start_from(cached)
         self._updates[axis] = update
         return update
 

@@ -922,7 +922,8 @@ class InputUpdate:
             own = prob.P is s.P  # no robustness weight: the structure's KKT and Clarabel's QP
             base = s.kkt_base() if own else None
             found = None
-            if self._active is not None:  # the last trial's active set, refined
+            if self._active is not None and self._active.size == rows.b.size:
+                # the last trial's active set (or the replaced model's), refined
                 found = _active_set(prob, rows, self._active, _WARM_ROUNDS, base)
             if found is not None:
                 z, self._active = found
@@ -943,6 +944,23 @@ class InputUpdate:
         up = np.asarray(u_prev_m, dtype=float)
         objective = _objective(s.f, u, s.yd, dh, up, s.weights, prob.r, robustness)
         return UpdateResult(u, status, objective, method, active)
+
+    def start_from(self, previous: InputUpdate) -> None:
+        """Start the next constrained solve from ``previous``'s last active set.
+
+        For the update of a refreshed model of the same axis: the limits are the same, so the
+        limits active at the old model's answer are a good guess for the new one's (half of
+        the constrained solves of a study with the model refresh were a new model's first).
+        The guess is only a start: the answer is accepted only when it satisfies the KKT
+        conditions of the new problem, else Clarabel solves it.
+
+        Parameters
+        ----------
+        previous : InputUpdate
+            The update this one replaces.
+        """
+        if previous.limits == self.limits and previous._active is not None:
+            self._active = previous._active.copy()
 
     def fork(self) -> InputUpdate:
         """A new update of the same axis sharing this one's structure and factorisation, the
