@@ -25,21 +25,22 @@ def pytest_configure(config) -> None:
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Flights first, the real firmware's first of all, dealt alternately into two halves.
+    """Flights first, the real firmware's first of all, dealt in turn to the workers.
 
     The end-to-end tests run in real time (tens of seconds to minutes each), the rest in
-    milliseconds. ``make test`` runs ``pytest -n 2 --dist worksteal``: the workers start on the
-    two halves of this order and an idle one steals from the end of the other's queue. Dealt
-    alternately, each half starts with half of the real-firmware flights, then half of the
-    mock's, then quick tests: two vehicles fly at once from the start, and the quick tests fill
-    the end instead of one worker finishing a long flight alone."""
+    milliseconds. ``make test`` runs ``pytest -n 2 --dist worksteal``: the workers start on
+    equal parts of this order and an idle one steals from the end of another's queue. Dealt in
+    turn, each part starts with its share of the real-firmware flights, then of the mock's,
+    then quick tests: the vehicles fly at once from the start, and the quick tests fill the end
+    instead of one worker finishing a long flight alone."""
     items.sort(
         key=lambda item: (
             item.get_closest_marker("px4") is None,
             item.get_closest_marker("e2e") is None,
         )
     )
-    items[:] = items[0::2] + items[1::2]
+    workers = getattr(config, "workerinput", {}).get("workercount", 2)
+    items[:] = [item for part in range(workers) for item in items[part::workers]]
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
