@@ -71,7 +71,7 @@ def test_scatter_is_the_spread_of_a_single_flights_epos() -> None:
 
 def test_the_spread_between_three_or_more_flights_is_a_single_flights_scatter() -> None:
     rng = np.random.default_rng(3)
-    v = ou_noise(rng, (3000, 4, 280, 2), 0.95) * 0.02
+    v = ou_noise(rng, (1500, 4, 280, 2), 0.95) * 0.02
     truth = np.var(np.mean(np.hypot(v[:, 0, :, 0], v[:, 0, :, 1]), axis=1))
     for k in (3, 4):
         floors = [floor_from_flights(v[i, :k]) for i in range(v.shape[0])]
