@@ -132,6 +132,10 @@ def fly(
     run resumed for ``iterations`` more trials (the first flying trial ``again``'s setpoints)."""
     name = name_of(point, profile)
     run = out / name
+    # the trials still to fly in a run already there (all of them again with --again)
+    left = iterations if not run.exists() or again is not None else iterations - flown(run)
+    if left <= 0:
+        return  # complete: no PX4 or rig started for it
     work = out / f".{name}-px4"
     work.mkdir(parents=True, exist_ok=True)
     params = {} if point is GPS else point.px4_params()
@@ -148,10 +152,7 @@ def fly(
             args = ["fly", *source, "--iter", str(iterations),
                     "--profile", str(profile_file(work, profile, mocap=point is not GPS)),
                     "--run", str(run)]  # fmt: skip
-            if run.exists():  # the trials still to fly (all of them again with --again)
-                left = iterations if again is not None else iterations - flown(run)
-                if left <= 0:
-                    return
+            if run.exists():
                 args = ["fly", *source, "--resume", str(run), "--iter", str(left)]
                 args += [] if again is None else ["--again", str(again)]
             try:
