@@ -11,6 +11,7 @@ from gcs.core.floor import (
     Floor,
     FloorDrift,
     FloorVerdict,
+    first_flights,
     floor_drift,
     floor_flights,
     floor_from_difference,
@@ -191,6 +192,26 @@ def test_a_run_that_left_the_floor_it_reached_drifts() -> None:
     assert floor_drift(verdict_row(at[:5], epos[:5]), newest=1) == FloorDrift(2, 3, (4,))
     assert floor_drift(verdict_row([False] * 6, epos)) is None  # never reached: no drift
     assert floor_drift(verdict_row([*at, True], [*epos, 0.02])) is None  # back at the floor
+
+
+def test_a_flight_of_setpoints_flown_before_is_never_one_of_the_trials_above() -> None:
+    """Trial 1 repeats trial 0 (the floor's repeat): the same setpoints flying above the
+    floor is their scatter, not learning leaving it. Seen on firmware over GPS: trial 0 at
+    the floor, its repeat and the first learned trial above; a drift needs two learned."""
+    rng = np.random.default_rng(3)
+    sp = rng.normal(size=(5, 20, 2))
+    sp[1] = sp[0]
+    sp[4] = sp[0]  # gcs fly --again 0
+    assert first_flights(sp) == (0, 0, 2, 3, 0)
+    f = Floor(0.385, 0.4, (0.3, 0.3), (0.3, 0.3), 0.08, 20.0, 2, "repeat")
+    epos = np.array([0.524, 0.658, 0.676, 0.70, 0.30])
+    v = floor_verdicts(epos, f, 2.0, sp)
+    assert [x.repeat_of for x in v] == [None, 0, None, None, 0]
+    assert [x.at_floor for x in v] == [True, False, False, False, True]
+    assert floor_drift(v[:3]) is None  # the repeat does not count: one learned trial above
+    assert floor_drift(v[:4]) == FloorDrift(0, 0, (2, 3))  # two learned trials above
+    assert floor_drift(v) == FloorDrift(0, 0, (2, 3))  # --again 0 at the floor: learning's are not
+    assert floor_drift(floor_verdicts(epos[:3], f, 2.0)) == FloorDrift(0, 0, (1, 2))  # blind
 
 
 @given(st.lists(st.tuples(st.booleans(), st.floats(0.001, 1.0)), min_size=0, max_size=12))

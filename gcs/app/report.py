@@ -299,12 +299,13 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
     order = sorted(records)
     floor, group, verdicts = None, (), {}
     if history and len(order) > 1:
-        flights = floor_flights(np.array([records[t].sp_ned_m[:-1, :2] for t in order]))
+        sp_all = np.array([records[t].sp_ned_m[:-1, :2] for t in order])
+        flights = floor_flights(sp_all)
         if flights:
             group = tuple(order[i] for i in flights)
             floor = floor_from_flights(np.array([records[t].pos_ned_m[1:, :2] for t in group]))
             epos_all = [trial_errors(records[t])[0] for t in order]
-            found = floor_verdicts(np.array(epos_all), floor, floor_z)
+            found = floor_verdicts(np.array(epos_all), floor, floor_z, sp_all)
             verdicts = {order[i]: v for i, v in enumerate(found)}
     learned = run.learn_records() if history else {}
     trials = {}

@@ -35,6 +35,7 @@ __all__ = [
     "floor_from_flights",
     "floor_from_difference",
     "floor_flights",
+    "first_flights",
     "integrated_autocorrelation",
     "floor_verdicts",
     "FloorDrift",
@@ -290,6 +291,9 @@ class FloorVerdict:
     converged : bool
         This trial and the previous are at the floor and their mean lies within one
         single-flight scatter of the floor: further trials cannot show an improvement.
+    repeat_of : int or None
+        The earliest trial flown with this trial's setpoints when this one flew them again (a
+        repeat, ``gcs fly --again``); None for a trial of setpoints new to the run.
     """
 
     trial: int
@@ -298,10 +302,40 @@ class FloorVerdict:
     z: float
     at_floor: bool
     converged: bool
+    repeat_of: int | None = None
+
+
+def first_flights(setpoints_ne_m: np.ndarray, tol_m: float = IDENTICAL_TOL_M) -> tuple[int, ...]:
+    """For every trial, the earliest trial flown with its setpoints (itself if none).
+
+    Parameters
+    ----------
+    setpoints_ne_m : ndarray, shape (T, N, 2)
+        Setpoints of every trial, in trial order [m].
+    tol_m : float
+        Largest difference that counts as identical [m].
+
+    Returns
+    -------
+    tuple of int, length T
+        ``first[j] <= j``; ``first[j] < j`` when trial j flew trial ``first[j]``'s setpoints
+        again.
+    """
+    sp = np.asarray(setpoints_ne_m, dtype=float)
+    if sp.ndim != 3 or sp.shape[-1] != 2:
+        raise ValueError(f"setpoints_ne_m must have shape (T, N, 2), got {sp.shape}")
+    first: list[int] = []
+    for j in range(sp.shape[0]):
+        same = [i for i in range(j) if first[i] == i and np.max(np.abs(sp[j] - sp[i])) <= tol_m]
+        first.append(same[0] if same else j)
+    return tuple(first)
 
 
 def floor_verdicts(
-    epos_m: np.ndarray, floor: Floor, z_max: float = 2.0
+    epos_m: np.ndarray,
+    floor: Floor,
+    z_max: float = 2.0,
+    setpoints_ne_m: np.ndarray | None = None,
 ) -> tuple[FloorVerdict, ...]:
     """Verdicts "at the floor" and "converged" for every trial.
 
@@ -314,6 +348,9 @@ def floor_verdicts(
     z_max : float
         One-sided threshold of the z statistic (2: a trial at the floor is called so with
         probability 0.977 under a Gaussian e_pos).
+    setpoints_ne_m : ndarray, shape (T, N, 2), optional
+        The trials' setpoints [m]: marks the flights of setpoints flown before
+        (``FloorVerdict.repeat_of``). Default: every trial counts as new.
 
     Returns
     -------
@@ -322,6 +359,9 @@ def floor_verdicts(
     e = np.asarray(epos_m, dtype=float)
     if e.ndim != 1 or not np.all(np.isfinite(e)):
         raise ValueError(f"epos_m must be a finite 1-D array, got shape {e.shape}")
+    first = tuple(range(e.size)) if setpoints_ne_m is None else first_flights(setpoints_ne_m)
+    if len(first) != e.size:
+        raise ValueError(f"setpoints_ne_m has {len(first)} trials, epos_m {e.size}")
     sigma = floor.scatter_m
     sigma_d = float(np.hypot(sigma, floor.floor_scatter_m))
     out: list[FloorVerdict] = []
@@ -333,7 +373,8 @@ def floor_verdicts(
             j >= 1 and at and out[-1].at_floor and 0.5 * (e[j] + e[j - 1]) - floor.epos_m <= sigma
         )
         ratio = float(ej / floor.epos_m) if floor.epos_m > 0 else float("inf")
-        out.append(FloorVerdict(j, float(ej), ratio, float(z), at, bool(conv)))
+        again = None if first[j] == j else first[j]
+        out.append(FloorVerdict(j, float(ej), ratio, float(z), at, bool(conv), again))
     return tuple(out)
 
 
@@ -348,7 +389,7 @@ class FloorDrift:
     best_trial : int
         The trial at the floor with the smallest e_pos: the setpoints worth flying again.
     above : tuple of int
-        The newest trials, all after ``reached_trial``, each above the floor.
+        The newest trials of new setpoints, all after ``reached_trial``, each above the floor.
     """
 
     reached_trial: int
@@ -361,10 +402,13 @@ def floor_drift(
 ) -> FloorDrift | None:
     """Whether learning has left the floor it reached.
 
-    A drift is ``newest`` trials in a row above the floor (``z > z_max``), the newest
-    included, after an earlier trial was at it. One trial at the floor is called above it by
-    chance with probability 1 - 0.977 under a Gaussian e_pos (``z_max = 2``), so two in a
-    row by chance about 5e-4 when the trials are independent: a rise, not the scatter.
+    A drift is the ``newest`` newest trials of new setpoints (learned ones; not repeats)
+    all above the floor (``z > z_max``), after an earlier trial was at it. One trial at the
+    floor is called above it by chance with probability 1 - 0.977 under a Gaussian e_pos
+    (``z_max = 2``), so two in a row by chance about 5e-4 when the trials are independent: a
+    rise, not the scatter. A flight of setpoints flown before (``repeat_of`` set: the repeat
+    that measures the floor, ``gcs fly --again``) says how much the same setpoints scatter,
+    not where learning went: it can be the trial that reached the floor, never one above it.
 
     Parameters
     ----------
@@ -380,10 +424,11 @@ def floor_drift(
     """
     if newest < 1:
         raise ValueError(f"newest must be >= 1, got {newest}")
-    tail = verdicts[-newest:]
+    new = [i for i, v in enumerate(verdicts) if v.repeat_of is None][-newest:]
+    tail = [verdicts[i] for i in new]
     if len(tail) < newest or any(v.at_floor for v in tail):
         return None
-    earlier = [v for v in verdicts[: len(verdicts) - newest] if v.at_floor]
+    earlier = [v for v in verdicts[: new[0]] if v.at_floor]
     if not earlier:
         return None
     best = min(earlier, key=lambda v: (v.epos_m, v.trial))

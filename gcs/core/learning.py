@@ -624,7 +624,7 @@ def plan_next_trial(
     y_all = y - start
     epos_all = np.array([epos(ref[1:], y[j]) for j in range(n_trials)])
     the_floor = _floor_of(sp, y, floor)
-    verdicts = floor_verdicts(epos_all, the_floor, adaptive.floor_z) if the_floor else ()
+    verdicts = floor_verdicts(epos_all, the_floor, adaptive.floor_z, sp) if the_floor else ()
     decision = None
     if adaptive.safeguard and n_trials > 1:
         scatter = _scatter(the_floor, models, u_all, y_all)

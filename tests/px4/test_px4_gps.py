@@ -13,6 +13,7 @@ import scipy.signal
 import yaml
 from test_fly_e2e import wait_for_line
 
+from gcs.app.fly import record_drift
 from gcs.core.model import dc_gain
 from gcs.core.pbsid import natural_frequency_damping
 from gcs.io.config import load_profile
@@ -150,8 +151,9 @@ def free_run_vaf(model, u: np.ndarray, y: np.ndarray) -> float:  # type: ignore[
 
 def test_until_converged_reaches_a_verdict(px4_booting, px4_figures, tmp_path: Path) -> None:
     """`gcs fly --profile antx-adaptive --until-converged --iter 4` on eight-short: a repeat
-    measures the floor, learning runs until it says it has converged or the bound is reached
-    (and says that), and the run ends landed and disarmed either way."""
+    measures the floor, learning runs until it says it has converged, has left the floor it
+    reached (two learned trials above it), or the bound is reached (and says which), and the
+    run ends landed and disarmed in every case."""
     px4, run = px4_booting, tmp_path / "run"
     code, out = finish(
         gcs("fly", "--connect", px4.url, "--profile", sitl_profile(tmp_path, "antx-adaptive"),
@@ -163,6 +165,7 @@ def test_until_converged_reaches_a_verdict(px4_booting, px4_figures, tmp_path: P
     flown = rd.complete_trials()
     records = {j: rd.read_learn_record(j) for j in flown if (run / f"learn-{j:03d}.json").exists()}
     converged = [j for j, r in records.items() if r["decision"]["converged"]]
+    drift = record_drift(records.get(flown[-1]))
     rows = report_rows(run)
     px4_figures.update(
         {
@@ -170,12 +173,17 @@ def test_until_converged_reaches_a_verdict(px4_booting, px4_figures, tmp_path: P
             "iteration": [r["iteration"] for r in rows],
             "floor_m": rows[0].get("floor_m"),
             "trials_flown": flown,
-            "verdict": "converged" if converged else "bound reached",
+            "verdict": "converged" if converged else "drifted up" if drift else "bound reached",
         }
     )
     if converged:  # landed after the first trial that converged, and said so
         assert flown[-1] == converged[0], (flown, converged)
         assert f"no further trial after trial {converged[0]}: learning has converged" in out
+    elif drift is not None:  # landed after two learned trials above the floor, and said so
+        assert flown[-1] == drift.above[-1] and len(drift.above) == 2, (flown, drift)
+        assert all(t != 1 for t in drift.above), drift  # trial 1 repeats trial 0: never "above"
+        assert "--until-converged: landed, learning left the floor" in out, out
+        assert f"--again {drift.best_trial}" in out, out
     else:
         assert flown == [0, 1, 2, 3], out
         assert "learning has not converged within --iter 4" in out, out
