@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: setup test test-fast test-other-cpu test-px4 fly fly-mocap lint bench clean
+.PHONY: setup test test-flights test-quick test-fast test-other-cpu test-px4 fly fly-mocap lint bench clean
 
 setup: $(VENV)/.installed
 
@@ -14,8 +14,12 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@
 
-PYTEST := $(BIN)/python -m pytest -n 2 --dist worksteal -q
-FAST   := -m "not e2e and not px4 and not live"
+PYTEST  := $(BIN)/python -m pytest -n 2 --dist worksteal -q
+FAST    := -m "not e2e and not px4 and not live"
+FLIGHTS := -m "e2e or px4 or live"
+# a real-time flight keeps about 0.4 of a core busy (its vehicle, gcs, MAVSDK's server) and
+# spends the rest waiting on the clock: three at once fit beside the quick tests
+FLIGHT_WORKERS ?= 3
 # the tests that compare numbers with records made on another machine (tests/records.py), and
 # those that hold a result bit for bit on one machine (workers vs one process, resumed vs not,
 # kept learner vs new): run again as on another CPU by test-other-cpu
@@ -26,10 +30,21 @@ NUMERIC_TESTS := tests/test_trajectory_regression.py tests/test_learning_regress
 
 # the whole suite, then the numerical tests as on another CPU. The real-firmware tests
 # (tests/px4/) are part of it whenever a PX4 SITL build is there (PX4_SITL_DIR, or the default
-# in tests/px4/sitl.py; docs/px4-sitl.md)
+# in tests/px4/sitl.py; docs/px4-sitl.md). Two parts run at once, each part's output printed
+# whole when it ends: the real-time flights, and the quick tests at a lower CPU priority
+# (nice), so that they take only the cores the flights leave idle and never delay a flight's
+# streams (docs/testing.md)
 test: setup
-	$(PYTEST)
-	$(MAKE) --no-print-directory test-other-cpu
+	$(MAKE) --no-print-directory -j2 --output-sync=target test-flights test-quick
+
+# the real-time flights and servers, and the real firmware
+test-flights: setup
+	$(BIN)/python -m pytest -n $(FLIGHT_WORKERS) --dist worksteal -q $(FLIGHTS)
+
+# test-fast, then test-other-cpu, both at a lower CPU priority
+test-quick: setup
+	nice -n 10 $(PYTEST) $(FAST)
+	nice -n 10 $(MAKE) --no-print-directory test-other-cpu
 
 # everything but the real-time flights and servers and the real firmware
 test-fast: setup

@@ -2,11 +2,18 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 # tests/synthetic.py is a helper module shared by several test files
 sys.path.insert(0, str(Path(__file__).parent))
 
 from px4.sitl import ENV_VAR, ROOT, Px4Build, Px4BuildError, build_dir  # noqa: E402
+
+# No test is timed (numbers live in benchmarks/): Hypothesis's per-example deadline, 200 ms by
+# default, would fail a correct example on a busy machine (make test runs the quick tests at a
+# lower priority beside the flights)
+settings.register_profile("gcs", deadline=None)
+settings.load_profile("gcs")
 
 # The real-firmware tests (tests/px4/) run whenever a PX4 SITL build is there: PX4_SITL_DIR, or
 # ../shared/px4-v1.16-sitl beside the checkout. Without one they are not collected, and the
