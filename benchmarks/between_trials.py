@@ -4,10 +4,11 @@ flight process (as before) or in a worker process of its own (``gcs.app.source_w
 Each flight is ``gcs fly --connect ... --mocap ...`` on the indoor mock (``profiles/
 mock-mocap.yaml``: no GPS, it navigates on the vision gcs forwards from the mock arena's NatNet
 stream at 120 Hz) with ``profiles/antx-adaptive.yaml`` (a ``mocap`` section added, the model's
-gain 40 % too strong as in tests/test_fly_adaptive_e2e.py, so that the learning step after
-trial 2 refreshes the model; the tests' watchdog limits, ``tests/synthetic.py:CI_FLIGHT``, as
-the machine is shared), ``--iter 4`` trials of ``eight-short``, with ``--load`` processes
-burning CPU beside it (each bounded in time). Two modes, alternated ``--pairs`` times:
+gain 40 % too strong as in tests/test_fly_adaptive_virtual.py, and one repeat of trial 0, so
+that the learning step after trial 2 refreshes the model; the tests' watchdog limits,
+``tests/synthetic.py:CI_FLIGHT``, as the machine is shared), ``--iter 4`` trials of
+``eight-short``, with ``--load`` processes burning CPU beside it (each bounded in time). Two
+modes, alternated ``--pairs`` times:
 
 - ``thread``: the run's trial source built in the flight process and called in its threads
   (``asyncio.to_thread``), as gcs did before the worker process;
@@ -148,6 +149,7 @@ def ticker(mode: str, seconds: float, rate_hz: float = 120.0) -> tuple[float, fl
 def adaptive_profile(tmp: Path) -> Path:
     data = yaml.safe_load((ROOT / "profiles" / "antx-adaptive.yaml").read_text())
     data["model"]["num"] = [1.4 * v for v in data["model"]["num"]]
+    data["learning"]["adaptive"]["repeats"] = 1  # the refresh after trial 2, in --iter 4
     data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
     data["mocap"] = {}
     path = tmp / "antx-adaptive-mocap.yaml"

@@ -4,7 +4,7 @@ A vehicle in a lab wanders by decimetres in hover, slowly: its non-repeatable er
 correlated over seconds, not white as the Monte Carlo studies draw it. This benchmark flies
 the same synthetic vehicle with both kinds, through the public learner (:class:`gcs.Learner`),
 the paper's profile (``antx``) and the adaptive one (``antx-adaptive``), and prints each run's
-e_pos in floors per trial (trial 1 of ``antx-adaptive`` repeats trial 0), then, per
+e_pos in floors per trial (trials 1..repeats of ``antx-adaptive`` repeat trial 0), then, per
 profile and correlation, the median and largest e_pos in floors over the iterations j >= 2 of
 every seed, and the adaptive learner's decisions, so that what time correlation
 does to learning at the floor can be read off.
@@ -19,7 +19,7 @@ seeded by its index: every run is reproducible.
 The floor of a line is the non-repeatable error's own e_pos, ``sigma sqrt(pi / 2)`` (the
 expected mean distance of a 2-D Gaussian error with that standard deviation per axis), the
 same for both profiles and every correlation; ``est`` is the floor the adaptive learner
-estimated from trial 0 and its repeat, in the same units. After ``|``: per learning step,
+estimated from trial 0 and its repeats, in the same units. After ``|``: per learning step,
 the refresh's accepted model moves [%] north/east (``-`` kept), ``R`` when the safeguard fell
 back.
 

@@ -9,8 +9,9 @@ tables of docs/results.md, "Learning that knows its floor", from the run directo
 * ``--set gps``: ``profiles/mock-gps.yaml``, ``--seeds 0,1,2``.
 
 Per seed, two runs of the default eight: ``profiles/antx.yaml`` (the paper's method, Table I,
-trials j = 0..J) and ``profiles/antx-adaptive.yaml`` (trial 0, its repeat, then j = 1..J; the
-floor from the pair). The paper's run flies no repeat: its rows are compared with the floor
+trials j = 0..J) and ``profiles/antx-adaptive.yaml`` (trial 0, its repeats, then j = 1..J; the
+floor from those flights; docs/results.md's tables were flown with one repeat, the profile's
+default then). The paper's run flies no repeat: its rows are compared with the floor
 measured in the adaptive run of the same seed and mock. A trial aborted by the watchdog (a
 loaded machine) is flown again with ``--resume``. Runs already complete are not flown again:
 delete a run directory to fly it anew.
@@ -52,8 +53,11 @@ def run_path(out: Path, which: str, method: str, seed: int) -> Path:
 
 
 def flights_needed(method: str, iterations: int) -> int:
-    """Trials to fly for iterations j = 0..iterations - 1 (the adaptive run's repeat is one)."""
-    return iterations + (1 if method == "adaptive" else 0)
+    """Trials to fly for iterations j = 0..iterations - 1 (plus the adaptive run's repeats)."""
+    from gcs.io.config import load_profile
+
+    profile = load_profile(ROOT / "profiles" / f"{METHODS[method]}.yaml")
+    return iterations + profile.learning.repeats
 
 
 def fly(out: Path, which: str, method: str, seed: int, iterations: int, extra: list[str]) -> None:

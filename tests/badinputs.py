@@ -98,11 +98,12 @@ def _learning_run(root: Path) -> Path:
 
 
 def _adaptive_run(root: Path) -> Path:
-    """A synthetic run with antx-adaptive.yaml: trials 0, 1 (the repeat of 0), 2 and 3
-    complete, learned with history after each (model-002.yaml refreshed), setpoints of 4."""
+    """A synthetic run with antx-adaptive.yaml flying one repeat (``repeats: 1``, the
+    catalogue's trial plan): trials 0, 1 (the repeat of 0), 2 and 3 complete, learned with
+    history after each (model-002.yaml refreshed), setpoints of 4."""
     from synthetic import make_adaptive_run
 
-    run = make_adaptive_run(root, trials=4)
+    run = make_adaptive_run(root, trials=4, repeats=1)
     assert (run.path / "model-002.yaml").exists()  # the catalogue damages it
     return run.path
 

@@ -8,7 +8,13 @@ import numpy as np
 
 from gcs.core.model import DiscreteModel, from_transfer_function, simulate
 from gcs.core.trials import trial_errors
-from gcs.io.config import Profile, load_profile, load_trajectory, trajectory_from_dict
+from gcs.io.config import (
+    Profile,
+    load_profile,
+    load_trajectory,
+    profile_from_dict,
+    trajectory_from_dict,
+)
 from gcs.io.records import TrialRecord, TrialStatus
 from gcs.io.rundir import RunDir
 
@@ -104,8 +110,18 @@ def make_run(tmp: Path, algorithm: str = "smoother", trials: int = 1) -> RunDir:
     return run
 
 
-def adaptive_profile() -> Profile:
-    return load_profile(ROOT / "profiles" / "antx-adaptive.yaml")
+def adaptive_profile(repeats: int | None = None) -> Profile:
+    """profiles/antx-adaptive.yaml; with ``repeats``, its ``learning.adaptive.repeats`` set to
+    that (1: the trial plan of a test about something else than the floor, trial 2 the first
+    learned one, whatever the shipped default)."""
+    path = ROOT / "profiles" / "antx-adaptive.yaml"
+    if repeats is None:
+        return load_profile(path)
+    import yaml
+
+    data = yaml.safe_load(path.read_text())
+    data["learning"]["adaptive"]["repeats"] = repeats
+    return profile_from_dict(data, str(path))
 
 
 def make_adaptive_run(
@@ -115,12 +131,14 @@ def make_adaptive_run(
     plants: tuple[DiscreteModel, DiscreteModel] | None = None,
     gust_m: float = 0.0,
     prof: Profile | None = None,
+    repeats: int | None = None,
 ) -> RunDir:
-    """A run of the tiny eight with antx-adaptive.yaml (or ``prof``): ``trials`` simulated
-    trials (trial 1 the repeat of trial 0), learning with history after each, the last too."""
+    """A run of the tiny eight with antx-adaptive.yaml (``repeats`` as :func:`adaptive_profile`
+    says) or ``prof``: ``trials`` simulated trials (trials 1..repeats repeat trial 0),
+    learning with history after each, the last too."""
     from gcs.app.learn import learn_run
 
-    prof = prof or adaptive_profile()
+    prof = prof or adaptive_profile(repeats)
     run = RunDir.create(tmp, prof, trajectory_from_dict(SHORT), "smoother", run_id="run")
     for j in range(trials):
         fly_synthetic(run, j, seed, plants, gust_m)

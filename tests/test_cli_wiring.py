@@ -118,7 +118,7 @@ def test_a_mocap_flight_on_the_mock_gets_the_vision_only_mock_by_default() -> No
 
 
 def test_learn_prints_the_decisions_of_a_run_that_learns_from_its_history(tmp_path: Path) -> None:
-    run = make_adaptive_run(tmp_path, trials=4)
+    run = make_adaptive_run(tmp_path, trials=4, repeats=1)  # model refreshed after trial 2
     result = invoke("learn", run.path)
     assert result.exit_code == 0, result.output
     assert "learned from trial 3" in result.output and "setpoints for trial 4" in result.output

@@ -29,6 +29,8 @@ def test_antx_is_the_paper_and_antx_adaptive_differs_only_in_learning_adaptive()
     assert paper.learning.adaptive is None and paper.learning.repeats == 0
     ad = adaptive.learning.adaptive
     assert ad.noise == "data" and ad.refresh and ad.safeguard and not ad.is_paper
+    # three flights of trial 0's setpoints: the floor's scatter between flights is measured
+    assert adaptive.learning.repeats == 2
     a, b = yaml.safe_load(ANTX.read_text()), yaml.safe_load(ADAPTIVE.read_text())
     for key in ("model", "t_ilc_s", "vehicle", "arena", "flight"):
         assert a[key] == b[key], key

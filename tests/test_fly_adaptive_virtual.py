@@ -30,15 +30,19 @@ ROOT = Path(__file__).resolve().parents[1]
 SHORT = ROOT / "trajectories" / "eight-short.yaml"
 
 
-def adaptive_ci_profile(tmp: Path) -> Path:
-    """antx-adaptive.yaml with the CI watchdog limits and a model 40 % too strong.
+def adaptive_ci_profile(tmp: Path, repeats: int = 1) -> Path:
+    """antx-adaptive.yaml with the CI watchdog limits, a model 40 % too strong and
+    ``repeats`` repeats of trial 0.
 
     The model's gain is off on purpose, by far more than the mock's loop is from eq. (11): the
     first pair of trials of different setpoints must refresh it (cross-validated), whatever the
-    gusts of the day.
+    gusts of the day. One repeat (the profile ships two): these flights test the campaign,
+    its records and resuming, on the trial plan of one repeat (trial 2 the first learned one),
+    one flight shorter; the floor of three flights is tests/test_learn_history_run.py's.
     """
     data = yaml.safe_load((ROOT / "profiles" / "antx-adaptive.yaml").read_text())
     data["model"]["num"] = [1.4 * v for v in data["model"]["num"]]
+    data["learning"]["adaptive"]["repeats"] = repeats
     data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
     path = tmp / "antx-adaptive-ci.yaml"
     path.write_text(yaml.safe_dump(data))

@@ -2,6 +2,9 @@
 
 Synthetic trials (tests/synthetic.py) stand in for flights: what is tested is what the run
 directory holds after each learning step, and that learning from it equals learning in memory.
+The repeats and the floor are tested with the profile's default (``repeats: 2``: trials 1 and 2
+repeat trial 0); the records, models, resuming and the live table with one repeat
+(``repeats=1``: trial 2 the first learned one), their trial plan whatever the default.
 """
 
 from __future__ import annotations
@@ -56,73 +59,85 @@ def test_trial_0_is_repeated_byte_for_byte_then_every_trial_is_learned_from(tmp_
     run = RunDir.create(
         tmp_path, adaptive_profile(), trajectory_from_dict(SHORT), "smoother", run_id="run"
     )
-    fly_synthetic(run, 0)
-    outcome = learn_run(run)
-    assert outcome.repeat_of == 0 and outcome.next_trial == 1 and outcome.next_iteration == 0
-    assert outcome.record is None
+    assert run.profile().learning.repeats == 2  # the profile's default: trials 1 and 2
     sp0 = (run.path / "setpoints-000.csv").read_bytes()
-    assert (run.path / "setpoints-001.csv").read_bytes() == sp0
-    assert sorted(p.name for p in run.path.glob("*-000.*")) == [
-        "setpoints-000.csv", "trial-000.csv", "trial-000.json"
-    ]  # fmt: skip  # no estimate, no record: nothing was learned
-    fly_synthetic(run, 1)
+    for j in (0, 1):
+        fly_synthetic(run, j)
+        outcome = learn_run(run)
+        assert outcome.repeat_of == 0 and outcome.next_trial == j + 1
+        assert outcome.next_iteration == 0 and outcome.record is None
+        assert (run.path / f"setpoints-00{j + 1}.csv").read_bytes() == sp0
+        assert sorted(p.name for p in run.path.glob(f"*-00{j}.*")) == [
+            f"setpoints-00{j}.csv", f"trial-00{j}.csv", f"trial-00{j}.json"
+        ]  # fmt: skip  # no estimate, no record: nothing was learned
+    fly_synthetic(run, 2)
     outcome = learn_run(run)
     assert outcome.repeat_of is None and outcome.next_iteration == 1
     record = outcome.record
-    assert record == json.loads((run.path / "learn-001.json").read_text())
-    assert record["learned_from"] == [0, 1] and record["next_trial"] == 2
+    assert record == json.loads((run.path / "learn-002.json").read_text())
+    assert record["learned_from"] == [0, 1, 2] and record["next_trial"] == 3
     assert record["models_from"] == "profile" and record["model_file"] is None
-    assert (run.path / "estimate-001.csv").exists() and (run.path / "setpoints-002.csv").exists()
-    # the record's decisions are those of a learner given the two trials
+    assert (run.path / "estimate-002.csv").exists() and (run.path / "setpoints-003.csv").exists()
+    assert not (run.path / "estimate-001.csv").exists()
+    # the record's decisions are those of a learner given the three trials
     profile = adaptive_profile()
-    trials = history(run, 1)
+    trials = history(run, 2)
     learner = Learner(
         learner_settings(profile, "smoother"), run.reference().pos_ned_m[:, :2],
-        profile.learning.adaptive, history=trials[:1],
+        profile.learning.adaptive, repeats=2, history=trials[:2],
     )  # fmt: skip
-    u2 = learner.step(trials[1].u_m, trials[1].y_m)
+    u3 = learner.step(trials[2].u_m, trials[2].y_m)
     plan = learner.last
-    np.testing.assert_allclose(run.read_setpoints(2)[:, :2], u2, atol=1e-8)
+    np.testing.assert_allclose(run.read_setpoints(3)[:, :2], u3, atol=1e-8)
     assert record["decision"]["epos_m"] == list(plan.record.epos_m)
-    assert [v["at_floor"] for v in record["decision"]["verdicts"]] == [False, False]
+    assert [v["at_floor"] for v in record["decision"]["verdicts"]] == [False] * 3
 
 
-def test_the_floor_is_measured_from_the_repeat_and_kept_in_the_run(tmp_path):
-    run = make_adaptive_run(tmp_path, trials=2, gust_m=0.01)
+def test_the_floor_is_measured_from_the_repeats_and_kept_in_the_run(tmp_path):
+    run = make_adaptive_run(tmp_path, trials=3, gust_m=0.01)  # the default: two repeats
     floor = json.loads((run.path / "floor.json").read_text())
-    assert floor["trials"] == [0, 1] and floor["source"] == "repeat" and floor["flights"] == 2
-    # independently: one flight's non-repeatable error is (Y0 - Y1) / sqrt(2)
-    y0, y1 = (run.read_trial(t).pos_ned_m[1:, :2] for t in (0, 1))
-    delta = (y0 - y1) / np.sqrt(2.0)
-    assert floor["epos_m"] == pytest.approx(np.mean(np.hypot(delta[:, 0], delta[:, 1])))
-    assert floor["rms_m"] == pytest.approx(np.sqrt(np.mean(np.sum(delta**2, axis=1))))
-    assert run.read_learn_record(1)["decision"]["floor"]["epos_m"] == floor["epos_m"]
+    assert floor["trials"] == [0, 1, 2] and floor["source"] == "repeat" and floor["flights"] == 3
+    # independently: one flight's non-repeatable error is sqrt(3 / 2) (Y_i - mean Y)
+    y = np.stack([run.read_trial(t).pos_ned_m[1:, :2] for t in (0, 1, 2)])
+    delta = np.sqrt(1.5) * (y - y.mean(axis=0))
+    dist = np.hypot(delta[..., 0], delta[..., 1])  # (3, N)
+    assert floor["epos_m"] == pytest.approx(np.mean(dist))
+    assert floor["rms_m"] == pytest.approx(np.sqrt(np.mean(dist**2)))
+    # three flights: the scatter between them is measured too, and the larger one is used
+    assert floor["scatter_between_m"] is not None and floor["scatter_within_m"] is not None
+    # the e_pos of the three deviations share their mean: their spread is sqrt(1 - 1/4) times
+    # that of independent flights (gcs.core.floor)
+    spread = np.std(dist.mean(axis=1), ddof=1)
+    assert floor["scatter_between_m"] == pytest.approx(spread / np.sqrt(0.75))
+    assert floor["scatter_m"] == max(floor["scatter_within_m"], floor["scatter_between_m"])
+    assert run.read_learn_record(2)["decision"]["floor"]["epos_m"] == floor["epos_m"]
+    assert not (run.path / "learn-001.json").exists()  # the first repeat measures nothing yet
     assert run.read_floor() == floor
 
 
 def test_a_refreshed_model_is_a_profile_to_fly_and_the_next_step_starts_from_it(tmp_path):
-    run = make_adaptive_run(tmp_path, trials=4)  # trials 0, 1 (repeat), 2, 3
+    run = make_adaptive_run(tmp_path, trials=4, repeats=1)  # trials 0, 1 (repeat), 2, 3
     record = run.read_learn_record(2)
     assert record["model_file"] == "model-002.yaml"  # the first pair of different setpoints
     moved = [ax["refresh"]["moved"] for ax in record["decision"]["axes"]]
     assert max(moved) > 0.05
     profile = load_profile(run.path / "model-002.yaml")  # a profile a user can fly as it is
-    assert profile.learning == adaptive_profile().learning and profile.arena is not None
+    assert profile.learning == adaptive_profile(repeats=1).learning and profile.arena is not None
     for a, model in enumerate(profile.models()):
         recorded = record["decision"]["axes"][a]["refresh"]["model"]
         np.testing.assert_array_equal(model.A, np.array(recorded["A"]))
         assert model.delay_samples == recorded["delay_samples"]
     assert run.read_learn_record(3)["models_from"] == "model-002.yaml"
     newest = run.read_learn_record(3)["model_file"] or "model-002.yaml"
-    models, source = models_in_use(run, adaptive_profile(), 4)
+    models, source = models_in_use(run, adaptive_profile(repeats=1), 4)
     assert source == newest
     np.testing.assert_array_equal(models[1].B, load_profile(run.path / newest).models()[1].B)
 
 
 def test_learning_from_the_directory_equals_learning_in_memory(tmp_path):
     """Resuming reads the models back from the run: the same setpoints as one long session."""
-    run = make_adaptive_run(tmp_path, trials=6)
-    learner = Learner.from_profile(adaptive_profile(), run.reference())
+    run = make_adaptive_run(tmp_path, trials=6, repeats=1)
+    learner = Learner.from_profile(adaptive_profile(repeats=1), run.reference())
     trials = history(run, 5)
     assert learner.step(trials[0].u_m, trials[0].y_m) is not None  # the repeat
     assert learner.last.repeat_of == 0
@@ -203,7 +218,7 @@ def damage_model_file_field(run: Path) -> None:
     ],
 )
 def test_records_and_models_must_agree_with_their_names(tmp_path, damage, message):
-    run = make_adaptive_run(tmp_path, trials=4)
+    run = make_adaptive_run(tmp_path, trials=4, repeats=1)
     assert run.read_learn_record(2)["model_file"] == "model-002.yaml"
     (run.path / "setpoints-004.csv").unlink()  # learning from trial 3 starts from model-002
     damage(run.path)
@@ -254,8 +269,9 @@ def recording(run: RunDir, sp: np.ndarray, seed: int, **kw) -> TrialRecording:
 
 
 def test_until_converged_the_source_says_stop_exactly_when_the_record_says_converged(tmp_path):
-    # the profile's own models as the vehicle and 1 cm of gusts: learning reaches the floor
-    profile = adaptive_profile()
+    # the profile's own models as the vehicle and 1 cm of gusts: learning reaches the floor.
+    # What is tested is the source's stop against the record, on one repeat's trial plan
+    profile = adaptive_profile(repeats=1)
     run = RunDir.create(tmp_path, profile, trajectory_from_dict(SHORT), "smoother", run_id="run")
     outcomes = []
     source = RunSource(run, on_learn=outcomes.append, until_converged=True)
@@ -307,7 +323,7 @@ def test_the_live_table_says_each_decision_as_it_happens(tmp_path):
     from gcs.app.fly_view import learning_lines
     from gcs.app.learn import LearnOutcome
 
-    run = make_adaptive_run(tmp_path, trials=3)
+    run = make_adaptive_run(tmp_path, trials=3, repeats=1)
     record = run.read_learn_record(2)
     axis = record["decision"]["axes"][0]
     axis["refresh"] = {**axis["refresh"], "accepted": True, "moved": 0.26}
@@ -355,10 +371,10 @@ def test_the_live_table_says_when_learning_drifts_up_from_the_floor(tmp_path):
 
 
 def test_again_is_refused_for_the_repeat_and_flies_as_the_trial_it_copies(tmp_path: Path) -> None:
-    run = make_adaptive_run(tmp_path / "a", trials=1)  # next: trial 1, the repeat of trial 0
-    with pytest.raises(RunLogError, match="trial 1, is a repeat of trial 0"):
+    run = make_adaptive_run(tmp_path / "a", trials=2)  # next: trial 2, the second repeat
+    with pytest.raises(RunLogError, match="trial 2, is a repeat of trial 0"):
         plan_fly(FlyRequest(resume=run.path, again=0))
-    run = make_adaptive_run(tmp_path / "b", trials=4)  # next: trial 4, learned
+    run = make_adaptive_run(tmp_path / "b", trials=4, repeats=1)  # next: trial 4, learned
     plan = plan_fly(FlyRequest(resume=run.path, again=2))
     assert (plan.first_trial, plan.again) == (4, 2)
     assert run.again_of(4) is None  # planning moves nothing

@@ -141,7 +141,7 @@ def test_from_profile_by_name_path_or_profile() -> None:
     for mine, theirs in zip(paper.models, PROFILE.models(), strict=True):
         np.testing.assert_array_equal(mine.A, theirs.A)
     adaptive = Learner.from_profile("antx-adaptive", REF2, "kilc")
-    assert adaptive.adaptive is not None and adaptive.repeats == 1
+    assert adaptive.adaptive is not None and adaptive.repeats == 2  # the profile's default
     assert adaptive.settings.algorithm == "kilc"
     with pytest.raises(PathError, match="no packaged profile"):
         Learner.from_profile("no-such-profile", REF2)

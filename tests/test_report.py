@@ -208,50 +208,52 @@ def test_a_run_with_a_repeat_reports_trial_and_j_the_floor_verdicts_and_decision
     # the console's width is fixed when it is made (COLUMNS then): wide, so no header wraps
     monkeypatch.setattr(gcs.cli.console, "width", 200)
 
-    run = make_adaptive_run(tmp_path, trials=5, gust_m=0.01)
+    run = make_adaptive_run(tmp_path, trials=5, gust_m=0.01)  # the default: two repeats
     rows = json.loads(invoke("report", run.path, "--json").output)["rows"]
     assert [r["trial"] for r in rows] == [0, 1, 2, 3, 4]
-    assert [r["iteration"] for r in rows] == [0, 0, 1, 2, 3]  # the paper's j: a repeat is 0
-    assert [r["repeat_of"] for r in rows] == [None, 0, None, None, None]
-    # the floor, independently: one flight's non-repeatable error (Y0 - Y1) / sqrt(2)
-    y = [run.read_trial(t).pos_ned_m[1:, :2] for t in (0, 1)]
-    delta = (y[0] - y[1]) / np.sqrt(2.0)
-    floor = float(np.mean(np.hypot(delta[:, 0], delta[:, 1])))
+    assert [r["iteration"] for r in rows] == [0, 0, 0, 1, 2]  # the paper's j: a repeat is 0
+    assert [r["repeat_of"] for r in rows] == [None, 0, 0, None, None]
+    # the floor, independently: one flight's non-repeatable error sqrt(3 / 2) (Y_i - mean Y)
+    y = np.stack([run.read_trial(t).pos_ned_m[1:, :2] for t in (0, 1, 2)])
+    delta = np.sqrt(1.5) * (y - y.mean(axis=0))
+    floor = float(np.mean(np.hypot(delta[..., 0], delta[..., 1])))
     ref = run.reference().pos_ned_m
     for r in rows:
         assert r["floor_m"] == pytest.approx(floor)
         assert r["floor_ratio"] == pytest.approx(r["epos_m"] / floor)
         sigma = r["floor_scatter_m"]
-        z = (r["epos_m"] - floor) / np.hypot(sigma, sigma)  # two flights: sigma_F = sigma
+        z = (r["epos_m"] - floor) / np.hypot(sigma, sigma / np.sqrt(2))  # three flights
         assert r["floor_z"] == pytest.approx(z) and r["at_floor"] == (z <= 2.0)
         dev = run.read_setpoints(r["trial"])[:, :2] - ref[:-1, :2]
         assert r["sp_rms_m"] == pytest.approx(np.sqrt(np.mean(np.sum(dev**2, axis=1))))
         learned = run.path / f"learn-{r['trial']:03d}.json"
         expected = json.loads(learned.read_text()) if learned.exists() else None
         assert r["learning"] == rounded(expected)  # every number to 9 digits
-    assert rows[0]["learning"] is None and rows[1]["learning"]["next_iteration"] == 1
-    assert rows[0]["sp_rms_m"] == rows[1]["sp_rms_m"] == 0.0 and rows[2]["sp_rms_m"] > 0.5
+    assert rows[0]["learning"] is None and rows[1]["learning"] is None
+    assert rows[2]["learning"]["next_iteration"] == 1
+    assert rows[0]["sp_rms_m"] == rows[1]["sp_rms_m"] == rows[2]["sp_rms_m"] == 0.0
+    assert rows[3]["sp_rms_m"] > 0.5
     out = invoke("report", run.path).output
     for text in ("trial", "e/floor", "verdict", "learning step", "sp RMS [m]",
                  "0 (repeat)", "repeat of 0 next", f"e_pos {1e3 * floor:.1f} mm",
-                 "after trial 2: model refreshed: north moved"):  # fmt: skip
+                 "after trial 3: model refreshed: north moved"):  # fmt: skip
         assert text in out, text
-    moved = run.read_learn_record(2)["decision"]["axes"][0]["refresh"]["moved"]
+    moved = run.read_learn_record(3)["decision"]["axes"][0]["refresh"]["moved"]
     assert f"model N {100 * moved:.0f} %" in out
 
 
 def test_the_epos_figure_draws_the_floor_and_the_html_the_decisions(tmp_path: Path) -> None:
     from synthetic import make_adaptive_run
 
-    run = make_adaptive_run(tmp_path, trials=4, gust_m=0.01)
+    run = make_adaptive_run(tmp_path, trials=4, gust_m=0.01)  # the default: two repeats
     floor = run.read_floor()["epos_m"]
     figures = report_figures(run, [0, 1, 3])
     ax = figures["epos"].axes[0]
     levels = [line.get_ydata()[0] for line in ax.get_lines() if len(set(line.get_ydata())) == 1]
     assert any(y == pytest.approx(floor) for y in levels)
-    assert [t.get_text() for t in ax.get_xticklabels()] == ["0", "0r", "1", "2"]
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["0", "0r", "0r", "1"]
     labels = figures["xy"].axes[0].get_legend_handles_labels()[1]
-    assert "trial 1, j = 0 (repeat)" in labels and "trial 3, j = 2" in labels
+    assert "trial 1, j = 0 (repeat)" in labels and "trial 3, j = 1" in labels
     path = write_html(run, tmp_path / "r.html")
     text = path.read_text()
     assert "floor (one flight" in text and "learning step" in text and "0 (repeat)" in text

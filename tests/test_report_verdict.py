@@ -25,6 +25,7 @@ def invoke(*args: object, columns: int = 200):
 
 @pytest.fixture(scope="module")
 def adaptive(tmp_path_factory: pytest.TempPathFactory):
+    # the profile's default: trials 1 and 2 repeat trial 0, trials 3, 4 and 5 are learned
     return make_adaptive_run(tmp_path_factory.mktemp("adaptive"), trials=6, gust_m=0.01)
 
 
@@ -43,18 +44,19 @@ def test_the_verdict_of_an_adaptive_run_against_its_trials(adaptive, monkeypatch
     v = doc["verdict"]
     assert v["flights"] == len(epos) == 6
     assert v["best_trial"] == best and v["best_epos_m"] == pytest.approx(epos[best])
-    assert v["best_updates"] == best - 1  # one repeat of trial 0 before learning starts
+    assert v["best_updates"] == max(0, best - 2)  # two repeats of trial 0 before learning
     assert v["change_pct"] == pytest.approx(100 * (epos[best] - epos[0]) / epos[0])
     floor = adaptive.read_floor()["epos_m"]
     assert v["floor_m"] == pytest.approx(floor)
     assert v["floor_ratio"] == pytest.approx(epos[best] / floor)
     # the flights left, independently: the geometric decay of e_pos - floor over the newest
-    # four learned trials (2..5), flights until z <= 2, plus one to confirm
+    # four learned trials (0, 3, 4, 5: trial 0 counts, its repeats do not; j = 0..3), flights
+    # until z <= 2, plus one to confirm
     learning = run_learning(adaptive)
     row = {r["trial"]: r for r in doc["rows"]}
     if v["converged_trial"] is None and not row[5]["at_floor"]:
-        x = np.array([1, 2, 3, 4], dtype=float)
-        excess = np.array([epos[t] - floor for t in (2, 3, 4, 5)])
+        x = np.array([0, 1, 2, 3], dtype=float)
+        excess = np.array([epos[t] - floor for t in (0, 3, 4, 5)])
         rate = math.exp(np.polyfit(x, np.log(excess), 1)[0])
         f = learning.floor
         target = 2.0 * math.hypot(f.scatter_m, f.floor_scatter_m)
@@ -93,17 +95,17 @@ def test_the_verdict_keys_are_in_the_schema_and_the_docs() -> None:
 
 
 def test_the_safeguard_records_the_best_trial_so_far(adaptive) -> None:
-    # learn-002 learned from trial 2, which was 4x better than every trial before it: the
-    # best so far is trial 2 (it used to say 0, the best of the trials before the newest)
+    # learn-003 learned from trial 3, which was 4x better than every trial before it: the
+    # best so far is trial 3 (it used to say 0, the best of the trials before the newest)
     epos = {j: trial_errors(adaptive.read_trial(j))[0] for j in adaptive.complete_trials()}
-    for j in range(2, 6):
+    for j in range(3, 6):
         guard = adaptive.read_learn_record(j)["decision"]["safeguard"]
         so_far = {t: epos[t] for t in range(j + 1)}
         earlier = {t: epos[t] for t in range(j)}
         assert guard["best_trial"] == min(so_far, key=so_far.get)
         assert guard["compared_trial"] == min(earlier, key=earlier.get)
-    assert epos[2] < 0.5 * epos[0]
-    assert adaptive.read_learn_record(2)["decision"]["safeguard"]["best_trial"] == 2
+    assert epos[3] < 0.5 * min(epos[0], epos[1], epos[2])
+    assert adaptive.read_learn_record(3)["decision"]["safeguard"]["best_trial"] == 3
 
 
 def test_the_adaptive_table_fits_80_columns_and_explains_its_words(adaptive, monkeypatch) -> None:
@@ -116,9 +118,9 @@ def test_the_adaptive_table_fits_80_columns_and_explains_its_words(adaptive, mon
     assert max(len(line.rstrip()) for line in out.splitlines()) <= 80
     # every trial on one line: "0 (repeat)" unbroken, no cell folded onto a second line
     lines = [ln for ln in table.splitlines() if ln.strip()[:1].isdigit()]
-    assert len(lines) == 6 and "0 (repeat)" in lines[1]
+    assert len(lines) == 6 and "0 (repeat)" in lines[1] and "0 (repeat)" in lines[2]
     # the learning step column did not fit: said where its contents are
-    assert "after trial 2: model refreshed" in out and "too wide for this terminal" in out
+    assert "after trial 3: model refreshed" in out and "too wide for this terminal" in out
     monkeypatch.setattr(gcs.cli.console, "width", 200)
     wide = invoke("report", adaptive.path, columns=200).output
     assert "repeat of 0 next" in wide and "'model N 37 %' refreshed the north (N)" in wide
@@ -129,7 +131,7 @@ def test_the_first_learned_step_is_bounded_by_the_step_limit(adaptive) -> None:
     # learning.max_step_m from the hover point, u(-1) = the start
     limit = adaptive.profile().learning.max_step_m
     start = adaptive.reference().pos_ned_m[0, :2]
-    for j in range(2, 6):
+    for j in range(3, 6):  # the learned trials
         sp = adaptive.read_setpoints(j)[:, :2]
         steps = np.abs(np.diff(np.vstack([start, sp]), axis=0))
         assert steps.max() <= limit + 1e-6

@@ -5,9 +5,10 @@ first session's gusts: the repeat of trial 0 matched it to the millimetre and th
 ten times below that of uninterrupted runs (2.4 mm against 20.9 and 20.8 mm). Here the same
 set-up is flown uninterrupted with five seeds, and once interrupted in its repeat and resumed
 by the command gcs printed; the resumed run's floor must lie among theirs: within half the
-smallest and twice the largest. A floor is measured from one repeat, so the gusts of the day
-move it: five seeds gave 11.5-38.4 mm when this test was written, and the resumed run 18.3 mm;
-the replay was a factor of ten below.
+smallest and twice the largest. A floor is measured here from one repeat (the profile of
+tests/test_fly_adaptive_virtual.py: the resumed seed is tested, in one flight fewer than the
+shipped two repeats take), so the gusts of the day move it: five seeds gave 11.5-38.4 mm when
+this test was written, and the resumed run 18.3 mm; the replay was a factor of ten below.
 """
 
 from __future__ import annotations

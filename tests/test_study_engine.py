@@ -25,7 +25,8 @@ STUDY = {
     "chunk_plants": 4,
     "steady_trials": 1,
     "uncertainty": {"levels": [0.4], "noise_std_m": 0.01, "disturbance_rms_m": 0.05},
-    "settings": [{"profile": "antx"}, {"profile": "antx-adaptive"}],
+    # one repeat: the batch against the learner is tested, not the floor (one flight fewer)
+    "settings": [{"profile": "antx"}, {"profile": "antx-adaptive", "repeats": 1}],
 }
 
 

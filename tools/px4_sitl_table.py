@@ -145,6 +145,9 @@ def figures_text(test: str, figures: dict) -> str:
             parts[-1] += f" (last {100 * e[-1] / e[0]:.0f} % of the first)"
     if figures.get("floor_m") is not None:
         parts.append(f"floor {figures['floor_m']:.3f} m")
+    if figures.get("floor_scatter_within_between_m"):
+        within, between = figures["floor_scatter_within_between_m"]
+        parts.append(f"its scatter within {within:.3f} / between flights {between:.3f} m")
     if "verdict" in figures:
         parts.append(f"{figures['verdict']} after trials {figures['trials_flown']}")
     if "prearm_wait" in figures:

@@ -3,8 +3,8 @@ PX4's own flight log.
 
 The lab flight of tests/px4/test_px4_lab.py (EKF2 on vision only, the rig's OptiTrack, ``gcs
 fly --mocap``) with the adaptive profile (profiles/antx-adaptive.yaml with the tests' watchdog
-limits) and a process burning CPU beside it: trial 0, its repeat (trial 1: the floor), then
-learned trials. The learning step after trial 2, the first from two trials of different
+limits and one repeat) and a process burning CPU beside it: trial 0, its repeat (trial 1: the
+floor), then learned trials. The learning step after trial 2, the first from two trials of different
 setpoints, refits the model (the model refresh: the heavy step, seconds of numerics in gcs's
 worker process) while the vehicle hovers on the vision and setpoints gcs streams, and trial 3
 is flown after it. PX4 logs every vision and setpoint message it receives
@@ -89,10 +89,13 @@ class TimedGcs(Gcs):
 
 
 def adaptive_lab_profile(tmp: Path) -> Path:
-    """profiles/antx-adaptive.yaml with the tests' watchdog limits and a ``mocap`` section (no
-    frame check: tests/px4/test_px4_lab.py flies it; here it would only lengthen the flight)."""
+    """profiles/antx-adaptive.yaml with the tests' watchdog limits, a ``mocap`` section (no
+    frame check: tests/px4/test_px4_lab.py flies it; here it would only lengthen the flight)
+    and one repeat of trial 0 (the profile ships two): the streams during the refresh are
+    tested, not the floor, and :data:`TRIALS` flights reach the refresh with one repeat."""
     data = yaml.safe_load((ROOT / "profiles" / "antx-adaptive.yaml").read_text())
     data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
+    data["learning"]["adaptive"]["repeats"] = 1
     data["mocap"] = {"check_move_m": 0.0}
     path = tmp / "antx-adaptive-lab.yaml"
     path.write_text(yaml.safe_dump(data))
