@@ -353,7 +353,7 @@ def test_the_live_table_says_when_learning_drifts_up_from_the_floor(tmp_path):
     record = run.read_learn_record(2)
     verdicts = record["decision"]["verdicts"]
     assert [v["trial"] for v in verdicts] == [0, 1, 2]
-    base = dict(verdicts[-1])
+    base = {**verdicts[-1], "repeat_of": None}  # learned trials, not repeats
     # trial 1 at the floor, then trials 2 and 3 above it: the newest two, after one at it
     record["decision"]["verdicts"] = [
         {**base, "trial": 0, "epos_m": 0.9, "z": 40.0, "at_floor": False},

@@ -16,7 +16,7 @@ setpoints flown, ``Y = y(1..N)`` the measured positions and ``Yd = yd(1..N)`` th
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -465,17 +465,7 @@ class LearningRecord:
             "trials": self.trials,
             "epos_m": list(self.epos_m),
             "floor": None if self.floor is None else self.floor.as_dict(),
-            "verdicts": [
-                {
-                    "trial": v.trial,
-                    "epos_m": v.epos_m,
-                    "ratio": v.ratio,
-                    "z": v.z,
-                    "at_floor": v.at_floor,
-                    "converged": v.converged,
-                }
-                for v in self.verdicts
-            ],
+            "verdicts": [asdict(v) for v in self.verdicts],
             "converged": self.converged,
             "safeguard": None if self.safeguard is None else self.safeguard.as_dict(),
             "axes": [a.as_dict() for a in self.axes],
