@@ -742,8 +742,9 @@ def counted_banded_lus(patch: pytest.MonkeyPatch) -> list[int]:
 
 
 def drifting_trials(seed: int, n: int, trials: int):
-    """A model, its reference, binding limits (a box, a rate limit and a deviation bound) and
-    ``trials`` disturbance estimates that drift from trial to trial."""
+    """A model, its reference, binding limits (a box, a rate limit and a deviation bound; the
+    box and rate limit alone when the deviation bound leaves them no setpoint) and ``trials``
+    disturbance estimates that drift from trial to trial."""
     model = random_stable_model(seed, seed % 4, 1 + seed % 3)
     yd, d_hat, u_prev = signals(seed, n)
     w = UpdateWeights(1.0, 0.01, 0.001)
@@ -751,6 +752,10 @@ def drifting_trials(seed: int, n: int, trials: int):
     box = binding_limits(next_input(model, yd, d_hat, u_prev, w).u_m, yd, r)
     deviation = 0.9 * float(np.max(np.abs(dense_reference(model, yd, d_hat, u_prev, w) - yd)))
     limits = SetpointLimits(box.u_min_m, box.u_max_m, box.max_step_m, max(deviation, 0.2))
+    try:
+        next_input(model, yd, d_hat, u_prev, w, limits)
+    except UpdateInfeasible:
+        limits = box
     rng = np.random.default_rng(seed)
     d = [d_hat]
     for _ in range(trials - 1):

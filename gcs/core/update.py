@@ -877,11 +877,15 @@ class _Schur:
         if two:
             cross = np.outer(c0, c1) * W_ss[np.ix_(at0, at1)]
             S += cross + cross.T + np.outer(c1, c1) * W_ss[np.ix_(at1, at1)]
-        try:
-            cho = scipy.linalg.cho_factor(S, check_finite=False)
-        except np.linalg.LinAlgError:
+        # LAPACK's Cholesky directly (scipy.linalg.cho_factor's checks cost more than it here)
+        cho, info = scipy.linalg.lapack.dpotrf(S, lower=False, clean=False)
+        if info != 0:  # not numerically positive definite
             return None
         b = rows.b[act]
+
+        def cho_solve(rhs: np.ndarray) -> np.ndarray:
+            x, _ = scipy.linalg.lapack.dpotrs(cho, rhs, lower=False)
+            return x
 
         def rows_at(v: np.ndarray) -> np.ndarray:  # A v for v on the involved inputs
             return c0 * v[at0] + c1 * v[at1] if two else c0 * v[at0]
@@ -892,10 +896,10 @@ class _Schur:
                 g += np.bincount(at1, weights=c1 * lam, minlength=inputs.size)
             return g @ W_in
 
-        lam = scipy.linalg.cho_solve(cho, rows_at(u0[inputs]) - b, check_finite=False)
+        lam = cho_solve(rows_at(u0[inputs]) - b)
         u = u0 - spread(lam)
         # one step of iterative refinement on the rows held
-        dlam = scipy.linalg.cho_solve(cho, rows_at(u[inputs]) - b, check_finite=False)
+        dlam = cho_solve(rows_at(u[inputs]) - b)
         lam += dlam
         u -= spread(dlam)
         if not (np.all(np.isfinite(u)) and np.all(np.isfinite(lam))):
