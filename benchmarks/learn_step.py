@@ -52,9 +52,26 @@ rounds; ``ratio`` = baseline / this code; ``max_dev_m``: the largest difference 
 setpoints between the two codes over every step. The other commit is checked out with
 ``git worktree add --detach`` under the system's temporary directory (kept for later runs).
 
+Lines with ``"baseline": "banded_rounds"`` time :meth:`gcs.Learner.step` of the ``antx`` and
+``antx-adaptive`` runs above (the default eight, N = 280) with the active-set rounds of the
+input update through the Schur complement of the structure's factorised KKT matrix (this
+code) against the rounds that factorise the whole augmented KKT system (``_SCHUR_MAX_ROWS =
+0``, the method before), in alternated subprocesses of one run (``--rounds R`` of each,
+default 5): ``median_s`` / ``max_s`` the wall seconds of a step (per step the median over the
+rounds, then the median and largest over the 8 steps), ``cpu_median_s`` the same in CPU
+seconds of the process (less sensitive to the other jobs of a shared machine), ``ratio`` /
+``cpu_ratio`` = banded / Schur; ``parts_ms``: median per step of ``InputUpdate.solve`` (every
+axis; ``active_set`` and ``clarabel`` are parts of it), of the smoother and of the rest of the
+step; ``rounds_per_step``: the equality-constrained solves of the active-set method per step
+(Clarabel's polish included), ``ms_per_round`` the active-set wall time per round on the steps
+without Clarabel; ``max_dev_m`` the largest difference of the learned setpoints between the
+two methods, ``bitwise_repeatable`` whether every run of this code learned the same setpoints
+bit for bit; ``load_avg_1min`` the machine's load when the line was printed.
+
 Usage: ``python benchmarks/learn_step.py`` (all cases, each in a subprocess),
 ``python benchmarks/learn_step.py --code [COMMIT] [--rounds R]`` (the lines against another
-commit only), or
+commit only), ``python benchmarks/learn_step.py --rounds [R]`` (the ``banded_rounds`` lines
+only), or
 ``python benchmarks/learn_step.py --case N constrained|free [sparse|dense|learner|axes2|axes3]``.
 """
 

@@ -35,6 +35,7 @@ linear term is replaced). See ``docs/update.md``.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import clarabel
@@ -813,10 +814,18 @@ class _Schur:
         self._pos = np.full(m, -1, dtype=np.intp)  # column of each input in _w, -1: not yet
         self._w = np.empty((0, m))  # the kept columns of W's input block, one per row
         self._count = 0
+        self._lock = threading.Lock()
 
     def _columns(self, inputs: np.ndarray) -> np.ndarray | None:
-        """Positions in ``_w`` of the columns of ``inputs`` (computing the missing ones), or
-        None when they would exceed the budget."""
+        """The columns of ``W``'s input block for ``inputs`` as rows, shape (inputs, m)
+        (computing the missing ones), or None when they would exceed the budget. Under a
+        lock: a column half written by another thread would give a wrong answer silently
+        (the forks of an update are solved on one thread; their shared Clarabel solver
+        refuses a second thread outright)."""
+        with self._lock:
+            return self._columns_locked(inputs)
+
+    def _columns_locked(self, inputs: np.ndarray) -> np.ndarray | None:
         new = inputs[self._pos[inputs] < 0]
         if new.size:
             count = self._count + new.size
@@ -835,7 +844,7 @@ class _Schur:
             self._w[self._count : count] = X[: self.m].T
             self._pos[new] = np.arange(self._count, count)
             self._count = count
-        return self._pos[inputs]
+        return self._w[self._pos[inputs]]
 
     def solve(
         self, rows: _Rows, act: np.ndarray, u0: np.ndarray
@@ -862,15 +871,14 @@ class _Schur:
             return u0.copy(), np.zeros(0)
         ends, coef = rows.ends[act], rows.coef[act]
         inputs = np.unique(ends[coef != 0.0])  # the inputs involved (node m: coefficient 0)
-        pos = self._columns(inputs)
-        if pos is None:
+        W_in = self._columns(inputs)  # (inputs, m): rows of W (symmetric) = its columns
+        if W_in is None:
             return None
         # A restricted to the involved inputs: row k is c0[k] e(at0[k]) + c1[k] e(at1[k])
         at = np.searchsorted(inputs, ends)
         at[coef == 0.0] = 0  # node m (and nothing else) adds zero
         at0, at1, c0, c1 = at[:, 0], at[:, 1], coef[:, 0], coef[:, 1]
         two = bool(np.any(c1))
-        W_in = self._w[pos]  # (inputs, m): rows of W (symmetric) = its columns
         W_ss = W_in[:, inputs]
         # S = A W A', gathered (each row of A has one or two entries)
         S = np.outer(c0, c0) * W_ss[np.ix_(at0, at0)]
