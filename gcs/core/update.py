@@ -808,9 +808,8 @@ class _Schur:
     """
 
     def __init__(self, K: _Triplets, lu: _BandedLU, m: int) -> None:
-        rows, cols, values, n = K
-        self._K = sp.csr_matrix((values, (rows, cols)), shape=(n, n))
-        self._lu, self._n, self.m = lu, n, m
+        self._triplets, self._K = K, None  # K as CSR built on the first column asked
+        self._lu, self._n, self.m = lu, K[3], m
         self._pos = np.full(m, -1, dtype=np.intp)  # column of each input in _w, -1: not yet
         self._w = np.empty((0, m))  # the kept columns of W's input block, one per row
         self._count = 0
@@ -835,6 +834,9 @@ class _Schur:
                 grown = np.empty((min(max(2 * count, 32), _SCHUR_MAX_COLUMNS), self.m))
                 grown[: self._count] = self._w[: self._count]
                 self._w = grown
+            if self._K is None:
+                rows, cols, values, n = self._triplets
+                self._K = sp.csr_matrix((values, (rows, cols)), shape=(n, n))
             # all at once, one right-hand side each (LAPACK and the sparse product treat the
             # columns alike: a column's bits do not depend on which others are asked with it)
             E = np.zeros((self._n, new.size))
