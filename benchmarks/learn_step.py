@@ -52,9 +52,26 @@ rounds; ``ratio`` = baseline / this code; ``max_dev_m``: the largest difference 
 setpoints between the two codes over every step. The other commit is checked out with
 ``git worktree add --detach`` under the system's temporary directory (kept for later runs).
 
+Lines with ``"baseline": "banded_rounds"`` time :meth:`gcs.Learner.step` of the ``antx`` and
+``antx-adaptive`` runs above (the default eight, N = 280) with the active-set rounds of the
+input update through the Schur complement of the structure's factorised KKT matrix (this
+code) against the rounds that factorise the whole augmented KKT system (``_SCHUR_MAX_ROWS =
+0``, the method before), in alternated subprocesses of one run (``--rounds R`` of each,
+default 5): ``median_s`` / ``max_s`` the wall seconds of a step (per step the median over the
+rounds, then the median and largest over the 8 steps), ``cpu_median_s`` the same in CPU
+seconds of the process (less sensitive to the other jobs of a shared machine), ``ratio`` /
+``cpu_ratio`` = banded / Schur; ``parts_ms``: median per step of ``InputUpdate.solve`` (every
+axis; ``active_set`` and ``clarabel`` are parts of it), of the smoother and of the rest of the
+step; ``rounds_per_step``: the equality-constrained solves of the active-set method per step
+(Clarabel's polish included), ``ms_per_round`` the active-set wall time per round on the steps
+without Clarabel; ``max_dev_m`` the largest difference of the learned setpoints between the
+two methods, ``bitwise_repeatable`` whether every run of this code learned the same setpoints
+bit for bit; ``load_avg_1min`` the machine's load when the line was printed.
+
 Usage: ``python benchmarks/learn_step.py`` (all cases, each in a subprocess),
 ``python benchmarks/learn_step.py --code [COMMIT] [--rounds R]`` (the lines against another
-commit only), or
+commit only), ``python benchmarks/learn_step.py --rounds [R]`` (the ``banded_rounds`` lines
+only), or
 ``python benchmarks/learn_step.py --case N constrained|free [sparse|dense|learner|axes2|axes3]``.
 """
 
@@ -429,6 +446,149 @@ def run_code(commit: str, rounds: int) -> None:
             }), flush=True)  # fmt: skip
 
 
+ROUNDS_CASES = ("antx", "antx-adaptive")
+
+
+def _step_parts(profile: str, rounds_method: str, out: Path) -> dict:
+    """Every step of :func:`_eight_run`'s run, with where each one spent its time.
+
+    ``rounds_method``: ``"schur"`` (this code) or ``"banded"`` (``_SCHUR_MAX_ROWS = 0``: every
+    active-set round factorises the whole augmented KKT system, the method before). The parts
+    are wall seconds per step of ``InputUpdate.solve`` (eq. (8), every axis), of the
+    active-set rounds and Clarabel within it, of the smoother (Algorithm 1) and of the rest
+    (the trial's checks, the floor and records of the adaptive learner, the refresh); the
+    rounds are the equality-constrained solves of the active-set method (Clarabel's polish
+    included).
+    """
+    import gcs.core.learning as learning
+    import gcs.core.update as update
+
+    if rounds_method == "banded":
+        update._SCHUR_MAX_ROWS = 0
+    parts: dict[str, float] = {}
+    counts = {"rounds": 0, "schur": 0}
+    inside = [False]
+
+    def timed(owner, name, label):
+        inner = getattr(owner, name)
+
+        def wrapper(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                parts[label] = parts.get(label, 0.0) + time.perf_counter() - t0
+
+        setattr(owner, name, wrapper)
+
+    def counted_active_set(inner):
+        def wrapper(*args, **kwargs):
+            inside[0] = True
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                inside[0] = False
+
+        return wrapper
+
+    banded = update._BandedLU
+
+    class CountingLU(banded):
+        def __init__(self, K, stage):
+            counts["rounds"] += inside[0]
+            super().__init__(K, stage)
+
+    schur_solve = update._Schur.solve
+
+    def counting_schur(self, *args, **kwargs):
+        found = schur_solve(self, *args, **kwargs)
+        counts["rounds"] += found is not None
+        counts["schur"] += found is not None
+        return found
+
+    update._BandedLU = CountingLU
+    update._Schur.solve = counting_schur
+    update._active_set = counted_active_set(update._active_set)
+    timed(update.InputUpdate, "solve", "update_s")
+    timed(update, "_active_set", "active_set_s")
+    timed(update, "_solve_clarabel", "clarabel_s")
+    timed(learning, "rts_smoother", "smoother_s")
+    steps: list[dict] = []
+    learner_step = Learner.step
+
+    def step(self, u, y):
+        parts.clear()
+        counts["rounds"] = counts["schur"] = 0
+        c0, t0 = time.process_time(), time.perf_counter()
+        u_next = learner_step(self, u, y)
+        total, cpu = time.perf_counter() - t0, time.process_time() - c0
+        steps.append(parts | counts | {"step_s": total, "cpu_s": cpu})
+        return u_next
+
+    Learner.step = step
+    line = _eight_run(profile, out)
+    for part in steps:
+        part["rest_s"] = part["step_s"] - part.get("update_s", 0.0) - part.get("smoother_s", 0.0)
+    return line | {"parts": steps}
+
+
+def run_rounds(rounds: int) -> None:
+    """The ``banded_rounds`` lines: the active-set rounds through the Schur complement against
+    the banded rounds, in alternated subprocesses of one run, ``rounds`` of each."""
+    keys = ("step_s", "cpu_s", "update_s", "active_set_s", "clarabel_s", "smoother_s", "rest_s")
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in ROUNDS_CASES:
+            runs: dict[str, list[dict]] = {"banded": [], "schur": []}
+            for k in range(rounds):
+                for method in runs:
+                    out = Path(tmp) / f"{case}-{method}-{k}.npy"
+                    cmd = [sys.executable, __file__, "--rounds-case", case, method, str(out)]
+                    text = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+                    runs[method].append(json.loads(text.strip().splitlines()[-1]) | {"out": out})
+            summary = {}
+            for method, lines in runs.items():
+                # per step: the median over the rounds of the run; then over the steps
+                steps = [[line["parts"][j] for line in lines] for j in range(TRIALS)]
+                per_step = [{key: statistics.median(p.get(key, 0.0) for p in s) for key in keys}
+                            | {"rounds": s[0]["rounds"], "schur": s[0]["schur"]}
+                            for s in steps]  # fmt: skip
+                active = [p for p in per_step if p["rounds"] > 0 and p["clarabel_s"] == 0.0]
+                summary[method] = {
+                    "median_s": statistics.median(p["step_s"] for p in per_step),
+                    "max_s": max(p["step_s"] for p in per_step),
+                    "cpu_median_s": statistics.median(p["cpu_s"] for p in per_step),
+                    "median_parts_ms": {key[:-2]: round(1000 * statistics.median(
+                        p[key] for p in per_step), 3) for key in keys[2:]},  # fmt: skip
+                    "rounds_per_step": [p["rounds"] for p in per_step],
+                    "schur_rounds": sum(p["schur"] for p in per_step),
+                    "ms_per_round": round(1000 * sum(p["active_set_s"] for p in active)
+                                          / max(1, sum(p["rounds"] for p in active)), 3),
+                    "methods": lines[-1]["methods"],
+                }  # fmt: skip
+            dev = max(float(np.max(np.abs(np.load(a["out"]) - np.load(b["out"]))))
+                      for a, b in zip(runs["schur"], runs["banded"], strict=True))  # fmt: skip
+            same = all(np.array_equal(np.load(a["out"]), np.load(runs["schur"][0]["out"]))
+                       for a in runs["schur"])  # fmt: skip
+            new, old = summary["schur"], summary["banded"]
+            print(json.dumps({
+                "baseline": "banded_rounds", "case": case, "n": lines[0]["n"], "axes": 2,
+                "rounds": rounds, "trials": TRIALS, "load_avg_1min": os.getloadavg()[0],
+                "median_s": round(new["median_s"], 5), "max_s": round(new["max_s"], 5),
+                "baseline_median_s": round(old["median_s"], 5),
+                "baseline_max_s": round(old["max_s"], 5),
+                "ratio": round(old["median_s"] / new["median_s"], 2),
+                "cpu_median_s": round(new["cpu_median_s"], 5),
+                "baseline_cpu_median_s": round(old["cpu_median_s"], 5),
+                "cpu_ratio": round(old["cpu_median_s"] / new["cpu_median_s"], 2),
+                "parts_ms": new["median_parts_ms"], "baseline_parts_ms": old["median_parts_ms"],
+                "rounds_per_step": new["rounds_per_step"],
+                "baseline_rounds_per_step": old["rounds_per_step"],
+                "schur_rounds": new["schur_rounds"], "ms_per_round": new["ms_per_round"],
+                "baseline_ms_per_round": old["ms_per_round"], "max_dev_m": dev,
+                "bitwise_repeatable": bool(same), "methods": new["methods"],
+            }), flush=True)  # fmt: skip
+
+
 def _subprocess(n: int, constrained: bool, kind: str) -> dict:
     cmd = [sys.executable, __file__, "--case", str(n), "constrained" if constrained else "free"]
     out = subprocess.run(cmd + [kind], check=True, capture_output=True, text=True).stdout
@@ -438,6 +598,12 @@ def _subprocess(n: int, constrained: bool, kind: str) -> dict:
 def main() -> None:
     if len(sys.argv) == 4 and sys.argv[1] == "--code-case":
         print(json.dumps(run_code_case(sys.argv[2], Path(sys.argv[3]))))
+        return
+    if len(sys.argv) == 5 and sys.argv[1] == "--rounds-case":
+        print(json.dumps(_step_parts(sys.argv[2], sys.argv[3], Path(sys.argv[4]))))
+        return
+    if len(sys.argv) >= 2 and sys.argv[1] == "--rounds":
+        run_rounds(int(sys.argv[2]) if len(sys.argv) > 2 else 5)
         return
     if len(sys.argv) >= 2 and sys.argv[1] == "--code":
         args = sys.argv[2:]
@@ -477,6 +643,7 @@ def main() -> None:
         three["peak_ratio"] = round(three["peak_mb"] / two["peak_mb"], 2)
         print(json.dumps(two), flush=True)
         print(json.dumps(three), flush=True)
+    run_rounds(5)
     run_code(BASELINE_COMMIT, 3)
 
 

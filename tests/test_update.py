@@ -12,6 +12,7 @@ import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import gcs.core.update as update_module
 from gcs.core.model import (
     DiscreteModel,
     from_transfer_function,
@@ -718,3 +719,114 @@ def test_clarabel_solver_is_built_once_and_given_each_new_linear_term(seed):
         np.testing.assert_allclose(res.u_m, fresh.u_m, rtol=0, atol=1e-9 * scale)
         stationarity, infeasibility = kkt_violation(model, yd, d_plant, u_prev, w, limits, res.u_m)
         assert stationarity < 1e-10 and infeasibility < 1e-10
+
+
+# ---------------------------------------------------------------------------------------------
+# the active-set rounds through the Schur complement of the unconstrained KKT matrix
+# ---------------------------------------------------------------------------------------------
+
+
+def counted_banded_lus(patch: pytest.MonkeyPatch) -> list[int]:
+    """Count the banded LU factorisations (the structure's KKT matrix and whole augmented
+    systems) built from now on; returns the list that grows by one per factorisation."""
+    built: list[int] = []
+    banded = update_module._BandedLU
+
+    class Counting(banded):
+        def __init__(self, K, stage):
+            built.append(K[3])
+            super().__init__(K, stage)
+
+    patch.setattr(update_module, "_BandedLU", Counting)
+    return built
+
+
+def drifting_trials(seed: int, n: int, trials: int):
+    """A model, its reference, binding limits (a box, a rate limit and a deviation bound; the
+    box and rate limit alone when the deviation bound leaves them no setpoint) and ``trials``
+    disturbance estimates that drift from trial to trial."""
+    model = random_stable_model(seed, seed % 4, 1 + seed % 3)
+    yd, d_hat, u_prev = signals(seed, n)
+    w = UpdateWeights(1.0, 0.01, 0.001)
+    r = relative_degree(model)
+    box = binding_limits(next_input(model, yd, d_hat, u_prev, w).u_m, yd, r)
+    deviation = 0.9 * float(np.max(np.abs(dense_reference(model, yd, d_hat, u_prev, w) - yd)))
+    limits = SetpointLimits(box.u_min_m, box.u_max_m, box.max_step_m, max(deviation, 0.2))
+    try:
+        next_input(model, yd, d_hat, u_prev, w, limits)
+    except UpdateInfeasible:
+        limits = box
+    rng = np.random.default_rng(seed)
+    d = [d_hat]
+    for _ in range(trials - 1):
+        d.append(d[-1] + 0.1 * np.cumsum(rng.normal(size=n)) / np.sqrt(n))
+    return model, yd, u_prev, w, limits, d
+
+
+def solve_trials(model, yd, u_prev, w, limits, d, **constants):
+    """Every trial of ``d`` through one kept update (``constants``: module constants set for
+    the run); returns the results and the number of banded LU factorisations built."""
+    with pytest.MonkeyPatch.context() as patch:
+        for name, value in constants.items():
+            patch.setattr(update_module, name, value)
+        built = counted_banded_lus(patch)
+        kept = InputUpdate(model, yd, w, limits)
+        results, u = [], u_prev
+        for d_hat in d:
+            results.append(kept.solve(d_hat, u))
+            u = results[-1].u_m
+    return results, len(built)
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(10, 40))
+def test_schur_rounds_reach_the_banded_rounds_minimiser(seed, n):
+    """The active-set rounds through the Schur complement of the structure's factorised KKT
+    matrix (few limits held) and the rounds that factorise the whole augmented KKT system
+    each trial (``_SCHUR_MAX_ROWS = 0``, the method before) land on the same minimiser,
+    within 1e-9 m, every answer satisfying the KKT conditions of the dense QP and the limits;
+    the Schur rounds factorise nothing but the structure's KKT matrix. With a budget of one
+    kept column the rounds fall back to the banded ones, and still agree."""
+    model, yd, u_prev, w, limits, d = drifting_trials(seed, n, 4)
+    schur, built_schur = solve_trials(model, yd, u_prev, w, limits, d)
+    banded, built_banded = solve_trials(model, yd, u_prev, w, limits, d, _SCHUR_MAX_ROWS=0)
+    budget, _ = solve_trials(model, yd, u_prev, w, limits, d, _SCHUR_MAX_COLUMNS=1)
+    assert built_schur == 1  # n <= 40: at most 2 m + 1 <= 81 rows held, below the limit
+    constrained = [k for k, res in enumerate(banded) if res.method != "direct"]
+    assert built_banded >= 1 + len(constrained)  # (Clarabel's polish included)
+    r = relative_degree(model)
+    u_prev_k = u_prev
+    for k, (a, b, c) in enumerate(zip(schur, banded, budget, strict=True)):
+        assert a.method == b.method == c.method
+        assert a.active_constraints == b.active_constraints
+        scale = max(1.0, float(np.max(np.abs(b.u_m))))
+        np.testing.assert_allclose(a.u_m, b.u_m, rtol=0, atol=1e-9 * scale)
+        np.testing.assert_allclose(c.u_m, b.u_m, rtol=0, atol=1e-9 * scale)
+        assert_within_limits(a.u_m, yd, r, limits, tol=1e-9)
+        stationarity, infeasibility = kkt_violation(model, yd, d[k], u_prev_k, w, limits, a.u_m)
+        assert stationarity < 1e-10 and infeasibility < 1e-10
+        u_prev_k = a.u_m
+
+
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_schur_rounds_are_deterministic_whatever_columns_were_kept_before(seed):
+    """The columns of the inverse KKT matrix are kept by the structure and shared with its
+    forks (the plants of a batch), so which ones exist when a trial is solved depends on
+    what was solved before. An answer does not: two updates given the same trials give the
+    same setpoints bit for bit, also when the second one's structure first served a fork
+    with other disturbance estimates (other active limits, other columns computed)."""
+    n = 40
+    model, yd, u_prev, w, limits, d = drifting_trials(seed, n, 3)
+    one = InputUpdate(model, yd, w, limits)
+    two = InputUpdate(model, yd, w, limits)
+    fork = two.fork()
+    rng = np.random.default_rng(seed + 1)
+    fork.solve(d[0] + 0.3 * rng.normal(size=n), u_prev)
+    fork.solve(d[0] - 0.3 * rng.normal(size=n), u_prev)
+    u_one = u_two = u_prev
+    for d_hat in d:
+        a, b = one.solve(d_hat, u_one), two.solve(d_hat, u_two)
+        assert a.method == b.method
+        assert np.array_equal(a.u_m, b.u_m)
+        u_one, u_two = a.u_m, b.u_m

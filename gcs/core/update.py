@@ -35,6 +35,7 @@ linear term is replaced). See ``docs/update.md``.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import clarabel
@@ -73,6 +74,17 @@ _FEAS_TOL_M = 1e-9
 _POLISH_ROUNDS = 5
 #: Rounds of the active-set solve started from the last trial's active set before Clarabel.
 _WARM_ROUNDS = 8
+#: An active-set round solves through the Schur complement of the unconstrained KKT matrix
+#: (:class:`_Schur`) while at most this many limits are held with equality; more go to the
+#: banded LU of the whole KKT system. The Schur complement is dense, its Cholesky
+#: factorisation grows as the cube of the count, and above about a hundred rows OpenBLAS
+#: spreads it over threads, which on a busy machine took 3-18 ms instead of 0.2-1.4 ms.
+_SCHUR_MAX_ROWS = 96
+#: Columns of the inverse KKT matrix a structure keeps for the Schur complement (each one
+#: ``N`` floats); a round that would need more goes to the banded LU.
+_SCHUR_MAX_COLUMNS = 512
+#: The objective's simulation convolves directly up to this many samples, by FFT above.
+_DIRECT_CONVOLVE = 512
 
 
 @dataclass(frozen=True)
@@ -287,6 +299,7 @@ class _Structure:
         self.stage_eq = np.repeat(np.arange(T), nx)
         self.stage_z = np.concatenate([np.arange(m), self.stage_eq])
         self._kkt: tuple[_Triplets, _BandedLU] | None = None
+        self._schur: _Schur | None = None
 
     def problem(
         self, d_hat_m: np.ndarray, u_prev_m: np.ndarray, robust: RobustnessWeight | None
@@ -313,6 +326,14 @@ class _Structure:
         if self._kkt is None:
             self._kkt = _kkt_factor(self.P, self.G, self.stage_z, self.stage_eq)
         return self._kkt[0]
+
+    def schur(self) -> _Schur:
+        """The KKT system of the structure's own Hessian for the active-set rounds through the
+        Schur complement (built on first use, its columns kept across trials)."""
+        if self._schur is None:
+            K = self.kkt_base()
+            self._schur = _Schur(K, self._kkt[1], self.m)
+        return self._schur
 
     def solve_direct(self, prob: _Problem) -> np.ndarray:
         """Unconstrained optimum (equality-constrained QP); the free inputs. The KKT matrix
@@ -398,7 +419,7 @@ class _BandedLU:
         self.order, self.kl, self.ku, self._lu, self._piv = order, kl, ku, lu, piv
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """``K^-1 rhs`` for ``rhs`` of shape (n,)."""
+        """``K^-1 rhs`` for ``rhs`` of shape (n,) or (n, k) (``k`` right-hand sides)."""
         x, info = scipy.linalg.lapack.dgbtrs(self._lu, self.kl, self.ku, rhs[self.order], self._piv)
         if info != 0:
             raise RuntimeError(f"banded solve of the input update's KKT system failed ({info})")
@@ -632,11 +653,13 @@ def _solve_clarabel(
     rows: _Rows | None = None,
     qp: _ClarabelQP | None = None,
     base: _Triplets | None = None,
+    schur: tuple[_Schur, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, str, clarabel.DefaultSolution]:
     """Solve the QP with the limits' inequalities (``rows``, default from ``limits``) by
     Clarabel (the kept solver ``qp`` when given: the QP without the robustness weight);
-    return free inputs and status. ``base``: the KKT triplets of ``prob.P`` and ``prob.G``
-    when already built (for the polish)."""
+    return free inputs and status. ``base``, ``schur``: the KKT triplets of ``prob.P`` and
+    ``prob.G`` when already built, the structure's Schur complement and the unconstrained
+    optimum (for the polish, see :func:`_active_set`)."""
     nz = prob.P.shape[0]
     if rows is None:
         A_in, b_in = (_inequalities(prob, limits) if limits is not None
@@ -659,7 +682,7 @@ def _solve_clarabel(
         raise RuntimeError(f"Clarabel failed on the input update (status {status})")
     x = np.asarray(solution.x, dtype=float)
     if rows.b.size:
-        x = _polish(prob, rows, x, solution, base)
+        x = _polish(prob, rows, x, solution, base, schur)
     return x[: prob.m], ("solved" if status == "Solved" else status), solution
 
 
@@ -677,6 +700,23 @@ class _Rows:
     csr: sp.csr_matrix  # A by rows, duplicates summed (the active-set method's row access)
     stage: np.ndarray  # latest input sample of each row, (rows,)
     ends: np.ndarray  # the two nodes of each row's edge, (rows, 2); node m is the fixed values
+    coef: np.ndarray  # the row's coefficients on its two nodes, (rows, 2); 0 on node m
+
+    def excess(self, u_free: np.ndarray) -> np.ndarray:
+        """``A z - b`` for ``z`` whose free inputs are ``u_free`` (the states do not enter).
+
+        Parameters
+        ----------
+        u_free : ndarray, shape (m,)
+            The free inputs [m].
+
+        Returns
+        -------
+        ndarray, shape (rows,)
+            The rows' excess over their bounds [m] (positive: violated).
+        """
+        u = np.append(u_free, 0.0)  # node m, the fixed values, has coefficient 0
+        return self.coef[:, 0] * u[self.ends[:, 0]] + self.coef[:, 1] * u[self.ends[:, 1]] - self.b
 
 
 def _rows_of(A_in: sp.csc_matrix, b_in: np.ndarray, m: int) -> _Rows:
@@ -687,12 +727,17 @@ def _rows_of(A_in: sp.csc_matrix, b_in: np.ndarray, m: int) -> _Rows:
         raise ValueError("each limit row must involve one or two inputs")
     if csr.shape[0] == 0:
         empty = np.zeros(0, dtype=np.intp)
-        return _Rows(sp.csc_matrix(A_in), np.zeros(0), csr, empty, np.zeros((0, 2), dtype=np.intp))
+        return _Rows(sp.csc_matrix(A_in), np.zeros(0), csr, empty, np.zeros((0, 2), dtype=np.intp),
+                     np.zeros((0, 2)))  # fmt: skip
     first = csr.indices[csr.indptr[:-1]]
     last = csr.indices[csr.indptr[1:] - 1]
     stage = np.maximum(first, last).astype(np.intp)
     ends = np.column_stack([np.minimum(first, last), np.where(count == 2, stage, m)])
-    return _Rows(sp.csc_matrix(A_in), np.asarray(b_in, dtype=float), csr, stage, ends)
+    # indices are sorted (sum_duplicates): the first entry is the smaller node's
+    two = count == 2
+    coef = np.column_stack([csr.data[csr.indptr[:-1]],
+                            np.where(two, csr.data[csr.indptr[1:] - 1], 0.0)])  # fmt: skip
+    return _Rows(sp.csc_matrix(A_in), np.asarray(b_in, dtype=float), csr, stage, ends, coef)
 
 
 def _independent(rows: _Rows, order: np.ndarray, m: int) -> np.ndarray:
@@ -709,6 +754,12 @@ def _independent(rows: _Rows, order: np.ndarray, m: int) -> np.ndarray:
     if order.size == 0:
         return keep
     ends = rows.ends[order]
+    if np.all(ends[:, 1] == m):
+        # bounds only: every edge ends at the fixed values (a star), so the forest is the
+        # first edge of each input
+        _, first = np.unique(ends[:, 0], return_index=True)
+        keep[order[first]] = True
+        return keep
     lo, hi = ends.min(axis=1), ends.max(axis=1)
     _, first = np.unique(lo * (m + 1) + hi, return_index=True)
     weight = first + 1.0  # positions in order, from 1 (a zero would be no edge)
@@ -733,51 +784,220 @@ def _most_negative_per_run(rows: _Rows, lam: np.ndarray, negative: np.ndarray) -
     return out
 
 
+class _Schur:
+    """The unconstrained KKT system of a structure, for active-set rounds with few limits.
+
+    Holding the limit rows ``act`` with equality adds them to the KKT matrix ``K`` (the
+    structure's, factorised once): ``[K A'; A 0] [z; lam] = [k; b]``. By the Schur
+    complement, ``z = z0 - W A' lam`` with ``z0 = K^-1 k`` the unconstrained optimum,
+    ``W = K^-1`` and ``(A W A') lam = A z0 - b``. A limit row involves one or two inputs, so
+    only the input rows and columns of ``W`` enter (the inverse of the reduced Hessian in the
+    inputs, symmetric positive definite): a round costs a Cholesky factorisation of the small
+    dense ``A W A'`` instead of a banded LU of the whole augmented KKT matrix. The columns of
+    ``W`` are computed on first use, each by the factorised ``K`` (two banded solves, one of
+    them iterative refinement), and kept (at most :data:`_SCHUR_MAX_COLUMNS`).
+
+    Parameters
+    ----------
+    K : tuple (rows, cols, values, n)
+        The structure's KKT matrix ``[P G'; G 0]`` as triplets.
+    lu : _BandedLU
+        Its factorisation.
+    m : int
+        Number of free inputs (the first ``m`` unknowns of ``K``).
+    """
+
+    def __init__(self, K: _Triplets, lu: _BandedLU, m: int) -> None:
+        self._triplets, self._K = K, None  # K as CSR built on the first column asked
+        self._lu, self._n, self.m = lu, K[3], m
+        self._pos = np.full(m, -1, dtype=np.intp)  # column of each input in _w, -1: not yet
+        self._w = np.empty((0, m))  # the kept columns of W's input block, one per row
+        self._count = 0
+        self._lock = threading.Lock()
+
+    def _columns(self, inputs: np.ndarray) -> np.ndarray | None:
+        """The columns of ``W``'s input block for ``inputs`` as rows, shape (inputs, m)
+        (computing the missing ones), or None when they would exceed the budget. Under a
+        lock: a column half written by another thread would give a wrong answer silently
+        (the forks of an update are solved on one thread; their shared Clarabel solver
+        refuses a second thread outright)."""
+        with self._lock:
+            return self._columns_locked(inputs)
+
+    def _columns_locked(self, inputs: np.ndarray) -> np.ndarray | None:
+        new = inputs[self._pos[inputs] < 0]
+        if new.size:
+            count = self._count + new.size
+            if count > _SCHUR_MAX_COLUMNS:
+                return None
+            if count > self._w.shape[0]:
+                grown = np.empty((min(max(2 * count, 32), _SCHUR_MAX_COLUMNS), self.m))
+                grown[: self._count] = self._w[: self._count]
+                self._w = grown
+            if self._K is None:
+                rows, cols, values, n = self._triplets
+                self._K = sp.csr_matrix((values, (rows, cols)), shape=(n, n))
+            # all at once, one right-hand side each (LAPACK and the sparse product treat the
+            # columns alike: a column's bits do not depend on which others are asked with it)
+            E = np.zeros((self._n, new.size))
+            E[new, np.arange(new.size)] = 1.0
+            X = self._lu.solve(E)
+            X += self._lu.solve(E - self._K @ X)
+            self._w[self._count : count] = X[: self.m].T
+            self._pos[new] = np.arange(self._count, count)
+            self._count = count
+        return self._w[self._pos[inputs]]
+
+    def solve(
+        self, rows: _Rows, act: np.ndarray, u0: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The free inputs and the multipliers with the rows ``act`` held with equality.
+
+        Parameters
+        ----------
+        rows : _Rows
+            The limit rows.
+        act : ndarray of int
+            Indices of the rows held with equality (linearly independent).
+        u0 : ndarray, shape (m,)
+            Free inputs of the unconstrained optimum ``z0``.
+
+        Returns
+        -------
+        (u, lam) or None
+            ``u`` of shape (m,) and the multipliers of ``act`` (the convention of the KKT
+            solve: non-negative at the minimiser); None when the columns of ``W`` needed
+            exceed the budget or ``A W A'`` is not numerically positive definite.
+        """
+        if act.size == 0:
+            return u0.copy(), np.zeros(0)
+        ends, coef = rows.ends[act], rows.coef[act]
+        inputs = np.unique(ends[coef != 0.0])  # the inputs involved (node m: coefficient 0)
+        W_in = self._columns(inputs)  # (inputs, m): rows of W (symmetric) = its columns
+        if W_in is None:
+            return None
+        # A restricted to the involved inputs: row k is c0[k] e(at0[k]) + c1[k] e(at1[k])
+        at = np.searchsorted(inputs, ends)
+        at[coef == 0.0] = 0  # node m (and nothing else) adds zero
+        at0, at1, c0, c1 = at[:, 0], at[:, 1], coef[:, 0], coef[:, 1]
+        two = bool(np.any(c1))
+        W_ss = W_in[:, inputs]
+        # S = A W A', gathered (each row of A has one or two entries)
+        S = np.outer(c0, c0) * W_ss[np.ix_(at0, at0)]
+        if two:
+            cross = np.outer(c0, c1) * W_ss[np.ix_(at0, at1)]
+            S += cross + cross.T + np.outer(c1, c1) * W_ss[np.ix_(at1, at1)]
+        # LAPACK's Cholesky directly (scipy.linalg.cho_factor's checks cost more than it here)
+        cho, info = scipy.linalg.lapack.dpotrf(S, lower=False, clean=False)
+        if info != 0:  # not numerically positive definite
+            return None
+        b = rows.b[act]
+
+        def cho_solve(rhs: np.ndarray) -> np.ndarray:
+            x, _ = scipy.linalg.lapack.dpotrs(cho, rhs, lower=False)
+            return x
+
+        def rows_at(v: np.ndarray) -> np.ndarray:  # A v for v on the involved inputs
+            return c0 * v[at0] + c1 * v[at1] if two else c0 * v[at0]
+
+        def spread(lam: np.ndarray) -> np.ndarray:  # W A' lam on the free inputs
+            g = np.bincount(at0, weights=c0 * lam, minlength=inputs.size)
+            if two:
+                g += np.bincount(at1, weights=c1 * lam, minlength=inputs.size)
+            return g @ W_in
+
+        lam = cho_solve(rows_at(u0[inputs]) - b)
+        u = u0 - spread(lam)
+        # one step of iterative refinement on the rows held
+        dlam = cho_solve(rows_at(u[inputs]) - b)
+        lam += dlam
+        u -= spread(dlam)
+        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(lam))):
+            return None
+        return u, lam
+
+
 def _active_set(
-    prob: _Problem, rows: _Rows, act: np.ndarray, rounds: int, base: _Triplets | None = None
+    prob: _Problem,
+    rows: _Rows,
+    act: np.ndarray,
+    rounds: int,
+    base: _Triplets | None = None,
+    schur: tuple[_Schur, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The QP's minimiser from a guess of its active set, or None.
 
     The rows ``act`` (a linearly independent subset of them) become equalities and the
-    equality-constrained QP is solved through its KKT system (banded in stage-wise order);
-    then the violated rows are added (the most violated first, each while it keeps the set
-    independent) and, of each run of consecutive samples whose rows have negative
-    multipliers, the most negative dropped (dropping whole runs at once overshoots and can
-    cycle), for at most ``rounds`` rounds. A point
-    is returned (with its active set) only when it is primal feasible and its multipliers are
-    non-negative: it then satisfies the KKT conditions of the full problem to rounding, and
-    the problem being strictly convex, it is the minimiser. ``base``: the KKT triplets of
-    ``prob.P`` and ``prob.G`` when already built.
+    equality-constrained QP is solved: through the Schur complement of the unconstrained
+    KKT matrix (``schur``, while at most :data:`_SCHUR_MAX_ROWS` rows are held) or through
+    the whole KKT system (banded in stage-wise order); then the violated rows are added (the
+    most violated first, each while it keeps the set independent) and, of each run of
+    consecutive samples whose rows have negative multipliers, the most negative dropped
+    (dropping whole runs at once overshoots and can cycle), for at most ``rounds`` rounds. A
+    point is returned (with its active set) only when it is primal feasible and its
+    multipliers are non-negative: it then satisfies the KKT conditions of the full problem to
+    rounding, and the problem being strictly convex, it is the minimiser.
+
+    Parameters
+    ----------
+    prob : _Problem
+        The trial's QP.
+    rows : _Rows
+        The limits' inequality rows.
+    act : ndarray of bool, shape (rows,)
+        The guess of the active set.
+    rounds : int
+        Most rounds (equality-constrained solves) before giving up.
+    base : tuple (rows, cols, values, n) or None
+        The KKT triplets of ``prob.P`` and ``prob.G`` when already built.
+    schur : (_Schur, ndarray) or None
+        The structure's unconstrained KKT system and the free inputs of the unconstrained
+        optimum of this trial (only when ``prob.P`` is the structure's own Hessian).
+
+    Returns
+    -------
+    (u, act) or None
+        The free inputs of the minimiser, shape (m,), and its active set (bool, (rows,)).
     """
-    n_eq, b_in, A_csr = prob.G.shape[0], rows.b, rows.csr
+    n_eq, b_in, A_csr, m = prob.G.shape[0], rows.b, rows.csr, prob.m
     scale = max(1.0, float(np.max(np.abs(b_in), initial=0.0)))
-    act = _independent(rows, np.flatnonzero(act), prob.m)
-    if base is None:  # the KKT system without the limits, built once
-        base = _kkt_triplets(prob.P, prob.G)
+    act = _independent(rows, np.flatnonzero(act), m)
     for _ in range(rounds):
-        K = _with_rows(base, A_csr, act)
-        h = np.concatenate([prob.h, b_in[act]])
-        stage = np.concatenate([prob.stage_z, prob.stage_eq, rows.stage[act]])
-        try:
-            z, nu = _kkt_solve_factored(K, _BandedLU(K, stage), prob.q, h, prob.P.shape[0])
-        except (RuntimeError, ValueError):
-            return None
-        excess = A_csr @ z - b_in
-        residual = max(np.max(np.abs(prob.G @ z - prob.h), initial=0.0),
-                       np.max(np.abs(excess[act]), initial=0.0))  # fmt: skip
+        held = np.flatnonzero(act)
+        found = None
+        if schur is not None and held.size <= _SCHUR_MAX_ROWS:
+            found = schur[0].solve(rows, held, schur[1])
+        if found is not None:
+            u, lam_held = found
+            excess = rows.excess(u)
+            residual = np.max(np.abs(excess[act]), initial=0.0)
+        else:
+            if base is None:  # the KKT system without the limits, built once
+                base = _kkt_triplets(prob.P, prob.G)
+            K = _with_rows(base, A_csr, act)
+            h = np.concatenate([prob.h, b_in[act]])
+            stage = np.concatenate([prob.stage_z, prob.stage_eq, rows.stage[act]])
+            try:
+                z, nu = _kkt_solve_factored(K, _BandedLU(K, stage), prob.q, h, prob.P.shape[0])
+            except (RuntimeError, ValueError):
+                return None
+            u, lam_held = z[:m], nu[n_eq:]
+            excess = A_csr @ z - b_in
+            residual = max(np.max(np.abs(prob.G @ z - prob.h), initial=0.0),
+                           np.max(np.abs(excess[act]), initial=0.0))  # fmt: skip
         if residual > 1e-10 * scale:
             return None
         lam = np.zeros(act.size)
-        lam[act] = nu[n_eq:]
+        lam[act] = lam_held
         lam_tol = 1e-9 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
         violated = excess > 1e-10 * scale
         negative = lam < -lam_tol
         if not violated.any() and not negative.any():
-            return z, act
+            return u, act
         new = np.flatnonzero(violated & ~act)
         new = new[np.argsort(-excess[new], kind="stable")]
         keep = act & ~_most_negative_per_run(rows, lam, negative)
-        act = _independent(rows, np.concatenate([np.flatnonzero(keep), new]), prob.m)
+        act = _independent(rows, np.concatenate([np.flatnonzero(keep), new]), m)
     return None
 
 
@@ -787,18 +1007,19 @@ def _polish(
     x: np.ndarray,
     solution: clarabel.DefaultSolution,
     base: _Triplets | None = None,
+    schur: tuple[_Schur, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Refine Clarabel's answer on its active set (as OSQP's polishing does).
 
     The inequalities Clarabel finds active (dual above slack) start :func:`_active_set` for
     a few rounds; its point is kept when it satisfies the KKT conditions of the full problem
-    to rounding, otherwise Clarabel's answer is returned.
+    to rounding, otherwise Clarabel's answer is returned (``base``, ``schur``: as there).
     """
     n_eq = prob.G.shape[0]
     s = np.asarray(solution.s, dtype=float)[n_eq:]
     zd = np.asarray(solution.z, dtype=float)[n_eq:]
-    found = _active_set(prob, rows, zd > s, _POLISH_ROUNDS, base)
-    return x if found is None else found[0]
+    found = _active_set(prob, rows, zd > s, _POLISH_ROUNDS, base, schur)
+    return x[: prob.m] if found is None else found[0]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -818,7 +1039,8 @@ def _objective(
 ) -> float:
     from scipy.signal import oaconvolve  # on first use: a second to import
 
-    y = oaconvolve(f, u)[: u.size] if u.size > 64 else np.convolve(f, u)[: u.size]
+    # direct below a few hundred samples (microseconds; the FFT's set-up costs a millisecond)
+    y = oaconvolve(f, u)[: u.size] if u.size > _DIRECT_CONVOLVE else np.convolve(f, u)[: u.size]
     e = (y - yd + dh)[r - 1 :]
     du = u - up
     value = float(weights.we * e @ e + weights.wdu * du @ du + weights.wu * u @ u)
@@ -911,7 +1133,8 @@ class InputUpdate:
         """
         s, limits = self._s, self.limits
         prob = s.problem(d_hat_m, u_prev_m, robustness)
-        u = _full_input(prob, s.solve_direct(prob))
+        u0 = s.solve_direct(prob)
+        u = _full_input(prob, u0)
         method, status = "direct", "solved"
         if limits is not None and _violations(u, prob, limits, -_FAST_PATH_TOL_M) > 0:
             shared = self._limit_data
@@ -921,18 +1144,19 @@ class InputUpdate:
             rows = shared.rows
             own = prob.P is s.P  # no robustness weight: the structure's KKT and Clarabel's QP
             base = s.kkt_base() if own else None
+            schur = (s.schur(), u0) if own else None
             found = None
             if self._active is not None and self._active.size == rows.b.size:
                 # the last trial's active set (or the replaced model's), refined
-                found = _active_set(prob, rows, self._active, _WARM_ROUNDS, base)
+                found = _active_set(prob, rows, self._active, _WARM_ROUNDS, base, schur)
             if found is not None:
-                z, self._active = found
-                u_free, method = z[: prob.m], "active-set"
+                u_free, self._active = found
+                method = "active-set"
             else:
                 if own and shared.qp is None:
                     shared.qp = _ClarabelQP(prob, rows)
                 qp = shared.qp if own else None
-                u_free, status, _ = _solve_clarabel(prob, limits, rows, qp, base)
+                u_free, status, _ = _solve_clarabel(prob, limits, rows, qp, base, schur)
                 method = "clarabel"
                 z = np.zeros(prob.P.shape[0])
                 z[: prob.m] = u_free
