@@ -1,0 +1,92 @@
+"""Learning holds at the floor in a lab as real ones are, on real PX4 firmware.
+
+The lab of the flight in which learning seemed to leave its floor (docs/learning-floor.md, "On
+firmware: the rise was the floor's measure"): Motive at 100 Hz, 30 ms from the body's motion
+to the frame with EKF2_EV_DELAY told 30 ms (a careful lab), 1 mm of marker noise per axis,
+and the room's axes turned 30 deg from gcs's mapping (PX4, on vision only, flies in the
+room's frame). The README's flight in it: ``gcs fly --mocap ... --profile antx-adaptive`` on
+the default eight, the floor measured from three flights of trial 0 (two repeats), so that
+the scatter between flights is measured too (``gcs.core.floor``). What the test asserts is the
+issue's bound: no learned trial from j = 2 on above 2 floors. How close to the floor the
+trials came (the goal: within 1.5 floors, the median within 1.25) is a figure, kept in the
+test's record; ``benchmarks/lab_floor_px4.py`` flies this point and others for the table.
+
+Not yet part of ``make test`` (marked ``lab_floor``; ``make test-lab-floor`` flies it): its
+bound is statistical and its reliability over ten runs in a row is not measured, and beside
+other flights on a busy machine the rig itself can serve a jump (its truth is PX4's 25 Hz
+display stream; once, at load 4-6, 0.141 m in 9.4 ms, which gcs's mocap watch rightly
+refused). docs/testing.md has the runs so far.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+from synthetic import CI_FLIGHT
+
+from gcs.io.rundir import RunDir
+from px4.flying import report_rows
+from px4.sitl import ROOT, STARTED_LINE
+from px4.test_px4_lab import LANDED, Gcs, LabConditions, lab_rig
+
+pytestmark = [pytest.mark.px4, pytest.mark.lab_floor]
+
+#: the lab: 100 Hz, 30 ms told to EKF2, 1 mm, the room turned 30 deg
+LAB = LabConditions(rate_hz=100.0, latency_ms=30.0, noise_mm=1.0, yaw_offset_deg=30.0,
+                    match_ev_delay=True)  # fmt: skip
+#: trial 0 and two repeats (the floor), then learned trials j = 1, 2, 3
+REPEATS = 2
+TRIALS = REPEATS + 4
+#: the issue's bound on a learned trial from j = 2 on [floors]
+BOUND = 2.0
+#: a hung flight, not a slow one: six trials of the 14 s eight, the frame check, the hover
+FLY_TIMEOUT_S = 900.0
+
+
+def lab_adaptive_profile(tmp: Path) -> Path:
+    """profiles/antx-adaptive.yaml with the tests' watchdog limits, a ``mocap`` section (the
+    frame check as shipped) and ``learning.adaptive.repeats`` :data:`REPEATS`."""
+    data = yaml.safe_load((ROOT / "profiles" / "antx-adaptive.yaml").read_text())
+    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
+    data["mocap"] = {}
+    data["learning"]["adaptive"]["repeats"] = REPEATS
+    path = tmp / "antx-adaptive-lab.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def test_learning_stays_within_two_floors_in_a_realistic_lab(
+    px4_factory, tmp_path: Path, px4_figures: dict
+) -> None:
+    """The README's adaptive flight in the lab of :data:`LAB`: it lands and disarms, the floor
+    comes from the three flights of trial 0, and no learned trial from j = 2 on is above
+    :data:`BOUND` floors."""
+    px4 = px4_factory(params=LAB.px4_params(), ready=STARTED_LINE)
+    run_path = tmp_path / "run"
+    with lab_rig(px4, LAB) as rig, px4.monitor() as mon:
+        gcs = Gcs(
+            "fly", "--connect", px4.url, "--mocap", rig.url, "--iter", TRIALS,
+            "--profile", lab_adaptive_profile(tmp_path), "--run", run_path,
+        )  # fmt: skip
+        code = gcs.wait(FLY_TIMEOUT_S)
+        out = gcs.output()
+        mon.wait("on the ground", lambda s: s.landed_state == LANDED, 60)
+        mon.wait("disarmed", lambda s: s.armed is False, 30)
+    assert code == 0, out
+    assert "landed and disarmed" in out, out
+    assert RunDir.open(run_path).complete_trials() == list(range(TRIALS)), out
+    rows = report_rows(run_path)
+    floor_m = rows[0]["floor_m"]
+    learned = {r["iteration"]: r["floor_ratio"] for r in rows if r["repeat_of"] is None}
+    from_j2 = [learned[j] for j in sorted(learned) if j >= 2]
+    px4_figures.update(
+        lab=LAB.rig_args() + [f"EKF2_EV_DELAY {LAB.px4_params()['EKF2_EV_DELAY']:g}"],
+        floor_m=floor_m,
+        e_pos_m=[round(r["epos_m"], 4) for r in rows],
+        floors={j: round(x, 2) for j, x in sorted(learned.items())},
+    )
+    assert [r["repeat_of"] for r in rows[: REPEATS + 1]] == [None] + [0] * REPEATS, rows
+    assert len(from_j2) == TRIALS - REPEATS - 2, learned
+    assert max(from_j2) <= BOUND, (learned, floor_m, out)
