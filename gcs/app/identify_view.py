@@ -20,7 +20,7 @@ from gcs.core.trajectory import Box
 from gcs.io.rundir import RunDir
 from gcs.io.settings import IdentifySettings
 
-__all__ = ["IdentifyView", "results_table", "model_lines", "excitation_lines"]
+__all__ = ["IdentifyView", "results_table", "model_lines", "excitation_lines", "weaker_lines"]
 
 
 def _poly(c: np.ndarray) -> str:
@@ -87,6 +87,30 @@ def model_lines(results: Sequence[AxisResult]) -> list[str]:
             f"poles z = {_poles(np.linalg.eigvals(r.model.A))}"
         )
     return lines
+
+
+def weaker_lines(results: Sequence[AxisResult], profile_name: str) -> list[str]:
+    """One warning per axis whose identified model explains the validation experiment less
+    than the input profile's model did (both simulated free-running on trial 1).
+
+    On short experiments over a hover that wanders (GPS: decimetres) an axis can come out
+    worse than the model one started from; the profile is written all the same (it is what
+    the data gave), and the line says which axis and what to do.
+
+    Parameters
+    ----------
+    results : sequence of AxisResult
+    profile_name : str
+        The input profile's name.
+    """
+    return [
+        f"warning: {r.axis}: the identified model explains the validation experiment less than "
+        f"{profile_name}'s (VAF {r.vaf_pct:.2f} % against {r.vaf_profile_pct:.2f} %): longer "
+        "experiments (identification.duration_s) or a steadier hover, or keep "
+        f"{profile_name}'s model for this axis"
+        for r in results
+        if not math.isnan(r.vaf_profile_pct) and r.vaf_pct < r.vaf_profile_pct
+    ]
 
 
 @dataclass(frozen=True)
@@ -172,6 +196,8 @@ class IdentifyView:
         self.console.print(results_table(results, profile_name))
         for line in model_lines(results):
             self.console.print(line, highlight=False)
+        for line in weaker_lines(results, profile_name):
+            self.console.print(line, highlight=False, markup=False)
 
     def wrote_profile(self, path: Path, new: bool) -> None:
         """The profile written (``new``), or already there with the same bytes.

