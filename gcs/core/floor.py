@@ -261,11 +261,9 @@ def floor_flights(setpoints_ne_m: np.ndarray, tol_m: float = IDENTICAL_TOL_M) ->
     list of int
         ``[0, 1, .., r]`` (``r >= 1``), or empty when trial 1 does not repeat trial 0.
     """
-    sp = np.asarray(setpoints_ne_m, dtype=float)
-    if sp.ndim != 3 or sp.shape[-1] != 2:
-        raise ValueError(f"setpoints_ne_m must have shape (T, N, 2), got {sp.shape}")
+    first = first_flights(setpoints_ne_m, tol_m)
     r = 0
-    while r + 1 < sp.shape[0] and np.max(np.abs(sp[r + 1] - sp[0])) <= tol_m:
+    while r + 1 < len(first) and first[r + 1] == 0:
         r += 1
     return list(range(r + 1)) if r >= 1 else []
 
