@@ -9,7 +9,7 @@ import pytest
 import scipy.linalg
 import scipy.optimize
 import scipy.sparse as sp
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import gcs.core.update as update_module
@@ -571,6 +571,9 @@ def test_kkt_helper_tells_the_minimiser_from_other_feasible_points(px4_model):
     order=st.integers(1, 4),
     n=st.integers(8, 40),
 )
+# a degenerate vertex: the box's lower bound, four rate limits and the pinned end (at the box's
+# upper bound) meet in a cycle, and the independent rows first held have negative multipliers
+@example(seed=369, delay=1, order=3, n=9)
 def test_kept_update_solves_on_its_active_set_to_the_exact_minimiser(seed, delay, order, n):
     """A kept update asked the trial it has just solved again takes its active set (the limits
     held with equality in the banded KKT system) and lands on the minimiser at once, to

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import clarabel
 import numpy as np
 import scipy.linalg
+import scipy.optimize
 import scipy.sparse as sp
 import scipy.sparse.csgraph
 
@@ -769,6 +770,28 @@ def _independent(rows: _Rows, order: np.ndarray, m: int) -> np.ndarray:
     return keep
 
 
+def _nonnegative_multipliers(
+    rows: _Rows, act: np.ndarray, tight: np.ndarray, lam: np.ndarray, m: int
+) -> bool:
+    """Whether the limits held (``act``, multipliers ``lam``) and those met with equality but
+    not held (``tight``: each closes a cycle with the held ones) admit non-negative multipliers
+    with the same force on the inputs.
+
+    At a degenerate vertex more limits meet than are independent, and the multipliers of the
+    independent subset that happens to be held are only one of a family: ``lam + t c`` for every
+    ``c`` with ``A' c = 0`` on these rows. The point is the minimiser when some member of the
+    family is non-negative, which a non-negative least-squares fit of the held rows' force
+    ``A_act' lam_act`` by the rows ``act | tight`` finds (to rounding) or rules out.
+    """
+    both = np.flatnonzero(act | tight)
+    A = rows.csr[both][:, :m]
+    force = A.T @ np.where(act[both], lam[both], 0.0)
+    cols = np.flatnonzero(np.abs(A).sum(axis=0).A1 > 0)
+    At = A[:, cols].toarray().T
+    fit, residual = scipy.optimize.nnls(At, force[cols])
+    return bool(residual <= 1e-9 * max(1.0, float(np.max(np.abs(force)))))
+
+
 def _most_negative_per_run(rows: _Rows, lam: np.ndarray, negative: np.ndarray) -> np.ndarray:
     """Mask of the row with the most negative multiplier in each run of consecutive samples
     among the ``negative`` rows."""
@@ -994,6 +1017,10 @@ def _active_set(
         negative = lam < -lam_tol
         if not violated.any() and not negative.any():
             return u, act
+        if not violated.any():
+            tight = ~act & (np.abs(excess) <= 1e-10 * scale)
+            if tight.any() and _nonnegative_multipliers(rows, act, tight, lam, m):
+                return u, act | tight
         new = np.flatnonzero(violated & ~act)
         new = new[np.argsort(-excess[new], kind="stable")]
         keep = act & ~_most_negative_per_run(rows, lam, negative)
