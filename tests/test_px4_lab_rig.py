@@ -237,6 +237,20 @@ def test_a_state_that_arrives_late_is_dated_near_when_it_was_made() -> None:
     assert state_time(None, 3.0, period) == 3.0 and state_time(1.0, 3.0, None) == 3.0
 
 
+def test_a_burst_of_states_is_dated_in_order_and_never_after_its_receipt() -> None:
+    """States made every 40 ms, the first five on time, then ten held up by a stall and
+    received 20 us apart: each is dated at most at its receipt and after the one before (the
+    clock pulled a tenth of the way would otherwise run ahead of the receipts and back)."""
+    receipts = [k * 0.04 for k in range(5)] + [0.36 + k * 20e-6 for k in range(10)]
+    dated: list[float] = []
+    for k, r in enumerate(receipts):
+        intervals = np.diff(receipts[: k + 1])
+        period = float(intervals.mean()) if intervals.size else None
+        dated.append(state_time(dated[-1] if dated else None, r, period))
+    assert all(d <= r for d, r in zip(dated, receipts, strict=True))
+    assert all(b > a for a, b in zip(dated, dated[1:], strict=False))
+
+
 def _free_udp(port: int) -> bool:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         try:

@@ -32,8 +32,9 @@ milliseconds late (PX4 or the rig descheduled). Taken as made at its receipt, su
 would move the served body by its speed times the delay in one frame: 0.125 m at 2.5 m/s and
 50 ms, a jump no vehicle makes, which gcs's mocap watch rightly refuses. So each state's time
 is its predecessor's plus the stream's mean interval, pulled a tenth of the way toward its
-receipt (:func:`state_time`): a late state moves the body by a tenth of that; a receipt more
-than 0.2 s after the prediction (PX4 stopped) restarts the clock there.
+receipt (:func:`state_time`), and never later than its receipt: a late state moves the body by
+a tenth of that; a receipt more than 0.2 s after the prediction (PX4 stopped) restarts the
+clock there.
 
 The message carries latitude and longitude in 1e-7 degrees (about 1.1 cm north, 0.75 cm
 east at 47 degrees) and altitude in millimetres: the served pose has that resolution, coarser
@@ -122,14 +123,17 @@ def state_time(
     -------
     float
         The state's time [s]: the receipt for the first state, without a period or after a
-        stop; else ``previous + period + gain (receipt - previous - period)``.
+        stop; else ``previous + period + gain (receipt - previous - period)``, at most the
+        receipt.
     """
     if previous_s is None or period_s is None:
         return receipt_s
     predicted = previous_s + period_s
     if receipt_s - predicted > resync_s:
         return receipt_s
-    return predicted + gain * (receipt_s - predicted)
+    # never after its receipt: states that come faster than the mean interval (a burst after a
+    # stall) would otherwise run the clock ahead of the receipts, and then backwards
+    return min(predicted + gain * (receipt_s - predicted), receipt_s)
 
 
 @dataclass(frozen=True)
