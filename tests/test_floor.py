@@ -154,6 +154,31 @@ def test_verdicts_at_floor_and_converged() -> None:
     assert v[4].ratio == pytest.approx(1.2)
 
 
+def test_converged_pairs_learned_trials_only() -> None:
+    """Where the floor is high (GPS), trial 0 and its repeats can be at it: they never make a
+    pair, and a flight of earlier setpoints (--again) between two learned trials is skipped."""
+    f = _floor(0.4, 0.05, flights=3)
+    a, b, c, d = (np.full((20, 2), x) for x in (0.0, 1.0, 2.0, 3.0))
+    # trials 0-2: the reference and its repeats, all at the floor; 3: learned, at it
+    e = np.array([0.40, 0.41, 0.39, 0.40])
+    v = floor_verdicts(e, f, setpoints_ne_m=np.array([a, a, a, b]))
+    assert all(x.at_floor for x in v)
+    assert not any(x.converged for x in v)
+    # then trial 4 learned at the floor: converged with trial 3, its learned predecessor
+    e = np.array([0.40, 0.41, 0.39, 0.40, 0.42])
+    v = floor_verdicts(e, f, setpoints_ne_m=np.array([a, a, a, b, c]))
+    assert [x.converged for x in v] == [False] * 4 + [True]
+    # an --again of trial 3 between two learned trials: trial 6 pairs with 4, not with 5
+    e = np.array([0.40, 0.41, 0.39, 0.40, 0.42, 0.41, 0.40])
+    sp = np.array([a, a, a, b, c, b, d])
+    v = floor_verdicts(e, f, setpoints_ne_m=sp)
+    assert v[5].repeat_of == 3 and not v[5].converged
+    assert v[6].converged
+    # the learned predecessor above the floor: no pair, though the --again before is at it
+    e = np.array([0.40, 0.41, 0.39, 0.40, 0.90, 0.41, 0.40])
+    assert not floor_verdicts(e, f, setpoints_ne_m=sp)[6].converged
+
+
 def test_verdicts_with_many_flights_use_a_tighter_floor() -> None:
     e = np.array([0.031, 0.031])
     loose = floor_verdicts(e, _floor(0.02, 0.004, flights=2))

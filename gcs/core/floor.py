@@ -287,8 +287,11 @@ class FloorVerdict:
         ``z <= z_max``: the trial is indistinguishable from a flight with nothing repeatable
         left.
     converged : bool
-        This trial and the previous are at the floor and their mean lies within one
-        single-flight scatter of the floor: further trials cannot show an improvement.
+        This learned trial and the learned one before it are at the floor and their mean lies
+        within one single-flight scatter of the floor: further trials cannot show an
+        improvement. Trial 0 and flights of setpoints flown before (its repeats,
+        ``gcs fly --again``) are never part of the pair: they say how the same setpoints
+        scatter, not where learning went.
     repeat_of : int or None
         The earliest trial flown with this trial's setpoints when this one flew them again (a
         repeat, ``gcs fly --again``); None for a trial of setpoints new to the run.
@@ -363,16 +366,24 @@ def floor_verdicts(
     sigma = floor.scatter_m
     sigma_d = float(np.hypot(sigma, floor.floor_scatter_m))
     out: list[FloorVerdict] = []
+    learned: int | None = None  # the newest learned trial before j
     for j, ej in enumerate(e):
         gap = ej - floor.epos_m
         z = gap / sigma_d if sigma_d > 0 else (0.0 if gap <= 0 else np.inf)
         at = bool(z <= z_max)
+        new = j >= 1 and first[j] == j  # learned: neither trial 0 nor a flight flown before
         conv = (
-            j >= 1 and at and out[-1].at_floor and 0.5 * (e[j] + e[j - 1]) - floor.epos_m <= sigma
+            new
+            and at
+            and learned is not None
+            and out[learned].at_floor
+            and 0.5 * (e[j] + e[learned]) - floor.epos_m <= sigma
         )
         ratio = float(ej / floor.epos_m) if floor.epos_m > 0 else float("inf")
         again = None if first[j] == j else first[j]
         out.append(FloorVerdict(j, float(ej), ratio, float(z), at, bool(conv), again))
+        if new:
+            learned = j
     return tuple(out)
 
 
