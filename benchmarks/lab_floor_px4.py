@@ -3,14 +3,17 @@
 Each flight is a fresh PX4 set up for vision only (``tests/px4/test_px4_lab.py``'s
 ``LAB_PARAMS``) and a fresh rig (``tests/px4/lab_rig.py``: PX4's ground truth served as an
 OptiTrack rigid body) under one point of the lab's conditions: frame rate, latency from motion
-to frame (EKF2_EV_DELAY told or left at 0), marker noise and the room's heading. Then the
+to frame (EKF2_EV_DELAY told or left at 0), marker noise and the room's heading, and where
+given the SIH vehicle's own mass and drag (``SIH_MASS``, ``SIH_KDV``; PX4 v1.16's SIH has no
+wind or gust). Then the
 README's flight, ``gcs fly --mocap ... --profile P --iter J`` on the default eight, with the
 tests' watchdog limits. Per flight: e_pos of every trial in floors (the floor from trial 0 and
 its repeat), the model refresh's changes and the safeguard's decisions, from the run's records.
 
-Points are given (``--point RATE:LATENCY:NOISE:HEADING:MATCH``; ``--point gps``: PX4's
-default airframe on GPS, no rig) or drawn across the ranges with a seed (``--draw K --seed
-S``: printed, so any run can be flown again). A profile ``NAME+a.b=VALUE`` sets a field of
+Points are given (``--point RATE:LATENCY:NOISE:HEADING:MATCH[:MASS:DRAG]``; ``--point
+gps``: PX4's default airframe on GPS, no rig) or drawn across the ranges with a seed (``--draw
+K --seed S``, ``--vehicle`` for the mass and drag too: printed, so any run can be flown
+again). A profile ``NAME+a.b=VALUE`` sets a field of
 the shipped one (``antx-adaptive+learning.adaptive.repeats=3``). Run directories are kept
 under ``--out``: a run there is resumed for the trials it lacks, or with ``--again K``
 resumed flying trial K's setpoints again (the same setpoints twice: their floor). For every
@@ -55,6 +58,10 @@ from gcs.io.rundir import RunDir  # noqa: E402
 FLY_TIMEOUT_S = 1800
 #: the ranges the points are drawn from (docs/learning-floor.md says where they come from)
 RANGES = {"rate_hz": (50.0, 360.0), "latency_ms": (0.0, 50.0), "noise_mm": (0.1, 2.0)}
+#: the SIH vehicle's ranges, drawn with ``--vehicle`` from a stream of their own (the points of
+#: a seed without it stay as they were): the mass against SIH's 20 N of thrust (a
+#: thrust-to-weight ratio from 2.5 down to 1.4) and the linear drag around PX4's default 1
+VEHICLE_RANGES = {"mass_kg": (0.8, 1.5), "drag_n_s_m": (0.5, 2.0)}
 
 
 #: the point of a GPS flight: PX4's default airframe (SIH with GPS), no rig, no mocap
@@ -62,23 +69,40 @@ GPS = None
 
 
 def parse_point(text: str) -> LabConditions | None:
+    """``RATE:LATENCY:NOISE:HEADING:MATCH[:MASS:DRAG]`` (MASS, DRAG: the SIH vehicle's), or gps."""
     if text == "gps":
         return GPS
-    rate, latency, noise, heading, match = text.split(":")
-    return LabConditions(float(rate), float(latency), float(noise), float(heading), match == "1")
+    rate, latency, noise, heading, match, *vehicle = text.split(":")
+    mass, drag = (float(v) for v in vehicle) if vehicle else (None, None)
+    return LabConditions(
+        float(rate), float(latency), float(noise), float(heading), match == "1", mass, drag
+    )
 
 
-def draw_points(count: int, seed: int) -> list[LabConditions]:
-    """``count`` points, uniform over :data:`RANGES`, any heading, EKF2_EV_DELAY told or not."""
+def draw_points(count: int, seed: int, vehicle: bool = False) -> list[LabConditions]:
+    """``count`` points, uniform over :data:`RANGES`, any heading, EKF2_EV_DELAY told or not;
+    with ``vehicle`` the SIH vehicle's mass and drag too (:data:`VEHICLE_RANGES`)."""
     rng = np.random.default_rng(seed)
+    rng_vehicle = np.random.default_rng([seed, 1])
     points = []
     for _ in range(count):
         rate, latency, noise = (float(rng.uniform(*RANGES[k])) for k in RANGES)
         heading = float(rng.uniform(-180.0, 180.0))
+        mass, drag = (
+            (round(float(rng_vehicle.uniform(*VEHICLE_RANGES[k])), 2) for k in VEHICLE_RANGES)
+            if vehicle
+            else (None, None)
+        )
         points.append(
             LabConditions(
-                round(rate), round(latency), round(noise, 1), round(heading), bool(rng.integers(2))
-            )
+                round(rate),
+                round(latency),
+                round(noise, 1),
+                round(heading),
+                bool(rng.integers(2)),
+                mass,
+                drag,
+            )  # fmt: skip
         )
     return points
 
@@ -86,10 +110,13 @@ def draw_points(count: int, seed: int) -> list[LabConditions]:
 def name_of(point: LabConditions | None, profile: str) -> str:
     if point is GPS:
         return f"{profile}-gps"
-    return (
+    name = (
         f"{profile}-r{point.rate_hz:g}-l{point.latency_ms:g}-n{point.noise_mm:g}"
         f"-h{point.yaw_offset_deg:g}-m{int(point.match_ev_delay)}"
     )
+    if point.mass_kg is not None or point.drag_n_s_m is not None:
+        name += f"-kg{point.mass_kg or 1:g}-kdv{point.drag_n_s_m or 1:g}"
+    return name
 
 
 def profile_file(dest: Path, spec: str, mocap: bool = True) -> Path:
@@ -248,9 +275,15 @@ def summary(run: Path) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--point", action="append", default=[], help="RATE:LATENCY:NOISE:HEADING:MATCH, or gps"
+        "--point",
+        action="append",
+        default=[],
+        help="RATE:LATENCY:NOISE:HEADING:MATCH[:MASS:DRAG], or gps",
     )
     parser.add_argument("--draw", type=int, default=0, help="points drawn across the ranges")
+    parser.add_argument(
+        "--vehicle", action="store_true", help="draw the SIH vehicle's mass and drag too"
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
         "--profiles",
@@ -267,7 +300,9 @@ def main() -> None:
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     if not args.table:
-        points = [parse_point(p) for p in args.point] + draw_points(args.draw, args.seed)
+        points = [parse_point(p) for p in args.point] + draw_points(
+            args.draw, args.seed, args.vehicle
+        )
         for p in points:
             print("point", json.dumps("gps" if p is GPS else p.__dict__), flush=True)
         build = Px4Build(build_dir()[0])

@@ -69,6 +69,11 @@ class LabConditions:
         Set PX4's EKF2_EV_DELAY to ``latency_ms`` (a lab that measured its latency and told
         PX4: gcs stamps each pose on arrival, so the mocap's own latency is what is left);
         False leaves it at 0, PX4's default.
+    mass_kg : float or None
+        The SIH vehicle's mass [kg] (``SIH_MASS``; its four rotors give 20 N at most, so the
+        thrust-to-weight ratio falls as the mass rises); None keeps PX4's 1 kg.
+    drag_n_s_m : float or None
+        The SIH vehicle's linear drag [N s/m] (``SIH_KDV``); None keeps PX4's 1.
     """
 
     rate_hz: float = 120.0
@@ -76,6 +81,8 @@ class LabConditions:
     noise_mm: float = 0.2
     yaw_offset_deg: float = 0.0
     match_ev_delay: bool = False
+    mass_kg: float | None = None
+    drag_n_s_m: float | None = None
 
     def rig_args(self) -> list[str]:
         """The rig's options (:func:`px4.lab_rig.rig_command`) for these conditions."""
@@ -89,6 +96,10 @@ class LabConditions:
         params = {**LAB_PARAMS, **overrides}
         if self.match_ev_delay:
             params["EKF2_EV_DELAY"] = self.latency_ms
+        if self.mass_kg is not None:
+            params["SIH_MASS"] = self.mass_kg
+        if self.drag_n_s_m is not None:
+            params["SIH_KDV"] = self.drag_n_s_m
         return params
 
 
