@@ -12,7 +12,7 @@ import yaml
 from gcs.app.study_chunks import build_plan
 from gcs.core.learner import Learner, LearnerBatch
 from gcs.core.metrics import epos
-from gcs.core.study import StudyPlan, _rng, draw_plant, fly_plants
+from gcs.core.study import PLANT_NOISE, StudyPlan, draw_plant, fly_plants, plant_stream
 from gcs.io.study import load_study
 
 STUDY = {
@@ -55,7 +55,7 @@ def _setting(plan: StudyPlan, case: str):  # noqa: ANN202
 def _by_hand(plan: StudyPlan, setting, plant: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
     """Today's Learner on one plant, one step per trial: e_pos per flight, last setpoints."""
     true = draw_plant(plan, 0, plant)
-    noise = _rng(plan.seed, 0, plant, 1)
+    noise = plant_stream(plan.seed, 0, plant, PLANT_NOISE)
     ref, n = plan.ref_ne_m, plan.n_samples
     learner = Learner(setting.settings, ref, setting.adaptive, setting.repeats)
     flights = 1 + learner.repeats + plan.iterations

@@ -44,6 +44,9 @@ __all__ = [
     "StudyPlan",
     "TruePlant",
     "draw_plant",
+    "plant_stream",
+    "PLANT_DRAW",
+    "PLANT_NOISE",
     "run_trials",
     "diverged",
     "fly_plants",
@@ -262,7 +265,29 @@ class TruePlant:
         return y + self.disturbance_ne_m
 
 
-def _rng(seed: int, level_index: int, plant: int, stream: int) -> np.random.Generator:
+#: The streams of one plant (:func:`plant_stream`): its draw, and its measurement noise.
+PLANT_DRAW, PLANT_NOISE = 0, 1
+
+
+def plant_stream(seed: int, level_index: int, plant: int, stream: int) -> np.random.Generator:
+    """The random stream ``stream`` of one plant of a study: :data:`PLANT_DRAW` (the true
+    plant, :func:`draw_plant`) or :data:`PLANT_NOISE` (its measurement noise, flight after
+    flight). Seeded from the study's seed and the plant's place, so a plant's results do not
+    depend on the chunk or the worker that flies it.
+
+    Parameters
+    ----------
+    seed : int
+        The study's seed.
+    level_index, plant : int
+        The uncertainty level's index and the plant's number.
+    stream : int
+        Which stream.
+
+    Returns
+    -------
+    numpy.random.Generator
+    """
     return np.random.default_rng(
         np.random.SeedSequence(seed, spawn_key=(level_index, plant, stream))
     )
@@ -386,7 +411,7 @@ def draw_plant(plan: StudyPlan, level_index: int, plant: int) -> TruePlant:
     u = plan.uncertainty
     level = u.levels[level_index]
     n = plan.n_samples
-    rng = _rng(plan.seed, level_index, plant, 0)
+    rng = plant_stream(plan.seed, level_index, plant, PLANT_DRAW)
     bs, as_, delays, draws = [], [], [], {}
     dt = plan.models[0].dt_s
     for axis, model in enumerate(plan.models):
@@ -538,7 +563,7 @@ def fly_plants(
     plants = list(plants)
     count = len(plants)
     true = [draw_plant(plan, level_index, p) for p in plants]
-    noise_rng = [_rng(plan.seed, level_index, p, 1) for p in plants]
+    noise_rng = [plant_stream(plan.seed, level_index, p, PLANT_NOISE) for p in plants]
     ref = plan.ref_ne_m
     start = ref[0]
     n = plan.n_samples
