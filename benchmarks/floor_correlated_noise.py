@@ -21,17 +21,26 @@ expected mean distance of a 2-D Gaussian error with that standard deviation per 
 same for both profiles and every correlation; ``est`` is the floor the adaptive learner
 estimated from trial 0 and its repeats, in the same units. After ``|``: per learning step,
 the refresh's accepted model moves [%] north/east (``-`` kept), ``R`` when the safeguard fell
-back.
+back. ``--refresh-noise white,measured`` flies the adaptive profile once per choice of
+``learning.adaptive.refresh_noise`` (the same seeds, so the same wander), and the summary adds,
+per choice, the accepted moves and the model's error after the last refresh,
+``max |F / F_true - 1|`` over the learning band of the true plant (the quantity that decides
+convergence), largest over the two axes.
+
+``--plants off35`` flies plants 35 % off the profile's model instead (``max |F_model / F_true -
+1|`` over the learning band: 0.35 north, 0.35 east, against 0.22 and 0.18 for the tests'
+plants), where the refresh has a model to correct.
 
 Usage::
 
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
-        [--seeds 4] [--trials 16] [--json out.json]
+        [--seeds 4] [--trials 16] [--refresh-noise white] [--plants tests] [--json out.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -46,7 +55,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 from synthetic import true_plants  # noqa: E402
 
 from gcs import Learner  # noqa: E402
-from gcs.core.model import simulate  # noqa: E402
+from gcs.core.model import from_transfer_function, simulate  # noqa: E402
+from gcs.core.refresh import model_change, transfer_function  # noqa: E402
 from gcs.core.trajectory_sources import sample_reference  # noqa: E402
 from gcs.io.config import load_trajectory  # noqa: E402
 
@@ -60,15 +70,42 @@ def wander(rng: np.random.Generator, n: int, sigma_m: float, corr_s: float) -> n
     return sigma_m * x / np.sqrt(w)
 
 
-def run(profile: str, sigma_m: float, corr_s: float, seed: int, trials: int) -> dict:
+#: Plants 35 % off eq. (11) over the learning band (north faster and less damped, east slower).
+OFF35 = (
+    from_transfer_function([0.1, 2.4], [1.0, 1.5, 2.5], 0.25, DT_S),
+    from_transfer_function([0.07, 1.75], [1.0, 2.1, 1.75], 0.25, DT_S),
+)
+
+
+def model_error(model, plant, band_gain2: float) -> float:
+    """``max |F_model / F_plant - 1|`` where ``|F_plant|^2 >= band_gain2``."""
+    bp, ap = transfer_function(plant)
+    bm, am = transfer_function(model)
+    return float(
+        model_change(bp[None], ap[None], bm[None], am[None], plant.delay_samples, DT_S,
+                     band_gain2, model.delay_samples)[0]
+    )  # fmt: skip
+
+
+def run(
+    profile: str,
+    sigma_m: float,
+    corr_s: float,
+    seed: int,
+    trials: int,
+    refresh_noise: str = "",
+    plants: str = "tests",
+) -> dict:
     """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions."""
     ref = sample_reference(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, DT_S)
     ref = ref.pos_ned_m[:, :2]
     n = ref.shape[0] - 1
     t_s = np.arange(1, n + 1) * DT_S
-    plants = true_plants()
+    plants = true_plants() if plants == "tests" else OFF35
     rng = np.random.default_rng(seed)
     learner = Learner.from_profile(profile, ref)
+    if refresh_noise:
+        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_noise=refresh_noise)
     u = ref[:-1].copy()
     epos, steps = [], []
     for _ in range(trials):
@@ -87,8 +124,11 @@ def run(profile: str, sigma_m: float, corr_s: float, seed: int, trials: int) -> 
             ]
             steps.append({"moved_pct": moved, "safeguard": rec["safeguard"]["action"]})
     floor = learner.floor
+    w = learner.settings.weights
+    errors = [model_error(learner.models[a], plants[a], w.wdu / w.we) for a in range(2)]
     return {
-        "profile": profile,
+        "profile": profile + (f"/{refresh_noise}" if refresh_noise else ""),
+        "model_error": errors,
         "sigma_m": sigma_m,
         "corr_s": corr_s,
         "seed": seed,
@@ -109,7 +149,7 @@ def line(r: dict) -> str:
         for s in r["steps"]
     )
     floors = " ".join(f"{e / f:.2f}" for e in r["epos_m"])
-    head = f"{r['profile']:14s} corr {r['corr_s']:4.2f} s seed {r['seed']} est {est}"
+    head = f"{r['profile']:22s} corr {r['corr_s']:4.2f} s seed {r['seed']} est {est}"
     return f"{head} | {floors} | {moves}"
 
 
@@ -119,18 +159,26 @@ def main() -> None:
     parser.add_argument("--corr", default="0.05,0.75,2.0", help="correlation times [s]")
     parser.add_argument("--seeds", type=int, default=4)
     parser.add_argument("--trials", type=int, default=16)
+    parser.add_argument(
+        "--refresh-noise",
+        default="white",
+        help="the adaptive profile's refresh_noise choices, comma-separated",
+    )
+    parser.add_argument("--plants", choices=("tests", "off35"), default="tests")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
+    variants = [("antx", "")] + [("antx-adaptive", n) for n in args.refresh_noise.split(",")]
+    labels = [p + (f"/{n}" if n else "") for p, n in variants]
     runs = []
     t0 = time.monotonic()
     for corr in (float(c) for c in args.corr.split(",")):
-        for profile in ("antx", "antx-adaptive"):
+        for profile, noise in variants:
             for seed in range(args.seeds):
-                runs.append(run(profile, args.sigma, corr, seed, args.trials))
+                runs.append(run(profile, args.sigma, corr, seed, args.trials, noise, args.plants))
                 print(line(runs[-1]), flush=True)
     summary = []
     for corr in sorted({r["corr_s"] for r in runs}):
-        for profile in ("antx", "antx-adaptive"):
+        for profile in labels:
             rs = [r for r in runs if r["corr_s"] == corr and r["profile"] == profile]
             # j >= 2: the iteration counts learning updates (a repeat is a flight of j = 0)
             late = [e / r["floor_m"] for r in rs for e in r["epos_m"][2 + r["repeats"] :]]
@@ -142,10 +190,18 @@ def main() -> None:
                     "max_floors_j3_on": float(np.max(late)),
                 }  # fmt: skip
             )
+            extra = ""
+            if profile != "antx":
+                moves = [m for r in rs for st in r["steps"] for m in st["moved_pct"] if m]
+                err = [100 * max(r["model_error"]) for r in rs]
+                extra = (
+                    f"; moves accepted {len(moves)}, largest {max(moves, default=0)} %; "
+                    f"model error at the end {' '.join(f'{e:.0f}' for e in err)} %"
+                )
             print(
-                f"{profile:14s} corr {corr:4.2f} s: j >= 2, median "
+                f"{profile:22s} corr {corr:4.2f} s: j >= 2, median "
                 f"{summary[-1]['median_floors_j3_on']:.2f} floors, largest "
-                f"{summary[-1]['max_floors_j3_on']:.2f} ({len(rs)} runs)"
+                f"{summary[-1]['max_floors_j3_on']:.2f} ({len(rs)} runs){extra}"
             )
     print(f"{time.monotonic() - t0:.0f} s")
     if args.json:

@@ -46,6 +46,7 @@ def test_every_field_parses(tmp_path: Path) -> None:
         "refresh": True,
         "refresh_min_snr": 2.0,
         "refresh_block_s": 0.5,
+        "refresh_noise": "measured",
         "robustness_cutoff_rad_s": 6.0,
         "robustness_order": 3,
         "safeguard": True,
@@ -62,6 +63,7 @@ def test_every_field_parses(tmp_path: Path) -> None:
     [
         ({"noise": "kalman"}, "learning.adaptive.noise"),
         ({"refresh": "yes"}, "learning.adaptive.refresh"),
+        ({"refresh_noise": "pink"}, "learning.adaptive.refresh_noise"),
         ({"safeguard": 1}, "learning.adaptive.safeguard"),
         ({"robustness_cutoff_rad_s": -2.0}, "learning.adaptive.robustness_cutoff_rad_s"),
         ({"robustness_cutoff_rad_s": "automatic"}, "learning.adaptive.robustness_cutoff_rad_s"),

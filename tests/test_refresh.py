@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.linalg
 import scipy.signal
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gcs.core.model import from_transfer_function, markov_parameters, simulate
 from gcs.core.refresh import (
+    ArNoise,
     RefreshSettings,
+    fit_ar_noise,
     fit_output_error,
     model_change,
     model_from_transfer_function,
@@ -197,3 +200,115 @@ def test_fit_recovers_a_known_iir_that_dlsim_confirms(delay) -> None:
     bb, ab, _ = fit_output_error(b0, a0, delay, du[None], dy[None], mask[None], rowwise=False)
     np.testing.assert_allclose(bb[0], b[0], rtol=1e-7)
     np.testing.assert_allclose(ab[0], a[0], rtol=1e-7)
+
+
+# ---------------------------------------------------------------------------------------------
+# The non-repeatable error's spectrum: fit_ar_noise, and the refresh on whitened pairs
+# ---------------------------------------------------------------------------------------------
+
+
+def _ar_series(coef: np.ndarray, sigma: float, shape: tuple[int, int], seed: int) -> np.ndarray:
+    """``v(k) = sum phi_i v(k-i) + e(k)`` by scipy.signal.lfilter, a burn-in dropped."""
+    rng = np.random.default_rng(seed)
+    e = sigma * rng.standard_normal((shape[0], shape[1] + 500))
+    return scipy.signal.lfilter([1.0], np.concatenate([[1.0], -coef]), e, axis=1)[:, 500:]
+
+
+def test_fit_ar_noise_recovers_a_known_ar2_process() -> None:
+    phi = np.array([1.5, -0.7])  # poles 0.84 at +-27 deg: a slow, oscillating wander
+    x = _ar_series(phi, 0.01, (8, 2000), 1)
+    noise = fit_ar_noise(x, 20)
+    assert noise.order == 2
+    np.testing.assert_allclose(noise.coefficients, -phi, atol=0.02)
+    assert noise.innovation_var_m2 == pytest.approx(1e-4, rel=0.05)
+    assert noise.variance_m2 == pytest.approx(np.mean(np.var(x, axis=1)), rel=1e-12)
+
+
+def test_fit_ar_noise_is_the_yule_walker_solution_of_its_order() -> None:
+    """The Levinson-Durbin recursion against scipy's Toeplitz solver on the same pooled
+    autocovariance, and its innovation variance against ``r_0 - phi . r_(1..p)``."""
+    x = _ar_series(np.array([0.9, -0.2, 0.1]), 0.02, (3, 280), 2)
+    noise = fit_ar_noise(x, 20)
+    p = noise.order
+    assert p >= 1
+    xc = x - x.mean(axis=1, keepdims=True)
+    r = np.array([np.sum(xc[:, k:] * xc[:, : x.shape[1] - k]) for k in range(p + 1)]) / x.size
+    phi = scipy.linalg.solve_toeplitz(r[:p], r[1 : p + 1])
+    np.testing.assert_allclose(noise.coefficients, -phi, rtol=1e-9, atol=1e-12)
+    assert noise.innovation_var_m2 == pytest.approx(r[0] - phi @ r[1 : p + 1], rel=1e-9)
+
+
+def test_fit_ar_noise_keeps_white_noise_white() -> None:
+    rng = np.random.default_rng(3)
+    noise = fit_ar_noise(0.1 * rng.standard_normal((2, 280)), 20)
+    assert noise.order == 0 and noise.coefficients == ()
+    assert noise.innovation_var_m2 == noise.variance_m2
+    assert noise.variance_m2 == pytest.approx(0.01, rel=0.15)
+
+
+def test_fit_ar_noise_refuses_bad_input() -> None:
+    with pytest.raises(ValueError):
+        fit_ar_noise(np.zeros((2, 3)), 5)
+    with pytest.raises(ValueError, match="NaN"):
+        fit_ar_noise(np.full((1, 50), np.nan), 5)
+    with pytest.raises(ValueError):
+        fit_ar_noise(np.zeros((1, 50)), -1)
+
+
+def test_whiten_is_the_fir_filter_of_the_ar_polynomial() -> None:
+    noise = ArNoise((-1.2, 0.5, 0.1), 1.0, 2.0)
+    x = excitation(8, 3)
+    np.testing.assert_allclose(
+        noise.whiten(x), scipy.signal.lfilter([1.0, -1.2, 0.5, 0.1], [1.0], x, axis=-1),
+        rtol=0, atol=1e-15,
+    )  # fmt: skip
+
+
+def test_refresh_on_whitened_pairs_recovers_a_known_plant() -> None:
+    """Noiseless pairs: whitening both sides keeps the true plant the exact fit."""
+    true = loop(1.5, 0.6, 1.1, 0.25)
+    du = excitation(9)
+    dy = simulate(true, du.T).T
+    noise = ArNoise((-1.5, 0.7), 1e-8, 1e-6)
+    res = refresh_model(EQ11, du, dy, 1e-6, RefreshSettings(delay_search=0), 0.01, noise)
+    assert res.accepted, res.reason
+    scale = np.max(np.abs(markov_parameters(true, 200)))
+    err = np.max(np.abs(markov_parameters(res.model, 200) - markov_parameters(true, 200)))
+    assert err <= 1e-6 * scale
+    # the SNR is the whitened predicted change over the innovation variance
+    pred = simulate(EQ11, noise.whiten(du).T).T
+    assert res.snr == pytest.approx(np.mean(pred[-1] ** 2) / 2e-8, rel=1e-9)
+
+
+def test_refresh_with_a_white_noise_model_is_the_refresh_without() -> None:
+    du = excitation(10)
+    dy = simulate(loop(1.4, 0.7, 1.0, 0.25), du.T).T + 0.01 * np.random.default_rng(
+        10
+    ).standard_normal(du.shape)
+    plain = refresh_model(EQ11, du, dy, 1e-4, RefreshSettings(), 0.01)
+    white = refresh_model(EQ11, du, dy, 1e-4, RefreshSettings(), 0.01, ArNoise((), 5.0, 5.0))
+    assert white.accepted == plain.accepted and white.snr == plain.snr
+    assert white.cv_loss_candidate_m2 == plain.cv_loss_candidate_m2
+
+
+def test_whitening_refuses_fits_to_a_slow_wander() -> None:
+    """The model in use is the truth and the pairs' noise a slow wander (an AR(2) of 0.1 m
+    with a period of about 5 s at 0.05 s): without its spectrum the cross-validation over
+    1 s blocks accepts fits to the wander; with the spectrum, measured on independent flights
+    (as the repeats of trial 0 give it), it accepts fewer and moves less."""
+    phi = np.array([1.94, -0.9425])  # poles 0.97 at +-3.6 deg
+    moved_plain, moved_white = [], []
+    for seed in range(12):
+        du = excitation(100 + seed, 1)
+        v = _ar_series(phi, 1.0, (5, 280), 200 + seed)
+        v *= 0.1 / np.std(v)
+        dy = simulate(EQ11, du.T).T + (v[0] - v[1])[None]
+        noise = fit_ar_noise(v[2:], 20)  # other flights: the repeats
+        r = noise.variance_m2
+        plain = refresh_model(EQ11, du, dy, r, RefreshSettings(min_snr=0.0), 0.01)
+        white = refresh_model(EQ11, du, dy, r, RefreshSettings(min_snr=0.0), 0.01, noise)
+        moved_plain.append(plain.moved)
+        moved_white.append(white.moved)
+    plain_n, white_n = np.count_nonzero(moved_plain), np.count_nonzero(moved_white)
+    assert white_n < plain_n, (moved_plain, moved_white)
+    assert np.median(moved_white) < np.median(moved_plain)

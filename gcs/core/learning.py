@@ -45,7 +45,13 @@ from gcs.core.noise_model import (
     fit_iteration_noise,
     fit_time_noise,
 )
-from gcs.core.refresh import RefreshResult, RefreshSettings, refresh_model
+from gcs.core.refresh import (
+    ArNoise,
+    RefreshResult,
+    RefreshSettings,
+    fit_ar_noise,
+    refresh_model,
+)
 from gcs.core.robustness import RobustnessWeight, repeat_cutoff, robustness_weight
 from gcs.core.safeguard import SafeguardDecision, SafeguardSettings, feasible_step, safeguard
 from gcs.core.trajectory import Box
@@ -247,6 +253,12 @@ def newest_step(
 
 NOISE_MODELS = ("table1", "data")
 
+#: What the refresh assumes of the non-repeatable error (AdaptiveSettings.refresh_noise).
+REFRESH_NOISE = ("white", "measured")
+
+#: Largest order of the refresh's autoregressive noise model [samples] (1 s at 0.05 s).
+REFRESH_NOISE_MAX_ORDER = 20
+
 
 @dataclass(frozen=True)
 class AdaptiveSettings:
@@ -272,6 +284,12 @@ class AdaptiveSettings:
         multiple of the noise of a difference of two flights.
     refresh_block_s : float
         Cross-validation block length of the refresh [s].
+    refresh_noise : str
+        The non-repeatable error the refresh assumes: ``"white"``, of the floor's variance;
+        ``"measured"``, an autoregressive model of it fitted to the flights of identical
+        setpoints in the history (:func:`gcs.core.refresh.fit_ar_noise`, order up to
+        ``REFRESH_NOISE_MAX_ORDER``), with which the pairs are whitened before the fit, the
+        cross-validation and the signal-to-noise gate (white until such flights exist).
     robustness_cutoff_rad_s : float, "auto" or None
         Cutoff of the zero-phase robustness weight (Q-filter) in the QP [rad/s]; ``"auto"``:
         from the flights of identical setpoints in the history, where the repeatable error
@@ -296,6 +314,7 @@ class AdaptiveSettings:
     refresh: bool = False
     refresh_min_snr: float = 1.0
     refresh_block_s: float = 1.0
+    refresh_noise: str = "white"
     robustness_cutoff_rad_s: float | str | None = None
     robustness_order: int = 2
     safeguard: bool = False
@@ -306,6 +325,11 @@ class AdaptiveSettings:
     def __post_init__(self) -> None:
         if self.noise not in NOISE_MODELS:
             raise ValueError(f"noise must be one of {', '.join(NOISE_MODELS)}, got {self.noise!r}")
+        if self.refresh_noise not in REFRESH_NOISE:
+            raise ValueError(
+                f"refresh_noise must be one of {', '.join(REFRESH_NOISE)}, "
+                f"got {self.refresh_noise!r}"
+            )
         cutoff = self.robustness_cutoff_rad_s
         if (
             cutoff is not None
@@ -559,12 +583,26 @@ def _refresh_axis(
     r_m2: float,
     adaptive: AdaptiveSettings,
     weights: UpdateWeights,
+    noise: ArNoise | None = None,
 ) -> RefreshResult:
     du, dy = np.diff(u, axis=0), np.diff(y, axis=0)
     moved = np.max(np.abs(du), axis=1) > IDENTICAL_TOL_M
     return refresh_model(
-        model, du[moved], dy[moved], r_m2, adaptive.refresh_settings(), weights.wdu / weights.we
-    )
+        model, du[moved], dy[moved], r_m2, adaptive.refresh_settings(), weights.wdu / weights.we,
+        noise,
+    )  # fmt: skip
+
+
+def _refresh_noise(sp: np.ndarray, y: np.ndarray) -> ArNoise | None:
+    """The non-repeatable error of one axis from the flights of identical setpoints in the
+    history (``sp``: (T, N, 2) setpoints, ``y``: (T, N) that axis's positions), or None."""
+    group = floor_flights(sp)
+    if not group:
+        return None
+    k = len(group)
+    delta = np.sqrt(k / (k - 1)) * (y[group] - y[group].mean(axis=0))
+    # two flights give one series (the other is its negative)
+    return fit_ar_noise(delta[:1] if k == 2 else delta, REFRESH_NOISE_MAX_ORDER)
 
 
 def plan_next_trial(
@@ -676,7 +714,8 @@ def _plan_axis(
     refresh = None
     if adaptive.refresh and u.shape[0] > 1:
         r_m2 = _noise_variance(model, u, y, the_floor, axis)
-        refresh = _refresh_axis(model, u, y, r_m2, adaptive, settings.weights)
+        noise = _refresh_noise(sp, y) if adaptive.refresh_noise == "measured" else None
+        refresh = _refresh_axis(model, u, y, r_m2, adaptive, settings.weights, noise)
         model = refresh.model
     state = None
     if adaptive.noise == "table1":

@@ -49,6 +49,8 @@ __all__ = [
     "refresh_decision",
     "refresh_model",
     "model_change",
+    "ArNoise",
+    "fit_ar_noise",
 ]
 
 
@@ -142,6 +144,100 @@ class RefreshResult:
             "snr": self.snr,
             "model": self.model.as_dict(),
         }
+
+
+# ---------------------------------------------------------------------------------------------
+# The non-repeatable error's spectrum: an autoregressive model that whitens it
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ArNoise:
+    """An autoregressive model of one flight's non-repeatable error on one axis.
+
+    ``v(k) + c_1 v(k-1) + .. + c_p v(k-p) = e(k)``, ``e`` white of variance
+    ``innovation_var_m2``: the filter ``L(z) = 1 + c_1 z^-1 + .. + c_p z^-p`` whitens ``v``
+    (and the difference of two flights' ``v``, whose spectrum has the same shape).
+
+    Parameters
+    ----------
+    coefficients : tuple of float
+        ``c_1 .. c_p`` (empty: white, ``p = 0``).
+    innovation_var_m2 : float
+        Variance of ``e`` [m^2].
+    variance_m2 : float
+        Variance of ``v`` itself [m^2].
+    """
+
+    coefficients: tuple[float, ...]
+    innovation_var_m2: float
+    variance_m2: float
+
+    @property
+    def order(self) -> int:
+        """``p``."""
+        return len(self.coefficients)
+
+    def whiten(self, x: np.ndarray) -> np.ndarray:
+        """``L(z) x`` along the last axis, from rest [same units as x]; shape like ``x``."""
+        x = np.asarray(x, dtype=float)
+        out = x.copy()
+        for i, c in enumerate(self.coefficients, start=1):
+            out[..., i:] += c * x[..., :-i]
+        return out
+
+
+def fit_ar_noise(series_m: np.ndarray, max_order: int) -> ArNoise:
+    """Autoregressive model of a non-repeatable error from flights of identical setpoints.
+
+    Yule-Walker equations on the autocovariance pooled over the series (Levinson-Durbin),
+    the order chosen by the Bayesian information criterion
+    ``N_total log(sigma_p^2) + p log(N_total)`` over ``p = 0 .. max_order`` (consistent: for
+    white noise it settles on 0 as the data grow).
+
+    Parameters
+    ----------
+    series_m : ndarray, shape (K, N)
+        Independent realisations of the error (e.g. ``sqrt(K / (K - 1))`` times each flight's
+        deviation from the mean of ``K`` flights of identical setpoints; for two flights their
+        difference over ``sqrt 2``) [m].
+    max_order : int
+        Largest order tried [samples].
+
+    Returns
+    -------
+    ArNoise
+    """
+    x = np.atleast_2d(np.asarray(series_m, dtype=float))
+    if x.ndim != 2 or x.shape[1] < 4:
+        raise ValueError(f"series_m must have shape (K, N) with N >= 4, got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("series_m contains NaN or inf")
+    if int(max_order) != max_order or max_order < 0:
+        raise ValueError(f"max_order must be an integer >= 0, got {max_order}")
+    k, n = x.shape
+    p_max = int(min(max_order, n // 4))
+    xc = x - x.mean(axis=1, keepdims=True)
+    # biased autocovariance (positive definite Toeplitz), pooled over the series
+    acov = np.array([np.sum(xc[:, lag:] * xc[:, : n - lag]) for lag in range(p_max + 1)]) / (k * n)
+    var = float(acov[0])
+    if var <= 0.0:
+        return ArNoise((), 0.0, 0.0)
+    total = k * n
+    best = (total * np.log(var), np.zeros(0), var)
+    coef = np.zeros(0)
+    err = var
+    for p in range(1, p_max + 1):  # Levinson-Durbin: phi(p) from phi(p-1)
+        refl = (acov[p] - coef @ acov[p - 1 : 0 : -1]) / err if p > 1 else acov[1] / err
+        coef = np.concatenate([coef - refl * coef[::-1], [refl]])
+        err *= 1.0 - refl * refl
+        if err <= 0.0:
+            break
+        bic = total * np.log(err) + p * np.log(total)
+        if bic < best[0]:
+            best = (bic, coef.copy(), err)
+    # v(k) = sum phi_i v(k-i) + e(k): L(z) = 1 - phi_1 z^-1 - ..
+    return ArNoise(tuple(float(-c) for c in best[1]), float(best[2]), var)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -718,8 +814,17 @@ def refresh_model(
     noise_var_m2: float,
     settings: RefreshSettings,
     band_gain2: float,
+    noise: ArNoise | None = None,
 ) -> RefreshResult:
     """Refresh one axis's model from consecutive trials (the learning step's entry point).
+
+    With ``noise``, the pairs are whitened first: ``du`` and ``dy`` both filtered by the
+    noise model's ``L(z)`` (``L (dy - F du) = L dy - F (L du)``, LTI filters from rest
+    commute), so the fit minimises the whitened simulation error (maximum likelihood for
+    Gaussian noise of that spectrum, a Box-Jenkins model with its noise part fixed), the
+    cross-validation's blocks hold nearly independent residuals whatever the correlation
+    time of the non-repeatable error, and the signal-to-noise gate compares the whitened
+    predicted change with the innovation variance.
 
     Parameters
     ----------
@@ -735,6 +840,9 @@ def refresh_model(
         Thresholds and iterations.
     band_gain2 : float
         ``W_du / W_e``: the learning band of :func:`model_change`.
+    noise : ArNoise, optional
+        The non-repeatable error's spectrum (:func:`fit_ar_noise`); default white, of
+        variance ``noise_var_m2``; of order 0, white as well (``noise_var_m2`` kept).
 
     Returns
     -------
@@ -746,6 +854,8 @@ def refresh_model(
         raise ValueError(f"du_m and dy_m must share one shape (P, N), got {du.shape}, {dy.shape}")
     if not (np.all(np.isfinite(du)) and np.all(np.isfinite(dy))):
         raise ValueError("du_m or dy_m contains NaN or inf")
+    if noise is not None and noise.order > 0:
+        du, dy, noise_var_m2 = noise.whiten(du), noise.whiten(dy), noise.innovation_var_m2
     b, a = transfer_function(current)
     if du.shape[0] == 0:
         return RefreshResult(current, False, "no pair of trials with different setpoints", 0.0,

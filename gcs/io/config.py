@@ -23,7 +23,7 @@ import numpy as np
 
 from gcs.core.estimators import KilcSettings, SmootherSettings
 from gcs.core.frames import SYSTEM_FRAMES, mapping_for
-from gcs.core.learning import NOISE_MODELS, AdaptiveSettings
+from gcs.core.learning import NOISE_MODELS, REFRESH_NOISE, AdaptiveSettings
 from gcs.core.model import DiscreteModel, from_state_space, from_transfer_function
 from gcs.core.trajectory import MAX_SAMPLES, Box, EightShape
 from gcs.core.trajectory_sources import PLANES, EllipseShape, SamplesShape, WaypointsShape
@@ -321,6 +321,7 @@ def _adaptive(f: Fields) -> AdaptiveSettings:
             refresh=flag["refresh"],
             refresh_min_snr=f.number("refresh_min_snr", d.refresh_min_snr),
             refresh_block_s=f.number("refresh_block_s", d.refresh_block_s, positive=True),
+            refresh_noise=f.string("refresh_noise", d.refresh_noise, REFRESH_NOISE),
             robustness_cutoff_rad_s=cutoff
             if cutoff is None or cutoff == "auto"
             else f.number("robustness_cutoff_rad_s", positive=True),
