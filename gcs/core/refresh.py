@@ -179,7 +179,18 @@ class ArNoise:
         return len(self.coefficients)
 
     def whiten(self, x: np.ndarray) -> np.ndarray:
-        """``L(z) x`` along the last axis, from rest [same units as x]; shape like ``x``."""
+        """``L(z) x`` along the last axis, from rest.
+
+        Parameters
+        ----------
+        x : ndarray, shape (..., N)
+            Series on the trial grid [m].
+
+        Returns
+        -------
+        ndarray, shape like ``x``
+            The filtered series [m].
+        """
         x = np.asarray(x, dtype=float)
         out = x.copy()
         for i, c in enumerate(self.coefficients, start=1):
