@@ -34,7 +34,8 @@ plants), where the refresh has a model to correct.
 Usage::
 
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
-        [--seeds 4] [--trials 16] [--refresh-noise white] [--plants tests] [--json out.json]
+        [--seeds 4] [--trials 16] [--refresh-noise white,measured] [--plants tests]
+        [--json out.json]
 """
 
 from __future__ import annotations
@@ -161,8 +162,9 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=16)
     parser.add_argument(
         "--refresh-noise",
-        default="white",
-        help="the adaptive profile's refresh_noise choices, comma-separated",
+        default="",
+        help="refresh_noise choices for the adaptive profile, comma-separated "
+        "(default: the profile's own)",
     )
     parser.add_argument("--plants", choices=("tests", "off35"), default="tests")
     parser.add_argument("--json", type=Path)
