@@ -194,3 +194,46 @@ def test_history_refusals() -> None:
         AdaptiveSettings(noise="kalman")
     with pytest.raises(ValueError):
         AdaptiveSettings(robustness_cutoff_rad_s=-1.0)
+
+
+def test_refresh_noise_measured_is_white_for_white_repeats() -> None:
+    """Only white measurement noise: the noise model of the repeats is white (order 0) and the
+    refresh, hence the learning, is the white one bit for bit."""
+    white = campaign(DATA, 3, noise_m=0.0)
+    measured = campaign(replace(DATA, refresh_noise="measured"), 3, noise_m=0.0)
+    np.testing.assert_array_equal(measured[2], white[2])
+    for a, b in zip(measured[1], white[1], strict=True):
+        for ax_m, ax_w in zip(a.record.axes, b.record.axes, strict=True):
+            assert ax_m.refresh.accepted == ax_w.refresh.accepted
+            np.testing.assert_array_equal(ax_m.refresh.snr, ax_w.refresh.snr)  # NaN: no pair
+    assert any(ax.refresh.pairs > 0 for p in measured[1] for ax in p.record.axes)
+
+
+def test_refresh_noise_measured_whitens_with_the_repeats_of_trial_0() -> None:
+    """A gust correlated over 0.75 s: the first refresh (trials 0, 0', 1) is the refresh of
+    the pair 0' -> 1 whitened by the noise model of the difference of trial 0 and its repeat,
+    axis by axis; the white refresh of the same flights is another decision."""
+    from gcs.core.refresh import fit_ar_noise, refresh_model
+
+    adaptive = replace(DATA, refresh_noise="measured")
+    _, plans, sp, pos = campaign(adaptive, 3)
+    _, plans_white, _, _ = campaign(DATA, 3)
+    settings_ = learner_settings(PROFILE, "smoother")
+    w = settings_.weights
+    start = REF2[0]
+    for a in range(2):
+        y = pos[:3, 1:, a] - start[a]
+        u = sp[:3, :, a] - start[a]
+        noise = fit_ar_noise(((y[0] - y[1]) / np.sqrt(2.0))[None], 20)
+        assert noise.order > 0
+        got = plans[1].record.axes[a].refresh  # plans[0]: after the repeat
+        expected = refresh_model(
+            settings_.models[a], (u[2] - u[1])[None], (y[2] - y[1])[None], 1.0,
+            adaptive.refresh_settings(), w.wdu / w.we, noise,
+        )  # fmt: skip
+        # the same data up to rounding (positions relative to the start point): the iterative
+        # fit agrees to its stopping tolerance
+        assert got.accepted == expected.accepted
+        assert got.moved == pytest.approx(expected.moved, rel=1e-6)
+        assert got.snr == pytest.approx(expected.snr, rel=1e-9)
+        assert got.snr != pytest.approx(plans_white[1].record.axes[a].refresh.snr, rel=1e-3)
