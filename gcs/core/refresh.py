@@ -14,7 +14,10 @@ held-out data better than the model in use: two-fold cross-validation over block
 (fit on the even blocks, score on the odd ones, and the other way round), the model in use
 scored on the same samples. It must also be stable. Pairs whose predicted output change is
 within the noise (signal-to-noise below ``min_snr``) carry no information and are not used; a
-refresh is attempted only when the newest pair is informative.
+refresh is attempted only when the newest pair is informative. With a model of the
+non-repeatable error's spectrum measured on flights of identical setpoints (:func:`fit_ar_noise`),
+:func:`refresh_model` whitens the pairs first, so that a wander slower than the blocks does not
+pass for a change of the vehicle.
 
 How far the model moved is the largest relative change of its frequency response over the
 band where the update inverts the model (``|F|^2 >= W_du / W_e``): ``max |F_new / F_old - 1|``.
