@@ -928,6 +928,18 @@ def _adaptive_cases() -> Iterator[Case]:
             ),
             "learning.adaptive.repeats",
         )
+    k = "profile field: learning.adaptive.refresh_noise"
+    for value in ("pink", 1, None):
+        yield Case(
+            k,
+            "fly",
+            f"learning.adaptive.refresh_noise {value!r}",
+            lambda ws, v=value: _fly(
+                ws,
+                profile=ws.profile("learning.adaptive.refresh_noise", v, base="antx-adaptive.yaml"),
+            ),
+            "learning.adaptive.refresh_noise",
+        )
 
 
 def _run_cases() -> Iterator[Case]:
