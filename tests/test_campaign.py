@@ -110,6 +110,22 @@ def test_a_drifting_hover_is_refused_and_an_approaching_one_measured_again() -> 
     assert record.verdict.ok
 
 
+def test_a_wander_that_moves_away_through_one_window_is_measured_once_more_and_passes() -> None:
+    """A swing of 0.3 m every 3 s, judged over 2 s windows: the first drifts away at 0.39 m/s
+    (over the 0.3 m/s limit), the next comes back; a steady drift is refused after it."""
+    settings = FlightSettings(hover_measure_s=2.0)
+
+    def wander(t):  # type: ignore[no-untyped-def]
+        return TARGET + [0.3 * np.sin(2 * np.pi * (t - 103.5) / 3.0), 0.0, 0.0]
+
+    vehicle, events = HoverVehicle(wander), []
+    record = asyncio.run(measure_hover(vehicle, TARGET, 0, settings, events.append))
+    assert vehicle.holds == [4.0, 2.0, 2.0] and record.verdict.ok
+    vehicle = HoverVehicle(lambda t: TARGET + [0.5 * (t - 100.0), 0.0, 0.0])
+    record = asyncio.run(measure_hover(vehicle, TARGET, 0, settings, events.append))
+    assert vehicle.holds == [4.0, 2.0, 2.0] and record.verdict.kind == "drifting"
+
+
 def test_a_settle_timeout_on_a_vehicle_that_hovers_widens_the_tolerances() -> None:
     vehicle = HoverVehicle(lambda t: TARGET + [0.6, 0.0, 0.0])  # further off than measured
     session = FlightSession("udpin://", 0, navigation_source({}), (), 0.2, 0.1)

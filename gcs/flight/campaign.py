@@ -727,11 +727,14 @@ async def _judge_arrived(
     vehicle: Vehicle,
     settings: FlightSettings,
 ) -> HoverRecord:
-    """Judge a hover; while it is still approaching the point, measure it again (twice at most)."""
+    """Judge a hover; while it is still approaching the point, measure it again (twice at most),
+    and once more when it drifts away: a vehicle that wanders by decimetres can move away from
+    the point through one short window and back through the next, where one that does not hold
+    the point goes on drifting."""
     record = _judge(samples, target, j, why, vehicle, settings)
-    for _ in range(2):
-        if record.verdict.kind != "approaching":
-            break
+    again = {"approaching": 2, "drifting": 1}
+    while again.get(record.verdict.kind, 0) > 0:
+        again[record.verdict.kind] -= 1
         samples = await vehicle.hold(settings.hover_measure_s, "the hover measurement")
         record = _judge(samples, target, j, why, vehicle, settings)
     return record
