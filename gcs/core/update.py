@@ -788,7 +788,7 @@ def _nonnegative_multipliers(
     force = A.T @ np.where(act[both], lam[both], 0.0)
     cols = np.flatnonzero(np.abs(A).sum(axis=0).A1 > 0)
     At = A[:, cols].toarray().T
-    fit, residual = scipy.optimize.nnls(At, force[cols])
+    _, residual = scipy.optimize.nnls(At, force[cols])
     return bool(residual <= 1e-9 * max(1.0, float(np.max(np.abs(force)))))
 
 
