@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib
 
 import numpy as np
 import pytest
 
 from gcs.core import montecarlo as mc
 from gcs.core.estimators import kilc_init, kilc_update, rts_smoother
+from gcs.core.learner import FOLD_MIN_PLANTS
 from gcs.core.model import from_transfer_function, lifted_matrix, simulate
+from gcs.core.update import UpdateWeights, next_input
 
 SMALL = mc.MontecarloSettings(
     levels=(0.1,),
@@ -22,13 +23,6 @@ SMALL = mc.MontecarloSettings(
     n_samples=60,
     seed=7,
 )
-
-
-def _update_module():
-    try:
-        return importlib.import_module("gcs.core.update")
-    except ImportError:
-        return None
 
 
 def _msd(wn: float, zeta: float, dt: float):
@@ -46,17 +40,10 @@ def _reference_norms(settings: mc.MontecarloSettings, level: float, algorithm: s
     u0 = np.sin(settings.reference_omega_rad_s * dt * np.arange(n))
     nominal = _msd(settings.wn_rad_s, settings.zeta, dt)
     f_nom = lifted_matrix(nominal, n)
-    upd = _update_module()
-    if upd is not None:
-        weights = upd.UpdateWeights(we=settings.we, wdu=settings.wdu, wu=settings.wu)
+    weights = UpdateWeights(we=settings.we, wdu=settings.wdu, wu=settings.wu)
 
-        def update(d_hat, u):
-            return upd.next_input(nominal, yd, d_hat, u, weights).u_m
-    else:
-        m_y, m_u = mc.update_operator(f_nom, settings.we, settings.wdu, settings.wu)
-
-        def update(d_hat, u):
-            return m_y @ (yd - d_hat) + m_u @ u
+    def update(d_hat, u):  # noqa: ANN001, ANN202
+        return next_input(nominal, yd, d_hat, u, weights).u_m
 
     # the study's noise stream: one (P*R, N) draw per trial, trials in order
     rng = mc.noise_generator(settings, level)
@@ -84,31 +71,13 @@ def _reference_norms(settings: mc.MontecarloSettings, level: float, algorithm: s
 
 @pytest.mark.parametrize("algorithm", mc.ALGORITHMS)
 @pytest.mark.parametrize("signal", ["true", "measured"])
-def test_batched_study_equals_per_trial_reference(algorithm: str, signal: str) -> None:
-    settings = dataclasses.replace(SMALL, error_signal=signal)
+@pytest.mark.parametrize("plants", [3, FOLD_MIN_PLANTS // 2])  # 6 runs: banded; 16: folded
+def test_batched_study_equals_per_trial_reference(algorithm: str, signal: str, plants: int) -> None:
+    settings = dataclasses.replace(SMALL, error_signal=signal, plants=plants)
     batched = mc.error_norms(settings, 0.1, algorithm)
     reference = _reference_norms(settings, 0.1, algorithm)
-    assert batched.shape == (3, 2, 6)
+    assert batched.shape == (plants, 2, 6)
     np.testing.assert_allclose(batched, reference, rtol=1e-8, atol=1e-10)
-
-
-def test_update_operator_equals_update_module() -> None:
-    upd = _update_module()
-    if upd is None or not hasattr(upd, "unconstrained_update_operator"):
-        pytest.skip("gcs.core.update not available")
-    n = 50
-    model = _msd(1.8, 0.8, 0.01)
-    weights = upd.UpdateWeights(we=1.0, wdu=0.01, wu=0.0)
-    m_y, m_u = mc.update_operator(lifted_matrix(model, n), 1.0, 0.01, 0.0)
-    big_m, big_l, c = upd.unconstrained_update_operator(model, n, weights)
-    np.testing.assert_allclose(m_y, big_m, atol=1e-9)
-    np.testing.assert_allclose(m_u, big_l, atol=1e-9)
-    np.testing.assert_allclose(c, 0.0)
-    rng = np.random.default_rng(3)
-    for _ in range(3):
-        yd, d_hat, u = rng.standard_normal((3, n))
-        expected = upd.next_input(model, yd, d_hat, u, weights).u_m
-        np.testing.assert_allclose(m_y @ (yd - d_hat) + m_u @ u, expected, atol=1e-8)
 
 
 @pytest.mark.parametrize(("wn", "zeta"), [(1.8, 0.8), (0.4, 0.1), (3.1, 1.7)])

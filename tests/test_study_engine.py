@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from gcs.app.study_chunks import build_plan
-from gcs.core.learner import Learner, LearnerBatch
+from gcs.core.learner import FOLD_MIN_PLANTS, Learner, LearnerBatch
 from gcs.core.metrics import epos
 from gcs.core.study import PLANT_NOISE, StudyPlan, draw_plant, fly_plants, plant_stream
 from gcs.io.study import load_study
@@ -30,11 +30,28 @@ STUDY = {
 }
 
 
+def _plan(tmp_path_factory: pytest.TempPathFactory, plants: int) -> StudyPlan:
+    path = Path(tmp_path_factory.mktemp("engine")) / "study.yaml"
+    path.write_text(yaml.safe_dump({**STUDY, "plants": plants, "chunk_plants": plants}))
+    return build_plan(load_study(path))
+
+
 @pytest.fixture(scope="module")
 def plan(tmp_path_factory: pytest.TempPathFactory) -> StudyPlan:
-    path = Path(tmp_path_factory.mktemp("engine")) / "study.yaml"
-    path.write_text(yaml.safe_dump(STUDY))
-    return build_plan(load_study(path))
+    return _plan(tmp_path_factory, 4)
+
+
+@pytest.fixture(scope="module")
+def plans(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
+    """Plans by their number of plants, each built once."""
+    built: dict[int, StudyPlan] = {}
+
+    def get(plants: int) -> StudyPlan:
+        if plants not in built:
+            built[plants] = _plan(tmp_path_factory, plants)
+        return built[plants]
+
+    return get
 
 
 def _setting(plan: StudyPlan, case: str):  # noqa: ANN202
@@ -69,8 +86,15 @@ def _by_hand(plan: StudyPlan, setting, plant: int) -> tuple[np.ndarray, np.ndarr
     return np.array(e), u
 
 
-@pytest.mark.parametrize("case", ["antx", "antx-adaptive", "kilc", "active-limits"])
-def test_the_batch_equals_a_learner_per_plant(plan: StudyPlan, case: str) -> None:
+# 4 plants: one banded solve of the KKT system per trial; FOLD_MIN_PLANTS: the paper's step
+# folded into dense matrices (the adaptive options run a Learner per plant at any size)
+@pytest.mark.parametrize(
+    ("case", "plants"),
+    [("antx", 4), ("antx-adaptive", 4), ("kilc", 4), ("active-limits", 4),
+     ("antx", FOLD_MIN_PLANTS), ("kilc", FOLD_MIN_PLANTS), ("active-limits", FOLD_MIN_PLANTS)],
+)  # fmt: skip
+def test_the_batch_equals_a_learner_per_plant(plans, case: str, plants: int) -> None:  # noqa: ANN001
+    plan = plans(plants)
     setting = _setting(plan, case)
     plants = range(plan.plants)
     batch = fly_plants(plan, setting, 0, plants)

@@ -24,7 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.core.estimators import KilcState, kilc_init, kilc_update, rts_smoother
+from gcs.core.estimators import (
+    KilcState,
+    kilc_init,
+    kilc_update,
+    rts_smoother,
+    smoother_operator,
+)
 from gcs.core.floor import Floor
 from gcs.core.learning import (
     AdaptiveSettings,
@@ -34,7 +40,7 @@ from gcs.core.learning import (
     newest_step,
     plan_next_trial,
 )
-from gcs.core.model import DiscreteModel, simulate
+from gcs.core.model import DiscreteModel, lifted_matrix, simulate
 from gcs.core.update import InputUpdate, UpdateResult
 
 __all__ = ["Learner", "LearnerBatch", "LearnerStep", "Trial"]
@@ -320,18 +326,66 @@ class Learner:
         return Trial(u, y)
 
 
+#: Plants from which :class:`LearnerBatch` folds the paper's step into dense matrices.
+FOLD_MIN_PLANTS = 16
+#: Longest trial it folds [samples]: four ``N x N`` matrices per axis (128 MB at 2 000).
+FOLD_MAX_SAMPLES = 2000
+
+
+@dataclass(frozen=True)
+class _Fold:
+    """The paper's step of one axis as dense matrices, for many plants at once (rows).
+
+    ``z = y - u F'``; the update ``u_next = c + (yd - d_hat) M' + u L'``; with the smoother
+    (``d_hat = z S' + d0 s0``) the two fold into ``u_next = c_s - y A_y + u A_u``.
+    """
+
+    yd: np.ndarray  # yd(1..N), (N,)
+    f_t: np.ndarray  # F', (N, N)
+    m_t: np.ndarray  # M', (N, N)
+    l_t: np.ndarray  # L', (N, N)
+    c: np.ndarray  # the pinned tail, (N,)
+    a_y: np.ndarray | None  # (M S)', smoother only
+    a_u: np.ndarray | None  # (M S F)' + L', smoother only
+    c_s: np.ndarray | None  # (yd - d0 s0) M' + c, smoother only
+
+    @classmethod
+    def build(cls, update: InputUpdate, yd: np.ndarray, settings: LearnerSettings) -> _Fold:
+        n = yd.size
+        M, L, c = update.unconstrained_map()
+        f_t = lifted_matrix(update.model, n).T.copy()
+        m_t, l_t = M.T.copy(), L.T.copy()
+        if settings.algorithm != "smoother":
+            return cls(yd, f_t, m_t, l_t, c, None, None, None)
+        S, s0 = smoother_operator(n, settings.smoother)
+        a_y = S.T @ m_t
+        a_u = f_t @ a_y + l_t
+        c_s = (yd - settings.smoother.d0 * s0) @ m_t + c
+        return cls(yd, f_t, m_t, l_t, c, a_y, a_u, c_s)
+
+    def update(self, d_hat: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Eq. (8)'s unconstrained optimum of every row: ``d_hat``, ``u`` of shape (P, N)."""
+        return (self.yd - d_hat) @ self.m_t + u @ self.l_t + self.c
+
+    def smoothed(self, y: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The smoother and the update at once: ``y``, ``u`` of shape (P, N)."""
+        return self.c_s - y @ self.a_y + u @ self.a_u
+
+
 class LearnerBatch:
     """Many plants learning one reference with one set of settings: :class:`Learner` per
     plant, with what depends only on the model computed once for them all.
 
     The plants share the learner's model; only their data differ. The paper's method
-    (``adaptive`` None) therefore runs batched: one residual simulation, one smoother or
-    K-ILC update and one banded solve of eq. (8) for every plant at once (one KKT
-    factorisation per axis), and the QP with the setpoint limits only for the plants whose
-    unconstrained optimum breaks a limit, each from its own last active set, as its own
-    :class:`Learner` would. With ``adaptive`` (noise model from each plant's data, refresh,
-    safeguard) a plant's model and estimator change with its own data, so each plant keeps
-    its own :class:`Learner` inside the batch.
+    (``adaptive`` None) therefore runs batched: for every plant at once the residual, the
+    smoother or K-ILC update and the unconstrained optimum of eq. (8), and the QP with the
+    setpoint limits only for the plants whose optimum breaks a limit, each from its own last
+    active set, as its own :class:`Learner` would. From :data:`FOLD_MIN_PLANTS` plants (trials
+    up to :data:`FOLD_MAX_SAMPLES` samples) the smoother and the unconstrained optimum are
+    folded into two dense matrices per axis, computed once (two matrix products per trial);
+    fewer plants take one banded solve of the KKT system per trial. With ``adaptive`` (noise
+    model from each plant's data, refresh, safeguard) a plant's model and estimator change
+    with its own data, so each plant keeps its own :class:`Learner` inside the batch.
 
     Every plant's setpoints equal its own :class:`Learner`'s to rounding (``batched=False``
     runs exactly those).
@@ -374,7 +428,9 @@ class LearnerBatch:
         self.plants = int(plants)
         self.repeats = template.repeats
         self._ref = template.reference_m
+        self._yd = template._yd
         self._each: list[Learner] | None = None
+        self._folds: list[_Fold] | None = None
         if adaptive is not None or not batched:
             self._each = [template] + [
                 Learner(settings, reference_m, adaptive, repeats) for _ in range(self.plants - 1)
@@ -384,6 +440,10 @@ class LearnerBatch:
             self._updates = [[u.fork() for u in updates] for _ in range(self.plants)]
             self._shared = updates
             self._kilc: list[KilcState] | None = None
+            if self.plants >= FOLD_MIN_PLANTS and self._yd.shape[0] <= FOLD_MAX_SAMPLES:
+                self._folds = [
+                    _Fold.build(u, self._yd[:, a], settings) for a, u in enumerate(updates)
+                ]
         self.failed: list[str | None] = [None] * self.plants
         #: Per plant and axis: limits holding with equality after the newest step.
         self.active_constraints = np.zeros((self.plants, len(settings.models)), dtype=int)
@@ -431,58 +491,76 @@ class LearnerBatch:
                     self.active_constraints[k, a] = update.active_constraints
         else:
             self._paper(u, y, out)
-        for k in range(self.plants):
-            if self.failed[k] is None and not np.all(np.isfinite(out[k])):
-                self.failed[k] = "non-finite setpoints"
-                out[k] = np.nan
+        for k in np.flatnonzero(self.learning & ~np.all(np.isfinite(out), axis=(1, 2))):
+            self.failed[k] = "non-finite setpoints"
+            out[k] = np.nan
         return out
 
     def _paper(self, u_m: np.ndarray, y_m: np.ndarray, out: np.ndarray) -> None:
         """The paper's step (:func:`gcs.core.learning.newest_step`) for every plant learning."""
         s = self.settings
-        for k in np.flatnonzero(self.learning):  # as Learner.step refuses a trial
-            for name, arr in (("u_m", u_m[k]), ("y_m", y_m[k])):
-                if self.failed[k] is None and not np.all(np.isfinite(arr)):
-                    self.failed[k] = f"{name} contains NaN or inf"
+        for name, arr in (("u_m", u_m), ("y_m", y_m)):  # as Learner.step refuses a trial
+            bad = self.learning & ~np.all(np.isfinite(arr), axis=(1, 2))
+            for k in np.flatnonzero(bad):
+                self.failed[k] = f"{name} contains NaN or inf"
         live = np.flatnonzero(self.learning)
         if live.size == 0:
             return
+        every = live.size == self.plants
         start = self._ref[0]
-        u = u_m[live] - start
-        y = y_m[live] - start
-        n = u.shape[1]
+        u = (u_m if every else u_m[live]) - start
+        y = (y_m if every else y_m[live]) - start
         states = []
         for a, model in enumerate(s.models):
-            z = (y[:, :, a] - simulate(model, u[:, :, a].T).T).T  # (N, plants)
-            if s.algorithm == "smoother":
-                d_hat = rts_smoother(z, s.smoother).d_hat.T
+            fold = None if self._folds is None else self._folds[a]
+            ua, ya = u[:, :, a], y[:, :, a]
+            if fold is not None and fold.a_y is not None:  # the smoother, folded
+                u_next = fold.smoothed(ya, ua)
             else:
-                prior = kilc_init(n, s.kilc) if self._kilc is None else self._kilc[a]
-                d_all = prior.d_hat
-                if d_all.ndim == 1:  # the prior, every plant alike
-                    d_all = np.repeat(d_all[:, None], self.plants, axis=1)
-                prior = KilcState(d_all[:, live], prior.p, prior.trials)
-                state = kilc_update(prior, z, s.kilc)
-                full = d_all.copy()
-                full[:, live] = state.d_hat
-                states.append(KilcState(full, state.p, state.trials))
-                d_hat = state.d_hat.T
-            u_next, within, active = self._shared[a].solve_unconstrained(d_hat, u[:, :, a])
-            for i, k in enumerate(live):
-                if within[i]:
-                    out[k, :, a] = u_next[i]
-                    self.active_constraints[k, a] = active[i]
-                    continue
+                z = ya - ua @ fold.f_t if fold is not None else (ya.T - simulate(model, ua.T)).T
+                d_hat, state = self._estimate(a, z, live)
+                if state is not None:
+                    states.append(state)
+                if fold is not None:
+                    u_next = fold.update(d_hat, ua)
+                else:
+                    u_next = self._shared[a].solve_unconstrained(d_hat, ua)[0]
+            within, active = self._shared[a].check_limits(u_next)
+            self.active_constraints[live[within], a] = active[within]
+            out[live[within], :, a] = u_next[within]
+            for i in np.flatnonzero(~within):
+                k = live[i]
+                if fold is not None and fold.a_y is not None:
+                    d_i = rts_smoother(ya[i] - ua[i] @ fold.f_t, s.smoother).d_hat
+                else:
+                    d_i = d_hat[i]
                 try:
-                    result = self._updates[k][a].solve(d_hat[i], u[i, :, a])
+                    result = self._updates[k][a].solve(d_i, ua[i])
                 except ValueError as exc:  # no next input within the limits
                     self.failed[k] = str(exc)
                     continue
                 out[k, :, a] = result.u_m
                 self.active_constraints[k, a] = result.active_constraints
-        if states:
+        if s.algorithm != "smoother":
             self._kilc = states
-        out[live] += start
-        for k in range(self.plants):
-            if self.failed[k] is not None:
-                out[k] = np.nan
+        out += start
+        out[~self.learning] = np.nan
+
+    def _estimate(
+        self, axis: int, z: np.ndarray, live: np.ndarray
+    ) -> tuple[np.ndarray, KilcState | None]:
+        """The disturbance estimate (P, N) of the plants ``live`` from their residuals ``z``
+        (P, N): Algorithm 1's smoother, or a K-ILC update and its new state (every plant's,
+        the others unchanged)."""
+        s = self.settings
+        if s.algorithm == "smoother":
+            return rts_smoother(z.T, s.smoother).d_hat.T, None
+        n = z.shape[1]
+        prior = kilc_init(n, s.kilc) if self._kilc is None else self._kilc[axis]
+        d_all = prior.d_hat
+        if d_all.ndim == 1:  # the prior, every plant alike
+            d_all = np.repeat(d_all[:, None], self.plants, axis=1)
+        state = kilc_update(KilcState(d_all[:, live], prior.p, prior.trials), z.T, s.kilc)
+        full = d_all.copy()
+        full[:, live] = state.d_hat
+        return state.d_hat.T, KilcState(full, state.p, state.trials)

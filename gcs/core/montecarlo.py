@@ -1,20 +1,14 @@
 """Batched Monte Carlo study of the paper's Sec. IV (Tables II and III).
 
-Both learning laws are linear in the data, and almost every step of one learning iteration is
-a *fixed* linear operator that does not depend on the plant or on the trial:
-
-* the nominal lifted matrix ``F_nom`` (the learning always uses the nominal model),
-* the smoother of Algorithm 1 (:func:`gcs.core.estimators.smoother_operator`: its gains depend
-  only on ``q, r, p0`` and ``N``),
-* the unconstrained minimiser of eq. (8),
-  ``U_(j+1) = M_y (Y_d - D_hat_j) + M_u U_j`` with
-  ``M = (F' We F + Wdu + Wu)^-1`` , ``M_y = M F' We``, ``M_u = M Wdu``,
-* the K-ILC gains, a scalar sequence (:func:`gcs.core.estimators.kilc_gains`).
-
-The only plant-dependent step is the true plant's response ``F_p U``, a causal convolution
-with the plant's Markov parameters, done here with a zero-padded FFT. One iteration of the
-whole batch (``plants x repeats`` trials) therefore costs a few ``(M, N) @ (N, N)`` products
-and one batched FFT: ``O(N^2)`` per trial, no Python loop over plants, repeats or samples.
+Every run of a level learns through one :class:`gcs.core.learner.LearnerBatch`, the engine of
+``gcs fly``, ``gcs learn`` and ``gcs study``: the learning always uses the nominal model, so
+the smoother of Algorithm 1 and the unconstrained minimiser of eq. (8) are fixed linear
+operators, folded once into two dense matrices (``U_(j+1) = c - Y_j A_y + U_j A_u`` for the
+smoother; K-ILC's scalar gains and ``M (Y_d - D_hat_j) + L U_j``). The only plant-dependent
+step is the true plant's response ``F_p U``, a causal convolution with the plant's Markov
+parameters, done here with a zero-padded FFT. One iteration of the whole batch
+(``plants x repeats`` trials) therefore costs a few ``(M, N) @ (N, N)`` products and one
+batched FFT: ``O(N^2)`` per trial, no Python loop over plants, repeats or samples.
 
 Conventions (as in :mod:`gcs.core.model`): ``Y = [y(1) .. y(N)] = F U + D``,
 ``U = [u(0) .. u(N-1)]``, trial ``j = 0`` flies ``U_0`` before any learning, trial ``j >= 1``
@@ -35,13 +29,15 @@ import numpy as np
 import scipy.fft
 import scipy.linalg
 
-from gcs.core.estimators import KilcSettings, SmootherSettings, kilc_gains, smoother_operator
-from gcs.core.learning import AdaptiveSettings
-from gcs.core.model import DiscreteModel, from_transfer_function, lifted_matrix
+from gcs.core.estimators import KilcSettings, SmootherSettings
+from gcs.core.learner import LearnerBatch
+from gcs.core.learning import AdaptiveSettings, LearnerSettings
+from gcs.core.model import DiscreteModel, from_transfer_function
 from gcs.core.noise_model import DisturbanceEstimate, drift_scale, estimate_disturbance
 from gcs.core.refresh import refresh_decision, simulate_tf, transfer_function
 from gcs.core.robustness import difference_matrix
 from gcs.core.study import diverged, run_trials
+from gcs.core.update import UpdateWeights
 
 __all__ = [
     "ALGORITHMS",
@@ -51,7 +47,6 @@ __all__ = [
     "PlantSample",
     "sample_plants",
     "noise_generator",
-    "update_operator",
     "error_norms",
     "run_study",
     "summarise",
@@ -372,33 +367,6 @@ def _markov_batch(wn: np.ndarray, zeta: np.ndarray, n: int, dt_s: float) -> np.n
     return f
 
 
-def update_operator(
-    f_nom: np.ndarray, we: float, wdu: float, wu: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """The unconstrained minimiser of eq. (8) as a fixed affine map.
-
-    ``U_(j+1) = M_y (Y_d - D_hat_j) + M_u U_j`` with ``M = (F' We F + Wdu + Wu)^-1``,
-    ``M_y = M F' We``, ``M_u = M Wdu``; every weight is a scalar times the identity.
-
-    Parameters
-    ----------
-    f_nom : ndarray, shape (N, N)
-        Lifted matrix of the model used for learning.
-    we, wdu, wu : float
-        Weights on the predicted error, the input change and the input.
-
-    Returns
-    -------
-    m_y : ndarray, shape (N, N)
-    m_u : ndarray, shape (N, N)
-    """
-    n = f_nom.shape[0]
-    h = we * (f_nom.T @ f_nom) + (wdu + wu) * np.eye(n)
-    rhs = np.hstack([we * f_nom.T, wdu * np.eye(n)])
-    sol = np.linalg.solve(h, rhs)
-    return sol[:, :n], sol[:, n:]
-
-
 def _signals(settings: MontecarloSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Reference ``yd(1..N)``, disturbance ``d(1..N)`` and ``U_0``, each shape (N,)."""
     n, dt = settings.n_samples, settings.t_ilc_s
@@ -429,28 +397,24 @@ def _simulate(
     if p == 0:
         return norms
     yd, d, u0 = _signals(settings)
-    f_nom = lifted_matrix(_msd_model(settings.wn_rad_s, settings.zeta, dt), n)
-    m_y, m_u = update_operator(f_nom, settings.we, settings.wdu, settings.wu)
+    learner = LearnerBatch(
+        LearnerSettings(
+            models=(_msd_model(settings.wn_rad_s, settings.zeta, dt),),
+            algorithm=algorithm,
+            weights=UpdateWeights(settings.we, settings.wdu, settings.wu),
+            smoother=settings.smoother,
+            kilc=settings.kilc,
+            axes=(0,),
+        ),
+        np.concatenate([[0.0], yd])[:, None],  # at rest at 0 before every trial
+        p * r,
+    )
     f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
     noise_rng = noise_generator(settings, level)  # same stream for both algorithms
-    if algorithm == "smoother":
-        # d_hat = S (y - F u) + s0 d0 and the update are fixed: fold them into two matrices,
-        # u_next = c - y A_y + u A_u (row-vector form, trials along axis 0).
-        s_op, s0 = smoother_operator(n, settings.smoother)
-        a_y = s_op.T @ m_y.T
-        a_u = f_nom.T @ a_y + m_u.T
-        c = (yd - settings.smoother.d0 * s0) @ m_y.T
-    else:
-        gains = kilc_gains(settings.kilc, settings.iterations)
-        d_hat = np.full((p * r, n), settings.kilc.d0)
-        f_nom_t, m_y_t, m_u_t = f_nom.T.copy(), m_y.T.copy(), m_u.T.copy()
     fly = _flights(settings, f_true, yd, d, noise_rng, norms)
 
     def learn(j: int, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-        if algorithm == "smoother":
-            return c - y @ a_y + u @ a_u
-        d_hat[:] += gains[j] * (y - u @ f_nom_t - d_hat)
-        return (yd - d_hat) @ m_y_t + u @ m_u_t
+        return learner.step(u[:, :, None], y[:, :, None])[:, :, 0]
 
     run_trials(np.broadcast_to(u0, (p * r, n)).copy(), settings.iterations + 1, fly, learn, step)
     return norms

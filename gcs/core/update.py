@@ -301,6 +301,7 @@ class _Structure:
         self.stage_z = np.concatenate([np.arange(m), self.stage_eq])
         self._kkt: tuple[_Triplets, _BandedLU] | None = None
         self._schur: _Schur | None = None
+        self._dense: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def problem(
         self, d_hat_m: np.ndarray, u_prev_m: np.ndarray, robust: RobustnessWeight | None
@@ -502,7 +503,9 @@ def _solve_direct(prob: _Problem) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 
-def _intervals(prob: _Problem, limits: SetpointLimits) -> tuple[np.ndarray, np.ndarray]:
+def _intervals(
+    prob: _Problem | _Structure, limits: SetpointLimits
+) -> tuple[np.ndarray, np.ndarray]:
     """Per-sample interval ``[lo, hi]`` from the box and the deviation bound, shape (N,)."""
     lo = np.full(prob.n, -np.inf)
     hi = np.full(prob.n, np.inf)
@@ -518,12 +521,21 @@ def _intervals(prob: _Problem, limits: SetpointLimits) -> tuple[np.ndarray, np.n
 
 def _violations(u: np.ndarray, prob: _Problem, limits: SetpointLimits, tol: float) -> int:
     """Number of limit rows whose slack is below ``tol`` (``tol < 0``: violated by ``-tol``)."""
+    return int(_violations_batch(u[None, :], prob, limits, tol)[0])
+
+
+def _violations_batch(
+    u: np.ndarray, prob: _Problem | _Structure, limits: SetpointLimits, tol: float
+) -> np.ndarray:
+    """:func:`_violations` of every row of ``u`` (P, N): shape (P,) of int."""
     lo, hi = _intervals(prob, limits)
-    count = int(np.sum(u - lo[: u.size] < tol)) + int(np.sum(hi[: u.size] - u < tol))
+    count = np.sum(u - lo[None, : u.shape[1]] < tol, axis=1)
+    count += np.sum(hi[None, : u.shape[1]] - u < tol, axis=1)
     if limits.max_step_m is not None:
-        du = np.diff(np.concatenate([[0.0], u]))
-        count += int(np.sum(limits.max_step_m - du < tol) + np.sum(limits.max_step_m + du < tol))
-    return count
+        du = np.diff(u, axis=1, prepend=0.0)
+        count += np.sum(limits.max_step_m - du < tol, axis=1)
+        count += np.sum(limits.max_step_m + du < tol, axis=1)
+    return count.astype(int)
 
 
 def _check_feasible(prob: _Problem, limits: SetpointLimits) -> None:
@@ -1255,29 +1267,75 @@ class InputUpdate:
         active : ndarray of int, shape (P,)
             Limits holding with equality at the optimum (as ``UpdateResult.active_constraints``).
         """
-        s, limits = self._s, self.limits
+        s = self._s
         dh = np.atleast_2d(np.asarray(d_hat_m, dtype=float))
         up = np.atleast_2d(np.asarray(u_prev_m, dtype=float))
-        probs = [s.problem(dh[k], up[k], None) for k in range(dh.shape[0])]
+        for name, arr in (("d_hat_m", dh), ("u_prev_m", up)):
+            if arr.shape[1:] != (s.n,):
+                raise ValueError(f"{name} must have {s.n} samples per trial, got {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name} contains NaN or inf")
+        we, wdu = s.weights.we, s.weights.wdu
+        w = s.yd[None, :] - dh
+        q_x = (-2.0 * we * (s.mask * w[:, s.d : s.n]))[:, :, None] * s.model.C[0][None, None, :]
+        q = np.hstack([-2.0 * wdu * up[:, : s.m], q_x.reshape(dh.shape[0], -1)])
         if s._kkt is None:
             s._kkt = _kkt_factor(s.P, s.G, s.stage_z, s.stage_eq)
         K, lu = s._kkt
         rows, cols, values, n = K
-        rhs = np.concatenate(
-            [-np.column_stack([p.q for p in probs]), np.repeat(s.h[:, None], len(probs), axis=1)]
-        )
+        rhs = np.concatenate([-q.T, np.repeat(s.h[:, None], dh.shape[0], axis=1)])
         sol = lu.solve(rhs)
         sol += lu.solve(rhs - sp.csr_matrix((values, (rows, cols)), shape=(n, n)) @ sol)
         if not np.all(np.isfinite(sol)):
             raise RuntimeError("KKT factorisation of the input update produced NaN")
-        u = np.array([_full_input(p, sol[: s.m, k]) for k, p in enumerate(probs)])
-        if limits is None:
-            return u, np.ones(len(probs), dtype=bool), np.zeros(len(probs), dtype=int)
-        within = np.array([_violations(u[k], p, limits, -_FAST_PATH_TOL_M) == 0
-                           for k, p in enumerate(probs)])  # fmt: skip
-        active = np.array([_violations(u[k], p, limits, _ACTIVE_TOL_M)
-                           for k, p in enumerate(probs)])  # fmt: skip
-        return u, within, active
+        u = np.hstack([sol[: s.m].T, np.full((dh.shape[0], s.r - 1), s.y_final)])
+        return (u, *self.check_limits(u))
+
+    def check_limits(self, u_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Which inputs satisfy the limits, and how many limits each meets with equality.
+
+        The tests of :meth:`solve`'s unconstrained optimum, for many inputs at once.
+
+        Parameters
+        ----------
+        u_m : ndarray, shape (P, N)
+            Inputs [m] (U-indexed), one row per trial.
+
+        Returns
+        -------
+        within : ndarray of bool, shape (P,)
+            Every limit satisfied (to 1e-9 m).
+        active : ndarray of int, shape (P,)
+            Limits holding with equality (to 1e-7 m), as ``UpdateResult.active_constraints``.
+        """
+        u = np.atleast_2d(np.asarray(u_m, dtype=float))
+        if self.limits is None or self.limits == SetpointLimits():
+            return np.ones(u.shape[0], dtype=bool), np.zeros(u.shape[0], dtype=int)
+        within = _violations_batch(u, self._s, self.limits, -_FAST_PATH_TOL_M) == 0
+        return within, _violations_batch(u, self._s, self.limits, _ACTIVE_TOL_M)
+
+    def unconstrained_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The unconstrained optimum as a dense affine map of the trial's data.
+
+        ``u_next = c + M @ (yd - d_hat) + L @ u_prev`` equals :meth:`solve`'s input wherever
+        it satisfies the limits (to rounding): :func:`unconstrained_update_operator` for this
+        update's model, length and weights, with the pinned tail's value folded into ``c``.
+        Computed on first use and kept; ``O(N^2)`` memory, ``O(N^3)`` time once.
+
+        Returns
+        -------
+        M : ndarray, shape (N, N)
+            Acts on ``yd - d_hat`` (Y-indexed) [m/m].
+        L : ndarray, shape (N, N)
+            Acts on ``u_prev`` (U-indexed) [m/m].
+        c : ndarray, shape (N,)
+            Constant [m]: ``yd(N)`` on the pinned tail, 0 elsewhere.
+        """
+        s = self._s
+        if s._dense is None:
+            M, L, c = unconstrained_update_operator(s.model, s.n, s.weights)
+            s._dense = (M, L, c * s.y_final)
+        return s._dense
 
 
 def next_input(
