@@ -8,11 +8,13 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from ekf2_origin import OriginRuleVehicle, standing_mocap
 
 from gcs.core.frames import mapping_for
+from gcs.errors import MocapError
 from gcs.flight.hover import hover_stats, widened
 from gcs.flight.link import TelemetrySample
-from gcs.flight.mocap.campaign import MOVE_WINDOW_S, check_moves
+from gcs.flight.mocap.campaign import MOVE_WINDOW_S, check_moves, ready_to_arm
 from gcs.flight.mocap.client import MocapSample, series_of
 from gcs.io.settings import FlightSettings
 
@@ -190,3 +192,21 @@ def test_the_session_record_of_the_mocap_is_each_steps_part_in_the_order_they_ca
     assert json.loads(json.dumps(last)) == last
     no_mocap = FlightSession("udpin://", 0, navigation_source({}))
     assert session_record(no_mocap)["mocap"] is None
+
+
+def test_an_origin_set_before_the_vision_height_leaves_the_estimate_on_the_mocap() -> None:
+    """The race of a loaded machine: gcs sets the origin 1 s before EKF2 fuses the vision
+    height (PX4 v1.16 then moves the local height by the origin's altitude)."""
+    vehicle, lines = OriginRuleVehicle(height_after_s=1.0), []
+    agreement = asyncio.run(ready_to_arm(vehicle, standing_mocap(), note_to(lines)))  # type: ignore[arg-type]
+    assert agreement.origin_set and agreement.agreement_m < 0.01
+    assert vehicle.shift_m == 0.0 and any("global origin set to" in ln for ln in lines), lines
+
+
+def test_an_estimate_off_by_the_origins_altitude_is_refused_at_once_naming_the_origin() -> None:
+    """An origin someone else set at 488 m before EKF2 had a height: the estimate sits 488 m
+    down for good; gcs says so at once instead of waiting out the agreement's bound."""
+    vehicle = OriginRuleVehicle(0.0, origin=(47.39, 8.54, 488.0), shift_m=488.0, timeout_s=30.0)
+    with pytest.raises(MocapError, match=r"488\.0 m below .* origin's altitude \(488 m\)"):
+        asyncio.run(ready_to_arm(vehicle, standing_mocap(), note_to([])))  # type: ignore[arg-type]
+    assert vehicle.t_s < 0.5  # at the first sample, not after 30 s

@@ -7,9 +7,11 @@ import pytest
 
 from gcs.core.frames import FrameMapping, mapping_for
 from gcs.flight.mocap.checks import (
+    ORIGIN_SHIFT_TOLERANCE_M,
     WANDER_FACTOR,
     move_direction_problem,
     move_length,
+    origin_shift_problem,
     pose_agreement_problem,
     window_mean,
 )
@@ -71,6 +73,24 @@ def test_pose_agreement() -> None:
     assert pose_agreement_problem([0, 0, -1], [0.05, 0.0, -1.02]) is None
     reason = pose_agreement_problem([0, 0, -1], [0.0, 0.0, 1.0])  # up axis sign wrong
     assert reason is not None and "2.00 m apart (mostly down" in reason
+
+
+def test_an_estimate_off_by_the_origins_altitude_names_the_origin() -> None:
+    # PX4 v1.16 after taking a 488 m origin before its vision height: 488 m down, for good
+    reason = origin_shift_problem([0.1, 0.0, 487.9], [0.1, 0.0, -0.1], 488.0)
+    assert (
+        reason is not None and "488.0 m below" in reason and "origin's altitude (488 m)" in reason
+    )
+    # with EKF2's own height error before vision (1.5 m on SIH) it is still the origin
+    assert origin_shift_problem([0, 0, 486.5], [0, 0, 0], 488.0) is not None
+    off = 488.0 - 1.01 * ORIGIN_SHIFT_TOLERANCE_M
+    assert origin_shift_problem([0, 0, off], [0, 0, 0], 488.0) is None  # another error
+    assert origin_shift_problem([0, 0, -0.1], [0, 0, -0.1], 488.0) is None  # agrees
+    # an origin at 0 m (what gcs sets) or a few metres cannot be told from a height error
+    assert origin_shift_problem([0, 0, 3.0], [0, 0, 0], 3.0) is None
+    assert origin_shift_problem([0, 0, 0.0], [0, 0, 0], 0.0) is None
+    # below sea level the estimate sits above the mocap
+    assert origin_shift_problem([0, 0, -430.0], [0, 0, 0], -430.0) is not None
 
 
 def test_window_mean_and_wander_against_a_direct_computation() -> None:

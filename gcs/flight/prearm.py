@@ -9,6 +9,15 @@ origin and, when there is none, sets :data:`LAB_ORIGIN`: any fixed place does, s
 geometry lives in the local frame (the arena's geofence is uploaded relative to the same
 origin). A vehicle that has an origin (GPS, or set by someone else) keeps it.
 
+The origin's altitude is 0 m. PX4 v1.16's EKF2 (``Ekf::setAltOrigin``) keeps the local height
+when the origin comes only if its vertical position is already valid; otherwise (vision not yet
+fused: a loaded machine, a PX4 just started) it keeps its height as the altitude and the local
+height moves by the origin's altitude. With vision as the height reference, every later start
+or reset of the vision height (``controlEvHeightFusion``: after a mocap dropout of some
+seconds) also sets the altitude to the vision height itself, whatever the origin's altitude.
+Flown on the SIH firmware with 488 m (SIH's home altitude): the local position read 488 m down
+in both cases and never came back; at 0 m neither moved it.
+
 Pre-arm verdict. PX4 decides whether it can arm from its health and arming checks; it reports
 them through the events interface (each failing check as one line, e.g. "Horizontal position
 unstable") and sums them up in the ``SYS_STATUS`` pre-arm bit, which MAVSDK gives as
@@ -36,9 +45,10 @@ __all__ = [
     "wait_ready_to_arm",
 ]
 
-LAB_ORIGIN = (47.397742, 8.545594, 488.0)
+LAB_ORIGIN = (47.397742, 8.545594, 0.0)
 """Latitude [deg], longitude [deg] and altitude AMSL [m] set as the origin of a vehicle that has
-none (PX4's SIH home; any fixed place serves a lab, whose geometry is local)."""
+none (PX4's SIH home at 0 m: any fixed place serves a lab, whose geometry is local, and only
+0 m keeps EKF2's local height whenever its vision height starts, see the module's text)."""
 
 NOT_BLOCKING = ("No manual control input",)
 """Problems PX4 lists while it can arm (no RC is fine for an offboard flight): not reasons."""

@@ -526,13 +526,15 @@ class VehicleState:
     landed_state: int | None = None
     relative_alt_m: float | None = None
     pos_ned_m: tuple[float, float, float] | None = None
+    estimator_flags: int | None = None  # ESTIMATOR_STATUS flags (ESTIMATOR_STATUS_FLAGS)
     statustext: list[tuple[float, str]] = field(default_factory=list)
     changes: list[tuple[float, str, object]] = field(default_factory=list)
 
 
 class Px4Monitor:
     """Watches PX4 on its onboard payload link (where PX4 sends HEARTBEAT, EXTENDED_SYS_STATE,
-    GLOBAL_POSITION_INT, STATUSTEXT by itself) from a thread; answers event waits.
+    GLOBAL_POSITION_INT, ESTIMATOR_STATUS, STATUSTEXT by itself) from a thread; answers event
+    waits.
 
     It never sends a heartbeat: PX4 does not count it as a ground station, so a test can take
     the ground station away and watch PX4's data-link-loss failsafe. The mission protocol
@@ -582,6 +584,8 @@ class Px4Monitor:
                     s.relative_alt_m = msg.relative_alt / 1000.0
                 elif kind == "LOCAL_POSITION_NED":
                     s.pos_ned_m = (msg.x, msg.y, msg.z)
+                elif kind == "ESTIMATOR_STATUS":
+                    s.estimator_flags = msg.flags
                 elif kind == "STATUSTEXT":
                     s.statustext.append((now, msg.text))
                 elif kind in (

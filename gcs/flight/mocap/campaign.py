@@ -31,6 +31,7 @@ from gcs.flight.mocap.checks import (
     FrameCheck,
     frame_check,
     move_length,
+    origin_shift_problem,
     pose_agreement_problem,
     window_mean,
 )
@@ -193,7 +194,9 @@ async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> Arming
     """A global origin (set when there is none), then the estimate where the mocap sees it.
 
     The agreement is waited for while the estimator settles (bounded), refused if it never
-    comes.
+    comes, and at once when the estimate's height is off by the origin's altitude (PX4 moved
+    its local frame when it took the origin, and does not move it back:
+    :func:`gcs.flight.mocap.checks.origin_shift_problem`).
 
     Parameters
     ----------
@@ -212,7 +215,7 @@ async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> Arming
     Raises
     ------
     MocapError
-        The estimate never agreed with the mocap.
+        The estimate never agreed with the mocap, or sits the origin's altitude away from it.
     """
     origin, was_set = await ensure_global_origin(vehicle)
     where = f"{origin[0]:.6f}, {origin[1]:.6f}, {origin[2]:.1f} m"
@@ -230,6 +233,9 @@ async def ready_to_arm(vehicle: Vehicle, mocap: MocapLink, note: Note) -> Arming
         except MocapError as exc:
             problem[0] = str(exc)
             return False
+        shifted = origin_shift_problem(est, pos, origin[2])
+        if shifted is not None:
+            raise MocapError(f"pre-flight: {shifted}")
         problem[0] = pose_agreement_problem(est, pos, mocap.settings.agreement_m)
         return problem[0] is None
 

@@ -66,6 +66,8 @@ import numpy as np
 
 __all__ = [
     "pose_agreement_problem",
+    "origin_shift_problem",
+    "ORIGIN_SHIFT_TOLERANCE_M",
     "move_direction_problem",
     "moved_as_commanded",
     "window_mean",
@@ -88,6 +90,10 @@ MAX_FOLLOW_ANGLE_DEG = 45.0
 MAX_MAPPING_ANGLE_DEG = 30.0
 #: Least spread [m] of the estimate along each horizontal axis for the mapping to be judged.
 MIN_EXCITATION_M = 0.05
+#: How close to the global origin's altitude the estimate's height error must be for the
+#: origin to be named as its cause [m] (the jump comes with EKF2's own height error before
+#: vision is fused: 1.5 m on the SIH firmware).
+ORIGIN_SHIFT_TOLERANCE_M = 2.0
 
 
 def _vec(value: np.ndarray, name: str) -> np.ndarray:
@@ -124,6 +130,43 @@ def pose_agreement_problem(
     return (
         f"mocap and vehicle estimate {dist:.2f} m apart (mostly {axis}; tolerance "
         f"{tolerance_m:.2f} m): check the mocap origin, up axis and that the vehicle uses it"
+    )
+
+
+def origin_shift_problem(
+    est_pos_ned_m: np.ndarray, mocap_pos_ned_m: np.ndarray, origin_alt_m: float
+) -> str | None:
+    """Whether the estimate's height is off by the global origin's altitude.
+
+    PX4 v1.16's EKF2 moves its local height by the origin's altitude when it takes the origin
+    before it has a valid height, and again at a start or reset of its vision height under an
+    origin above 0 m (docs/mocap.md); the local position then stays that far down for good.
+
+    Parameters
+    ----------
+    est_pos_ned_m : numpy.ndarray
+        Vehicle's position estimate, shape (3,) [m, NED].
+    mocap_pos_ned_m : numpy.ndarray
+        Mocap position mapped to NED, shape (3,) [m].
+    origin_alt_m : float
+        Altitude of the vehicle's global origin, AMSL [m].
+
+    Returns
+    -------
+    str or None
+        Reason naming the offset, the origin and what to do, or None (the offset is not the
+        origin's altitude, or that altitude is too small to tell).
+    """
+    below_m = float(_vec(est_pos_ned_m, "est_pos_ned_m")[2] - _vec(mocap_pos_ned_m, "mocap")[2])
+    if abs(origin_alt_m) <= 2 * ORIGIN_SHIFT_TOLERANCE_M:
+        return None
+    if abs(below_m - origin_alt_m) > ORIGIN_SHIFT_TOLERANCE_M:
+        return None
+    return (
+        f"the vehicle's estimate is {below_m:.1f} m below the mocap, its global origin's "
+        f"altitude ({origin_alt_m:g} m): PX4 moved its local height by the origin's altitude "
+        "(origin taken before EKF2 had a vision height, or a vision height reset since) and "
+        "does not recover: restart PX4 and let gcs set the origin (at 0 m)"
     )
 
 
