@@ -33,6 +33,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+from px4.flying import sitl_profile  # noqa: E402
 from px4.lab_rig import LabRig  # noqa: E402
 from px4.sitl import STARTED_LINE, Px4Build, Px4Sitl, build_dir  # noqa: E402
 from px4.test_px4_lab import LAB_PARAMS  # noqa: E402
@@ -42,12 +43,7 @@ FLY_TIMEOUT_S = 600  # a hung flight, not a slow one: a loaded machine makes hea
 
 
 def _profile(tmp: Path) -> Path:
-    data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
-    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
-    data["mocap"] = {}
-    path = tmp / "antx-lab.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path
+    return sitl_profile(tmp, limits=CI_FLIGHT, mocap={})
 
 
 def _ended(out: str) -> str:

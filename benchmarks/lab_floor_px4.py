@@ -46,7 +46,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
-from px4.flying import report_rows  # noqa: E402
+from px4.flying import report_rows, sitl_profile  # noqa: E402
 from px4.lab_rig import LabRig  # noqa: E402
 from px4.sitl import STARTED_LINE, Px4Build, Px4Sitl, build_dir  # noqa: E402
 from px4.test_px4_lab import LabConditions  # noqa: E402
@@ -123,20 +123,8 @@ def profile_file(dest: Path, spec: str, mocap: bool = True) -> Path:
     """The shipped profile of ``spec`` (``NAME`` or ``NAME+a.b.c=VALUE+...``: fields set) with
     the tests' watchdog limits, written to ``dest``."""
     name, *fields = spec.split("+")
-    data = yaml.safe_load((ROOT / "profiles" / f"{name}.yaml").read_text())
-    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
-    if mocap:
-        data["mocap"] = {}
-    for field in fields:
-        keys, value = field.split("=")
-        *parents, last = keys.split(".")
-        section = data
-        for key in parents:
-            section = section.setdefault(key, {})
-        section[last] = yaml.safe_load(value)
-    path = dest / "profile-lab.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
+    values = {k: yaml.safe_load(v) for k, v in (f.split("=") for f in fields)}
+    return sitl_profile(dest, name, limits=CI_FLIGHT, mocap={} if mocap else None, fields=values)
 
 
 def flown(run: Path) -> int:

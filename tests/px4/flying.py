@@ -140,13 +140,31 @@ def report_rows(run: Path) -> list[dict]:
     return json.loads(json.dumps(document, allow_nan=False))["rows"]
 
 
-def sitl_profile(tmp: Path, name: str = "antx", **sections: dict) -> Path:
-    """The shipped profile ``name`` with :data:`SITL_LIMITS` (and any ``sections`` updated),
-    written to ``tmp``."""
+def sitl_profile(
+    tmp: Path,
+    name: str = "antx",
+    *,
+    limits: dict | None = None,
+    mocap: dict | None = None,
+    fields: dict[str, object] | None = None,
+    **sections: dict,
+) -> Path:
+    """The shipped profile ``name`` for a firmware flight, written to ``tmp``: the watchdog
+    limits ``limits`` (default :data:`SITL_LIMITS`; the lab flights give the mock's
+    ``CI_FLIGHT``), a ``mocap`` section when given (a lab), any ``sections`` updated, and
+    ``fields`` set by their dotted names (``{"learning.adaptive.repeats": 1}``)."""
     data = yaml.safe_load((ROOT / "profiles" / f"{name}.yaml").read_text())
-    data["flight"] = dict(data.get("flight") or {}, **SITL_LIMITS)
+    data["flight"] = dict(data.get("flight") or {}, **(SITL_LIMITS if limits is None else limits))
+    if mocap is not None:
+        data["mocap"] = dict(mocap)
     for key, values in sections.items():
         data[key] = dict(data.get(key) or {}, **values)
+    for dotted, value in (fields or {}).items():
+        *parents, last = dotted.split(".")
+        section = data
+        for key in parents:
+            section = section.setdefault(key, {})
+        section[last] = value
     path = tmp / f"{name}-sitl.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path

@@ -38,7 +38,8 @@ from test_source_worker_e2e import cpu_burner
 
 from gcs.flight.mocap.health import HealthLimits
 from gcs.io.rundir import RunDir
-from px4.sitl import ROOT, STARTED_LINE, Px4Sitl
+from px4.flying import sitl_profile
+from px4.sitl import STARTED_LINE, Px4Sitl
 from px4.test_px4_lab import (
     FLY_TIMEOUT_S,
     LANDED,
@@ -93,13 +94,10 @@ def adaptive_lab_profile(tmp: Path) -> Path:
     frame check: tests/px4/test_px4_lab.py flies it; here it would only lengthen the flight)
     and one repeat of trial 0 (the profile ships two): the streams during the refresh are
     tested, not the floor, and :data:`TRIALS` flights reach the refresh with one repeat."""
-    data = yaml.safe_load((ROOT / "profiles" / "antx-adaptive.yaml").read_text())
-    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
-    data["learning"]["adaptive"]["repeats"] = 1
-    data["mocap"] = {"check_move_m": 0.0}
-    path = tmp / "antx-adaptive-lab.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path
+    return sitl_profile(
+        tmp, "antx-adaptive", limits=CI_FLIGHT, mocap={"check_move_m": 0.0},
+        fields={"learning.adaptive.repeats": 1},
+    )  # fmt: skip
 
 
 def refresh_reasons(run: RunDir, j: int) -> list[str]:

@@ -38,7 +38,7 @@ from gcs.flight.vehicle import Vehicle
 from gcs.io.mocap_source import parse_mocap_url
 from gcs.io.rundir import RunDir
 from gcs.io.settings import FlightSettings, MocapSettings
-from px4.flying import remember
+from px4.flying import remember, sitl_profile
 from px4.lab_rig import LabRig
 from px4.sitl import ROOT, STARTED_LINE, Px4Monitor, Px4Sitl
 
@@ -177,12 +177,8 @@ class Gcs:
 
 
 def lab_profile(tmp: Path, **mocap: object) -> Path:
-    data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
-    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
-    data["mocap"] = mocap
-    path = tmp / "antx-lab.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path
+    """profiles/antx.yaml for a lab flight: the tests' watchdog limits, the ``mocap`` section."""
+    return sitl_profile(tmp, limits=CI_FLIGHT, mocap=mocap)
 
 
 @pytest.fixture

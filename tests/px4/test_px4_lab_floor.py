@@ -23,12 +23,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import yaml
 from synthetic import CI_FLIGHT
 
 from gcs.io.rundir import RunDir
-from px4.flying import report_rows
-from px4.sitl import ROOT, STARTED_LINE
+from px4.flying import report_rows, sitl_profile
+from px4.sitl import STARTED_LINE
 from px4.test_px4_lab import LANDED, Gcs, LabConditions, lab_rig
 
 pytestmark = [pytest.mark.px4, pytest.mark.lab_floor]
@@ -48,13 +47,10 @@ FLY_TIMEOUT_S = 900.0
 def lab_adaptive_profile(tmp: Path) -> Path:
     """profiles/antx-adaptive.yaml with the tests' watchdog limits, a ``mocap`` section (the
     frame check as shipped) and ``learning.adaptive.repeats`` :data:`REPEATS`."""
-    data = yaml.safe_load((ROOT / "profiles" / "antx-adaptive.yaml").read_text())
-    data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT)
-    data["mocap"] = {}
-    data["learning"]["adaptive"]["repeats"] = REPEATS
-    path = tmp / "antx-adaptive-lab.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
+    return sitl_profile(
+        tmp, "antx-adaptive", limits=CI_FLIGHT, mocap={},
+        fields={"learning.adaptive.repeats": REPEATS},
+    )  # fmt: skip
 
 
 def test_learning_stays_within_two_floors_in_a_realistic_lab(
