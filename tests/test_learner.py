@@ -163,8 +163,9 @@ def test_refusals_name_the_cause_and_keep_nothing() -> None:
         LearnerSettings(models=PROFILE.models(), algorithm="ilc")
     with pytest.raises(ValueError, match="north and east"):
         Learner(dataclasses.replace(settings, axes=(1, 2)), REF2, AdaptiveSettings())
-    with pytest.raises(ValueError, match="arena"):
-        Learner(dataclasses.replace(settings, arena=None), REF2, AdaptiveSettings())
+    with pytest.raises(ValueError, match="safeguard .* needs settings.arena"):
+        Learner(dataclasses.replace(settings, arena=None), REF2, AdaptiveSettings(safeguard=True))
+    Learner(dataclasses.replace(settings, arena=None), REF2, AdaptiveSettings(refresh=True))
     with pytest.raises(ValueError, match="repeats"):
         Learner(settings, REF2, AdaptiveSettings(), repeats=-1)
     trials = [Trial(REF2[:-1], REF2[1:]), Trial(REF2[:-1], REF2[2:])]

@@ -327,8 +327,9 @@ def first_flights(setpoints_ne_m: np.ndarray, tol_m: float = IDENTICAL_TOL_M) ->
         raise ValueError(f"setpoints_ne_m must have shape (T, N, 2), got {sp.shape}")
     first: list[int] = []
     for j in range(sp.shape[0]):
-        same = [i for i in range(j) if first[i] == i and np.max(np.abs(sp[j] - sp[i])) <= tol_m]
-        first.append(same[0] if same else j)
+        own = [i for i in range(j) if first[i] == i]  # trials of setpoints new when flown
+        same = np.max(np.abs(sp[j] - sp[own]), axis=(1, 2)) <= tol_m if own else []
+        first.append(own[int(np.argmax(same))] if np.any(same) else j)
     return tuple(first)
 
 

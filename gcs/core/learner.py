@@ -37,8 +37,15 @@ from gcs.core.learning import (
     LearnerSettings,
     LearningRecord,
     axis_limits,
+    data_estimates,
+    history_decisions,
     newest_step,
     plan_next_trial,
+    refresh_axes,
+    refresh_noise_of,
+    robustness_of,
+    step_from_anchor,
+    table1_estimate_of,
 )
 from gcs.core.model import DiscreteModel, lifted_matrix, simulate
 from gcs.core.update import InputUpdate, UpdateResult
@@ -167,8 +174,8 @@ class Learner:
                 "learning with adaptive options is defined on north and east (e_pos, floor, "
                 f"safeguard); got axes {tuple(settings.axes)}"
             )
-        if adaptive is not None and settings.arena is None:
-            raise ValueError("learning with adaptive options needs settings.arena")
+        if adaptive is not None and adaptive.safeguard and settings.arena is None:
+            raise ValueError("the safeguard of the adaptive options needs settings.arena")
         if int(repeats) != repeats or repeats < 0:
             raise ValueError(f"repeats must be an integer >= 0, got {repeats}")
         self.settings = settings
@@ -383,9 +390,17 @@ class LearnerBatch:
     active set, as its own :class:`Learner` would. From :data:`FOLD_MIN_PLANTS` plants (trials
     up to :data:`FOLD_MAX_SAMPLES` samples) the smoother and the unconstrained optimum are
     folded into two dense matrices per axis, computed once (two matrix products per trial);
-    fewer plants take one banded solve of the KKT system per trial. With ``adaptive`` (noise
-    model from each plant's data, refresh, safeguard) a plant's model and estimator change
-    with its own data, so each plant keeps its own :class:`Learner` inside the batch.
+    fewer plants take one banded solve of the KKT system per trial.
+
+    With ``adaptive`` (:func:`gcs.core.learning.plan_next_trial` per plant) the plants' models
+    and estimators change with their own data, but most of the arithmetic still batches: the
+    residuals (one compiled filter per distinct model), the noise model from the data and its
+    filters (:func:`gcs.core.learning.data_estimates`), the refresh's noise variance and its
+    fits (:func:`gcs.core.learning.refresh_axes`, the plants of one delay together), and the
+    update of every plant still on the nominal model without a robustness weight (one banded
+    solve, the QP only for the plants that break a limit). Per plant: the floor, e_pos, the
+    safeguard's decision and step, the robustness weight, ``noise = "table1"``'s estimate,
+    and the update of a plant whose model a refresh replaced (its own :class:`InputUpdate`).
 
     Every plant's setpoints equal its own :class:`Learner`'s to rounding (``batched=False``
     runs exactly those).
@@ -399,11 +414,11 @@ class LearnerBatch:
     plants : int
         Number of plants ``P``.
     adaptive : AdaptiveSettings, optional
-        As :class:`Learner` (a :class:`Learner` per plant).
+        As :class:`Learner`.
     repeats : int
         As :class:`Learner`.
     batched : bool
-        False: a :class:`Learner` per plant for the paper's method too (the reference).
+        False: a :class:`Learner` per plant (the reference).
 
     Raises
     ------
@@ -429,9 +444,10 @@ class LearnerBatch:
         self.repeats = template.repeats
         self._ref = template.reference_m
         self._yd = template._yd
+        self.adaptive = adaptive
         self._each: list[Learner] | None = None
         self._folds: list[_Fold] | None = None
-        if adaptive is not None or not batched:
+        if not batched:
             self._each = [template] + [
                 Learner(settings, reference_m, adaptive, repeats) for _ in range(self.plants - 1)
             ]
@@ -440,7 +456,12 @@ class LearnerBatch:
             self._updates = [[u.fork() for u in updates] for _ in range(self.plants)]
             self._shared = updates
             self._kilc: list[KilcState] | None = None
-            if self.plants >= FOLD_MIN_PLANTS and self._yd.shape[0] <= FOLD_MAX_SAMPLES:
+            self._models = [tuple(settings.models)] * self.plants
+            self._sp: list[np.ndarray] = []  # setpoints and positions of every trial (adaptive)
+            self._y: list[np.ndarray] = []
+            if adaptive is None and (
+                self.plants >= FOLD_MIN_PLANTS and self._yd.shape[0] <= FOLD_MAX_SAMPLES
+            ):
                 self._folds = [
                     _Fold.build(u, self._yd[:, a], settings) for a, u in enumerate(updates)
                 ]
@@ -452,6 +473,13 @@ class LearnerBatch:
     def learning(self) -> np.ndarray:
         """Plants still learning (their update has not failed), shape (P,) of bool."""
         return np.array([f is None for f in self.failed])
+
+    @property
+    def models(self) -> list[tuple[DiscreteModel, ...]]:
+        """Each plant's models after the newest step (a refresh may have replaced some)."""
+        if self._each is not None:
+            return [learner.models for learner in self._each]
+        return list(self._models)
 
     def step(self, u_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
         """Learn from one complete trial of every plant still learning.
@@ -489,6 +517,8 @@ class LearnerBatch:
                     continue
                 for a, update in enumerate(learner.last.updates):
                     self.active_constraints[k, a] = update.active_constraints
+        elif self.adaptive is not None:
+            self._plan(u, y, out)
         else:
             self._paper(u, y, out)
         for k in np.flatnonzero(self.learning & ~np.all(np.isfinite(out), axis=(1, 2))):
@@ -499,10 +529,7 @@ class LearnerBatch:
     def _paper(self, u_m: np.ndarray, y_m: np.ndarray, out: np.ndarray) -> None:
         """The paper's step (:func:`gcs.core.learning.newest_step`) for every plant learning."""
         s = self.settings
-        for name, arr in (("u_m", u_m), ("y_m", y_m)):  # as Learner.step refuses a trial
-            bad = self.learning & ~np.all(np.isfinite(arr), axis=(1, 2))
-            for k in np.flatnonzero(bad):
-                self.failed[k] = f"{name} contains NaN or inf"
+        self._refuse_non_finite(u_m, y_m)
         live = np.flatnonzero(self.learning)
         if live.size == 0:
             return
@@ -545,6 +572,101 @@ class LearnerBatch:
             self._kilc = states
         out += start
         out[~self.learning] = np.nan
+
+    def _refuse_non_finite(self, u_m: np.ndarray, y_m: np.ndarray) -> None:
+        """Stop the plants whose trial has a NaN or inf, as :meth:`Learner.step` refuses it."""
+        for name, arr in (("u_m", u_m), ("y_m", y_m)):
+            bad = self.learning & ~np.all(np.isfinite(arr), axis=(1, 2))
+            for k in np.flatnonzero(bad):
+                self.failed[k] = f"{name} contains NaN or inf"
+
+    def _plan(self, u_m: np.ndarray, y_m: np.ndarray, out: np.ndarray) -> None:
+        """:func:`gcs.core.learning.plan_next_trial` for every plant learning, batched where
+        the plants' arithmetic is shared (see the class)."""
+        s, adaptive = self.settings, self.adaptive or AdaptiveSettings()
+        self._refuse_non_finite(u_m, y_m)
+        self._sp.append(u_m.copy())
+        self._y.append(y_m.copy())
+        live = np.flatnonzero(self.learning)
+        if len(self._sp) <= self.repeats:  # trial 0 once more: the floor's flights
+            out[live] = self._sp[0][live]
+            return
+        ref, start = self._ref, self._ref[0]
+        sp, y = np.stack(self._sp, axis=1)[live], np.stack(self._y, axis=1)[live]  # (K, T, N, 2)
+        n_trials = sp.shape[1]
+        floors, anchors, steps = [], [], []
+        for i, k in enumerate(live):
+            _, floor, _, decision = history_decisions(
+                s, adaptive, ref, sp[i], y[i], self._models[k]
+            )
+            floors.append(floor)
+            anchors.append(n_trials - 1 if decision is None else decision.anchor_trial)
+            steps.append(1.0 if decision is None else decision.step)
+        at_anchor = (np.arange(live.size), np.array(anchors))
+        new_models = [list(self._models[k]) for k in live]
+        for a in range(self.n_axes):
+            u, ya = sp[..., a] - start[a], y[..., a] - start[a]  # (K, T, N)
+            models = [m[a] for m in new_models]
+            if adaptive.refresh and n_trials > 1:
+                noises = None
+                if adaptive.refresh_noise == "measured":
+                    noises = [refresh_noise_of(sp[i], ya[i]) for i in range(live.size)]
+                results = refresh_axes(s, adaptive, models, u, ya, floors, a, noises)
+                models = [r.model for r in results]
+            if adaptive.noise == "table1":
+                d_hat = np.array(
+                    [table1_estimate_of(s, m, u[i], ya[i])[0] for i, m in enumerate(models)]
+                )
+            else:
+                d_hat = data_estimates(s, adaptive, models, u, ya)[0]
+            u_anchor = u[at_anchor]
+            target = np.empty_like(u_anchor)
+            solo = np.ones(live.size, dtype=bool)  # plants solved alone
+            if adaptive.robustness_cutoff_rad_s is None:
+                shared = np.array([m is s.models[a] for m in models], dtype=bool)
+                if shared.any():
+                    target[shared], within, active = self._shared[a].solve_unconstrained(
+                        d_hat[shared], u_anchor[shared]
+                    )
+                    self.active_constraints[live[shared], a] = active
+                    solo[np.flatnonzero(shared)[within]] = False
+            for i in np.flatnonzero(solo):
+                k = live[i]
+                robust = robustness_of(s, adaptive, models[i], a, ref, sp[i], y[i], u[i, 0])[0]
+                try:
+                    result = self._update_of(k, a, models[i]).solve(d_hat[i], u_anchor[i], robust)
+                except ValueError as exc:  # no next input within the limits
+                    self.failed[k] = str(exc)
+                    continue
+                target[i] = result.u_m
+                self.active_constraints[k, a] = result.active_constraints
+            for i, k in enumerate(live):
+                if self.failed[k] is not None:
+                    continue
+                update = self._updates[k][a] if models[i] is not s.models[a] else self._shared[a]
+                out[k, :, a] = step_from_anchor(
+                    models[i], self._yd[:, a], update.limits, u_anchor[i], target[i], steps[i]
+                )[0]
+                new_models[i][a] = models[i]
+        for i, k in enumerate(live):
+            self._models[k] = tuple(new_models[i])
+        out[live] += start
+        out[~self.learning] = np.nan
+
+    def _update_of(self, plant: int, axis: int, model: DiscreteModel) -> InputUpdate:
+        """Eq. (8) of one plant's axis for ``model``, as :meth:`Learner._update` keeps it."""
+        cached = self._updates[plant][axis]
+        if cached.model is model:
+            return cached
+        update = InputUpdate(model, self._yd[:, axis], self.settings.weights, cached.limits)
+        update.start_from(cached)
+        self._updates[plant][axis] = update
+        return update
+
+    @property
+    def n_axes(self) -> int:
+        """Number of learned axes."""
+        return self._ref.shape[1]
 
     def _estimate(
         self, axis: int, z: np.ndarray, live: np.ndarray

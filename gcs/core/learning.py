@@ -50,7 +50,7 @@ from gcs.core.refresh import (
     RefreshResult,
     RefreshSettings,
     fit_ar_noise,
-    refresh_model,
+    refresh_models,
 )
 from gcs.core.robustness import RobustnessWeight, repeat_cutoff, robustness_weight
 from gcs.core.safeguard import SafeguardDecision, SafeguardSettings, feasible_step, safeguard
@@ -75,6 +75,14 @@ __all__ = [
     "LearningRecord",
     "LearningPlan",
     "plan_next_trial",
+    "history_decisions",
+    "data_estimates",
+    "refresh_axes",
+    "model_outputs",
+    "step_from_anchor",
+    "refresh_noise_of",
+    "robustness_of",
+    "table1_estimate_of",
 ]
 
 
@@ -554,46 +562,130 @@ def _table1_estimate(
     return state.d_hat, np.full(n, state.p), rec, state
 
 
-def _data_estimate(
+def model_outputs(models: Sequence[DiscreteModel], u: np.ndarray) -> np.ndarray:
+    """``F u`` from rest of every plant with its own model: ``u`` of shape (K, T, N).
+
+    One compiled filter (:func:`gcs.core.model.simulate`) per distinct model, every trial of
+    its plants a column: column by column the arithmetic of a plant's own call.
+    """
+    out = np.empty(u.shape)
+    for model, rows in _by_model(models):
+        x = u[rows]
+        out[rows] = simulate(model, x.reshape(-1, x.shape[-1]).T).T.reshape(x.shape)
+    return out
+
+
+def _residuals(
+    models: Sequence[DiscreteModel], u: np.ndarray, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The residuals ``y - F u`` (K, T, N) of every trial and the predicted output changes
+    ``F (u_j - u_(j-1))`` (K, T-1, N), in one :func:`model_outputs` call."""
+    out = model_outputs(models, np.concatenate([u, np.diff(u, axis=1)], axis=1))
+    return y - out[:, : u.shape[1]], out[:, u.shape[1] :]
+
+
+def _by_model(models: Sequence[DiscreteModel]) -> list[tuple[DiscreteModel, np.ndarray]]:
+    """The plants of each distinct model (the same object), in order of first appearance."""
+    groups: dict[int, tuple[DiscreteModel, list[int]]] = {}
+    for k, model in enumerate(models):
+        groups.setdefault(id(model), (model, []))[1].append(k)
+    return [(model, np.array(rows)) for model, rows in groups.values()]
+
+
+def data_estimates(
     settings: LearnerSettings,
     adaptive: AdaptiveSettings,
-    model: DiscreteModel,
+    models: Sequence[DiscreteModel],
     u: np.ndarray,
     y: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, NoiseRecord]:
-    """Data-driven estimate of one axis from residuals of every trial (u, y: (T, N))."""
-    z = y - simulate(model, u.T).T
-    change = simulate(model, np.diff(u, axis=0).T).T.reshape(u.shape[0] - 1, u.shape[1])
+) -> tuple[np.ndarray, np.ndarray, list[NoiseRecord]]:
+    """Data-driven estimate of one axis of K plants from the residuals of every trial.
+
+    Parameters
+    ----------
+    settings, adaptive
+        As :func:`plan_next_trial`.
+    models : sequence of DiscreteModel
+        Each plant's model of the axis.
+    u, y : ndarray, shape (K, T, N)
+        Setpoints and positions of every trial, learning coordinates [m].
+
+    Returns
+    -------
+    tuple
+        ``(d_hat, p, records)``: arrays of shape (K, N), one :class:`NoiseRecord` per plant.
+    """
+    z, change = _residuals(models, u, y)
     est = estimate_disturbance(
         z, drift_scale(change), settings.algorithm == "smoother", adaptive.drift_offset
     )
     it, tn = est.iteration, est.time
-    rec = NoiseRecord(
-        "data", float(it.q0_m2), float(it.kappa), float(it.r_m2), bool(it.identified),
-        float(tn.q_m2), float(tn.r_m2), float(est.r_eff_m2),
-        tuple(float(w) for w in est.weights),
-    )  # fmt: skip
-    return est.d_hat_m, est.p_m2, rec
+    records = [
+        NoiseRecord(
+            "data",
+            float(it.q0_m2[k]),
+            float(it.kappa[k]),
+            float(it.r_m2[k]),
+            bool(it.identified[k]),
+            float(tn.q_m2[k]),
+            float(tn.r_m2[k]),
+            float(est.r_eff_m2[k]),
+            tuple(float(w) for w in est.weights[k]),
+        )  # fmt: skip
+        for k in range(u.shape[0])
+    ]
+    return est.d_hat_m, est.p_m2, records
 
 
-def _refresh_axis(
-    model: DiscreteModel,
+def refresh_axes(
+    settings: LearnerSettings,
+    adaptive: AdaptiveSettings,
+    models: Sequence[DiscreteModel],
     u: np.ndarray,
     y: np.ndarray,
-    r_m2: float,
-    adaptive: AdaptiveSettings,
-    weights: UpdateWeights,
-    noise: ArNoise | None = None,
-) -> RefreshResult:
-    du, dy = np.diff(u, axis=0), np.diff(y, axis=0)
-    moved = np.max(np.abs(du), axis=1) > IDENTICAL_TOL_M
-    return refresh_model(
-        model, du[moved], dy[moved], r_m2, adaptive.refresh_settings(), weights.wdu / weights.we,
-        noise,
-    )  # fmt: skip
+    floors: Sequence[Floor | None],
+    axis: int,
+    noises: Sequence[ArNoise | None] | None = None,
+) -> list[RefreshResult]:
+    """The refresh of one axis of K plants from their pairs of trials of different setpoints.
+
+    Parameters
+    ----------
+    settings, adaptive
+        As :func:`plan_next_trial`.
+    models : sequence of DiscreteModel
+        Each plant's model of the axis.
+    u, y : ndarray, shape (K, T, N)
+        Setpoints and positions of every trial, learning coordinates [m].
+    floors : sequence of Floor or None
+        Each plant's floor (its noise variance; None: from the residuals).
+    axis : int
+        Index of the axis in ``settings.axes``.
+    noises : sequence of ArNoise or None, optional
+        Each plant's measured non-repeatable error (``refresh_noise = "measured"``).
+
+    Returns
+    -------
+    list of RefreshResult
+        One per plant (:func:`gcs.core.refresh.refresh_models`).
+    """
+    r_m2 = _noise_variances(models, u, y, floors, axis)
+    du, dy = np.diff(u, axis=1), np.diff(y, axis=1)
+    moved = np.max(np.abs(du), axis=2) > IDENTICAL_TOL_M  # (K, T-1): repeats left out
+    out: list[RefreshResult | None] = [None] * len(models)
+    for pattern in np.unique(moved, axis=0):  # the plants whose pairs moved alike
+        rows = np.flatnonzero(np.all(moved == pattern, axis=1))
+        results = refresh_models(
+            [models[k] for k in rows], du[rows][:, pattern], dy[rows][:, pattern], r_m2[rows],
+            adaptive.refresh_settings(), settings.weights.wdu / settings.weights.we,
+            None if noises is None else [noises[k] for k in rows],
+        )  # fmt: skip
+        for k, result in zip(rows, results, strict=True):
+            out[k] = result
+    return out  # type: ignore[return-value]
 
 
-def _refresh_noise(sp: np.ndarray, y: np.ndarray) -> ArNoise | None:
+def refresh_noise_of(sp: np.ndarray, y: np.ndarray) -> ArNoise | None:
     """The non-repeatable error of one axis from the flights of identical setpoints in the
     history (``sp``: (T, N, 2) setpoints, ``y``: (T, N) that axis's positions), or None."""
     group = floor_flights(sp)
@@ -646,18 +738,10 @@ def plan_next_trial(
     LearningPlan
     """
     ref, sp, y = ref_m, sp_m, y_m
-    start = ref[0]
-    n_trials = sp.shape[0]
-    u_all = sp - start
-    y_all = y - start
-    epos_all = np.array([epos(ref[1:], y[j]) for j in range(n_trials)])
-    the_floor = _floor_of(sp, y, floor)
-    verdicts = floor_verdicts(epos_all, the_floor, adaptive.floor_z, sp) if the_floor else ()
-    decision = None
-    if adaptive.safeguard and n_trials > 1:
-        scatter = _scatter(the_floor, models, u_all, y_all)
-        decision = safeguard(epos_all, sp, scatter, settings.arena, adaptive.safeguard_settings())
-    anchor = n_trials - 1 if decision is None else decision.anchor_trial
+    epos_all, the_floor, verdicts, decision = history_decisions(
+        settings, adaptive, ref, sp, y, models, floor
+    )
+    anchor = sp.shape[0] - 1 if decision is None else decision.anchor_trial
     step = 1.0 if decision is None else decision.step
     axes = [
         _plan_axis(settings, adaptive, updates, models[a], a, ref, sp, y, the_floor, anchor, step)
@@ -665,7 +749,7 @@ def plan_next_trial(
     ]
     states = [ax.kilc_state for ax in axes if ax.kilc_state is not None]
     record = LearningRecord(
-        trials=n_trials,
+        trials=sp.shape[0],
         epos_m=tuple(float(e) for e in epos_all),
         floor=the_floor,
         verdicts=verdicts,
@@ -680,6 +764,37 @@ def plan_next_trial(
         kilc_states=tuple(states) if states else None,
         record=record,
     )
+
+
+def history_decisions(
+    settings: LearnerSettings,
+    adaptive: AdaptiveSettings,
+    ref_m: np.ndarray,
+    sp_m: np.ndarray,
+    y_m: np.ndarray,
+    models: tuple[DiscreteModel, ...],
+    floor: Floor | None = None,
+) -> tuple[np.ndarray, Floor | None, tuple[FloorVerdict, ...], SafeguardDecision | None]:
+    """What :func:`plan_next_trial` decides from one plant's whole history before any axis:
+    e_pos of every trial, the floor, the verdicts and the safeguard's decision (None when
+    off or after one trial). Arguments as :func:`plan_next_trial`.
+
+    Returns
+    -------
+    tuple
+        ``(epos_m, floor, verdicts, safeguard)``.
+    """
+    ref, sp, y = ref_m, sp_m, y_m
+    start = ref[0]
+    n_trials = sp.shape[0]
+    epos_all = np.array([epos(ref[1:], y[j]) for j in range(n_trials)])
+    the_floor = _floor_of(sp, y, floor)
+    verdicts = floor_verdicts(epos_all, the_floor, adaptive.floor_z, sp) if the_floor else ()
+    decision = None
+    if adaptive.safeguard and n_trials > 1:
+        scatter = _scatter(the_floor, models, sp - start, y - start)
+        decision = safeguard(epos_all, sp, scatter, settings.arena, adaptive.safeguard_settings())
+    return epos_all, the_floor, verdicts, decision
 
 
 @dataclass(frozen=True)
@@ -713,30 +828,59 @@ def _plan_axis(
     yd = ref[1:, axis] - start[axis]
     refresh = None
     if adaptive.refresh and u.shape[0] > 1:
-        r_m2 = _noise_variance(model, u, y, the_floor, axis)
-        noise = _refresh_noise(sp, y) if adaptive.refresh_noise == "measured" else None
-        refresh = _refresh_axis(model, u, y, r_m2, adaptive, settings.weights, noise)
+        noise = refresh_noise_of(sp, y) if adaptive.refresh_noise == "measured" else None
+        refresh = refresh_axes(settings, adaptive, [model], u[None], y[None], [the_floor], axis,
+                               [noise])[0]  # fmt: skip
         model = refresh.model
     state = None
     if adaptive.noise == "table1":
-        # one trial at a time: the same arithmetic as newest_step, bit for bit
-        z = np.array([y[j] - simulate(model, u[j]) for j in range(u.shape[0])])
-        d_hat, p, noise_rec, state = _table1_estimate(settings, z)
+        d_hat, p, noise_rec, state = table1_estimate_of(settings, model, u, y)
     else:
-        d_hat, p, noise_rec = _data_estimate(settings, adaptive, model, u, y)
-    robust, robust_rec = _robustness(settings, adaptive, model, axis, ref, sp, y_abs, u[0])
+        d_hat, p, records = data_estimates(settings, adaptive, [model], u[None], y[None])
+        d_hat, p, noise_rec = d_hat[0], p[0], records[0]
+    robust, robust_rec = robustness_of(settings, adaptive, model, axis, ref, sp, y_abs, u[0])
     update = updates(axis, model)
     result = update.solve(d_hat, u[anchor], robust)
-    if step < 1.0:  # after a safeguard revert: no further from the best trial than its limits allow
-        yd_u = reference_for_inputs(yd, relative_degree(model))
-        step = feasible_step(u[anchor], result.u_m, yd_u, update.limits, step)
-    u_next = result.u_m if step >= 1.0 else u[anchor] + step * (result.u_m - u[anchor])
+    u_next, step = step_from_anchor(model, yd, update.limits, u[anchor], result.u_m, step)
     name = AXIS_NAMES[settings.axes[axis]]
     record = AxisRecord(name, noise_rec, refresh, robust_rec, result, step)
     return _AxisPlan(u_next, d_hat, p, model, state, record)
 
 
-def _robustness(
+def step_from_anchor(
+    model: DiscreteModel,
+    yd: np.ndarray,
+    limits: SetpointLimits | None,
+    anchor: np.ndarray,
+    target: np.ndarray,
+    step: float,
+) -> tuple[np.ndarray, float]:
+    """The next setpoints of one axis, ``step`` of the way from the anchor's to eq. (8)'s
+    ``target`` (all of it when ``step`` is 1); after a safeguard revert no further from the
+    best trial than its limits allow (:func:`gcs.core.safeguard.feasible_step`).
+
+    Returns
+    -------
+    tuple
+        ``(u_next, step)``: setpoints (N,) and the step taken.
+    """
+    if step >= 1.0:
+        return target, 1.0
+    yd_u = reference_for_inputs(yd, relative_degree(model))
+    step = feasible_step(anchor, target, yd_u, limits, step)
+    return (target if step >= 1.0 else anchor + step * (target - anchor)), step
+
+
+def table1_estimate_of(
+    settings: LearnerSettings, model: DiscreteModel, u: np.ndarray, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, NoiseRecord, KilcState | None]:
+    """Table I's estimate of one axis from its trials ``u``, ``y`` (T, N)."""
+    # one trial at a time: the same arithmetic as newest_step, bit for bit
+    z = np.array([y[j] - simulate(model, u[j]) for j in range(u.shape[0])])
+    return _table1_estimate(settings, z)
+
+
+def robustness_of(
     settings: LearnerSettings,
     adaptive: AdaptiveSettings,
     model: DiscreteModel,
@@ -760,20 +904,23 @@ def _robustness(
     return weight, rec
 
 
-def _noise_variance(
-    model: DiscreteModel,
+def _noise_variances(
+    models: Sequence[DiscreteModel],
     u: np.ndarray,
     y: np.ndarray,
-    the_floor: Floor | None,
+    floors: Sequence[Floor | None],
     axis: int,
-) -> float:
-    """One flight's non-repeatable variance per sample of one axis, for the refresh's SNR."""
-    if the_floor is not None:
-        return float(the_floor.axis_rms_m[axis] ** 2)
-    z = y - simulate(model, u.T).T
-    white = float(fit_time_noise(z).r_m2)
-    m = drift_scale(simulate(model, np.diff(u, axis=0).T).T)
-    return float(fit_iteration_noise(z, m, white, drift_offset=False).r_m2)
+) -> np.ndarray:
+    """One flight's non-repeatable variance per sample of one axis of K plants, for the
+    refresh's SNR: the floor's, else fitted to the residuals (u, y: (K, T, N))."""
+    r_m2 = np.array([np.nan if f is None else f.axis_rms_m[axis] ** 2 for f in floors])
+    rest = np.flatnonzero([f is None for f in floors])
+    if rest.size:
+        z, change = _residuals([models[k] for k in rest], u[rest], y[rest])
+        white = fit_time_noise(z).r_m2
+        m = drift_scale(change)
+        r_m2[rest] = fit_iteration_noise(z, m, white, drift_offset=False).r_m2
+    return r_m2
 
 
 def _scatter(

@@ -17,6 +17,7 @@ the report treat them the same way.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,6 +85,26 @@ class DiscreteModel:
     def order(self) -> int:
         """Number of states of the core model (without delay states)."""
         return self.A.shape[0]
+
+    @functools.cached_property
+    def difference_equation(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(num, a)`` of :func:`simulate`'s difference equation (computed once per model).
+
+        ``a`` the characteristic polynomial of ``A``, ``num`` the delay's zeros, then ``b``
+        from the first ``n`` Markov parameters. Read-only arrays.
+        """
+        n = self.order
+        a = np.real(np.poly(self.A))  # det(zI - A) = z^n + a_1 z^(n-1) + ..
+        f = np.empty(n)  # Markov parameters without the delay
+        x = self.B[:, 0].copy()
+        for k in range(n):
+            f[k] = self.C[0] @ x
+            x = self.A @ x
+        b = np.array([f[k] + a[1 : k + 1] @ f[k - 1 :: -1][:k] for k in range(n)])
+        num = np.concatenate([np.zeros(self.delay_samples), b])
+        num.flags.writeable = False
+        a.flags.writeable = False
+        return num, a
 
     def is_stable(self) -> bool:
         """True when all eigenvalues of ``A`` lie strictly inside the unit circle."""
@@ -308,15 +329,7 @@ def simulate(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
     ndarray, same shape as ``u``
     """
     u = np.asarray(u, dtype=float)
-    n = model.order
-    a = np.real(np.poly(model.A))  # det(zI - A) = z^n + a_1 z^(n-1) + ..
-    f = np.empty(n)  # Markov parameters without the delay
-    x = model.B[:, 0].copy()
-    for k in range(n):
-        f[k] = model.C[0] @ x
-        x = model.A @ x
-    b = np.array([f[k] + a[1 : k + 1] @ f[k - 1 :: -1][:k] for k in range(n)])
-    num = np.concatenate([np.zeros(model.delay_samples), b])
+    num, a = model.difference_equation
     from scipy.signal import lfilter  # on first use: a second to import
 
     return lfilter(num, a, u, axis=0)

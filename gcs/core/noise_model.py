@@ -452,6 +452,7 @@ def fit_iteration_noise(
         theta[..., 0] = 0.0
     parts = _sigma_parts(m, t)
     ll = _restricted_loglik(_sigma(theta, m, t, parts), s)
+    finished = np.zeros(batch, dtype=bool)  # a problem stops where it would stop alone
     for _ in range(_SCORING_ITER):
         cand = _scoring_step(theta, m, t, s, lower, drift_offset, parts)
         step = cand - theta
@@ -464,12 +465,14 @@ def fit_iteration_noise(
             cand = np.maximum(theta + step, lower)
             ll_new = _restricted_loglik(_sigma(cand, m, t, parts), s)
         worse = ~(ll_new >= ll - 1e-12 * np.abs(ll))
-        cand = np.where(worse[..., None], theta, cand)
-        ll_new = np.where(worse, ll, ll_new)
+        keep = worse | finished
+        cand = np.where(keep[..., None], theta, cand)
+        ll_new = np.where(keep, ll, ll_new)
         scale = np.maximum(np.abs(theta), 1e-30)
         done = np.max(np.abs(cand - theta) / (scale + np.abs(cand)), axis=-1) < _SCORING_TOL
         theta, ll = cand, ll_new
-        if np.all(done):
+        finished |= done
+        if np.all(finished):
             break
     return IterationNoise(
         theta[..., 0], theta[..., 1], theta[..., 2], ll, np.ones(batch, dtype=bool)

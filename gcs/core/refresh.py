@@ -24,14 +24,14 @@ band where the update inverts the model (``|F|^2 >= W_du / W_e``): ``max |F_new 
 That is the quantity that decides convergence of norm-optimal ILC, ``|1 - F_true / F| < 1``,
 so a move of 0.3 means the old model was about 30 % off where learning acts.
 
-Everything is vectorised over a leading batch axis (Monte Carlo runs); :func:`refresh_model`
-is the one-axis entry point the learning step uses.
+Everything is vectorised over a leading batch axis; :func:`refresh_model` is the one-axis
+entry point the learning step uses, :func:`refresh_models` the same for the plants of a batch.
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -51,6 +51,7 @@ __all__ = [
     "fit_output_error",
     "refresh_decision",
     "refresh_model",
+    "refresh_models",
     "model_change",
     "ArNoise",
     "fit_ar_noise",
@@ -866,29 +867,99 @@ def refresh_model(
     dy = np.asarray(dy_m, dtype=float)
     if du.ndim != 2 or du.shape != dy.shape:
         raise ValueError(f"du_m and dy_m must share one shape (P, N), got {du.shape}, {dy.shape}")
+    return refresh_models(
+        [current], du[None], dy[None], np.array([noise_var_m2]), settings, band_gain2, [noise]
+    )[0]
+
+
+def refresh_models(
+    currents: Sequence[DiscreteModel],
+    du_m: np.ndarray,
+    dy_m: np.ndarray,
+    noise_var_m2: np.ndarray,
+    settings: RefreshSettings,
+    band_gain2: float,
+    noises: Sequence[ArNoise | None] | None = None,
+) -> list[RefreshResult]:
+    """:func:`refresh_model` of many plants at once, each its own (the learners of a batch).
+
+    The plants of one input delay share one :func:`refresh_decision`, simulated row by row:
+    every row iterates as it would alone, so each result equals its own
+    :func:`refresh_model`'s.
+
+    Parameters
+    ----------
+    currents : sequence of DiscreteModel
+        Model in use of each plant (``K`` of them).
+    du_m, dy_m : ndarray, shape (K, P, N)
+        The pairs of each plant, as :func:`refresh_model` (the same number per plant) [m].
+    noise_var_m2 : ndarray, shape (K,)
+        Each plant's per-sample variance of one flight's non-repeatable error [m^2].
+    settings : RefreshSettings
+        Thresholds and iterations.
+    band_gain2 : float
+        ``W_du / W_e``.
+    noises : sequence of ArNoise or None, optional
+        Each plant's non-repeatable error spectrum (default: white).
+
+    Returns
+    -------
+    list of RefreshResult
+        One per plant, in order.
+    """
+    du = np.array(du_m, dtype=float)
+    dy = np.array(dy_m, dtype=float)
+    r = np.array(noise_var_m2, dtype=float).reshape(len(currents))
+    if du.ndim != 3 or du.shape != dy.shape or du.shape[0] != len(currents):
+        raise ValueError(
+            f"du_m and dy_m must share one shape ({len(currents)}, P, N), got {du.shape}, "
+            f"{dy.shape}"
+        )
     if not (np.all(np.isfinite(du)) and np.all(np.isfinite(dy))):
         raise ValueError("du_m or dy_m contains NaN or inf")
-    if noise is not None and noise.order > 0:
-        du, dy, noise_var_m2 = noise.whiten(du), noise.whiten(dy), noise.innovation_var_m2
-    b, a = transfer_function(current)
-    if du.shape[0] == 0:
-        return RefreshResult(current, False, "no pair of trials with different setpoints", 0.0,
-                             float("nan"), float("nan"), float("nan"), 0, float("nan"))  # fmt: skip
-    out = refresh_decision(
-        b[None], a[None], current.delay_samples, current.dt_s, du[None], dy[None],
-        np.array([noise_var_m2]), settings, band_gain2, rowwise=True,
-    )  # fmt: skip
-    model = current
-    if out.accepted[0]:
-        model = model_from_transfer_function(out.b[0], out.a[0], current.dt_s, int(out.delay[0]))
-    return RefreshResult(
-        model=model,
-        accepted=bool(out.accepted[0]),
-        reason=str(out.reason[0]),
-        moved=float(out.moved[0]),
-        candidate_moved=float(out.candidate_moved[0]),
-        cv_loss_current_m2=float(out.cv_current[0]),
-        cv_loss_candidate_m2=float(out.cv_candidate[0]),
-        pairs=int(out.pairs[0]),
-        snr=float(out.snr[0]),
-    )
+    for k, noise in enumerate(noises or ()):
+        if noise is not None and noise.order > 0:
+            du[k], dy[k], r[k] = noise.whiten(du[k]), noise.whiten(dy[k]), noise.innovation_var_m2
+    nan = float("nan")
+    if du.shape[1] == 0:
+        return [
+            RefreshResult(
+                current,
+                False,
+                "no pair of trials with different setpoints",
+                0.0,
+                nan,
+                nan,
+                nan,
+                0,
+                nan,
+            )  # fmt: skip
+            for current in currents
+        ]
+    out: list[RefreshResult | None] = [None] * len(currents)
+    ba = [transfer_function(current) for current in currents]
+    for delay in sorted({c.delay_samples for c in currents}):
+        rows = [k for k, c in enumerate(currents) if c.delay_samples == delay]
+        dec = refresh_decision(
+            np.array([ba[k][0] for k in rows]), np.array([ba[k][1] for k in rows]), delay,
+            currents[rows[0]].dt_s, du[rows], dy[rows], r[rows], settings, band_gain2,
+            rowwise=True,
+        )  # fmt: skip
+        for i, k in enumerate(rows):
+            model = currents[k]
+            if dec.accepted[i]:
+                model = model_from_transfer_function(
+                    dec.b[i], dec.a[i], model.dt_s, int(dec.delay[i])
+                )
+            out[k] = RefreshResult(
+                model=model,
+                accepted=bool(dec.accepted[i]),
+                reason=str(dec.reason[i]),
+                moved=float(dec.moved[i]),
+                candidate_moved=float(dec.candidate_moved[i]),
+                cv_loss_current_m2=float(dec.cv_current[i]),
+                cv_loss_candidate_m2=float(dec.cv_candidate[i]),
+                pairs=int(dec.pairs[i]),
+                snr=float(dec.snr[i]),
+            )
+    return out  # type: ignore[return-value]
