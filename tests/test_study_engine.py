@@ -64,9 +64,13 @@ def _setting(plan: StudyPlan, case: str):  # noqa: ANN202
         return dataclasses.replace(
             paper, settings=dataclasses.replace(paper.settings, algorithm="kilc")
         )
+    if case == "adaptive-robustness":  # every plant's update solved alone, with its weight
+        options = dataclasses.replace(adaptive.adaptive, robustness_cutoff_rad_s=3.0)
+        return dataclasses.replace(adaptive, adaptive=options)
     # active limits: a deviation bound that the optimum of some plants and updates breaks
-    limited = dataclasses.replace(paper.settings, max_deviation_m=0.12, max_step_m=0.05)
-    return dataclasses.replace(paper, settings=limited)
+    setting = adaptive if case == "adaptive-limits" else paper
+    limited = dataclasses.replace(setting.settings, max_deviation_m=0.12, max_step_m=0.05)
+    return dataclasses.replace(setting, settings=limited)
 
 
 def _by_hand(plan: StudyPlan, setting, plant: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
@@ -87,10 +91,11 @@ def _by_hand(plan: StudyPlan, setting, plant: int) -> tuple[np.ndarray, np.ndarr
 
 
 # 4 plants: one banded solve of the KKT system per trial; FOLD_MIN_PLANTS: the paper's step
-# folded into dense matrices (the adaptive options run a Learner per plant at any size)
+# folded into dense matrices (the adaptive options batch without folding at any size)
 @pytest.mark.parametrize(
     ("case", "plants"),
     [("antx", 4), ("antx-adaptive", 4), ("kilc", 4), ("active-limits", 4),
+     ("adaptive-limits", 4), ("adaptive-robustness", 4),
      ("antx", FOLD_MIN_PLANTS), ("kilc", FOLD_MIN_PLANTS), ("active-limits", FOLD_MIN_PLANTS)],
 )  # fmt: skip
 def test_the_batch_equals_a_learner_per_plant(plans, case: str, plants: int) -> None:  # noqa: ANN001
@@ -112,8 +117,49 @@ def test_the_batch_equals_a_learner_per_plant(plans, case: str, plants: int) -> 
     shares = [b.limit_active for b in batch]
     if case == "antx":  # some updates took the QP, others the batched direct solve
         assert max(shares) > 0 and min(shares) < 1
-    if case == "active-limits":  # a limit held in every update of every plant
+    if case in ("active-limits", "adaptive-limits"):  # a limit held in every update
         assert min(shares) == 1
+
+
+def _fly_batch(plan: StudyPlan, setting, batched: bool) -> tuple[LearnerBatch, np.ndarray, list]:  # noqa: ANN001
+    """The plants of ``plan`` learning through one LearnerBatch: the batch, the setpoints of
+    every flight (F, P, N, 2) and the safeguard's action per update and plant (reference
+    only)."""
+    count, ref, n = plan.plants, plan.ref_ne_m, plan.n_samples
+    true = [draw_plant(plan, 0, p) for p in range(count)]
+    noise = [plant_stream(plan.seed, 0, p, PLANT_NOISE) for p in range(count)]
+    batch = LearnerBatch(setting.settings, ref, count, setting.adaptive, setting.repeats,
+                         batched=batched)  # fmt: skip
+    u, flown, actions = ref[None, :-1].repeat(count, axis=0), [], []
+    for f in range(batch.repeats + plan.iterations):
+        flown.append(u)
+        y = np.array([t.respond(u[p] - ref[0]) + ref[0] for p, t in enumerate(true)])
+        y += np.array([np.asarray(t.noise_std_m) * noise[p].standard_normal((n, 2))
+                       for p, t in enumerate(true)])  # fmt: skip
+        u = batch.step(u, y)
+        if not batched and f >= batch.repeats:
+            actions.append([learner.last.record.safeguard.action for learner in batch._each])
+    return batch, np.array([*flown, u]), actions
+
+
+def test_the_adaptive_batch_refreshes_some_plants_and_reverts_one_alone(plan: StudyPlan) -> None:
+    adaptive = plan.settings[1]
+    # a stricter signal-to-noise gate: two plants refresh their east model, two keep it
+    strict = dataclasses.replace(adaptive.adaptive, refresh_min_snr=300.0)
+    for setting in (adaptive, dataclasses.replace(adaptive, adaptive=strict)):
+        batch, flown, _ = _fly_batch(plan, setting, batched=True)
+        each, flown_each, actions = _fly_batch(plan, setting, batched=False)
+        assert batch._each is None and each._each is not None  # the batched path, not a loop
+        np.testing.assert_allclose(flown, flown_each, rtol=0, atol=1e-9)
+        assert batch.failed == each.failed == [None] * plan.plants
+        nominal = setting.settings.models
+        replaced = [[m is not n for m, n in zip(ms, nominal, strict=True)] for ms in batch.models]
+        assert replaced == [[m is not n for m, n in zip(ms, nominal, strict=True)]
+                            for ms in each.models]  # fmt: skip
+        if setting is adaptive:  # the safeguard took one plant back to its best trial
+            assert sum(a.count("revert") for a in actions) >= 1
+        else:
+            assert [r[1] for r in replaced] == [True, True, False, False]
 
 
 def test_a_plant_whose_trial_is_refused_stops_alone(plan: StudyPlan) -> None:

@@ -92,7 +92,7 @@ def study_settings(
     keep_diverged : bool
         Keep plants whose learning diverged in the statistics.
     adaptive : bool
-        The new options will run too: their per-run operators must fit in memory.
+        The new options will run too: every trial of every run must fit in memory.
 
     Returns
     -------
@@ -171,8 +171,8 @@ def estimate_adaptive_s(settings: MontecarloSettings) -> float:
     """Computing time of the new options' tasks in this process, from a small unit [s].
 
     One task of the new options on 2 plants x 1 repeat at the first level, timed here and
-    scaled by the study's plant-runs and levels: an upper bound (its fixed part, the
-    operators, is counted once per plant-run).
+    scaled by the study's plant-runs and levels: an upper bound (its fixed part is counted
+    once per plant-run).
 
     Parameters
     ----------

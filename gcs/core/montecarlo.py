@@ -23,7 +23,7 @@ import os
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft
@@ -33,9 +33,6 @@ from gcs.core.estimators import KilcSettings, SmootherSettings
 from gcs.core.learner import LearnerBatch
 from gcs.core.learning import AdaptiveSettings, LearnerSettings
 from gcs.core.model import DiscreteModel, from_transfer_function
-from gcs.core.noise_model import DisturbanceEstimate, drift_scale, estimate_disturbance
-from gcs.core.refresh import refresh_decision, simulate_tf, transfer_function
-from gcs.core.robustness import difference_matrix
 from gcs.core.study import diverged, run_trials
 from gcs.core.update import UpdateWeights
 
@@ -387,37 +384,56 @@ def _simulate(
     level: float,
     algorithm: str,
     step: Callable[[], None] | None = None,
-) -> np.ndarray:
-    """Error norms of every trial, shape (P, R, iterations + 1)."""
+    adaptive: AdaptiveSettings | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Error norms of every trial (P, R, iterations + 1), and the runs whose model a refresh
+    replaced (P, R) (``adaptive`` only; else every False)."""
     if algorithm not in ALGORITHMS:
         raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
     n, dt = settings.n_samples, settings.t_ilc_s
     p, r = plants.wn_rad_s.size, settings.repeats
     norms = np.zeros((p, r, settings.iterations + 1))
+    refreshed = np.zeros((p, r), dtype=bool)
     if p == 0:
-        return norms
+        return norms, refreshed
+    runs = p * r
+    # the paper's method: a run is a plant of one axis. The adaptive options are defined on
+    # north and east, which they learn apart (without a repeat, which the study does not
+    # fly): two runs are then the two axes of one vehicle, the last one twice when odd
+    axes = 1 if adaptive is None else 2
+    vehicles = -(-runs // axes)
     yd, d, u0 = _signals(settings)
+    model = _msd_model(settings.wn_rad_s, settings.zeta, dt)
     learner = LearnerBatch(
         LearnerSettings(
-            models=(_msd_model(settings.wn_rad_s, settings.zeta, dt),),
+            models=(model,) * axes,
             algorithm=algorithm,
             weights=UpdateWeights(settings.we, settings.wdu, settings.wu),
             smoother=settings.smoother,
             kilc=settings.kilc,
-            axes=(0,),
+            axes=tuple(range(axes)),
         ),
-        np.concatenate([[0.0], yd])[:, None],  # at rest at 0 before every trial
-        p * r,
+        np.repeat(np.concatenate([[0.0], yd])[:, None], axes, axis=1),  # at rest at 0 first
+        vehicles,
+        adaptive,
     )
     f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
     noise_rng = noise_generator(settings, level)  # same stream for both algorithms
     fly = _flights(settings, f_true, yd, d, noise_rng, norms)
 
-    def learn(j: int, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-        return learner.step(u[:, :, None], y[:, :, None])[:, :, 0]
+    def as_vehicles(x: np.ndarray) -> np.ndarray:  # (runs, N) -> (vehicles, N, axes)
+        x = np.concatenate([x, x[runs - 1 :].repeat(vehicles * axes - runs, axis=0)])
+        return x.reshape(vehicles, axes, n).transpose(0, 2, 1)
 
-    run_trials(np.broadcast_to(u0, (p * r, n)).copy(), settings.iterations + 1, fly, learn, step)
-    return norms
+    def learn(j: int, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        u_next = learner.step(as_vehicles(u), as_vehicles(y))
+        return u_next.transpose(0, 2, 1).reshape(vehicles * axes, n)[:runs]
+
+    run_trials(np.broadcast_to(u0, (runs, n)).copy(), settings.iterations + 1, fly, learn, step)
+    if adaptive is not None:
+        replaced = [m is not model for models in learner.models for m in models]
+        refreshed = np.array(replaced[:runs]).reshape(p, r)
+    return norms, refreshed
 
 
 def _flights(
@@ -467,7 +483,7 @@ def error_norms(settings: MontecarloSettings, level: float, algorithm: str) -> n
     ndarray, shape (P, repeats, iterations + 1)
         ``[plant, repeat, j]`` [m]; ``P`` is ``settings.plants`` minus excluded plants.
     """
-    return _simulate(settings, sample_plants(settings, level), level, algorithm)
+    return _simulate(settings, sample_plants(settings, level), level, algorithm)[0]
 
 
 def _rule_text(settings: MontecarloSettings) -> str:
@@ -581,7 +597,7 @@ def run_study(
 
     def batch(level: float, algorithm: str) -> StudyRow:
         plants = sample_plants(settings, level)
-        norms = _simulate(settings, plants, level, algorithm, step)
+        norms = _simulate(settings, plants, level, algorithm, step)[0]
         return summarise(settings, norms, level, algorithm, plants.excluded)
 
     jobs = [(level, algorithm) for level in settings.levels for algorithm in settings.algorithms]
@@ -597,11 +613,9 @@ def run_study(
 
 
 # =============================================================================================
-# The study with the options beyond the paper: data-driven noise model, model refresh,
-# robustness weight. Each run (plant x repeat) now has its own model and its own estimator
-# gains, so the fixed-operator trick above no longer applies; the runs still advance together
-# as the rows of (runs, ...) arrays, and the only per-run matrices are the update operators,
-# recomputed for the runs whose model a refresh changed.
+# Memory, and the study with the options beyond the paper (data-driven noise model, model
+# refresh): the same trial loop, the runs learning through LearnerBatch with those options
+# (each run's model and estimator then follow its own data; see _simulate).
 # =============================================================================================
 
 
@@ -641,10 +655,6 @@ def check_study_size(settings: MontecarloSettings, memory_bytes: float | None = 
             f"{settings.repeats} runs needs about {need / 1e9:.3g} GB (N x N operators), more "
             f"than the {limit / 1e9:.3g} GB it may use on this machine; use fewer samples"
         )
-
-
-#: Memory the adaptive study may spend on per-run update operators [bytes].
-_OPERATOR_BYTES_MAX = 2e9
 
 
 @dataclass(frozen=True)
@@ -695,151 +705,14 @@ class ComparisonRow:
     seconds: float
 
 
-def _runs_markov(b: np.ndarray, a: np.ndarray, n: int) -> np.ndarray:
-    """Markov parameters f_1..f_N of every run's model (delay 0), shape (M, N)."""
-    impulse = np.zeros((b.shape[0], 1, n))
-    impulse[:, 0, 0] = 1.0
-    return simulate_tf(b, a, 0, impulse)[:, 0, :]
-
-
-def _conv(f: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Causal convolution along the last axis: f (M, N) with x (M, ..., N)."""
-    n = x.shape[-1]
-    nfft = scipy.fft.next_fast_len(2 * n - 1, real=True)
-    ff = f.reshape(f.shape[:1] + (1,) * (x.ndim - 2) + f.shape[1:])
-    return np.fft.irfft(np.fft.rfft(ff, nfft) * np.fft.rfft(x, nfft), nfft)[..., :n]
-
-
-def _update_inverses(
-    f: np.ndarray, settings: MontecarloSettings, robust_lam: np.ndarray, order: int
-) -> np.ndarray:
-    """``H^-1`` per run, ``H = we F'F + (wdu + wu) I + lam D'D``: shape (M, N, N)."""
-    m, n = f.shape
-    idx = np.subtract.outer(np.arange(n), np.arange(n))
-    out = np.empty((m, n, n))
-    dtd = None
-    if np.any(robust_lam > 0):
-        d = difference_matrix(n, order).toarray()
-        dtd = d.T @ d
-    for start in range(0, m, 128):  # chunks bound the temporary (C, N, N) arrays
-        sl = slice(start, min(start + 128, m))
-        big = np.where(idx >= 0, f[sl][:, np.clip(idx, 0, None)], 0.0)  # lifted F per run
-        h = settings.we * np.einsum("mki,mkj->mij", big, big)
-        h += (settings.wdu + settings.wu) * np.eye(n)
-        if dtd is not None:
-            h += robust_lam[sl, None, None] * dtd
-        out[sl] = np.linalg.inv(h)
-    return out
-
-
-def _robust_lam(
-    b: np.ndarray, a: np.ndarray, settings: MontecarloSettings, adaptive: AdaptiveSettings
-) -> np.ndarray:
-    """Robustness weight per run (0 when off): ``we |F(w_c)|^2 / (2 sin(w_c T / 2))^(2p)``."""
-    cutoff = adaptive.robustness_cutoff_rad_s
-    if cutoff is None:
-        return np.zeros(b.shape[0])
-    if cutoff == "auto":
-        raise ValueError("the study flies no repeat: give the robustness cutoff in rad/s")
-    dt = settings.t_ilc_s
-    zinv = np.exp(-1j * cutoff * dt)
-    powers = zinv ** np.arange(1, b.shape[-1] + 1)
-    gain2 = np.abs((b @ powers) / (1.0 + a @ powers)) ** 2
-    return (
-        settings.we * gain2 / (2.0 * np.sin(0.5 * cutoff * dt)) ** (2 * adaptive.robustness_order)
-    )
-
-
-def _adaptive_simulate(
-    settings: MontecarloSettings,
-    plants: PlantSample,
-    level: float,
-    algorithm: str,
-    adaptive: AdaptiveSettings,
-    step: Callable[[], None] | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Error norms (P, R, J+1) and whether each run's model was refreshed (P, R)."""
-    n, dt = settings.n_samples, settings.t_ilc_s
-    p, r = plants.wn_rad_s.size, settings.repeats
-    runs, n_trials = p * r, settings.iterations + 1
-    norms = np.zeros((p, r, n_trials))
-    refreshed = np.zeros(runs, dtype=bool)
-    if p == 0:
-        return norms, refreshed.reshape(p, r)
-    yd, d, u0 = _signals(settings)
-    b0, a0 = transfer_function(_msd_model(settings.wn_rad_s, settings.zeta, dt))
-    b = np.tile(b0, (runs, 1))
-    a = np.tile(a0, (runs, 1))
-    f_run = _runs_markov(b[:1], a[:1], n).repeat(runs, axis=0)
-    lam = _robust_lam(b, a, settings, adaptive)
-    h_inv = _update_inverses(f_run[:1], settings, lam[:1], adaptive.robustness_order)
-    h_inv = np.broadcast_to(h_inv, (runs, n, n))  # shared until a refresh changes a run
-    d_mat = difference_matrix(n, adaptive.robustness_order)
-    f_true = _markov_batch(plants.wn_rad_s, plants.zeta, n, dt)
-    noise_rng = noise_generator(settings, level)  # the paper's study's noise, draw for draw
-    refresh_settings = replace(adaptive.refresh_settings(), delay_search=0)
-    u_hist = np.zeros((runs, n_trials, n))
-    y_hist = np.zeros((runs, n_trials, n))
-    flights = _flights(settings, f_true, yd, d, noise_rng, norms)
-
-    def fly(j: int, u: np.ndarray) -> np.ndarray:
-        y = flights(j, u)
-        u_hist[:, j], y_hist[:, j] = u, y
-        return y
-
-    def learn(j: int, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-        nonlocal b, a, h_inv
-        est = _estimate(f_run, u_hist[:, : j + 1], y_hist[:, : j + 1], algorithm, adaptive)
-        if adaptive.refresh and j >= 1:
-            out = refresh_decision(
-                b, a, 0, dt, np.diff(u_hist[:, : j + 1], axis=1),
-                np.diff(y_hist[:, : j + 1], axis=1), est.iteration.r_m2, refresh_settings,
-                settings.wdu / settings.we,
-            )  # fmt: skip
-            changed = np.flatnonzero(out.accepted)
-            if changed.size:
-                refreshed[changed] = True
-                b, a = out.b, out.a
-                f_run[changed] = _runs_markov(b[changed], a[changed], n)
-                lam[changed] = _robust_lam(b[changed], a[changed], settings, adaptive)
-                h_inv = np.array(h_inv)  # own copy per run from the first refresh on
-                h_inv[changed] = _update_inverses(
-                    f_run[changed], settings, lam[changed], adaptive.robustness_order
-                )
-                est = _estimate(f_run, u_hist[:, : j + 1], y_hist[:, : j + 1], algorithm, adaptive)
-        rhs = settings.we * _conv_transpose(f_run, yd - est.d_hat_m) + settings.wdu * u
-        if np.any(lam > 0):
-            rhs = rhs + lam[:, None] * (d_mat.T @ (d_mat @ u0))[None, :]
-        return np.einsum("mij,mj->mi", h_inv, rhs)
-
-    run_trials(np.broadcast_to(u0, (runs, n)).copy(), n_trials, fly, learn, step)
-    return norms, refreshed.reshape(p, r)
-
-
-def _conv_transpose(f: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``F' x`` for each run's lower-triangular Toeplitz ``F``: a correlation, x (M, N)."""
-    return _conv(f, x[:, ::-1])[:, ::-1]
-
-
-def _estimate(
-    f_run: np.ndarray,
-    u_hist: np.ndarray,
-    y_hist: np.ndarray,
-    algorithm: str,
-    adaptive: AdaptiveSettings,
-) -> DisturbanceEstimate:
-    """The disturbance estimate of every run from its whole history (M, T, N)."""
-    z = y_hist - _conv(f_run, u_hist)
-    if adaptive.noise == "table1":
-        raise ValueError("the adaptive study needs noise = 'data' (table1 is the paper's study)")
-    m = drift_scale(_conv(f_run, np.diff(u_hist, axis=1)))
-    return estimate_disturbance(z, m, algorithm == "smoother", adaptive.drift_offset)
-
-
 def adaptive_error_norms(
     settings: MontecarloSettings, level: float, algorithm: str, adaptive: AdaptiveSettings
 ) -> tuple[np.ndarray, np.ndarray]:
     """Error 2-norms of every trial with the new options, on the paper's plants and noise.
+
+    The runs learn through :class:`gcs.core.learner.LearnerBatch` with ``adaptive``, as a
+    flight's learner does: two runs are the north and east axes of one vehicle, which the
+    options learn apart (no repeat is flown, so no floor couples them).
 
     Parameters
     ----------
@@ -848,19 +721,21 @@ def adaptive_error_norms(
     level : float
         Uncertainty level.
     algorithm : str
-        ``"smoother"`` (iteration filter and RTS smoother) or ``"kilc"`` (iteration filter).
+        ``"smoother"`` or ``"kilc"``.
     adaptive : AdaptiveSettings
-        The options; ``noise`` must be ``"data"``. The safeguard is not simulated (it acts
-        on measured e_pos against a floor from a repeat flight, which the study does not fly).
+        The options. Without a repeat flight, ``robustness_cutoff_rad_s = "auto"`` and
+        ``refresh_noise = "measured"`` find no floor (off, white); the safeguard needs an
+        arena, which the study has not (refused).
 
     Returns
     -------
     norms : ndarray, shape (P, repeats, iterations + 1)
         ``[plant, repeat, j]`` [m].
     refreshed : ndarray of bool, shape (P, repeats)
-        Runs whose model a refresh changed at least once.
+        Runs whose model a refresh replaced.
     """
-    return _adaptive_simulate(settings, sample_plants(settings, level), level, algorithm, adaptive)
+    plants = sample_plants(settings, level)
+    return _simulate(settings, plants, level, algorithm, None, adaptive)
 
 
 def _diverged(settings: MontecarloSettings, norms: np.ndarray) -> np.ndarray:
@@ -869,26 +744,34 @@ def _diverged(settings: MontecarloSettings, norms: np.ndarray) -> np.ndarray:
     return diverged(per_plant[:, 0], steady)
 
 
-def check_adaptive_size(settings: MontecarloSettings) -> None:
-    """Refuse an adaptive study whose per-run update operators would not fit in memory.
+def check_adaptive_size(settings: MontecarloSettings, memory_bytes: float | None = None) -> None:
+    """Refuse an adaptive study whose trials would not fit in memory.
+
+    The new options learn from every trial so far: each level keeps the setpoints and
+    positions of every trial of every run, and each step stacks them and their residuals.
 
     Parameters
     ----------
     settings : MontecarloSettings
         The study.
+    memory_bytes : float, optional
+        The memory it may use; default half of this machine's.
 
     Raises
     ------
     ValueError
-        ``plants x repeats`` operators of ``N x N`` doubles exceed 2 GB.
+        The trials of one level would take more than that.
     """
-    memory = 8.0 * settings.plants * settings.repeats * settings.n_samples**2
-    if memory > _OPERATOR_BYTES_MAX:
+    runs = float(settings.plants * settings.repeats)
+    need = 8.0 * 6.0 * runs * (settings.iterations + 1) * settings.n_samples
+    limit = 0.5 * _physical_memory() if memory_bytes is None else memory_bytes
+    if need > limit:
         raise ValueError(
-            f"the adaptive study keeps one {settings.n_samples} x {settings.n_samples} update "
-            f"operator per run: {memory / 1e9:.1f} GB for {settings.plants} x "
-            f"{settings.repeats} runs (limit {_OPERATOR_BYTES_MAX / 1e9:.0f} GB); use fewer "
-            "samples, plants or repeats"
+            f"the adaptive study keeps every trial of its {settings.plants} x "
+            f"{settings.repeats} runs ({settings.iterations + 1} trials of "
+            f"{settings.n_samples} samples): about {need / 1e9:.3g} GB, more than the "
+            f"{limit / 1e9:.3g} GB it may use on this machine; use fewer plants, repeats or "
+            "samples"
         )
 
 
@@ -921,7 +804,7 @@ def compare_study(
     Raises
     ------
     ValueError
-        The per-run update operators would take more than 2 GB.
+        The trials would not fit in memory (:func:`check_adaptive_size`).
     """
     import time
 
@@ -930,9 +813,9 @@ def compare_study(
     rows, comparison = [], []
     for level in settings.levels:
         plants = sample_plants(settings, level)
-        paper = _simulate(settings, plants, level, algorithm)
+        paper = _simulate(settings, plants, level, algorithm)[0]
         start = time.perf_counter()
-        new, refreshed = _adaptive_simulate(settings, plants, level, algorithm, adaptive, step)
+        new, refreshed = _simulate(settings, plants, level, algorithm, step, adaptive)
         seconds = time.perf_counter() - start
         rows.append(summarise(settings, new, level, f"{algorithm}+adaptive", plants.excluded))
         div_p, div_n = _diverged(settings, paper), _diverged(settings, new)
