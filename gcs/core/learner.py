@@ -643,9 +643,9 @@ class LearnerBatch:
             for i, k in enumerate(live):
                 if self.failed[k] is not None:
                     continue
-                update = self._updates[k][a] if models[i] is not s.models[a] else self._shared[a]
+                limits = self._shared[a].limits  # every model's, the same arena and bounds
                 out[k, :, a] = step_from_anchor(
-                    models[i], self._yd[:, a], update.limits, u_anchor[i], target[i], steps[i]
+                    models[i], self._yd[:, a], limits, u_anchor[i], target[i], steps[i]
                 )[0]
                 new_models[i][a] = models[i]
         for i, k in enumerate(live):

@@ -75,14 +75,8 @@ __all__ = [
     "LearningRecord",
     "LearningPlan",
     "plan_next_trial",
-    "history_decisions",
     "data_estimates",
     "refresh_axes",
-    "model_outputs",
-    "step_from_anchor",
-    "refresh_noise_of",
-    "robustness_of",
-    "table1_estimate_of",
 ]
 
 

@@ -9,7 +9,7 @@ fly one trial loop (:func:`run_trials`, also the loop of :mod:`gcs.core.montecar
 through one :class:`gcs.core.learner.LearnerBatch`, which equals a
 :class:`gcs.core.learner.Learner` per plant (the paper's method batched: what depends on the
 model once for every plant, a QP only for the plants whose optimum breaks a limit; the
-adaptive options a Learner per plant, since a refresh gives each plant its own model). The
+adaptive options batched too, a plant whose model a refresh replaced updated alone). The
 plant's simulation is on this side.
 
 Everything is linear in the trial length ``N``: the true plant is simulated as a difference
@@ -538,8 +538,8 @@ def fly_plants(
     """Learn on true plants with one setting: trial 0, its repeats, ``iterations`` more.
 
     Every plant flies the same trial loop (:func:`run_trials`); the learning is one
-    :class:`gcs.core.learner.LearnerBatch` for them all (the paper's method batched, the
-    adaptive options a :class:`gcs.core.learner.Learner` per plant). A plant's results do
+    :class:`gcs.core.learner.LearnerBatch` for them all (the paper's method and the adaptive
+    options batched). A plant's results do
     not depend on the other plants of the batch (its own plant and noise streams).
 
     Parameters
