@@ -22,6 +22,7 @@ _API = {
     "Learner": "gcs.api",
     "learner_settings": "gcs.api",
     "profile_of": "gcs.api",
+    "LearnerBatch": "gcs.core.learner",
     "LearnerStep": "gcs.core.learner",
     "Trial": "gcs.core.learner",
     "AdaptiveSettings": "gcs.core.learning",
