@@ -50,7 +50,7 @@ from gcs.core.learning import (
 from gcs.core.model import DiscreteModel, lifted_matrix, simulate
 from gcs.core.update import InputUpdate, UpdateResult
 
-__all__ = ["Learner", "LearnerBatch", "LearnerStep", "Trial"]
+__all__ = ["FOLD_MAX_SAMPLES", "FOLD_MIN_PLANTS", "Learner", "LearnerBatch", "LearnerStep", "Trial"]
 
 
 @dataclass(frozen=True)
