@@ -512,7 +512,11 @@ class Vehicle:
         return None
 
     def set_origin(self, lat_deg: float, lon_deg: float, alt_m: float) -> bool:
-        """SET_GPS_GLOBAL_ORIGIN: EKF2 takes the first one (PX4 ignores later ones).
+        """SET_GPS_GLOBAL_ORIGIN: the mock takes the first one and refuses later ones.
+
+        PX4 v1.16's EKF2 takes later ones too and moves its local frame by the change of
+        altitude (docs/mocap.md); gcs sets an origin only on a vehicle that has none, so the
+        mock keeps the first and does not model that shift.
 
         Parameters
         ----------
