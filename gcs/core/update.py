@@ -307,20 +307,29 @@ class _Structure:
         self, d_hat_m: np.ndarray, u_prev_m: np.ndarray, robust: RobustnessWeight | None
     ) -> _Problem:
         """The QP of one trial: the fixed structure and this trial's linear term."""
-        N, m, weights = self.n, self.m, self.weights
+        N, m = self.n, self.m
         dh = _check_vector("d_hat_m", d_hat_m, N, ValueError)
         up = _check_vector("u_prev_m", u_prev_m, N, ValueError)
-        w = self.yd - dh
-        C = self.model.C
-        qX = (-2.0 * weights.we * (self.mask * w[self.d : N]))[:, None] * C[0][None, :]
-        qU = -2.0 * weights.wdu * up[:m]
+        qU, qX = self.linear_terms(dh, up)
         P = self.P
         if robust is not None and robust.lam > 0:
             PR, qR = _robust_terms(robust, N, m, self.y_final)
             P, qU = sp.block_diag([self.PU + PR, self.PX], format="csc"), qU + qR
-        q = np.concatenate([qU, qX.ravel()])
+        q = np.concatenate([qU, qX])
         return _Problem(N, self.r, m, self.y_final, P, q, self.G, self.h, self.yd_u,
                         self.stage_z, self.stage_eq)  # fmt: skip
+
+    def linear_terms(
+        self, d_hat_m: np.ndarray, u_prev_m: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The linear term of eq. (8) without the robustness weight, of one trial (shape (N,))
+        or of many (rows of shape (P, N)): its input part (..., m) and its state part
+        (..., nz - m)."""
+        we, wdu = self.weights.we, self.weights.wdu
+        w = self.yd - d_hat_m
+        qX = (-2.0 * we * (self.mask * w[..., self.d : self.n]))[..., None] * self.model.C[0]
+        qU = -2.0 * wdu * u_prev_m[..., : self.m]
+        return qU, qX.reshape(*qX.shape[:-2], -1)
 
     def kkt_base(self) -> _Triplets:
         """The KKT matrix ``[P G'; G 0]`` of the structure's own Hessian as triplets (the
@@ -1275,10 +1284,7 @@ class InputUpdate:
                 raise ValueError(f"{name} must have {s.n} samples per trial, got {arr.shape}")
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name} contains NaN or inf")
-        we, wdu = s.weights.we, s.weights.wdu
-        w = s.yd[None, :] - dh
-        q_x = (-2.0 * we * (s.mask * w[:, s.d : s.n]))[:, :, None] * s.model.C[0][None, None, :]
-        q = np.hstack([-2.0 * wdu * up[:, : s.m], q_x.reshape(dh.shape[0], -1)])
+        q = np.hstack(s.linear_terms(dh, up))
         if s._kkt is None:
             s._kkt = _kkt_factor(s.P, s.G, s.stage_z, s.stage_eq)
         K, lu = s._kkt
