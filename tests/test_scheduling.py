@@ -97,3 +97,25 @@ def test_a_frozen_heap_is_left_out_of_collections_until_thawed() -> None:
     finally:
         thaw_heap()
     assert gc.get_freeze_count() == 0
+
+
+def test_another_threads_policy_is_raised_by_its_id_and_an_ended_thread_is_left_alone() -> None:
+    started, go = threading.Event(), threading.Event()
+    tids: list[int] = []
+
+    def waiting() -> None:
+        tids.append(threading.get_native_id())
+        started.set()
+        go.wait()
+
+    thread = threading.Thread(target=waiting)
+    thread.start()
+    started.wait()
+    tid = tids[0]
+    previous = in_thread(lambda: raise_thread(tid))
+    assert (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority) == RAISED
+    assert policy() == (os.SCHED_OTHER, 0)  # only that thread
+    go.set()
+    thread.join()
+    restore_thread(previous, tid)  # ended: nothing to give back, no error
+    assert raise_thread(tid) is None

@@ -197,3 +197,37 @@ def test_a_worker_of_a_real_time_flight_process_runs_at_normal_policy() -> None:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     assert sp[0, 2] == os.SCHED_OTHER
     assert sp[0, 1] == min(os.nice(0) + WORKER_NICE, 19)
+
+
+def test_the_pools_threads_started_before_take_off_are_raised_with_the_flight() -> None:
+    """They pickle the calls and unpickle the answers between trials, holding the GIL the
+    flight's raised threads wait for (gcs.io.scheduling)."""
+    from realtime import RAISED
+
+    from gcs.io.scheduling import raise_python_threads, restore_python_threads
+
+    def policy(tid: int) -> tuple[int, int]:
+        return os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority
+
+    before = set(threading.enumerate())
+    with WorkerSource(build, (2,), {}) as source:
+        pool = [t.native_id for t in set(threading.enumerate()) - before if t.native_id]
+        assert pool  # the pool's own threads, started by the test's thread (normal policy)
+        assert all(policy(tid) == (os.SCHED_OTHER, 0) for tid in pool)
+        out: list[Any] = []
+
+        def flight() -> None:  # as MavsdkLink does on connecting, in the flight's thread
+            raised = raise_python_threads()
+            out.append([policy(tid) for tid in pool])
+            out.append(source.hover_point_for(3))  # a call through the raised pool
+            restore_python_threads(raised)
+            out.append([policy(tid) for tid in pool])
+
+        thread = threading.Thread(target=flight)
+        thread.start()
+        thread.join()
+        during, answer, after = out
+        assert during == [RAISED] * len(pool)
+        assert answer.tolist() == [3.0, 0.0, -1.0]
+        assert after == [(os.SCHED_OTHER, 0)] * len(pool)
+    assert policy(0) == (os.SCHED_OTHER, 0)  # the test's own thread, raised and given back

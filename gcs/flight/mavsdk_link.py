@@ -32,7 +32,15 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryA
 
 from gcs.flight.backend import CommandRefused, LinkUnreachable, PositionReport, VehicleLink
 from gcs.flight.clock import WALL_CLOCK, Clock
-from gcs.io.scheduling import Previous, freeze_heap, raise_thread, restore_thread, thaw_heap
+from gcs.io.scheduling import (
+    Previous,
+    freeze_heap,
+    raise_python_threads,
+    raise_thread,
+    restore_python_threads,
+    restore_thread,
+    thaw_heap,
+)
 
 __all__ = ["MavsdkLink"]
 
@@ -82,6 +90,7 @@ class MavsdkLink(VehicleLink):
         self._telemetry: TelemetryAsync | None = None
         self._direct: MavlinkDirectAsync | None = None
         self._raised: tuple[int, Previous | None] | None = None
+        self._raised_others: dict[int, Previous] = {}
 
     async def connect(self, url: str, timeout_s: float) -> bool:
         self._enter_flight()
@@ -125,16 +134,20 @@ class MavsdkLink(VehicleLink):
 
     def _enter_flight(self) -> None:
         """The flight loop, and what MAVSDK starts for it, keep their streams at rate on a busy
-        machine: a real-time policy where allowed, the heap frozen (gcs.io.scheduling)."""
+        machine: a real-time policy where allowed, the heap frozen (gcs.io.scheduling). The
+        process's other Python threads (the learning worker's pool) are raised too: any of them
+        may hold the GIL the streams wait for."""
         if self._raised is None:
             self._raised = (threading.get_ident(), raise_thread())
+            self._raised_others = raise_python_threads()
             freeze_heap()
 
     def _leave_flight(self) -> None:
         """Give back what :meth:`_enter_flight` took (in the thread that took it)."""
         if self._raised is not None and self._raised[0] == threading.get_ident():
             restore_thread(self._raised[1])
-            self._raised = None
+            restore_python_threads(self._raised_others)
+            self._raised, self._raised_others = None, {}
             thaw_heap()
 
     @property

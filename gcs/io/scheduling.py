@@ -18,6 +18,13 @@ it. Heavy work never runs there: the learning runs in a worker process at the no
 (:mod:`gcs.app.source_worker`), and a virtual clock never asks.
 
 On Linux a policy belongs to a thread: threads and processes it starts afterwards inherit it.
+Threads started *before* the flight keep the normal policy, and in one process that is a
+danger through the GIL: a normal thread that holds it when the machine's load preempts it
+stops every raised thread waiting for it, for as long as the OS leaves it unscheduled (a
+priority inversion). gcs's flight process has such threads: those of the learning worker's
+pool, started before take-off, which pickle each call's recordings and unpickle its answer
+between trials. So a flight raises every Python thread its process has
+(:func:`raise_python_threads`) and gives them their policy back after landing.
 
 The other pause of a process is its own: a full garbage collection walks every object the
 process holds, and holds the GIL meanwhile. The mock drone, with pymavlink's dialect and its
@@ -29,14 +36,18 @@ So these processes collect once and freeze what they hold before the flight
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
+import threading
 
 __all__ = [
     "FLIGHT_PRIORITY",
     "Previous",
     "raise_thread",
     "restore_thread",
+    "raise_python_threads",
+    "restore_python_threads",
     "to_normal",
     "freeze_heap",
     "thaw_heap",
@@ -49,32 +60,62 @@ Previous = tuple[int, int]
 """A thread's policy and priority before :func:`raise_thread`."""
 
 
-def raise_thread() -> Previous | None:
-    """Put the calling thread under ``SCHED_RR`` at :data:`FLIGHT_PRIORITY` where allowed.
+def raise_thread(tid: int = 0) -> Previous | None:
+    """Put a thread under ``SCHED_RR`` at :data:`FLIGHT_PRIORITY` where allowed.
+
+    ``tid``: the thread's native id (``threading.get_native_id``); 0 for the calling thread.
 
     Returns: the policy and priority it had (for :func:`restore_thread`); None when nothing changed:
-    not allowed, not available on this OS, or already under a real-time policy.
+    not allowed, not available on this OS, already under a real-time policy, or no such thread.
     """
     if not hasattr(os, "sched_setscheduler"):
         return None
-    policy = os.sched_getscheduler(0)
-    if policy in (os.SCHED_FIFO, os.SCHED_RR):
-        return None
-    before = (policy, os.sched_getparam(0).sched_priority)
     try:
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(FLIGHT_PRIORITY))
-    except OSError:  # PermissionError: neither root, CAP_SYS_NICE nor an RLIMIT_RTPRIO
-        return None
+        policy = os.sched_getscheduler(tid)
+        if policy in (os.SCHED_FIFO, os.SCHED_RR):
+            return None
+        before = (policy, os.sched_getparam(tid).sched_priority)
+        os.sched_setscheduler(tid, os.SCHED_RR, os.sched_param(FLIGHT_PRIORITY))
+    except OSError:  # PermissionError: neither root, CAP_SYS_NICE nor an RLIMIT_RTPRIO;
+        return None  # ProcessLookupError: the thread has ended
     return before
 
 
-def restore_thread(previous: Previous | None) -> None:
-    """Give the calling thread back the policy it had before :func:`raise_thread`.
+def restore_thread(previous: Previous | None, tid: int = 0) -> None:
+    """Give a thread back the policy it had before :func:`raise_thread`.
 
-    ``previous``: what :func:`raise_thread` returned (None: nothing to give back).
+    ``previous``: what :func:`raise_thread` returned (None: nothing to give back). ``tid``: the
+    thread's native id; 0 for the calling thread. A thread that has ended is left alone.
     """
     if previous is not None:
-        os.sched_setscheduler(0, previous[0], os.sched_param(previous[1]))
+        with contextlib.suppress(ProcessLookupError):
+            os.sched_setscheduler(tid, previous[0], os.sched_param(previous[1]))
+
+
+def raise_python_threads() -> dict[int, Previous]:
+    """:func:`raise_thread` every other Python thread of this process (see the module's note on
+    the GIL).
+
+    Returns: the previous policy of each thread changed, by native id (for
+    :func:`restore_python_threads`); empty where the OS does not allow it.
+    """
+    own = threading.get_native_id()
+    raised: dict[int, Previous] = {}
+    for thread in threading.enumerate():
+        tid = thread.native_id
+        if tid is None or tid == own:
+            continue
+        previous = raise_thread(tid)
+        if previous is not None:
+            raised[tid] = previous
+    return raised
+
+
+def restore_python_threads(raised: dict[int, Previous]) -> None:
+    """Give the threads :func:`raise_python_threads` changed their policy back (those still
+    running)."""
+    for tid, previous in raised.items():
+        restore_thread(previous, tid)
 
 
 def to_normal() -> None:
