@@ -27,6 +27,10 @@ per choice, the accepted moves and the model's error after the last refresh,
 ``max |F / F_true - 1|`` over the learning band of the true plant (the quantity that decides
 convergence), largest over the two axes.
 
+``--latency L`` [s] delays what the learner measures by ``L`` (rounded to samples): a lab's
+motion-to-frame latency that the model does not hold (the refresh may find it: it searches the
+model's delay within +-2 samples).
+
 ``--plants off35`` flies plants 35 % off the profile's model instead (``max |F_model / F_true -
 1|`` over the learning band: 0.35 north, 0.35 east, against 0.22 and 0.18 for the tests'
 plants), where the refresh has a model to correct.
@@ -35,7 +39,7 @@ Usage::
 
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
         [--seeds 4] [--trials 16] [--refresh-noise white,measured] [--plants tests]
-        [--json out.json]
+        [--latency 0.05] [--json out.json]
 """
 
 from __future__ import annotations
@@ -96,6 +100,7 @@ def run(
     trials: int,
     refresh_noise: str = "",
     plants: str = "tests",
+    latency_s: float = 0.0,
 ) -> dict:
     """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions."""
     ref = sample_reference(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, DT_S)
@@ -108,10 +113,11 @@ def run(
     if refresh_noise:
         learner.adaptive = dataclasses.replace(learner.adaptive, refresh_noise=refresh_noise)
     u = ref[:-1].copy()
+    lag = int(round(latency_s / DT_S))
     epos, steps = [], []
     for _ in range(trials):
         y = np.column_stack(
-            [ref[0, a] + simulate(plants[a], u[:, a] - ref[0, a])
+            [ref[0, a] + simulate(plants[a], np.r_[np.zeros(lag), u[: n - lag, a] - ref[0, a]])
              + 0.05 * np.sin(0.7 * t_s + a) ** 2 + wander(rng, n, sigma_m, corr_s)
              for a in range(2)]
         )  # fmt: skip
@@ -132,6 +138,7 @@ def run(
         "model_error": errors,
         "sigma_m": sigma_m,
         "corr_s": corr_s,
+        "latency_s": lag * DT_S,
         "seed": seed,
         "floor_m": sigma_m * float(np.sqrt(np.pi / 2)),
         "floor_estimate_m": floor.epos_m if floor is not None else None,
@@ -167,6 +174,7 @@ def main() -> None:
         "(default: the profile's own)",
     )
     parser.add_argument("--plants", choices=("tests", "off35"), default="tests")
+    parser.add_argument("--latency", type=float, default=0.0, help="measurement latency [s]")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     variants = [("antx", "")] + [("antx-adaptive", n) for n in args.refresh_noise.split(",")]
@@ -176,7 +184,10 @@ def main() -> None:
     for corr in (float(c) for c in args.corr.split(",")):
         for profile, noise in variants:
             for seed in range(args.seeds):
-                runs.append(run(profile, args.sigma, corr, seed, args.trials, noise, args.plants))
+                runs.append(
+                    run(profile, args.sigma, corr, seed, args.trials, noise, args.plants,
+                        args.latency)
+                )  # fmt: skip
                 print(line(runs[-1]), flush=True)
     summary = []
     for corr in sorted({r["corr_s"] for r in runs}):
