@@ -31,6 +31,8 @@ convergence), largest over the two axes.
 motion-to-frame latency that the model does not hold (the refresh may find it: it searches the
 model's delay within +-2 samples).
 
+``--refresh-max-move M`` sets ``learning.adaptive.refresh_max_move`` of the adaptive profile.
+
 ``--plants off35`` flies plants 35 % off the profile's model instead (``max |F_model / F_true -
 1|`` over the learning band: 0.35 north, 0.35 east, against 0.22 and 0.18 for the tests'
 plants), where the refresh has a model to correct.
@@ -39,7 +41,7 @@ Usage::
 
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
         [--seeds 4] [--trials 16] [--refresh-noise white,measured] [--plants tests]
-        [--latency 0.05] [--json out.json]
+        [--latency 0.05] [--refresh-max-move 1.0] [--json out.json]
 """
 
 from __future__ import annotations
@@ -101,6 +103,7 @@ def run(
     refresh_noise: str = "",
     plants: str = "tests",
     latency_s: float = 0.0,
+    max_move: float | None = None,
 ) -> dict:
     """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions."""
     ref = sample_reference(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, DT_S)
@@ -112,6 +115,8 @@ def run(
     learner = Learner.from_profile(profile, ref)
     if refresh_noise:
         learner.adaptive = dataclasses.replace(learner.adaptive, refresh_noise=refresh_noise)
+    if max_move is not None and learner.adaptive is not None:
+        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_max_move=max_move)
     u = ref[:-1].copy()
     lag = int(round(latency_s / DT_S))
     epos, steps = [], []
@@ -175,6 +180,9 @@ def main() -> None:
     )
     parser.add_argument("--plants", choices=("tests", "off35"), default="tests")
     parser.add_argument("--latency", type=float, default=0.0, help="measurement latency [s]")
+    parser.add_argument(
+        "--refresh-max-move", type=float, help="learning.adaptive.refresh_max_move (adaptive)"
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     variants = [("antx", "")] + [("antx-adaptive", n) for n in args.refresh_noise.split(",")]
@@ -186,7 +194,7 @@ def main() -> None:
             for seed in range(args.seeds):
                 runs.append(
                     run(profile, args.sigma, corr, seed, args.trials, noise, args.plants,
-                        args.latency)
+                        args.latency, args.refresh_max_move)
                 )  # fmt: skip
                 print(line(runs[-1]), flush=True)
     summary = []

@@ -941,6 +941,21 @@ def _adaptive_cases() -> Iterator[Case]:
             "learning.adaptive.refresh_noise",
         )
 
+    k = "profile field: learning.adaptive.refresh_max_move"
+    for value in (0, -0.5, "far", float("nan")):
+        yield Case(
+            k,
+            "fly",
+            f"learning.adaptive.refresh_max_move {value!r}",
+            lambda ws, v=value: _fly(
+                ws,
+                profile=ws.profile(
+                    "learning.adaptive.refresh_max_move", v, base="antx-adaptive.yaml"
+                ),
+            ),
+            "learning.adaptive.refresh_max_move",
+        )
+
 
 def _run_cases() -> Iterator[Case]:
     k = "run directory: learn"

@@ -312,3 +312,28 @@ def test_whitening_refuses_fits_to_a_slow_wander() -> None:
     plain_n, white_n = np.count_nonzero(moved_plain), np.count_nonzero(moved_white)
     assert white_n < plain_n, (moved_plain, moved_white)
     assert np.median(moved_white) < np.median(moved_plain)
+
+
+def test_a_move_the_convergence_contradicts_is_rejected_only_where_learning_converged() -> None:
+    """``max_move``: where the learning has converged with the model in use, a candidate that
+    moves it by more than the limit is rejected; elsewhere the same candidate is accepted."""
+    true = loop(2.2, 0.5, 1.3, 0.25)  # far from EQ11: a large move
+    du = excitation(6)
+    dy = simulate(true, du.T).T
+    free = refresh_model(EQ11, du, dy, 1e-8, RefreshSettings(delay_search=0), 0.01)
+    assert free.accepted and free.moved > 0.2
+    limit = RefreshSettings(delay_search=0, max_move=free.moved / 2)
+    refused = refresh_model(EQ11, du, dy, 1e-8, limit, 0.01, converged=True)
+    assert not refused.accepted and refused.model is EQ11 and refused.moved == 0.0
+    assert refused.candidate_moved == pytest.approx(free.moved)
+    assert refused.reason.startswith("rejected: moves the model") and "limit" in refused.reason
+    kept = refresh_model(EQ11, du, dy, 1e-8, limit, 0.01, converged=False)
+    assert kept.accepted and kept.moved == pytest.approx(free.moved)
+    within = RefreshSettings(delay_search=0, max_move=2 * free.moved)
+    assert refresh_model(EQ11, du, dy, 1e-8, within, 0.01, converged=True).accepted
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf")])
+def test_max_move_must_be_positive_and_finite(bad: float) -> None:
+    with pytest.raises(ValueError, match="max_move"):
+        RefreshSettings(max_move=bad)

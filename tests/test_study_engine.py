@@ -162,6 +162,26 @@ def test_the_adaptive_batch_refreshes_some_plants_and_reverts_one_alone(plan: St
             assert [r[1] for r in replaced] == [True, True, False, False]
 
 
+def test_the_refresh_limit_holds_alike_batched_and_per_plant(plan: StudyPlan) -> None:
+    """``refresh_max_move``: the plants whose learning converged keep models the limit
+    refuses, in the batch as in a learner per plant."""
+    adaptive = plan.settings[1]
+    nominal = adaptive.settings.models
+
+    def replaced(batch: LearnerBatch) -> int:
+        return sum(m is not n for ms in batch.models for m, n in zip(ms, nominal, strict=True))
+
+    free, _, _ = _fly_batch(plan, adaptive, batched=True)
+    limited = dataclasses.replace(
+        adaptive, adaptive=dataclasses.replace(adaptive.adaptive, refresh_max_move=0.05)
+    )
+    batch, flown, _ = _fly_batch(plan, limited, batched=True)
+    each, flown_each, _ = _fly_batch(plan, limited, batched=False)
+    np.testing.assert_allclose(flown, flown_each, rtol=0, atol=1e-9)
+    assert batch.failed == each.failed == [None] * plan.plants
+    assert replaced(batch) == replaced(each) < replaced(free)
+
+
 def test_a_plant_whose_trial_is_refused_stops_alone(plan: StudyPlan) -> None:
     paper = plan.settings[0]
     ref = plan.ref_ne_m

@@ -37,6 +37,7 @@ from gcs.core.learning import (
     LearnerSettings,
     LearningRecord,
     axis_limits,
+    converged_with_model,
     data_estimates,
     history_decisions,
     newest_step,
@@ -594,11 +595,12 @@ class LearnerBatch:
         ref, start = self._ref, self._ref[0]
         sp, y = np.stack(self._sp, axis=1)[live], np.stack(self._y, axis=1)[live]  # (K, T, N, 2)
         n_trials = sp.shape[1]
-        floors, anchors, steps = [], [], []
+        floors, anchors, steps, converged = [], [], [], []
         for i, k in enumerate(live):
-            _, floor, _, decision = history_decisions(
+            epos_all, floor, _, decision = history_decisions(
                 s, adaptive, ref, sp[i], y[i], self._models[k]
             )
+            converged.append(converged_with_model(epos_all))
             floors.append(floor)
             anchors.append(n_trials - 1 if decision is None else decision.anchor_trial)
             steps.append(1.0 if decision is None else decision.step)
@@ -611,7 +613,7 @@ class LearnerBatch:
                 noises = None
                 if adaptive.refresh_noise == "measured":
                     noises = [refresh_noise_of(sp[i], ya[i]) for i in range(live.size)]
-                results = refresh_axes(s, adaptive, models, u, ya, floors, a, noises)
+                results = refresh_axes(s, adaptive, models, u, ya, floors, a, noises, converged)
                 models = [r.model for r in results]
             if adaptive.noise == "table1":
                 d_hat = np.array(

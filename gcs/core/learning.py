@@ -77,6 +77,7 @@ __all__ = [
     "plan_next_trial",
     "data_estimates",
     "refresh_axes",
+    "converged_with_model",
 ]
 
 
@@ -286,6 +287,11 @@ class AdaptiveSettings:
         multiple of the noise of a difference of two flights.
     refresh_block_s : float
         Cross-validation block length of the refresh [s].
+    refresh_max_move : float or None
+        Where the learning has converged with the model in use (its newest trial better than
+        trial 0), a refresh that moves the model by more than this where learning acts is
+        rejected: such a move contradicts the convergence (``max_move`` of
+        :class:`gcs.core.refresh.RefreshSettings`); None: no limit.
     refresh_noise : str
         The non-repeatable error the refresh assumes: ``"white"``, of the floor's variance;
         ``"measured"``, an autoregressive model of it fitted to the flights of identical
@@ -317,6 +323,7 @@ class AdaptiveSettings:
     refresh_min_snr: float = 1.0
     refresh_block_s: float = 1.0
     refresh_noise: str = "white"
+    refresh_max_move: float | None = None
     robustness_cutoff_rad_s: float | str | None = None
     robustness_order: int = 2
     safeguard: bool = False
@@ -350,7 +357,11 @@ class AdaptiveSettings:
 
     def refresh_settings(self) -> RefreshSettings:
         """The refresh fields as :class:`gcs.core.refresh.RefreshSettings`."""
-        return RefreshSettings(min_snr=self.refresh_min_snr, block_s=self.refresh_block_s)
+        return RefreshSettings(
+            min_snr=self.refresh_min_snr,
+            block_s=self.refresh_block_s,
+            max_move=self.refresh_max_move,
+        )
 
     def safeguard_settings(self) -> SafeguardSettings:
         """The safeguard fields as :class:`gcs.core.safeguard.SafeguardSettings`."""
@@ -640,6 +651,7 @@ def refresh_axes(
     floors: Sequence[Floor | None],
     axis: int,
     noises: Sequence[ArNoise | None] | None = None,
+    converged: Sequence[bool] | None = None,
 ) -> list[RefreshResult]:
     """The refresh of one axis of K plants from their pairs of trials of different setpoints.
 
@@ -657,6 +669,9 @@ def refresh_axes(
         Index of the axis in ``settings.axes``.
     noises : sequence of ArNoise or None, optional
         Each plant's measured non-repeatable error (``refresh_noise = "measured"``).
+    converged : sequence of bool, optional
+        Whether each plant's learning has converged with its model
+        (:func:`converged_with_model`; ``refresh_max_move`` applies there).
 
     Returns
     -------
@@ -673,10 +688,18 @@ def refresh_axes(
             [models[k] for k in rows], du[rows][:, pattern], dy[rows][:, pattern], r_m2[rows],
             adaptive.refresh_settings(), settings.weights.wdu / settings.weights.we,
             None if noises is None else [noises[k] for k in rows],
+            None if converged is None else [converged[k] for k in rows],
         )  # fmt: skip
         for k, result in zip(rows, results, strict=True):
             out[k] = result
     return out  # type: ignore[return-value]
+
+
+def converged_with_model(epos_m: np.ndarray) -> bool:
+    """Whether learning has converged with the model in use: its newest trial came out better
+    than trial 0 (``epos_m``: e_pos of every trial so far, oldest first [m]). Where it has, the
+    vehicle is within the model's convergence region, and ``refresh_max_move`` applies."""
+    return bool(epos_m.size > 1 and epos_m[-1] < epos_m[0])
 
 
 def refresh_noise_of(sp: np.ndarray, y: np.ndarray) -> ArNoise | None:
@@ -738,7 +761,20 @@ def plan_next_trial(
     anchor = sp.shape[0] - 1 if decision is None else decision.anchor_trial
     step = 1.0 if decision is None else decision.step
     axes = [
-        _plan_axis(settings, adaptive, updates, models[a], a, ref, sp, y, the_floor, anchor, step)
+        _plan_axis(
+            settings,
+            adaptive,
+            updates,
+            models[a],
+            a,
+            ref,
+            sp,
+            y,
+            the_floor,
+            anchor,
+            step,
+            converged_with_model(epos_all),
+        )  # fmt: skip
         for a in range(len(models))
     ]
     states = [ax.kilc_state for ax in axes if ax.kilc_state is not None]
@@ -815,6 +851,7 @@ def _plan_axis(
     the_floor: Floor | None,
     anchor: int,
     step: float,
+    converged: bool = False,
 ) -> _AxisPlan:
     """Refresh, estimate and update one axis from the whole history."""
     start = ref[0]
@@ -824,7 +861,7 @@ def _plan_axis(
     if adaptive.refresh and u.shape[0] > 1:
         noise = refresh_noise_of(sp, y) if adaptive.refresh_noise == "measured" else None
         refresh = refresh_axes(settings, adaptive, [model], u[None], y[None], [the_floor], axis,
-                               [noise])[0]  # fmt: skip
+                               [noise], [converged])[0]  # fmt: skip
         model = refresh.model
     state = None
     if adaptive.noise == "table1":

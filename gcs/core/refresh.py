@@ -77,6 +77,12 @@ class RefreshSettings:
     delay_search : int
         The input delay is searched within this many samples of the current model's (the
         candidate with the smallest cross-validated error wins); 0 keeps it.
+    max_move : float or None
+        Where the learning has converged with the model in use (a plant's ``converged``), a
+        candidate that moves the model by more than this (:func:`model_change`) is rejected:
+        learning with a model converges only where the vehicle is within 100 % of it
+        (``|1 - F_true / F| < 1``), so such a move contradicts what was flown (docs/
+        learning-floor.md, section 5). None: no limit.
     """
 
     min_snr: float = 1.0
@@ -84,6 +90,7 @@ class RefreshSettings:
     max_iter: int = 40
     stability_margin: float = 0.999
     delay_search: int = 2
+    max_move: float | None = None
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.min_snr) and self.min_snr >= 0):
@@ -96,6 +103,8 @@ class RefreshSettings:
             raise ValueError(f"stability_margin must lie in (0, 1], got {self.stability_margin}")
         if int(self.delay_search) != self.delay_search or self.delay_search < 0:
             raise ValueError(f"delay_search must be an integer >= 0, got {self.delay_search}")
+        if self.max_move is not None and not (np.isfinite(self.max_move) and self.max_move > 0):
+            raise ValueError(f"max_move must be > 0 or None, got {self.max_move}")
 
 
 @dataclass(frozen=True)
@@ -725,6 +734,7 @@ def refresh_decision(
     settings: RefreshSettings,
     band_gain2: float,
     rowwise: bool = False,
+    converged: np.ndarray | None = None,
 ) -> _Batch:
     """Batched refresh: fit, cross-validate and accept or keep, per batch row.
 
@@ -747,6 +757,9 @@ def refresh_decision(
     rowwise : bool
         How the candidates are simulated (see :func:`simulate_tf`): row by row for the
         learner's one row, all rows at once (default) for the Monte Carlo study's many.
+    converged : ndarray of bool, shape (M,), optional
+        The rows whose learning has converged with the current model: there a candidate
+        moving it by more than ``settings.max_move`` is rejected (default: none).
 
     Returns
     -------
@@ -804,7 +817,11 @@ def refresh_decision(
             for i in range(rows.size)
         ]
     )
-    accept = stable & (best_cv < cv_cur)
+    better = best_cv < cv_cur
+    too_far = np.zeros(rows.size, dtype=bool)
+    if settings.max_move is not None and converged is not None:
+        too_far = np.asarray(converged, dtype=bool)[rows] & (moved_c > settings.max_move)
+    accept = stable & better & ~too_far
     result.cv_current[rows] = cv_cur / count
     result.cv_candidate[rows] = best_cv / count
     result.candidate_moved[rows] = moved_c
@@ -817,7 +834,13 @@ def refresh_decision(
         accept,
         "accepted: explains held-out data better",
         np.where(stable, "rejected: does not explain held-out data better", "rejected: unstable"),
-    )
+    ).astype(object)
+    for i in np.flatnonzero(stable & better & too_far):
+        why[i] = (
+            f"rejected: moves the model {100 * moved_c[i]:.0f} % (limit "
+            f"{100 * settings.max_move:.0f} %), which the learning's convergence with it "
+            "contradicts"
+        )
     result.reason[rows] = why
     return result
 
@@ -830,6 +853,7 @@ def refresh_model(
     settings: RefreshSettings,
     band_gain2: float,
     noise: ArNoise | None = None,
+    converged: bool = False,
 ) -> RefreshResult:
     """Refresh one axis's model from consecutive trials (the learning step's entry point).
 
@@ -858,6 +882,8 @@ def refresh_model(
     noise : ArNoise, optional
         The non-repeatable error's spectrum (:func:`fit_ar_noise`); default white, of
         variance ``noise_var_m2``; of order 0, white as well (``noise_var_m2`` kept).
+    converged : bool
+        The learning has converged with ``current`` (``settings.max_move`` applies).
 
     Returns
     -------
@@ -868,7 +894,14 @@ def refresh_model(
     if du.ndim != 2 or du.shape != dy.shape:
         raise ValueError(f"du_m and dy_m must share one shape (P, N), got {du.shape}, {dy.shape}")
     return refresh_models(
-        [current], du[None], dy[None], np.array([noise_var_m2]), settings, band_gain2, [noise]
+        [current],
+        du[None],
+        dy[None],
+        np.array([noise_var_m2]),
+        settings,
+        band_gain2,
+        [noise],
+        [converged],
     )[0]
 
 
@@ -880,6 +913,7 @@ def refresh_models(
     settings: RefreshSettings,
     band_gain2: float,
     noises: Sequence[ArNoise | None] | None = None,
+    converged: Sequence[bool] | None = None,
 ) -> list[RefreshResult]:
     """:func:`refresh_model` of many plants at once, each its own (the learners of a batch).
 
@@ -901,6 +935,9 @@ def refresh_models(
         ``W_du / W_e``.
     noises : sequence of ArNoise or None, optional
         Each plant's non-repeatable error spectrum (default: white).
+    converged : sequence of bool, optional
+        Whether each plant's learning has converged with its model (``settings.max_move``
+        applies there); default: none has.
 
     Returns
     -------
@@ -943,7 +980,7 @@ def refresh_models(
         dec = refresh_decision(
             np.array([ba[k][0] for k in rows]), np.array([ba[k][1] for k in rows]), delay,
             currents[rows[0]].dt_s, du[rows], dy[rows], r[rows], settings, band_gain2,
-            rowwise=True,
+            rowwise=True, converged=None if converged is None else np.array(converged)[rows],
         )  # fmt: skip
         for i, k in enumerate(rows):
             model = currents[k]

@@ -322,6 +322,9 @@ def _adaptive(f: Fields) -> AdaptiveSettings:
             refresh_min_snr=f.number("refresh_min_snr", d.refresh_min_snr),
             refresh_block_s=f.number("refresh_block_s", d.refresh_block_s, positive=True),
             refresh_noise=f.string("refresh_noise", d.refresh_noise, REFRESH_NOISE),
+            refresh_max_move=None
+            if f.raw("refresh_max_move", None) is None
+            else f.number("refresh_max_move", positive=True),
             robustness_cutoff_rad_s=cutoff
             if cutoff is None or cutoff == "auto"
             else f.number("robustness_cutoff_rad_s", positive=True),
