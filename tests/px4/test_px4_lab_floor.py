@@ -11,11 +11,11 @@ issue's bound: no learned trial from j = 2 on above 2 floors. How close to the f
 trials came (the goal: within 1.5 floors, the median within 1.25) is a figure, kept in the
 test's record; ``benchmarks/lab_floor_px4.py`` flies this point and others for the table.
 
-Not yet part of ``make test`` (marked ``lab_floor``; ``make test-lab-floor`` flies it): of
-four flights that finished, three held within 2 floors and one did not (j = 3 at 2.27, beside
-two other lab flights), and beside other flights the rig itself can serve a jump (its truth
-is PX4's 25 Hz display stream; once, at load 4-6, 0.141 m in 9.4 ms, which gcs's mocap watch
-rightly refused). docs/testing.md has the runs.
+Not yet part of ``make test`` (marked ``lab_floor``; ``make test-lab-floor`` flies it): on a
+loaded machine it held within 2 floors in 7 of 11 flights in one evening (and 3 of the 4 that
+finished on an earlier day), and beside other flights the rig itself can serve a jump (its
+truth is PX4's 25 Hz display stream; once, at load 4-6, 0.141 m in 9.4 ms, which gcs's mocap
+watch rightly refused). docs/testing.md has the runs.
 """
 
 from __future__ import annotations
