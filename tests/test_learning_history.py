@@ -13,7 +13,7 @@ from synthetic import SHORT, profile, true_plants
 
 from gcs.api import Learner, learner_settings
 from gcs.core.learner import Trial
-from gcs.core.learning import AdaptiveSettings
+from gcs.core.learning import AdaptiveSettings, converged_with_model
 from gcs.core.metrics import epos
 from gcs.core.model import simulate
 from gcs.core.trajectory import points_outside, sample_eight
@@ -237,3 +237,11 @@ def test_refresh_noise_measured_whitens_with_the_repeats_of_trial_0() -> None:
         assert got.moved == pytest.approx(expected.moved, rel=1e-6)
         assert got.snr == pytest.approx(expected.snr, rel=1e-9)
         assert got.snr != pytest.approx(plans_white[1].record.axes[a].refresh.snr, rel=1e-3)
+
+
+def test_learning_has_converged_with_its_model_once_the_newest_trial_beats_trial_0() -> None:
+    """Where ``refresh_max_move`` applies: the newest trial better than trial 0."""
+    assert converged_with_model(np.array([0.9, 0.88, 0.3]))
+    assert not converged_with_model(np.array([0.9, 0.3, 0.95]))  # the newest worse: diverging
+    assert not converged_with_model(np.array([0.9, 0.9]))  # a repeat of trial 0
+    assert not converged_with_model(np.array([0.9]))  # nothing flown with the model yet
