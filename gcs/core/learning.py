@@ -697,8 +697,19 @@ def refresh_axes(
 
 def converged_with_model(epos_m: np.ndarray) -> bool:
     """Whether learning has converged with the model in use: its newest trial came out better
-    than trial 0 (``epos_m``: e_pos of every trial so far, oldest first [m]). Where it has, the
-    vehicle is within the model's convergence region, and ``refresh_max_move`` applies."""
+    than trial 0. Where it has, the vehicle is within the model's convergence region, and
+    ``refresh_max_move`` applies.
+
+    Parameters
+    ----------
+    epos_m : ndarray, shape (T,)
+        e_pos of every trial so far, oldest first [m].
+
+    Returns
+    -------
+    bool
+        True when there are two trials or more and the newest is better than trial 0.
+    """
     return bool(epos_m.size > 1 and epos_m[-1] < epos_m[0])
 
 
