@@ -24,6 +24,7 @@ point at a time on a 2-core machine and nothing else beside it.
 
     .venv/bin/python benchmarks/lab_floor_px4.py --point 100:30:1:30:1 --profiles antx-adaptive
     .venv/bin/python benchmarks/lab_floor_px4.py --draw 6 --seed 1 --parallel 2
+    .venv/bin/python benchmarks/lab_floor_px4.py --point 100:30:1:30:1 --trajectory slow.yaml
     .venv/bin/python benchmarks/lab_floor_px4.py --table        # the table of what was flown
 
 Nothing is asserted.
@@ -107,16 +108,16 @@ def draw_points(count: int, seed: int, vehicle: bool = False) -> list[LabConditi
     return points
 
 
-def name_of(point: LabConditions | None, profile: str) -> str:
+def name_of(point: LabConditions | None, profile: str, trajectory: Path | None = None) -> str:
     if point is GPS:
-        return f"{profile}-gps"
+        return f"{profile}-gps" + (f"-t{trajectory.stem}" if trajectory else "")
     name = (
         f"{profile}-r{point.rate_hz:g}-l{point.latency_ms:g}-n{point.noise_mm:g}"
         f"-h{point.yaw_offset_deg:g}-m{int(point.match_ev_delay)}"
     )
     if point.mass_kg is not None or point.drag_n_s_m is not None:
         name += f"-kg{point.mass_kg or 1:g}-kdv{point.drag_n_s_m or 1:g}"
-    return name
+    return name + (f"-t{trajectory.stem}" if trajectory else "")
 
 
 def profile_file(dest: Path, spec: str, mocap: bool = True) -> Path:
@@ -142,10 +143,12 @@ def fly(
     profile: str,
     iterations: int,
     again: int | None = None,
+    trajectory: Path | None = None,
 ) -> None:
-    """One flight into ``out/NAME`` (kept), its output in ``out/NAME.log``: a new run, or the
-    run resumed for ``iterations`` more trials (the first flying trial ``again``'s setpoints)."""
-    name = name_of(point, profile)
+    """One flight into ``out/NAME`` (kept), its output in ``out/NAME.log``: a new run (on
+    ``trajectory``, default the packaged eight), or the run resumed for ``iterations`` more
+    trials (the first flying trial ``again``'s setpoints)."""
+    name = name_of(point, profile, trajectory)
     run = out / name
     # the trials still to fly in a run already there (all of them again with --again)
     left = iterations if not run.exists() or again is not None else iterations - flown(run)
@@ -167,6 +170,7 @@ def fly(
             args = ["fly", *source, "--iter", str(iterations),
                     "--profile", str(profile_file(work, profile, mocap=point is not GPS)),
                     "--run", str(run)]  # fmt: skip
+            args += [] if trajectory is None else ["--trajectory", str(trajectory.resolve())]
             if run.exists():
                 args = ["fly", *source, "--resume", str(run), "--iter", str(left)]
                 args += [] if again is None else ["--again", str(again)]
@@ -279,6 +283,9 @@ def main() -> None:
         help="comma-separated; NAME+a.b=VALUE sets a field (learning.limits.max_step_m=0.2)",
     )
     parser.add_argument("--iter", type=int, default=8)
+    parser.add_argument(
+        "--trajectory", type=Path, help="trajectory file of new runs (default: the packaged eight)"
+    )
     parser.add_argument("--parallel", type=int, default=1, help="PX4 instances at a time")
     parser.add_argument("--out", type=Path, default=ROOT / "logs" / "lab-floor")
     parser.add_argument("--table", action="store_true", help="only the table of what was flown")
@@ -299,7 +306,9 @@ def main() -> None:
         with ThreadPoolExecutor(args.parallel) as pool:
             list(
                 pool.map(
-                    lambda item: fly(build, args.out, item[0], item[1], args.iter, args.again),
+                    lambda item: fly(
+                        build, args.out, item[0], item[1], args.iter, args.again, args.trajectory
+                    ),
                     plan,
                 )
             )
