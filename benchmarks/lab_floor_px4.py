@@ -24,7 +24,6 @@ point at a time on a 2-core machine and nothing else beside it.
 
     .venv/bin/python benchmarks/lab_floor_px4.py --point 100:30:1:30:1 --profiles antx-adaptive
     .venv/bin/python benchmarks/lab_floor_px4.py --draw 6 --seed 1 --parallel 2
-    .venv/bin/python benchmarks/lab_floor_px4.py --point 100:30:1:30:1 --trajectory slow.yaml
     .venv/bin/python benchmarks/lab_floor_px4.py --table        # the table of what was flown
 
 Nothing is asserted.
