@@ -771,21 +771,10 @@ def plan_next_trial(
     )
     anchor = sp.shape[0] - 1 if decision is None else decision.anchor_trial
     step = 1.0 if decision is None else decision.step
+    converged = converged_with_model(epos_all)
+    common = (settings, adaptive, updates)
     axes = [
-        _plan_axis(
-            settings,
-            adaptive,
-            updates,
-            models[a],
-            a,
-            ref,
-            sp,
-            y,
-            the_floor,
-            anchor,
-            step,
-            converged_with_model(epos_all),
-        )  # fmt: skip
+        _plan_axis(*common, models[a], a, ref, sp, y, the_floor, anchor, step, converged)
         for a in range(len(models))
     ]
     states = [ax.kilc_state for ax in axes if ax.kilc_state is not None]

@@ -98,6 +98,8 @@ class Px4Build:
         put in place atomically, so that parallel test workers share it."""
         self.check()
         binary = self.root / "bin" / "px4"
+        # a cache key (the folder of this binary's copy), not a record: nothing is compared
+        # with it, so a build made on another machine only gets a folder of its own
         digest = hashlib.sha256(binary.read_bytes()).hexdigest()[:16]
         done = cache / digest / "bin"
         if (done / "px4").is_file():
