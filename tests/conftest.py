@@ -32,7 +32,8 @@ def pytest_configure(config) -> None:
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Flights first, the real firmware's first of all, dealt in turn to the workers.
+    """Flights first, the real firmware's first of all (its longest flight, the lab floor's,
+    at the head), dealt in turn to the workers.
 
     The end-to-end tests run in real time (tens of seconds to minutes each), the rest in
     milliseconds. ``make test`` runs ``pytest -n 2 --dist worksteal``: the workers start on
@@ -43,6 +44,7 @@ def pytest_collection_modifyitems(config, items) -> None:
     items.sort(
         key=lambda item: (
             item.get_closest_marker("px4") is None,
+            item.get_closest_marker("lab_floor") is None,
             item.get_closest_marker("e2e") is None,
         )
     )
