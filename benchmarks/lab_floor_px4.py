@@ -8,7 +8,9 @@ given the SIH vehicle's own mass and drag (``SIH_MASS``, ``SIH_KDV``; PX4 v1.16'
 wind or gust). Then the
 README's flight, ``gcs fly --mocap ... --profile P --iter J`` on the default eight, with the
 tests' watchdog limits. Per flight: e_pos of every trial in floors (the floor from trial 0 and
-its repeat), the model refresh's changes and the safeguard's decisions, from the run's records.
+its repeat), what the learning step before each trial predicted of it and how far the flight
+came out from that (``gcs report``'s prediction), the model refresh's changes and the
+safeguard's decisions, from the run's records.
 
 Points are given (``--point RATE:LATENCY:NOISE:HEADING:MATCH[:MASS:DRAG]``; ``--point
 gps``: PX4's default airframe on GPS, no rig) or drawn across the ranges with a seed (``--draw
@@ -225,9 +227,15 @@ def group_floors(rd: RunDir, epos_m: dict[int, float]) -> list[dict]:
     return out
 
 
+def _round(value: float | None, digits: int) -> float | None:
+    return None if value is None else round(value, digits)
+
+
 def summary(run: Path) -> dict:
-    """Per trial e_pos [m] and in floors, the refresh's changes, the safeguard's decisions and
-    the floors of every group of identical setpoints."""
+    """Per trial e_pos [m] and in floors, what the step before it predicted of it (e_pos [m],
+    the flight's distance from the prediction in floors, setpoint samples at a limit), the
+    refresh's changes, the safeguard's decisions and the floors of every group of identical
+    setpoints."""
     rows = report_rows(run)
     rd = RunDir.open(run)
     floor = next((r.get("floor_m") for r in rows if r.get("floor_m")), None)
@@ -258,6 +266,10 @@ def summary(run: Path) -> dict:
         "epos_m": [r["epos_m"] and round(r["epos_m"], 4) for r in rows],
         "floor_m": floor,
         "floors": [r["epos_m"] and round(r["epos_m"] / floor, 2) for r in rows] if floor else None,
+        # what the learning step before each trial predicted of it, and how far it flew from that
+        "predicted_m": [_round(r.get("predicted_epos_m"), 4) for r in rows],
+        "miss_floors": [_round(r.get("prediction_miss_ratio"), 2) for r in rows],
+        "limits_active": [r.get("limits_active") for r in rows],
         "decisions": decisions,
         "identical": group_floors(rd, {r["trial"]: r["epos_m"] for r in rows}),
     }

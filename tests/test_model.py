@@ -18,6 +18,7 @@ from gcs.core.model import (
     from_transfer_function,
     lifted_matrix,
     markov_parameters,
+    predicted_output,
     relative_degree,
     simulate,
 )
@@ -374,3 +375,15 @@ def test_a_transfer_function_is_scipys_state_space_held_bit_for_bit(
     np.testing.assert_array_equal(model.A, e[:n, :n])
     np.testing.assert_array_equal(model.B, e[:n, n:])
     np.testing.assert_array_equal(model.C, cc)
+
+
+def test_the_predicted_output_is_the_lifted_form_with_the_disturbance() -> None:
+    """``Y = F U + D`` (eq. 5) with F built from the Markov parameters, not the difference
+    equation the function runs."""
+    model = from_transfer_function(NUM11, DEN11, 0.25, DT)
+    rng = np.random.default_rng(3)
+    u, d = rng.normal(size=120), rng.normal(size=120)
+    f = scipy.linalg.toeplitz(markov_parameters(model, 120), np.zeros(120))
+    np.testing.assert_allclose(predicted_output(model, u, d), f @ u + d, rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="u and d_hat"):
+        predicted_output(model, u, d[:-1])

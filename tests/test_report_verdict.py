@@ -10,10 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cli_runner import invoke as gcs_invoke
-from synthetic import make_adaptive_run, make_run
+from synthetic import fly_synthetic, make_adaptive_run, make_run
 
 from gcs.app.report import run_learning, run_metrics, run_verdict
 from gcs.app.report_html import write_html
+from gcs.core.model import lifted_matrix
 from gcs.core.trials import trial_errors
 
 SCHEMA = Path(__file__).resolve().parents[1] / "docs" / "report.schema.json"
@@ -164,3 +165,66 @@ def test_a_run_that_drifts_up_from_the_floor_says_so_with_its_best_trial(adaptiv
     assert "drifting up: trial 2 reached the floor, trials 4 and 5 are above it again" in text
     assert "the best setpoints at the floor are trial 3's; gcs fly --resume <run> --again 3" in text
     assert v.as_dict()["drift_trials"] == [4, 5]
+
+
+def _prediction_by_hand(run, t: int, models) -> tuple[float, float]:
+    """What the step before trial t predicted, from the run's files: ``F u + d_hat`` with the
+    lifted matrix (not the report's difference equation), e_pos and the miss [m]."""
+    ref = run.reference().pos_ned_m
+    start, n = ref[0, :2], run.n_samples
+    rec = run.read_trial(t)
+    d_hat = run.read_estimate(t - 1)[0]
+    u = rec.sp_ned_m[:-1, :2] - start
+    y_hat = np.column_stack([lifted_matrix(models[a], n) @ u[:, a] + d_hat[:, a] for a in (0, 1)])
+    y = rec.pos_ned_m[1:, :2] - start
+    yd = ref[1:, :2] - start
+    return float(np.hypot(*(yd - y_hat).T).mean()), float(np.hypot(*(y - y_hat).T).mean())
+
+
+def test_each_learned_trial_against_the_prediction_of_the_step_before_it(adaptive) -> None:
+    doc = json.loads(invoke("report", adaptive.path, "--json").output)
+    rows = {r["trial"]: r for r in doc["rows"]}
+    floor = adaptive.read_floor()["epos_m"]
+    models = adaptive.profile().models()
+    for t in (0, 1, 2):  # trial 0 and its repeats: no step planned them
+        assert rows[t]["predicted_epos_m"] is None and rows[t]["prediction_miss_m"] is None
+    for t in (3, 4, 5):
+        record = json.loads(adaptive.learn_path(t - 1).read_text())
+        if record["model_file"] is not None:  # the step refreshed the model it planned with
+            models = adaptive.read_model(t - 1)
+        predicted, miss = _prediction_by_hand(adaptive, t, models)
+        assert rows[t]["predicted_epos_m"] == pytest.approx(predicted, rel=1e-8)
+        assert rows[t]["prediction_miss_m"] == pytest.approx(miss, rel=1e-8)
+        assert rows[t]["prediction_miss_ratio"] == pytest.approx(miss / floor, rel=1e-8)
+        active = sum(a["update"]["active_constraints"] for a in record["decision"]["axes"])
+        assert rows[t]["limits_active"] == active
+    v = doc["verdict"]
+    assert v["prediction_trial"] == 5
+    assert v["prediction"]["miss_m"] == pytest.approx(rows[5]["prediction_miss_m"])
+    said = f"the step before trial 5 predicted it at {1e3 * rows[5]['predicted_epos_m']:.1f} mm"
+    assert any(line.startswith(f"verdict: {said}") for line in v["text"])
+    assert any(f"{rows[5]['prediction_miss_ratio']:.2f}x the floor" in line for line in v["text"])
+
+
+def test_the_paper_profile_predicts_each_trial_from_the_newest_alone(paper) -> None:
+    doc = json.loads(invoke("report", paper.path, "--json").output)
+    rows = {r["iteration"]: r for r in doc["rows"]}
+    models = paper.profile().models()
+    assert rows[0]["predicted_epos_m"] is None
+    for t in (1, 2):
+        predicted, miss = _prediction_by_hand(paper, t, models)
+        assert rows[t]["predicted_epos_m"] == pytest.approx(predicted, rel=1e-8)
+        assert rows[t]["prediction_miss_m"] == pytest.approx(miss, rel=1e-8)
+        assert rows[t]["limits_active"] is None  # the paper's profile records no decisions
+        assert "prediction_miss_ratio" not in rows[t]  # no floor
+    line = next(x for x in doc["verdict"]["text"] if "predicted it at" in x)
+    assert "the floor" not in line
+
+
+def test_a_trial_flying_another_ones_setpoints_again_has_no_prediction(tmp_path: Path) -> None:
+    run = make_adaptive_run(tmp_path, trials=4, gust_m=0.01)
+    run.fly_again(4, 3)
+    fly_synthetic(run, 4, seed=7, gust_m=0.01)
+    learning = run_learning(run)
+    assert learning.trials[3].prediction is not None
+    assert learning.trials[4].prediction is None

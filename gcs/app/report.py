@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from gcs.app.learn import models_in_use
 from gcs.core.floor import (
     Floor,
     FloorDrift,
@@ -32,7 +33,8 @@ from gcs.core.floor import (
     floor_verdicts,
 )
 from gcs.core.learning import AdaptiveSettings
-from gcs.core.metrics import IterationMetrics, iteration_table
+from gcs.core.metrics import IterationMetrics, epos, iteration_table
+from gcs.core.model import predicted_output
 from gcs.core.trials import (
     iteration_of,
     repeat_of,
@@ -51,6 +53,7 @@ __all__ = [
     "run_facts",
     "TrialEntry",
     "TrialLearning",
+    "Prediction",
     "RunLearning",
     "run_learning",
     "trial_overview",
@@ -74,7 +77,7 @@ __all__ = [
 ]
 
 #: The ``format`` and ``version`` fields of ``gcs report --json`` (docs/report.md).
-REPORT_FORMAT, REPORT_VERSION = "gcs-report", 4
+REPORT_FORMAT, REPORT_VERSION = "gcs-report", 5
 
 #: Significant digits of every number in the JSON document.
 JSON_DIGITS = 9
@@ -245,6 +248,25 @@ def is_three_d(run: RunDir) -> bool:
 
 
 @dataclass(frozen=True)
+class Prediction:
+    """What the learning step before a trial predicted of it, against what it flew.
+
+    The step planned the trial's setpoints with its model and its estimate of the
+    disturbance (``Y = F U + D``); the measured positions differ from that prediction by one
+    flight's noise (the floor) and the estimate's, and by whatever the model did not foresee.
+
+    ``predicted_epos_m``: e_pos (eq. 10) the step predicted for the trial [m].
+    ``miss_m``: mean horizontal distance between the measured and the predicted positions
+    [m]. ``limits_active``: setpoint samples at a limit in that step's update (both axes),
+    None where the run does not record it.
+    """
+
+    predicted_epos_m: float
+    miss_m: float
+    limits_active: int | None
+
+
+@dataclass(frozen=True)
 class TrialLearning:
     """What learning says about one complete trial.
 
@@ -252,7 +274,9 @@ class TrialLearning:
     ``repeat_of``: the trial it repeats, or None. ``sp_rms_m``, ``sp_max_m``: RMS and largest
     horizontal distance of its setpoints from the reference [m]. ``verdict``: e_pos against the
     floor (None without a floor). ``record``: the decision record of the learning step from this
-    trial (``learn-JJJ.json``).
+    trial (``learn-JJJ.json``). ``prediction``: what the step before it predicted of it (None
+    for trial 0, a repeat, a trial flying another's setpoints again, or a step without an
+    estimate on file).
     """
 
     trial: int
@@ -262,6 +286,7 @@ class TrialLearning:
     sp_max_m: float
     verdict: FloorVerdict | None = None
     record: dict | None = None
+    prediction: Prediction | None = None
 
 
 @dataclass(frozen=True)
@@ -313,9 +338,45 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
         rms, largest = setpoint_deviation(records[t].sp_ned_m[:-1], ref)
         trials[t] = TrialLearning(
             t, iteration_of(t, repeats), repeat_of(t, repeats), rms, largest,
-            verdicts.get(t), learned.get(t),
+            verdicts.get(t), learned.get(t), trial_prediction(run, records, t, learned),
         )  # fmt: skip
     return RunLearning(history, repeats, floor, group, floor_z, trials)
+
+
+def trial_prediction(
+    run: RunDir, records: dict[int, TrialRecord], t: int, learned: dict[int, dict]
+) -> Prediction | None:
+    """What the learning step from trial ``t - 1`` predicted of trial ``t`` (:class:`Prediction`).
+
+    The step's models (the refreshed ones it ended with, or the profile's) and its estimate
+    (``estimate-(t-1).csv``) predict the positions at the setpoints trial ``t`` flew.
+
+    ``records``: the run's complete trials. ``learned``: the decision records by trial
+    (``learn-JJJ.json``; empty for the paper's profile).
+
+    Returns: None when the step made no prediction of it (trial 0, a repeat of trial 0, a
+    trial flying another's setpoints again, no estimate on file).
+    """
+    profile = run.profile()
+    history = profile.learning.adaptive is not None
+    repeats = profile.learning.repeats if history else 0
+    prev = t - 1
+    if prev not in records or repeat_of(t, repeats) is not None or t <= repeats:
+        return None
+    if run.again_of(t) is not None or not run.estimate_path(prev).exists():
+        return None
+    models = models_in_use(run, profile, t)[0] if history else profile.models()
+    start = run.reference().pos_ned_m[0, :2]
+    d_hat = run.read_estimate(prev)[0][:, :2]
+    u = records[t].sp_ned_m[:-1, :2] - start
+    y = records[t].pos_ned_m[1:, :2] - start
+    y_hat = np.column_stack([predicted_output(models[a], u[:, a], d_hat[:, a]) for a in (0, 1)])
+    yd = run.reference().pos_ned_m[1:, :2] - start
+    record = learned.get(prev)
+    active = None
+    if record is not None and record.get("decision"):
+        active = sum(a["update"]["active_constraints"] for a in record["decision"]["axes"])
+    return Prediction(epos(yd, y_hat), epos(y_hat, y), active)
 
 
 def trial_clock_rates(run: RunDir) -> dict[int, float | None]:
@@ -402,6 +463,12 @@ def _learning_json(row: dict, learning: RunLearning) -> dict:
             "at_floor": None if v is None else v.at_floor,
             "converged": None if v is None else v.converged,
         }  # fmt: skip
+    pr = None if t is None else t.prediction
+    out["predicted_epos_m"] = None if pr is None else pr.predicted_epos_m
+    out["prediction_miss_m"] = None if pr is None else pr.miss_m
+    out["limits_active"] = None if pr is None else pr.limits_active
+    if f is not None:
+        out["prediction_miss_ratio"] = None if pr is None else pr.miss_m / f.epos_m
     if learning.history:
         out["learning"] = None if t is None else t.record
     return out
@@ -517,7 +584,8 @@ class Verdict:
     (:func:`gcs.core.floor.floor_drift`); empty when learning did not drift up.
     ``drift_reached_trial``: the first trial at the floor, when it drifted. ``drift_best_trial``:
     the trial at the floor with the smallest e_pos, when it drifted: its setpoints are the ones
-    worth flying again.
+    worth flying again. ``prediction_trial``: the newest trial the learning step before it
+    predicted (:class:`Prediction`), None if none; ``prediction``: that prediction.
     """
 
     flights: int
@@ -538,6 +606,8 @@ class Verdict:
     drift_trials: list[int] = field(default_factory=list)
     drift_reached_trial: int | None = None
     drift_best_trial: int | None = None
+    prediction_trial: int | None = None
+    prediction: Prediction | None = None
 
     def lines(self) -> list[str]:
         """The verdict as a few lines of plain words (terminal and HTML)."""
@@ -573,6 +643,8 @@ class Verdict:
                 f"verdict: {drift_sentence(drift)}; gcs fly --resume <run> --again "
                 f"{drift.best_trial} flies them again (docs/learning-floor.md)"
             )
+        if self.prediction is not None:
+            out.append(f"verdict: {self._prediction_sentence()}")
         if self.converged_trial is not None:
             out.append(
                 f"verdict: converged at trial {self.converged_trial}: more flights cannot show "
@@ -582,6 +654,27 @@ class Verdict:
             left = "" if self.flights_left is None else f"likely {self.flights_left} more; "
             out.append(f"verdict: not converged; {left}{self.flights_left_how}")
         return out
+
+    def _prediction_sentence(self) -> str:
+        """What the newest learning step predicted of the trial it planned, in words."""
+        pr, t = self.prediction, self.prediction_trial
+        assert pr is not None
+        limits = (
+            ""
+            if not pr.limits_active
+            else (f" with {pr.limits_active} setpoint samples at a limit")
+        )
+        said = (
+            f"the step before trial {t} predicted it at {_mm(pr.predicted_epos_m)}{limits}; it "
+            f"flew {_mm(pr.miss_m)} from that prediction"
+        )
+        if self.floor_m is None:
+            return said
+        return (
+            f"{said}, {pr.miss_m / self.floor_m:.2f}x the floor (noise alone gives about 1x, a "
+            "little more from the estimate's own; the rest is what the model did not foresee: "
+            "docs/learning-floor.md)"
+        )
 
     def as_dict(self) -> dict:
         """JSON-ready dictionary: the fields, and ``text`` (:meth:`lines`)."""
@@ -644,7 +737,16 @@ def run_verdict(rows: list[IterationMetrics], learning: RunLearning | None) -> V
         flights_left=left,
         flights_left_how=how,
         **_drift_fields(verdicts),
+        **_prediction_fields(verdicts),
     )
+
+
+def _prediction_fields(trials: dict) -> dict:
+    """The verdict's prediction fields: the newest trial with a :class:`Prediction`."""
+    predicted = [t for t in sorted(trials) if trials[t].prediction is not None]
+    if not predicted:
+        return {}
+    return {"prediction_trial": predicted[-1], "prediction": trials[predicted[-1]].prediction}
 
 
 def drift_sentence(drift: FloorDrift) -> str:

@@ -33,7 +33,6 @@ __all__ = [
     "Floor",
     "FloorVerdict",
     "floor_from_flights",
-    "floor_with_error",
     "floor_from_difference",
     "floor_flights",
     "first_flights",
@@ -221,42 +220,6 @@ def floor_from_flights(pos_ne_m: np.ndarray) -> Floor:
     delta = np.sqrt(k / (k - 1)) * (pos - pos.mean(axis=0))
     # two flights give one series (delta_2 = -delta_1): keep one so tau is not counted twice
     return _floor(delta[:1] if k == 2 else delta, k, "repeat")
-
-
-def floor_with_error(pos_ne_m: np.ndarray, error_ne_m: np.ndarray) -> float:
-    """The e_pos expected of a flight whose repeatable error is ``error_ne_m``: the floor of
-    ``K >= 2`` flights of identical setpoints with that error added.
-
-    Each flight's deviation ``delta_i`` (as in :func:`floor_from_flights`) is a draw of one
-    flight's non-repeatable part, so ``mean_i,k |error(k) + delta_i(k)|`` estimates the
-    expected e_pos of a flight with that repeatable error. With a zero error it is the floor's
-    e_pos; it is never below ``mean_k |error(k)|`` (at each sample the ``delta_i`` average to
-    zero, so the mean of the distances is at least the distance of the mean). A learned
-    trial whose setpoints ride their limits keeps an error the model can predict (the error
-    at the constrained optimum): this is the floor that trial can reach.
-
-    Parameters
-    ----------
-    pos_ne_m : ndarray, shape (K, N, 2)
-        Measured north/east positions y(1..N) of each flight of identical setpoints [m].
-    error_ne_m : ndarray, shape (N, 2)
-        Repeatable north/east error ``yd - y`` of the flight in question [m].
-
-    Returns
-    -------
-    float
-        The expected e_pos [m].
-    """
-    pos = _check_ne("pos_ne_m", pos_ne_m, 3)
-    err = _check_ne("error_ne_m", error_ne_m, 2)
-    k = pos.shape[0]
-    if k < 2:
-        raise ValueError(f"the floor needs at least 2 flights, got {k}")
-    if err.shape != pos.shape[1:]:
-        raise ValueError(f"error_ne_m has shape {err.shape}, the flights {pos.shape[1:]}")
-    delta = np.sqrt(k / (k - 1)) * (pos - pos.mean(axis=0))
-    moved = err[None] + delta
-    return float(np.hypot(moved[..., 0], moved[..., 1]).mean())
 
 
 def floor_from_difference(diff_ne_m: np.ndarray, source: str = "repeat") -> Floor:

@@ -32,6 +32,7 @@ __all__ = [
     "markov_parameters",
     "lifted_matrix",
     "simulate",
+    "predicted_output",
     "relative_degree",
     "controllable_slices",
     "dc_gain",
@@ -333,6 +334,32 @@ def simulate(model: DiscreteModel, u: np.ndarray) -> np.ndarray:
     from scipy.signal import lfilter  # on first use: a second to import
 
     return lfilter(num, a, u, axis=0)
+
+
+def predicted_output(model: DiscreteModel, u: np.ndarray, d_hat: np.ndarray) -> np.ndarray:
+    """The outputs the lifted model ``Y = F U + D`` predicts for inputs ``u``.
+
+    A learning step plans the next trial with this prediction: its measured positions against
+    it show how well the model foresaw the vehicle (the step's own error, apart from noise).
+
+    Parameters
+    ----------
+    model : DiscreteModel
+    u : ndarray, shape (N,)
+        Inputs u(0..N-1), learning coordinates (relative to the start point) [m].
+    d_hat : ndarray, shape (N,)
+        Disturbance d(1..N) in the same coordinates (a learning step's estimate) [m].
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        Outputs y(1..N) [m].
+    """
+    u = np.asarray(u, dtype=float)
+    d = np.asarray(d_hat, dtype=float)
+    if u.ndim != 1 or u.shape != d.shape:
+        raise ValueError(f"u and d_hat must be (N,) alike, got {u.shape} and {d.shape}")
+    return simulate(model, u) + d
 
 
 def relative_degree(model: DiscreteModel, rtol: float = 1e-9) -> int:
