@@ -233,7 +233,8 @@ def _round(value: float | None, digits: int) -> float | None:
 
 def summary(run: Path) -> dict:
     """Per trial e_pos [m] and in floors, what the step before it predicted of it (e_pos [m],
-    the flight's distance from the prediction in floors, setpoint samples at a limit), the
+    the flight's distance from the prediction in floors and what noise alone gives, setpoint
+    samples at a limit), the
     refresh's changes, the safeguard's decisions and the floors of every group of identical
     setpoints."""
     rows = report_rows(run)
@@ -269,6 +270,7 @@ def summary(run: Path) -> dict:
         # what the learning step before each trial predicted of it, and how far it flew from that
         "predicted_m": [_round(r.get("predicted_epos_m"), 4) for r in rows],
         "miss_floors": [_round(r.get("prediction_miss_ratio"), 2) for r in rows],
+        "noise_floors": [_round(r.get("prediction_noise_ratio"), 2) for r in rows],
         "limits_active": [r.get("limits_active") for r in rows],
         "decisions": decisions,
         "identical": group_floors(rd, {r["trial"]: r["epos_m"] for r in rows}),

@@ -18,6 +18,7 @@ from gcs.core.floor import (
     floor_from_flights,
     floor_verdicts,
     integrated_autocorrelation,
+    prediction_noise_ratio,
 )
 
 
@@ -252,3 +253,30 @@ def test_drift_is_the_newest_two_above_after_one_at_the_floor(rows) -> None:
         assert drift.reached_trial == reached[0] and drift.above == (n - 2, n - 1)
         assert epos[drift.best_trial] == min(epos[j] for j in reached)
         assert at[drift.best_trial]
+
+
+@pytest.mark.parametrize("weights", [[1.0], [0.5, 0.5], [0.08, 0.08, 0.08, 0.32, 0.43]])
+def test_the_distance_from_a_right_prediction_is_the_floor_times_the_noise_ratio(weights):
+    """Simulated: a flight's anisotropic Gaussian noise minus the estimate's (the weighted mean
+    of earlier flights' noise, independent draws of the same process): its mean horizontal
+    distance against one flight's."""
+    rng = np.random.default_rng(11)
+    scale = np.array([0.12, 0.05])  # anisotropic north/east [m]
+    v = rng.standard_normal((len(weights) + 1, 200_000, 2)) * scale
+    miss = v[0] - np.tensordot(np.asarray(weights), v[1:], axes=1)
+    ratio = np.hypot(*miss.T).mean() / np.hypot(*v[0].T).mean()
+    assert ratio == pytest.approx(prediction_noise_ratio(np.asarray(weights)), rel=0.01)
+
+
+@given(st.lists(st.floats(0.0, 1.0), min_size=1, max_size=12))
+def test_the_noise_ratio_lies_between_one_and_the_newest_trial_alone(weights) -> None:
+    """Weights of an estimate sum to at most 1: the ratio is 1 without noise in the estimate
+    and sqrt(2) at most (all the weight on one trial)."""
+    w = np.asarray(weights)
+    w = w / max(1.0, w.sum())
+    assert 1.0 <= prediction_noise_ratio(w) <= np.sqrt(2.0) + 1e-12
+
+
+def test_the_noise_ratio_refuses_weights_that_are_not_a_finite_vector() -> None:
+    with pytest.raises(ValueError, match="finite"):
+        prediction_noise_ratio(np.array([0.5, np.nan]))

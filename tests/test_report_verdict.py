@@ -196,14 +196,18 @@ def test_each_learned_trial_against_the_prediction_of_the_step_before_it(adaptiv
         assert rows[t]["predicted_epos_m"] == pytest.approx(predicted, rel=1e-8)
         assert rows[t]["prediction_miss_m"] == pytest.approx(miss, rel=1e-8)
         assert rows[t]["prediction_miss_ratio"] == pytest.approx(miss / floor, rel=1e-8)
-        active = sum(a["update"]["active_constraints"] for a in record["decision"]["axes"])
+        axes = record["decision"]["axes"]
+        active = sum(a["update"]["active_constraints"] for a in axes)
         assert rows[t]["limits_active"] == active
+        noise = np.mean([math.sqrt(1 + sum(w * w for w in a["noise"]["weights"])) for a in axes])
+        assert rows[t]["prediction_noise_ratio"] == pytest.approx(noise, rel=1e-8)
     v = doc["verdict"]
     assert v["prediction_trial"] == 5
     assert v["prediction"]["miss_m"] == pytest.approx(rows[5]["prediction_miss_m"])
     said = f"the step before trial 5 predicted it at {1e3 * rows[5]['predicted_epos_m']:.1f} mm"
     assert any(line.startswith(f"verdict: {said}") for line in v["text"])
     assert any(f"{rows[5]['prediction_miss_ratio']:.2f}x the floor" in line for line in v["text"])
+    assert any(f"alone give about {rows[5]['prediction_noise_ratio']:.2f}x" in x for x in v["text"])
 
 
 def test_the_paper_profile_predicts_each_trial_from_the_newest_alone(paper) -> None:

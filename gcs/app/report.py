@@ -31,6 +31,7 @@ from gcs.core.floor import (
     floor_flights,
     floor_from_flights,
     floor_verdicts,
+    prediction_noise_ratio,
 )
 from gcs.core.learning import AdaptiveSettings
 from gcs.core.metrics import IterationMetrics, epos, iteration_table
@@ -258,12 +259,15 @@ class Prediction:
     ``predicted_epos_m``: e_pos (eq. 10) the step predicted for the trial [m].
     ``miss_m``: mean horizontal distance between the measured and the predicted positions
     [m]. ``limits_active``: setpoint samples at a limit in that step's update (both axes),
-    None where the run does not record it.
+    None where the run does not record it. ``noise_ratio``: the distance from the prediction
+    that noise alone gives, in floors (:func:`gcs.core.floor.prediction_noise_ratio` of the
+    step's trial weights, the mean of the axes); None where the run does not record them.
     """
 
     predicted_epos_m: float
     miss_m: float
     limits_active: int | None
+    noise_ratio: float | None = None
 
 
 @dataclass(frozen=True)
@@ -373,10 +377,12 @@ def trial_prediction(
     y_hat = np.column_stack([predicted_output(models[a], u[:, a], d_hat[:, a]) for a in (0, 1)])
     yd = run.reference().pos_ned_m[1:, :2] - start
     record = learned.get(prev)
-    active = None
+    active = noise = None
     if record is not None and record.get("decision"):
-        active = sum(a["update"]["active_constraints"] for a in record["decision"]["axes"])
-    return Prediction(epos(yd, y_hat), epos(y_hat, y), active)
+        axes = record["decision"]["axes"]
+        active = sum(a["update"]["active_constraints"] for a in axes)
+        noise = float(np.mean([prediction_noise_ratio(a["noise"]["weights"]) for a in axes]))
+    return Prediction(epos(yd, y_hat), epos(y_hat, y), active, noise)
 
 
 def trial_clock_rates(run: RunDir) -> dict[int, float | None]:
@@ -469,6 +475,7 @@ def _learning_json(row: dict, learning: RunLearning) -> dict:
     out["limits_active"] = None if pr is None else pr.limits_active
     if f is not None:
         out["prediction_miss_ratio"] = None if pr is None else pr.miss_m / f.epos_m
+        out["prediction_noise_ratio"] = None if pr is None else pr.noise_ratio
     if learning.history:
         out["learning"] = None if t is None else t.record
     return out
@@ -670,9 +677,10 @@ class Verdict:
         )
         if self.floor_m is None:
             return said
+        noise = "about 1x" if pr.noise_ratio is None else f"about {pr.noise_ratio:.2f}x"
         return (
-            f"{said}, {pr.miss_m / self.floor_m:.2f}x the floor (noise alone gives about 1x, a "
-            "little more from the estimate's own; the rest is what the model did not foresee: "
+            f"{said}, {pr.miss_m / self.floor_m:.2f}x the floor (the flight's noise and the "
+            f"estimate's alone give {noise}; more is what the model did not foresee: "
             "docs/learning-floor.md)"
         )
 

@@ -33,6 +33,7 @@ __all__ = [
     "Floor",
     "FloorVerdict",
     "floor_from_flights",
+    "prediction_noise_ratio",
     "floor_from_difference",
     "floor_flights",
     "first_flights",
@@ -220,6 +221,32 @@ def floor_from_flights(pos_ne_m: np.ndarray) -> Floor:
     delta = np.sqrt(k / (k - 1)) * (pos - pos.mean(axis=0))
     # two flights give one series (delta_2 = -delta_1): keep one so tau is not counted twice
     return _floor(delta[:1] if k == 2 else delta, k, "repeat")
+
+
+def prediction_noise_ratio(weights: np.ndarray) -> float:
+    """How far a flight comes out from a learning step's prediction of it, in floors, when the
+    model is right: its own noise and the estimate's.
+
+    The estimate of the disturbance is a weighted mean of the trials' residuals, so it carries
+    ``sum_i w_i v_i`` of their non-repeatable parts; the flight adds its own ``v``. For
+    independent flights of one Gaussian process the difference is that process scaled by
+    ``sqrt(1 + sum_i w_i^2)``, and so is its e_pos: the floor times that factor (1 for an
+    estimate without noise, ``sqrt(2)`` for the newest trial alone).
+
+    Parameters
+    ----------
+    weights : ndarray, shape (T,)
+        Weight of each trial in the estimate (``NoiseRecord.weights``).
+
+    Returns
+    -------
+    float
+        The factor, >= 1.
+    """
+    w = np.asarray(weights, dtype=float)
+    if w.ndim != 1 or not np.all(np.isfinite(w)):
+        raise ValueError(f"weights must be a finite (T,) array, got shape {w.shape}")
+    return float(np.sqrt(1.0 + np.sum(w**2)))
 
 
 def floor_from_difference(diff_ne_m: np.ndarray, source: str = "repeat") -> Floor:
