@@ -1,4 +1,4 @@
-"""How often a trial with nothing repeatable left meets the floor-ratio targets (offline, mock).
+"""How often a trial with nothing repeatable left meets the floor-ratio targets (mock or recorded).
 
 Flies one setpoint sequence ``--flights`` times through ``gcs.mock.physics.QuadPhysics`` (no
 network; each flight with its own gust seed, the vehicle settled at the start first, as
@@ -17,11 +17,22 @@ learning can do. Against that:
   repeatable part (the e_pos of the mean flight), e.g. for the setpoints a live run learned
   (``--setpoints run/setpoints-008.csv``).
 
+Or, with ``--run DIR`` (once per run), the flights of identical setpoints a run recorded
+(trial 0 and its repeats: ``learning.adaptive.repeats``), e.g. on real firmware in a lab
+(``benchmarks/lab_floor_px4.py --profiles antx-adaptive+learning.adaptive.repeats=5 --iter
+6``): each run's flights give their ``delta_i`` from their own mean, and the runs must be of
+one point (the same noise; ``--within-run`` draws the trials from the floor's own run, as in
+one flight session). Then the floor is drawn from ``--floor-flights`` flights of one
+run, the trials from the others, and the targets are also those of the lab-floor test (two
+trials, each within 2 floors of a floor from three flights) and of its goal (five trials, each
+within 1.5 floors and their median within 1.25).
+
 Nothing is asserted; the figures go to docs/results.md as they come out.
 
     .venv/bin/python benchmarks/floor_targets.py                        # indoor, the reference
     .venv/bin/python benchmarks/floor_targets.py --mock-config profiles/mock-gps.yaml
     .venv/bin/python benchmarks/floor_targets.py --setpoints logs/p5-live/x/setpoints-008.csv
+    .venv/bin/python benchmarks/floor_targets.py --run RUN_A --run RUN_B --floor-flights 3
 """
 
 from __future__ import annotations
@@ -33,10 +44,11 @@ from pathlib import Path
 import numpy as np
 from mock_learning_offline import fly  # setpoint k at k t_ilc, 5 s settled at the start first
 
-from gcs.core.floor import floor_from_flights
+from gcs.core.floor import floor_flights, floor_from_flights
 from gcs.core.metrics import epos
 from gcs.core.trajectory import sample_eight
 from gcs.io.config import load_trajectory
+from gcs.io.rundir import RunDir
 from gcs.mock.config import load_mock_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -50,6 +62,125 @@ def _setpoints(path: Path | None, ref: np.ndarray) -> np.ndarray:
     return table[:, 2:5]
 
 
+def recorded_groups(runs: list[Path]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The reference (N+1, 3) and, per run, its flights of trial 0's setpoints (K, N, 2) [m]."""
+    groups, ref = [], None
+    for path in runs:
+        run = RunDir.open(path)
+        ref = run.reference().pos_ned_m
+        measurement = run.profile().mocap.measurement  # as gcs report measures it
+        records = [run.measured_trial(t, measurement) for t in run.complete_trials()]
+        group = floor_flights(np.array([r.sp_ned_m[:-1, :2] for r in records]))
+        groups.append(np.array([records[i].pos_ned_m[1:, :2] for i in group]))
+    assert ref is not None
+    return ref, groups
+
+
+def targets(
+    groups: list[np.ndarray],
+    floor_flights_n: int,
+    draws: int,
+    weights: np.ndarray | None = None,
+    within: bool = False,
+    seed: int = 0,
+) -> dict[str, float | None | list[float]]:
+    """The chance that trials with nothing repeatable left meet each target, against a floor
+    from ``floor_flights_n`` flights of one group and up to six trials from the other flights
+    (``within``: of the same group only, as in one flight session; a target that needs more
+    trials than there are is None).
+
+    ``weights``: a learner whose model is right but whose estimate is the weighted mean of
+    earlier flights (their non-repeatable parts, drawn from the other flights too): each
+    trial's error is its flight's ``delta`` minus that weighted mean (of any other flights,
+    the floor's too, as learning weighs trial 0 and its repeats); None: a perfect estimate.
+    """
+    deltas = []  # (group, flight, one flight's non-repeatable part (N, 2))
+    for g, ys in enumerate(groups):
+        k = ys.shape[0]
+        deltas += [(g, i, d) for i, d in enumerate(np.sqrt(k / (k - 1)) * (ys - ys.mean(axis=0)))]
+    w = np.zeros(0) if weights is None else np.asarray(weights, dtype=float)
+    rng = np.random.default_rng(seed)
+    need = {"median3_within_1_15": 3, "max6_within_1_3": 6, "max2_within_2": 2, "goal5": 5}
+    hits = dict.fromkeys(need, 0)
+    ratios, counts = [], []
+    for _ in range(draws):
+        g = int(rng.integers(len(groups)))
+        chosen = rng.permutation(groups[g].shape[0])[:floor_flights_n]
+        floor = floor_from_flights(groups[g][chosen]).epos_m
+        pool = [(h, i) for (h, i, _) in deltas if h == g or not within]
+        rest = [k for k, (h, i) in enumerate(pool) if not (h == g and i in chosen)]
+        if len(rest) < 2 or len(pool) < 1 + w.size:
+            raise SystemExit(f"{len(pool)} flights, {len(rest)} beside the floor's: too few")
+        by_key = {(h, i): d for (h, i, d) in deltas}
+        trials = []
+        for own in rng.permutation(rest)[:6]:  # distinct flights, one per trial
+            # the estimate's flights: any others, the floor's too (learning weighs trial 0
+            # and its repeats as well; successive estimates share flights)
+            others = [k for k in rng.permutation(len(pool)) if k != own][: w.size]
+            mean = np.tensordot(w, np.array([by_key[pool[k]] for k in others]), axes=1)
+            err = by_key[pool[own]] - mean
+            trials.append(np.hypot(err[:, 0], err[:, 1]).mean() / floor)
+        t = np.array(trials)
+        counts.append(t.size)
+        hits["median3_within_1_15"] += t.size >= 3 and np.median(t[:3]) <= 1.15
+        hits["max6_within_1_3"] += t.size >= 6 and t.max() <= 1.3
+        hits["max2_within_2"] += t[:2].max() <= 2.0
+        hits["goal5"] += t.size >= 5 and t[:5].max() <= 1.5 and np.median(t[:5]) <= 1.25
+        ratios.append(t[0])
+    out: dict[str, float | None | list[float]] = {
+        k: (v / draws if min(counts) >= need[k] else None) for k, v in hits.items()
+    }
+    out["ratio_quantiles"] = [float(q) for q in np.quantile(ratios, [0.05, 0.5, 0.95])]
+    return out
+
+
+def _pct(value: float | None) -> str:
+    return "-" if value is None else f"{100 * value:.0f} %"
+
+
+def main_recorded(args: argparse.Namespace) -> None:
+    """The targets of recorded flights (``--run``)."""
+    _, groups = recorded_groups(args.run)
+    weights = (
+        None if args.weights is None else np.array([float(x) for x in args.weights.split(",")])
+    )
+    found = targets(groups, args.floor_flights, args.draws, weights, args.within_run)
+    per_flight = [
+        float(e)
+        for ys in groups
+        for e in np.hypot(
+            *(np.sqrt(len(ys) / (len(ys) - 1)) * (ys - ys.mean(axis=0))).transpose(2, 0, 1)
+        ).mean(axis=1)
+    ]
+    floors = [floor_from_flights(ys).epos_m for ys in groups]
+    out = {
+        "runs": [str(r) for r in args.run], "flights": [len(ys) for ys in groups],
+        "floor_m": floors, "perfect_trial_epos_mean_m": float(np.mean(per_flight)),
+        "perfect_trial_epos_sd_m": float(np.std(per_flight, ddof=1)),
+        "floor_flights": args.floor_flights, "weights": args.weights,
+        "within_run": args.within_run, **found,
+    }  # fmt: skip
+    f = float(np.mean(floors))
+    print(
+        f"{sum(out['flights'])} flights of identical setpoints in {len(groups)} runs: floors "
+        + ", ".join(f"{1e3 * x:.1f}" for x in floors)
+        + f" mm; a perfect trial's e_pos {1e3 * out['perfect_trial_epos_mean_m']:.1f} ± "
+        f"{1e3 * out['perfect_trial_epos_sd_m']:.1f} mm "
+        f"({100 * out['perfect_trial_epos_sd_m'] / f:.0f} % of the floor)\n"
+        f"  {'perfect trials' if weights is None else 'trials, estimate weights ' + args.weights}"
+        f" against a floor from {args.floor_flights} flights: e/floor 5-50-95 % "
+        + " / ".join(f"{q:.2f}" for q in found["ratio_quantiles"])
+        + f"; two within 2 floors (the lab-floor test): {_pct(found['max2_within_2'])}; "
+        f"five within 1.5, median within 1.25 (its goal): {_pct(found['goal5'])}; "
+        f"median of 3 within 1.15: {_pct(found['median3_within_1_15'])}; none of 6 "
+        f"above 1.3: {_pct(found['max6_within_1_3'])}"
+        + (" (floor and trials of one run)" if args.within_run else "")
+        + "\n"
+    )
+    if args.json is not None:
+        args.json.write_text(json.dumps(out, indent=1) + "\n")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mock-config", type=Path, default=None)
@@ -58,7 +189,26 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=5000, help="gust seeds seed, seed + 1, ..")
     parser.add_argument("--draws", type=int, default=4000)
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument(
+        "--run", type=Path, action="append", default=[], help="a recorded run (repeatable)"
+    )
+    parser.add_argument(
+        "--floor-flights", type=int, default=3, help="flights of the floor (--run): 3 as shipped"
+    )
+    parser.add_argument(
+        "--weights",
+        default=None,
+        help="--run: trials of a right model with an estimate of these trial weights (w1,w2,..)",
+    )
+    parser.add_argument(
+        "--within-run",
+        action="store_true",
+        help="--run: the trials from the floor's own run only (one flight session)",
+    )
     args = parser.parse_args()
+    if args.run:
+        main_recorded(args)
+        return
     cfg = load_mock_config(args.mock_config)
     ref = sample_eight(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, T_ILC_S)
     r = ref.pos_ned_m
