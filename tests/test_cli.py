@@ -45,9 +45,13 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
         "iteration", "status", "reason", "epos_m", "epos_pct", "change_pct",
         "max_err_m", "epos_3d_m", "rms_north_m", "rms_east_m", "rms_down_m",
         "vehicle_time_rate", "trial", "repeat_of", "sp_rms_m", "sp_max_m",
+        "predicted_epos_m", "prediction_miss_m", "limits_active",
     }  # fmt: skip
     # the paper's method flies no repeat: trial and iteration are one; no floor keys
     assert [(r["trial"], r["repeat_of"]) for r in rows] == [(0, None), (1, None)]
+    # trial 1 was predicted by the step from trial 0 (no decision record: no limit count)
+    assert rows[0]["predicted_epos_m"] is None and rows[1]["prediction_miss_m"] > 0
+    assert rows[1]["limits_active"] is None
     assert rows[0]["sp_rms_m"] == 0.0  # trial 0 flies the reference
     dev = run.read_setpoints(1)[:, :2] - run.reference().pos_ned_m[:-1, :2]
     assert rows[1]["sp_rms_m"] == pytest.approx(np.sqrt(np.mean(np.sum(dev**2, axis=1))))

@@ -399,3 +399,20 @@ def test_drift_reason_names_the_trials_above_and_the_best_at_the_floor() -> None
         "drifting up: trial 3 reached the floor, trials 5 and 6 are above it again; the best "
         "setpoints at the floor are trial 4's"
     )
+
+
+def test_each_learning_step_says_how_far_its_trial_flew_from_the_prediction(tmp_path):
+    """The live table's line from the learning step, against the report's prediction of the
+    same trial (tests/test_report_verdict.py checks that one against the lifted form)."""
+    from gcs.app.fly_view import learning_lines
+    from gcs.app.report import run_learning
+
+    run = make_adaptive_run(tmp_path, trials=4, repeats=1, gust_m=0.01)
+    fly_synthetic(run, 4, gust_m=0.01)
+    outcome = learn_run(run)
+    expected = run_learning(run).trials[4].prediction
+    assert expected is not None and outcome.prediction == expected
+    text = "\n".join(learning_lines(outcome))
+    said = f"trial 4: {1e3 * expected.miss_m:.1f} mm from what the step before it predicted"
+    assert said in text
+    assert f"(noise alone: about {expected.noise_ratio:.2f}x)" in text

@@ -175,8 +175,9 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
 
     The newest trial's verdict against the floor (e.g. "trial 6: 1.08x the floor, at the
     floor"; "converged" in green), a drift up from the floor once reached
-    (:func:`gcs.core.floor.floor_drift`, with the trial whose setpoints were best there), a
-    safeguard's fall back, a refreshed model and how far it moved, and what comes next; a
+    (:func:`gcs.core.floor.floor_drift`, with the trial whose setpoints were best there), how far
+    the newest trial flew from what the step before it predicted (against what noise alone
+    gives), a safeguard's fall back, a refreshed model and how far it moved, and what comes next; a
     repeat of trial 0 says so.
 
     Parameters
@@ -212,6 +213,13 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
         drift = record_drift(record)
         if drift is not None:
             lines.append(f"  [yellow]{escape(drift_sentence(drift))}[/]")
+        pr = outcome.prediction
+        if pr is not None and pr.noise_ratio is not None:
+            lines.append(
+                f"  trial {outcome.trial}: {1e3 * pr.miss_m:.1f} mm from what the step before it "
+                f"predicted, {pr.miss_m / floor['epos_m']:.2f}x the floor (noise alone: about "
+                f"{pr.noise_ratio:.2f}x)"
+            )
     for line in decision_lines(record):  # the report has them all; live, what changed
         if line.startswith(("model kept", "estimate")):
             continue

@@ -30,9 +30,10 @@ import numpy as np
 from gcs.api import Learner, learner_settings
 from gcs.app.failures import OptionError
 from gcs.core.estimators import KilcState
-from gcs.core.floor import floor_flights
+from gcs.core.floor import floor_flights, prediction_noise_ratio
 from gcs.core.learner import LearnerStep, Trial
-from gcs.core.model import DiscreteModel, relative_degree
+from gcs.core.metrics import epos
+from gcs.core.model import DiscreteModel, predicted_output, relative_degree
 from gcs.core.trajectory import Reference, check_setpoints
 from gcs.core.trials import iteration_of, setpoint_deviation
 from gcs.errors import GcsError, ProfileError, RunLogError, TrajectoryError
@@ -47,11 +48,35 @@ __all__ = [
     "check_algorithm",
     "learn_run",
     "models_in_use",
+    "Prediction",
+    "trial_prediction",
     "check_history",
     "check_learned",
     "check_learnable",
     "differing_field",
 ]
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """What the learning step before a trial predicted of it, against what it flew.
+
+    The step planned the trial's setpoints with its model and its estimate of the
+    disturbance (``Y = F U + D``); the measured positions differ from that prediction by one
+    flight's noise (the floor) and the estimate's, and by whatever the model did not foresee.
+
+    ``predicted_epos_m``: e_pos (eq. 10) the step predicted for the trial [m].
+    ``miss_m``: mean horizontal distance between the measured and the predicted positions
+    [m]. ``limits_active``: setpoint samples at a limit in that step's update (both axes),
+    None where the run does not record it. ``noise_ratio``: the distance from the prediction
+    that noise alone gives, in floors (:func:`gcs.core.floor.prediction_noise_ratio` of the
+    step's trial weights, the mean of the axes); None where the run does not record them.
+    """
+
+    predicted_epos_m: float
+    miss_m: float
+    limits_active: int | None
+    noise_ratio: float | None = None
 
 
 @dataclass(frozen=True)
@@ -77,6 +102,9 @@ class LearnOutcome:
     record : dict or None
         The decision record written to ``learn-JJJ.json`` (profiles with
         ``learning.adaptive``), or None.
+    prediction : Prediction or None
+        What the step before predicted of the trial learned from, and how it flew
+        (:func:`trial_prediction`); None when no step predicted it.
     """
 
     trial: int
@@ -87,6 +115,7 @@ class LearnOutcome:
     next_iteration: int
     repeat_of: int | None = None
     record: dict | None = None
+    prediction: Prediction | None = None
 
 
 @dataclass(frozen=True)
@@ -332,6 +361,7 @@ def learn_run(
         methods=step.methods,
         active_constraints=step.active_constraints,
         next_iteration=j + 1,
+        prediction=trial_prediction(run, profile, j, record, None),
     )
 
 
@@ -395,6 +425,53 @@ def check_history(run: RunDir, profile: Profile, j: int) -> None:
             run.read_model(k)
 
 
+def trial_prediction(
+    run: RunDir, profile: Profile, t: int, trial: TrialRecord, step_record: dict | None
+) -> Prediction | None:
+    """What the learning step from trial ``t - 1`` predicted of trial ``t`` (:class:`Prediction`).
+
+    The step's models (the refreshed ones it ended with, or the profile's) and its estimate
+    (``estimate-(t-1).csv``) predict the positions at the setpoints trial ``t`` flew.
+
+    Parameters
+    ----------
+    run : RunDir
+        The learning run.
+    profile : Profile
+        Its profile.
+    t : int
+        The trial.
+    trial : TrialRecord
+        Trial ``t``, complete and measured as the run measures.
+    step_record : dict or None
+        The decision record of the step from trial ``t - 1`` (``learn-(t-1).json``; None for
+        the paper's profile).
+
+    Returns
+    -------
+    Prediction or None
+        None when the step made no prediction of it: trial 0, a repeat of trial 0, a trial
+        flying another's setpoints again, no estimate on file.
+    """
+    history = profile.learning.adaptive is not None
+    repeats = profile.learning.repeats if history else 0
+    if t <= repeats or run.again_of(t) is not None or not run.estimate_path(t - 1).exists():
+        return None
+    models = models_in_use(run, profile, t)[0] if history else profile.models()
+    ref = run.reference().pos_ned_m
+    start = ref[0, :2]
+    d_hat = run.read_estimate(t - 1)[0][:, :2]
+    u = trial.sp_ned_m[:-1, :2] - start
+    y = trial.pos_ned_m[1:, :2] - start
+    y_hat = np.column_stack([predicted_output(models[a], u[:, a], d_hat[:, a]) for a in (0, 1)])
+    active = noise = None
+    if step_record is not None and step_record.get("decision"):
+        axes = step_record["decision"]["axes"]
+        active = sum(a["update"]["active_constraints"] for a in axes)
+        noise = float(np.mean([prediction_noise_ratio(a["noise"]["weights"]) for a in axes]))
+    return Prediction(epos(ref[1:, :2] - start, y_hat), epos(y_hat, y), active, noise)
+
+
 def models_in_use(
     run: RunDir, profile: Profile, j: int
 ) -> tuple[tuple[DiscreteModel, DiscreteModel], str]:
@@ -444,6 +521,8 @@ def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
     if step.repeat_of is not None:
         path = run.write_repeat(j + 1)
         return LearnOutcome(j, j + 1, path, step.methods, 0, 0, repeat_of=step.repeat_of)
+    before = run.read_learn_record(j - 1) if j > repeats else None
+    prediction = trial_prediction(run, profile, j, records[-1], before)
     assert step.record is not None and step.d_hat_m is not None and step.p_m2 is not None
     sp = _setpoints(step.setpoints_m, axes, ref)
     try:  # the QP keeps these limits; this guards against a solver that did not
@@ -475,6 +554,7 @@ def _learn_history(run: RunDir, profile: Profile, j: int) -> LearnOutcome:
         active_constraints=step.active_constraints,
         next_iteration=record["next_iteration"],
         record=run.read_learn_record(j),
+        prediction=prediction,
     )
 
 

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs.app.learn import models_in_use
+from gcs.app.learn import Prediction, trial_prediction
 from gcs.core.floor import (
     Floor,
     FloorDrift,
@@ -31,11 +31,9 @@ from gcs.core.floor import (
     floor_flights,
     floor_from_flights,
     floor_verdicts,
-    prediction_noise_ratio,
 )
 from gcs.core.learning import AdaptiveSettings
-from gcs.core.metrics import IterationMetrics, epos, iteration_table
-from gcs.core.model import predicted_output
+from gcs.core.metrics import IterationMetrics, iteration_table
 from gcs.core.trials import (
     iteration_of,
     repeat_of,
@@ -54,7 +52,6 @@ __all__ = [
     "run_facts",
     "TrialEntry",
     "TrialLearning",
-    "Prediction",
     "RunLearning",
     "run_learning",
     "trial_overview",
@@ -249,28 +246,6 @@ def is_three_d(run: RunDir) -> bool:
 
 
 @dataclass(frozen=True)
-class Prediction:
-    """What the learning step before a trial predicted of it, against what it flew.
-
-    The step planned the trial's setpoints with its model and its estimate of the
-    disturbance (``Y = F U + D``); the measured positions differ from that prediction by one
-    flight's noise (the floor) and the estimate's, and by whatever the model did not foresee.
-
-    ``predicted_epos_m``: e_pos (eq. 10) the step predicted for the trial [m].
-    ``miss_m``: mean horizontal distance between the measured and the predicted positions
-    [m]. ``limits_active``: setpoint samples at a limit in that step's update (both axes),
-    None where the run does not record it. ``noise_ratio``: the distance from the prediction
-    that noise alone gives, in floors (:func:`gcs.core.floor.prediction_noise_ratio` of the
-    step's trial weights, the mean of the axes); None where the run does not record them.
-    """
-
-    predicted_epos_m: float
-    miss_m: float
-    limits_active: int | None
-    noise_ratio: float | None = None
-
-
-@dataclass(frozen=True)
 class TrialLearning:
     """What learning says about one complete trial.
 
@@ -321,7 +296,8 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
     """
     records = complete_records(run) if records is None else records
     ref = run.reference().pos_ned_m
-    ln = run.profile().learning
+    profile = run.profile()
+    ln = profile.learning
     history = ln.adaptive is not None and run.kind == "learning"
     floor_z = (ln.adaptive or AdaptiveSettings()).floor_z
     repeats = ln.repeats if history else 0
@@ -342,47 +318,10 @@ def run_learning(run: RunDir, records: dict[int, TrialRecord] | None = None) -> 
         rms, largest = setpoint_deviation(records[t].sp_ned_m[:-1], ref)
         trials[t] = TrialLearning(
             t, iteration_of(t, repeats), repeat_of(t, repeats), rms, largest,
-            verdicts.get(t), learned.get(t), trial_prediction(run, records, t, learned),
+            verdicts.get(t), learned.get(t),
+            trial_prediction(run, profile, t, records[t], learned.get(t - 1)),
         )  # fmt: skip
     return RunLearning(history, repeats, floor, group, floor_z, trials)
-
-
-def trial_prediction(
-    run: RunDir, records: dict[int, TrialRecord], t: int, learned: dict[int, dict]
-) -> Prediction | None:
-    """What the learning step from trial ``t - 1`` predicted of trial ``t`` (:class:`Prediction`).
-
-    The step's models (the refreshed ones it ended with, or the profile's) and its estimate
-    (``estimate-(t-1).csv``) predict the positions at the setpoints trial ``t`` flew.
-
-    ``records``: the run's complete trials. ``learned``: the decision records by trial
-    (``learn-JJJ.json``; empty for the paper's profile).
-
-    Returns: None when the step made no prediction of it (trial 0, a repeat of trial 0, a
-    trial flying another's setpoints again, no estimate on file).
-    """
-    profile = run.profile()
-    history = profile.learning.adaptive is not None
-    repeats = profile.learning.repeats if history else 0
-    prev = t - 1
-    if prev not in records or repeat_of(t, repeats) is not None or t <= repeats:
-        return None
-    if run.again_of(t) is not None or not run.estimate_path(prev).exists():
-        return None
-    models = models_in_use(run, profile, t)[0] if history else profile.models()
-    start = run.reference().pos_ned_m[0, :2]
-    d_hat = run.read_estimate(prev)[0][:, :2]
-    u = records[t].sp_ned_m[:-1, :2] - start
-    y = records[t].pos_ned_m[1:, :2] - start
-    y_hat = np.column_stack([predicted_output(models[a], u[:, a], d_hat[:, a]) for a in (0, 1)])
-    yd = run.reference().pos_ned_m[1:, :2] - start
-    record = learned.get(prev)
-    active = noise = None
-    if record is not None and record.get("decision"):
-        axes = record["decision"]["axes"]
-        active = sum(a["update"]["active_constraints"] for a in axes)
-        noise = float(np.mean([prediction_noise_ratio(a["noise"]["weights"]) for a in axes]))
-    return Prediction(epos(yd, y_hat), epos(y_hat, y), active, noise)
 
 
 def trial_clock_rates(run: RunDir) -> dict[int, float | None]:
