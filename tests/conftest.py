@@ -32,8 +32,8 @@ def pytest_configure(config) -> None:
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Flights first, the real firmware's first of all (its longest flight, the lab floor's,
-    at the head), dealt in turn to the workers.
+    """Flights first, the real firmware's first of all (the lab floor's long flight, where it
+    is selected, at the head), dealt in turn to the workers.
 
     The end-to-end tests run in real time (tens of seconds to minutes each), the rest in
     milliseconds. ``make test`` runs ``pytest -n 2 --dist worksteal``: the workers start on
