@@ -76,6 +76,13 @@ def recorded_groups(runs: list[Path]) -> tuple[np.ndarray, list[np.ndarray]]:
     return ref, groups
 
 
+def flight_deltas(ys: np.ndarray) -> np.ndarray:
+    """Each of ``K`` flights' non-repeatable part, ``sqrt(K / (K - 1)) (Y_i - mean Y)``
+    (K, N, 2) [m] (docs/learning-floor.md, section 1)."""
+    k = ys.shape[0]
+    return np.sqrt(k / (k - 1)) * (ys - ys.mean(axis=0))
+
+
 def targets(
     groups: list[np.ndarray],
     floor_flights_n: int,
@@ -94,10 +101,8 @@ def targets(
     trial's error is its flight's ``delta`` minus that weighted mean (of any other flights,
     the floor's too, as learning weighs trial 0 and its repeats); None: a perfect estimate.
     """
-    deltas = []  # (group, flight, one flight's non-repeatable part (N, 2))
-    for g, ys in enumerate(groups):
-        k = ys.shape[0]
-        deltas += [(g, i, d) for i, d in enumerate(np.sqrt(k / (k - 1)) * (ys - ys.mean(axis=0)))]
+    # (group, flight, one flight's non-repeatable part (N, 2))
+    deltas = [(g, i, d) for g, ys in enumerate(groups) for i, d in enumerate(flight_deltas(ys))]
     w = np.zeros(0) if weights is None else np.asarray(weights, dtype=float)
     rng = np.random.default_rng(seed)
     need = {"median3_within_1_15": 3, "max6_within_1_3": 6, "max2_within_2": 2, "goal5": 5}
@@ -145,13 +150,7 @@ def main_recorded(args: argparse.Namespace) -> None:
         None if args.weights is None else np.array([float(x) for x in args.weights.split(",")])
     )
     found = targets(groups, args.floor_flights, args.draws, weights, args.within_run)
-    per_flight = [
-        float(e)
-        for ys in groups
-        for e in np.hypot(
-            *(np.sqrt(len(ys) / (len(ys) - 1)) * (ys - ys.mean(axis=0))).transpose(2, 0, 1)
-        ).mean(axis=1)
-    ]
+    per_flight = [float(np.hypot(*d.T).mean()) for ys in groups for d in flight_deltas(ys)]
     floors = [floor_from_flights(ys).epos_m for ys in groups]
     out = {
         "runs": [str(r) for r in args.run], "flights": [len(ys) for ys in groups],

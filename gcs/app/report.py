@@ -605,11 +605,7 @@ class Verdict:
         """What the newest learning step predicted of the trial it planned, in words."""
         pr, t = self.prediction, self.prediction_trial
         assert pr is not None
-        limits = (
-            ""
-            if not pr.limits_active
-            else (f" with {pr.limits_active} setpoint samples at a limit")
-        )
+        limits = f" with {pr.limits_active} setpoint samples at a limit" if pr.limits_active else ""
         said = (
             f"the step before trial {t} predicted it at {_mm(pr.predicted_epos_m)}{limits}; it "
             f"flew {_mm(pr.miss_m)} from that prediction"
