@@ -108,7 +108,13 @@ def fly(build: Px4Build, number: int, load: int) -> dict:
             log = read_flight_log(max(vehicle.ulogs(), key=lambda p: p.stat().st_size))
             after = out.split(f"trial {REFRESHED_AFTER} flown")[-1].splitlines()
             row |= px4_gaps(run, log, gcs.timed).as_dict()
-            row["refresh"] = next((ln.strip() for ln in after if "model " in ln), None)
+            # the live line of the refresh, not the printed report's legend
+            verdicts = [
+                ln.strip()
+                for ln in after
+                if ln.strip().startswith(("model refreshed", "model kept"))
+            ]
+            row["refresh"] = verdicts[0] if verdicts else None
         else:
             lines = [ln for ln in out.splitlines() if ln.strip()]
             row["ended"] = lines[-1][:160] if lines else ""
