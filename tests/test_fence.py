@@ -126,6 +126,45 @@ def test_each_check_names_what_it_saw() -> None:
     assert "outside the arena" in first[1]
 
 
+def test_while_landing_only_a_reading_below_the_floor_is_let_through() -> None:
+    # the PX4 SITL GPS landing: on the ground, the estimate sinks 1.57 m below it, its
+    # velocity saying so (0.3-0.6 m/s down), for about 10 s until the land detector
+    t = np.arange(0.0, 10.0, 1 / RATE_HZ)
+    vel = np.zeros((len(t), 3))
+    vel[:, 2] = 0.157
+    sinking = np.column_stack([0 * t - 0.58, 0 * t + 0.63, 0.157 * t])
+    landing = EstimateMonitor(FENCE)
+    samples = zip(t, sinking, vel, strict=True)
+    seen = [landing.update(float(tk), p, v, landing=True) for tk, p, v in samples]
+    assert seen == [None] * len(t)
+    assert landing.below_floor_landing_m == pytest.approx(sinking[-1, 2])
+    assert landing.peaks["outside_m"] == pytest.approx(sinking[-1, 2])  # the evidence kept
+    (first, *_) = _run(EstimateMonitor(FENCE), t, sinking, vel)  # in any other phase: a breach
+    assert "outside the arena" in first[1] and first[0] == pytest.approx(1.5 / 0.157, abs=0.02)
+    # every other limit holds while landing: beside the arena, above its ceiling, too fast
+    for pos, v, what in (([0.0, -4.6, -1.0], [0, 0, 0], "outside the arena"),
+                         ([0.0, 0.0, -4.6], [0, 0, 0], "outside the arena"),
+                         ([0.0, 0.0, 0.5], [0, 0, 2.3], "descending at 2.30 m/s")):  # fmt: skip
+        assert what in (EstimateMonitor(FENCE).update(0.0, pos, v, landing=True) or "")
+    assert EstimateMonitor(FENCE).below_floor_landing_m == 0.0
+
+
+def test_the_landing_flag_reaches_the_monitor_and_nothing_else_changes() -> None:
+    from gcs.flight.link import Link, TelemetrySample
+    from gcs.flight.watches import Watches
+
+    mirror = Link(SETTINGS)
+    mirror.armed = True
+    watches = Watches(mirror, SETTINGS, FENCE)
+    below = TelemetrySample(1.0, (0.0, 0.0, 1.6), (0.0, 0.0, 0.0), 1.0)
+    watches.landing = True
+    watches.check_sample(below)
+    assert watches.breach is None and watches.below_floor_landing_m == pytest.approx(1.6)
+    watches.landing = False
+    watches.check_sample(TelemetrySample(1.1, (0.0, 0.0, 1.6), (0.0, 0.0, 0.0), 1.1))
+    assert (watches.breach or "").startswith("fence: the measured position NED (0.00, 0.00, 1.60)")
+
+
 def test_a_telemetry_gap_is_not_a_jump_and_a_reordered_sample_is_ignored() -> None:
     monitor = EstimateMonitor(FENCE)
     # 0.5 s without samples while braking at 8 m/s^2 from 2 m/s: the position moves as

@@ -139,6 +139,33 @@ def test_a_divergence_in_hover_aborts_within_a_second(tmp_path: Path) -> None:
     assert_nothing_outside_was_sent(stats)
 
 
+def test_a_height_estimate_sinking_below_the_floor_while_landing_lets_the_vehicle_land(
+    tmp_path: Path,
+) -> None:
+    # PX4 SITL on GPS, landing: on the ground the estimate sank 1.5 m below it before the land
+    # detector said so, and the fence ended a complete identification with an error. Here the
+    # height estimate sinks 1.94 m (0.8 t^2 / 2 for 2.2 s) from 0.3 s after LAND.
+    source = CircleSource(duration_s=4.0)
+    _, error, clean = fly(tmp_path, Faults(), source)
+    assert error is None
+    land_s = next(m["t_vehicle_s"] for m in clean["modes"] if m["mode"] == "LAND")
+    faults = Faults(
+        divergence_start_s=land_s - clean["first_armed_vehicle_s"] + 0.3,
+        divergence_duration_s=2.2, divergence_ned_m_s2=(0.0, 0.0, 0.8),
+    )  # fmt: skip
+    statuses, error, stats = fly(tmp_path, faults, source)
+    (fault,) = stats["estimator_faults"]
+    assert fault["onset_vehicle_s"] > land_s
+    assert error is None, (error, statuses)
+    assert statuses[-2] == "landed and disarmed", statuses
+    assert statuses[-1].startswith("while landing the position estimate read up to 1.9"), statuses
+    assert "m below the arena's floor" in statuses[-1]
+    assert [m["mode"] for m in stats["modes"] if m["t_vehicle_s"] >= land_s][0] == "LAND"
+    assert not any(m["mode"] == "HOLD" for m in stats["modes"] if m["t_vehicle_s"] > land_s)
+    assert not any(s.startswith(("aborting", "emergency stop")) for s in statuses), statuses
+    assert stats["modes"][-1]["armed"] is False
+
+
 def test_the_incident_a_divergence_during_take_off_is_caught_before_anything_is_streamed(
     tmp_path: Path,
 ) -> None:

@@ -574,6 +574,14 @@ class _Campaign:
         self.emit(Status("landing"))
         await self.vehicle.land_and_disarm()
         self.emit(Status("landed and disarmed"))
+        below_m = self.vehicle.below_floor_landing_m
+        if self.fence is not None and below_m > self.fence.margin_m:
+            self.emit(Status(
+                f"while landing the position estimate read up to {below_m:.2f} m below the "
+                "arena's floor: its height drifted (the vehicle cannot be below the ground; "
+                "PX4 lands on its vertical velocity), so gcs let it land; check the height "
+                "source before the next flight", warning=True,
+            ))  # fmt: skip
         if self.mocap is not None and self.session is not None:
             self.session = _with_link(self.session, self.mocap)
             await asyncio.to_thread(self.source.record_session, self.session)

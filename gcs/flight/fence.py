@@ -140,12 +140,15 @@ class Fence:
         """The arena, shape (3, 2): (min, max) per NED axis [m]."""
         return np.asarray(self.arena_ned_m, dtype=float)
 
-    def outside_by(self, pos_ned_m: Any) -> float:
+    def outside_by(self, pos_ned_m: Any, *, floor: bool = True) -> float:
         """How far a point lies outside the arena (0 inside) [m], the largest axis.
 
-        ``pos_ned_m``: local NED [m].
+        ``pos_ned_m``: local NED [m]. ``floor``: False leaves out the arena's floor (its largest
+        down): a point below it counts as inside.
         """
         p, b = _ned(pos_ned_m), self.bounds
+        if not floor:
+            b[2, 1] = np.inf
         return float(max(0.0, np.max(b[:, 0] - p), np.max(p - b[:, 1])))
 
     def setpoint_problem(self, pos_ned_m: Any) -> str | None:
@@ -176,13 +179,14 @@ class Fence:
         k = int(np.flatnonzero(bad)[0])
         return f"setpoint k = {k}: {self.setpoint_problem(sp[k])}"
 
-    def position_problem(self, pos_ned_m: Any) -> str | None:
+    def position_problem(self, pos_ned_m: Any, *, floor: bool = True) -> str | None:
         """Why a measured position ends the flight (beyond the arena plus margin), or None.
 
-        ``pos_ned_m``: measured position, local NED [m].
+        ``pos_ned_m``: measured position, local NED [m]. ``floor``: False leaves out the
+        arena's floor (while PX4 lands, see :meth:`EstimateMonitor.update`).
         """
         p = _ned(pos_ned_m)
-        out = self.outside_by(p)
+        out = self.outside_by(p, floor=floor)
         if out > self.margin_m or not np.all(np.isfinite(p)):
             return (
                 f"the measured position {format_ned(p)} is {out:.2f} m outside the arena "
@@ -223,6 +227,8 @@ class EstimateMonitor:
 
     def __init__(self, fence: Fence) -> None:
         self.fence = fence
+        #: deepest estimate below the arena's floor while landing [m] (0: none)
+        self.below_floor_landing_m = 0.0
         self._last: tuple[float, np.ndarray, np.ndarray] | None = None
         self._window: deque[tuple[float, np.ndarray]] = deque()
         self._sum = np.zeros(3)
@@ -234,13 +240,23 @@ class EstimateMonitor:
         if value > self.peaks[key]:
             self.peaks[key] = value
 
-    def update(self, t_vehicle_s: float, pos_ned_m: Any, vel_ned_m_s: Any) -> str | None:
+    def update(
+        self, t_vehicle_s: float, pos_ned_m: Any, vel_ned_m_s: Any, *, landing: bool = False
+    ) -> str | None:
         """Take one sample; return what it breaks, or None.
 
         Samples older than the last one taken are ignored (a reordered datagram).
 
         ``t_vehicle_s``: the sample's vehicle time [s]. ``pos_ned_m``: reported position, local NED
-        [m]. ``vel_ned_m_s``: reported velocity, local NED [m/s].
+        [m]. ``vel_ned_m_s``: reported velocity, local NED [m/s]. ``landing``: PX4 is landing
+        on gcs's command. Then an estimate below the arena's floor is no breach (every other
+        limit still is): PX4's Land descends on its vertical velocity and stops on ground
+        contact whatever the position says, and the vehicle cannot be below the ground, so
+        such a reading is the estimate's height drifting (seen on PX4 SITL on GPS: 1.5 m below
+        the ground in the 10 s its land detector took), and the breach's answer, land, is what
+        is happening. Under position control the same reading would make the vehicle climb,
+        hence a breach in every other phase. The deepest such reading is kept
+        (:attr:`below_floor_landing_m`).
         """
         p, v = _ned(pos_ned_m), _ned(vel_ned_m_s)
         last = self._last
@@ -248,7 +264,10 @@ class EstimateMonitor:
             return None
         self._last = (t_vehicle_s, p, v)
         self._peak("outside_m", self.fence.outside_by(p))
-        problem = self.fence.position_problem(p) or self._speed_problem(v)
+        if landing:
+            below_m = float(p[2] - self.fence.bounds[2, 1])
+            self.below_floor_landing_m = max(self.below_floor_landing_m, below_m)
+        problem = self.fence.position_problem(p, floor=not landing) or self._speed_problem(v)
         if last is None:
             return problem
         dt = t_vehicle_s - last[0]

@@ -60,24 +60,28 @@ class Landing:
         mirror = self._mirror
         link = mirror.link
         self._manoeuvres.stop_streaming()
-        await mirror.command("land", link.land)
-        self._manoeuvres.offboard_started = (
-            False  # PX4 lands now: a stop must not switch it to Hold
-        )
-        await self._watches.wait_until(
-            lambda: mirror.landed_state == LandedState.ON_GROUND,
-            self.settings.land_timeout_s,
-            "landing",
-            in_control=False,
-        )
-        if mirror.armed:
-            await mirror.command("disarm", link.disarm)
+        self._watches.landing = True  # an estimate below the floor is no breach now
+        try:
+            await mirror.command("land", link.land)
+            self._manoeuvres.offboard_started = (
+                False  # PX4 lands now: a stop must not switch it to Hold
+            )
             await self._watches.wait_until(
-                lambda: not mirror.armed,
-                self.settings.command_timeout_s,
-                "disarmed state",
+                lambda: mirror.landed_state == LandedState.ON_GROUND,
+                self.settings.land_timeout_s,
+                "landing",
                 in_control=False,
             )
+            if mirror.armed:
+                await mirror.command("disarm", link.disarm)
+                await self._watches.wait_until(
+                    lambda: not mirror.armed,
+                    self.settings.command_timeout_s,
+                    "disarmed state",
+                    in_control=False,
+                )
+        finally:
+            self._watches.landing = False
 
     async def emergency_stop(self, reason: str) -> str:
         """Stop streaming, leave offboard (Hold), land, and disarm once on the ground.

@@ -92,6 +92,11 @@ class CampaignVehicle(Protocol):
         ...
 
     @property
+    def below_floor_landing_m(self) -> float:
+        """Deepest estimate below the arena's floor while landing [m] (0: none)."""
+        ...
+
+    @property
     def clock(self) -> VehicleClock:
         """The vehicle's continuous time and its fit to the local clock."""
         ...
@@ -276,6 +281,10 @@ class Vehicle(CampaignVehicle):
     @property
     def breach(self) -> str | None:
         return self._watches.breach
+
+    @property
+    def below_floor_landing_m(self) -> float:
+        return self._watches.below_floor_landing_m
 
     @property
     def clock(self) -> VehicleClock:

@@ -47,6 +47,9 @@ class Watches:
         self.settings = settings
         self.fence = fence
         self.breach: str | None = None  # the first breach seen; ends the flight
+        #: PX4 is landing on our command: the estimate monitor leaves out the arena's floor
+        #: (:meth:`gcs.flight.fence.EstimateMonitor.update` says why)
+        self.landing = False
         self._monitor = EstimateMonitor(fence) if fence is not None else None
         self._watches: list[tuple[str, Callable[[], str | None]]] = []
 
@@ -59,9 +62,16 @@ class Watches:
             As received (before the mirror keeps it).
         """
         if self._monitor is not None:
-            problem = self._monitor.update(sample.t_vehicle_s, sample.pos_ned_m, sample.vel_ned_m_s)
+            problem = self._monitor.update(
+                sample.t_vehicle_s, sample.pos_ned_m, sample.vel_ned_m_s, landing=self.landing
+            )
             if problem is not None and self.fence_active:
                 self.trip("fence", problem)
+
+    @property
+    def below_floor_landing_m(self) -> float:
+        """Deepest estimate below the arena's floor while landing [m] (0: none, no fence)."""
+        return 0.0 if self._monitor is None else self._monitor.below_floor_landing_m
 
     @property
     def fence_active(self) -> bool:
