@@ -135,7 +135,14 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
         assert rec.complete and rec.abort_reason is None
         assert rec.t_s.shape == (n + 1,) and rec.pos_ned_m.shape == (n + 1, 3)
         assert rec.vel_ned_m_s.shape == (n + 1, 3) and rec.sent_s.shape == (n,)
-        assert rec.interpolated.shape == (n + 1,) and rec.interpolated_share < 0.05
+        # flagged exactly where the grid point's bracketing samples are more than the gap
+        # apart (a busy machine may delay the telemetry: how much is not this test's to judge)
+        grid = np.arange(n + 1) * T_ILC_S
+        after = np.searchsorted(rec.raw_t_s, grid, side="left")
+        before = np.searchsorted(rec.raw_t_s, grid, side="right") - 1
+        span = rec.raw_t_s[after] - rec.raw_t_s[before]
+        assert rec.interpolated.tolist() == (span > SETTINGS.telemetry_gap_s).tolist()
+        assert rec.interpolated_share < 0.5  # the stream lived through most of the trial
         assert np.all(np.isfinite(rec.pos_ned_m)) and np.all(np.isfinite(rec.sent_s))
         np.testing.assert_allclose(rec.sent_s, rec.t_s[:-1], atol=SETTINGS.max_setpoint_late_s)
         # the vehicle follows the circle, with the closed loop's lag
