@@ -126,6 +126,29 @@ def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
     assert drone.stats()["modes"][-1]["armed"] is False
 
 
+def test_a_second_flight_on_the_same_vehicle_arms_after_a_complete_one(tmp_path, tiny) -> None:
+    """PX4 returns to the last mode it was put in that allows arming when it disarms: after a
+    complete flight (offboard, land, disarm) the vehicle sits disarmed in OFFBOARD, where it
+    cannot arm without a setpoint stream. The next command on it (here a ``--resume``; ``gcs
+    fly`` after ``gcs identify`` alike) switches it to Hold first, and flies."""
+    run_path = tmp_path / "run"
+    with SimulatedDrone(seed=1) as drone:
+        code, out = fly(drone, tmp_path, tiny, run_path)
+        assert code == 0, out
+        assert "switched to Hold" not in out  # a vehicle fresh from boot is in Hold already
+        last = drone.stats()["modes"][-1]
+        assert (last["mode"], last["armed"]) == ("OFFBOARD", False)  # PX4's mode after disarm
+        drone.advance(drone.vehicle.t_s + 10.0)  # the operator types the next command
+        code, out = run_gcs("fly", "--connect", drone.url, "--resume", run_path, "--iter", 1)
+        assert code == 0, out
+        assert "switched to Hold" in out
+        modes = drone.stats()["modes"]
+    assert RunDir.open(run_path).complete_trials() == [0, 1, 2]
+    armings = [i for i in range(1, len(modes)) if modes[i]["armed"] and not modes[i - 1]["armed"]]
+    assert len(armings) == 2, modes
+    assert modes[armings[1] - 1]["mode"] == "HOLD", modes  # armed from Hold, not from OFFBOARD
+
+
 def test_more_ctrl_c_while_stopping_cannot_leave_the_vehicle_in_the_air(
     tmp_path, tiny, monkeypatch
 ) -> None:

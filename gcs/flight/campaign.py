@@ -843,6 +843,10 @@ def _breach_first(breach: str | None, exc: BaseException, reason: str) -> Vehicl
 
 async def _wait_prearm(vehicle: Vehicle, emit: EventCallback) -> None:
     """Wait for PX4's own pre-arm verdict (bounded); its reasons end the flight if it refuses."""
+    if await vehicle.leave_offboard_on_ground():
+        emit(Status("the vehicle was in Offboard mode, where PX4 cannot arm without a setpoint "
+                    "stream (it returns there after an offboard flight's disarm): switched to "
+                    "Hold"))  # fmt: skip
     emit(Status("waiting for the vehicle's pre-arm checks"))
     state = await wait_ready_to_arm(vehicle, vehicle.settings.health_timeout_s)
     emit(Status(f"vehicle ready to arm (after {state.waited_s:.1f} s)"))

@@ -242,6 +242,37 @@ class Manoeuvres:
             raise VehicleError(f"setpoint refused: {exc.result}") from None
         self.target_ned_m = np.array([n, e, d])
 
+    async def leave_offboard_on_ground(self) -> bool:
+        """Switch a disarmed vehicle that is in OFFBOARD mode to Hold, so that it can arm.
+
+        On a disarm PX4 (v1.14 on) returns to the last mode it was put in that allows arming
+        (``UserModeIntention::onDisarm``), not to the mode it landed in: after a flight of
+        offboard, land, disarm that is OFFBOARD, whose arming check then fails ("No offboard
+        signal") until setpoints stream. A second command on the same vehicle (``gcs fly`` after
+        ``gcs identify``, a ``--resume``) would wait for the pre-arm checks in vain.
+
+        Returns
+        -------
+        bool
+            Whether the mode was switched (False: armed, or in another mode).
+
+        Raises
+        ------
+        VehicleError
+            Hold refused or not reported within ``settings.command_timeout_s``.
+        """
+        mirror = self._mirror
+        if mirror.armed or mirror.flight_mode != FlightMode.OFFBOARD:
+            return False
+        await mirror.command("Hold", mirror.link.stop_offboard)
+        await self._watches.wait_until(
+            lambda: mirror.flight_mode == FlightMode.HOLD,
+            self.settings.command_timeout_s,
+            "Hold mode",
+            in_control=False,
+        )
+        return True
+
     async def start_offboard_at_current_position(self, preroll_s: float = 1.0) -> None:
         """Stream the current position as setpoint, switch to OFFBOARD and wait for it.
 

@@ -183,6 +183,11 @@ class CampaignVehicle(Protocol):
         """Wait for a valid local position estimate and fresh samples."""
         ...
 
+    async def leave_offboard_on_ground(self) -> bool:
+        """Switch a disarmed vehicle in OFFBOARD mode to Hold (PX4 returns to OFFBOARD after a
+        disarm, where it cannot arm); whether it was switched."""
+        ...
+
     async def arm_and_takeoff(self, altitude_m: float) -> None:
         """Arm and take off to ``altitude_m`` above the local origin (positive up)."""
         ...
@@ -359,6 +364,9 @@ class Vehicle(CampaignVehicle):
 
     async def wait_healthy_local_position(self, timeout_s: float | None = None) -> None:
         await self._manoeuvres.wait_healthy_local_position(timeout_s)
+
+    async def leave_offboard_on_ground(self) -> bool:
+        return await self._manoeuvres.leave_offboard_on_ground()
 
     async def arm_and_takeoff(self, altitude_m: float) -> None:
         await self._manoeuvres.arm_and_takeoff(altitude_m)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import scipy.signal
 import yaml
+from synthetic import SHORT
 from test_fly_e2e import wait_for_line
 
 from gcs.app.fly import record_drift
@@ -97,7 +98,13 @@ def test_identify_with_short_experiments(px4_booting, px4_figures, tmp_path: Pat
     where it explains it better, no warning. Short experiments on a GPS hover that wanders
     0.1-0.7 m support no more: in three runs the east axis's VAF was 40-62 % and in four the
     gains 1.1-1.8 (north: VAF 91 %), where the shipped 60 s gave 80-90 %; east once came out
-    at 0.01 % (antx's -19 %) and once at 1.37 % (antx's 19.55 %), so the VAFs are figures."""
+    at 0.01 % (antx's -19 %) and once at 1.37 % (antx's 19.55 %), so the VAFs are figures.
+
+    Then the README's next step on the same vehicle, not rebooted: one trial of ``gcs fly`` with
+    the identified profile. On the identification's disarm PX4 returned to OFFBOARD (the last
+    mode it was put in that allows arming), where it cannot arm without a setpoint stream; gcs
+    switches it to Hold first (before, it waited out the pre-arm checks: "No offboard
+    signal")."""
     profile_path = sitl_profile(tmp_path, identification={"duration_s": EXPERIMENT_S})
     out_path = tmp_path / "identified.yaml"
     px4 = px4_booting
@@ -107,6 +114,15 @@ def test_identify_with_short_experiments(px4_booting, px4_figures, tmp_path: Pat
     )  # fmt: skip
     assert code == 0, out
     assert "landed and disarmed" in out and f"wrote profile {out_path}" in out, out
+    tiny = tmp_path / "tiny.yaml"
+    tiny.write_text(yaml.safe_dump(SHORT))
+    code, flown = finish(
+        gcs("fly", "--connect", px4.url, "--profile", out_path, "--iter", 1, "--run",
+            tmp_path / "fly", "--trajectory", tiny)
+    )  # fmt: skip
+    assert code == 0, flown
+    for line in ("switched to Hold", "trial 0 flown", "landed and disarmed"):
+        assert line in flown, flown
     profile = load_profile(out_path)
     description = yaml.safe_load(out_path.read_text())["description"]
     vafs = dict(re.findall(r"([xy]): order \d+, delay \d+, VAF ([-\d.]+) %", description))
