@@ -131,16 +131,27 @@ def test_every_natnet_version_is_read_by_the_library(version: tuple[int, int]) -
 
 
 def test_occlusion_is_reported_by_the_health_check(hover) -> None:
+    """An occlusion three times the limit, served over the wire: the frames of its window
+    come untracked, and the check names how long the body has been lost by the receipt times
+    of the frames (which a loaded machine may bunch: so the duration is computed from them
+    here, not asserted as the window's length)."""
     server, client = hover
     start = client.wait_until(lambda s: s.tracked, WAIT_S)
     assert stream_problem(client.recent(0.5), start.t_receipt_s) is None
-    server.add_fault(FaultWindow("occlusion", server.now_s() + 0.05, 0.35))
+    occluded_s = 3 * LIMITS.max_occluded_s
+    server.add_fault(FaultWindow("occlusion", server.now_s() + 0.05, occluded_s))
     lost = client.wait_until(lambda s: not s.tracked, WAIT_S)
     back = client.wait_until(lambda s: s.tracked, WAIT_S)
     window = _until(client, back.seq - 1)
     assert lost.seq in window.seq and not window.tracked[-1]
+    last_tracked = np.flatnonzero(window.tracked)[-1]
+    assert not window.tracked[last_tracked + 1 :].any()  # every frame since, untracked
+    lost_s = float(window.t_receipt_s[-1] - window.t_receipt_s[last_tracked])
     reason = occlusion_problem(window, float(window.t_receipt_s[-1]), LIMITS)
-    assert reason is not None and reason.startswith("rigid body lost (not tracked for 0.3")
+    if lost_s > LIMITS.max_occluded_s:
+        assert reason == f"rigid body lost (not tracked for {lost_s:.2f} s)"
+    else:  # frames held back until the body was nearly back: not yet a loss
+        assert reason is None
 
 
 def test_dropout_is_reported_as_stale(hover) -> None:

@@ -198,4 +198,7 @@ def test_telemetry_dropout_fault_silences_positions(tmp_path: Path) -> None:
     with MockProcess(seed=0, faults=Faults(dropout_start_s=0.5, dropout_duration_s=0.6)) as mock:
         times = asyncio.run(fly(mock.url))
     gaps = [b - a for a, b in zip(times, times[1:], strict=False)]
-    assert max(gaps) == pytest.approx(0.6, abs=0.1)
+    # 0.6 s of the mock's time without a position: the receipts pause at least that long, less
+    # a telemetry period (a loaded machine may lengthen the pause, never shorten it)
+    assert max(gaps) >= 0.5, gaps
+    assert times[-1] - times[0] > max(gaps)  # and positions come again after it
