@@ -31,7 +31,9 @@ time after each as the shipped smoother path does):
 Per candidate: its prediction error over the shipped one's, median, mean, the 10/90 %
 quantiles and the share of steps where it predicted better. Then, for the shipped estimate, the
 prediction error in units of what noise alone would leave (the run's floor times
-``prediction_noise_ratio`` of its weights) and each learned trial's e_pos in floors.
+``prediction_noise_ratio`` of its weights) and each learned trial's e_pos in floors, also per
+trajectory with how hard its learned trials flew (the 99th percentile of the measured
+acceleration).
 
 Usage: ``python benchmarks/estimate_replay.py RUN_OR_DIR ... [--json OUT]``
 """
@@ -188,9 +190,27 @@ def replay_run(path: Path) -> list[dict]:
             "floor_m": floor_m,
             "noise_ratio": noise_ratio,
             "trial_epos_m": epos(ref[1:, :2] - start, y_t),
+            "trial_acc_p99_m_s2": peak_acceleration(y_t, profile.t_ilc_s),
+            "trajectory": trajectory_name(run.manifest["trajectory"]),
         })  # fmt: skip
         t += 1
     return rows
+
+
+def trajectory_name(trajectory: dict) -> str:
+    """The trajectory's name, with its loop's period when it has one."""
+    period = trajectory.get("period_s")
+    return trajectory["name"] + ("" if period is None else f" ({period:g} s loop)")
+
+
+def peak_acceleration(pos_m: np.ndarray, dt_s: float) -> float:
+    """99th percentile of the horizontal acceleration of measured positions (N, 2) [m/s^2],
+    the velocity first averaged over 5 samples (the measurement's noise differentiated twice
+    would swamp it)."""
+    vel = np.diff(pos_m, axis=0) / dt_s
+    box = np.ones(5) / 5
+    vel = np.column_stack([np.convolve(vel[:, i], box, "same") for i in range(2)])
+    return float(np.percentile(np.linalg.norm(np.diff(vel, axis=0), axis=1) / dt_s, 99))
 
 
 def summary(rows: list[dict]) -> str:
@@ -223,7 +243,20 @@ def summary(rows: list[dict]) -> str:
         f"{', '.join(f'{v:.2f}' for v in np.percentile(ratio, [10, 25, 50, 75, 90]))}",
         f"- learned trial e_pos / floor: "
         f"{', '.join(f'{v:.2f}' for v in np.percentile(floors, [10, 25, 50, 75, 90]))}",
+        "",
+        "by trajectory:",
+        "",
+        "| trajectory | steps | acceleration p99 [m/s^2]: median | prediction error / noise's "
+        "share: median | trial e_pos / floor: median |",
+        "|---|---|---|---|---|",
     ]
+    acc = np.array([r["trial_acc_p99_m_s2"] for r in rows])
+    for name in sorted({r["trajectory"] for r in rows}):
+        sel = np.array([r["trajectory"] == name for r in rows])
+        lines.append(
+            f"| {name} | {sel.sum()} | {np.median(acc[sel]):.2f} | {np.median(excess[sel]):.2f} "
+            f"| {np.median(floors[sel]):.2f} |"
+        )
     return "\n".join(lines)
 
 
