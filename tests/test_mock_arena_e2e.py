@@ -283,11 +283,14 @@ def test_vision_only_flight_and_the_failsafe_when_the_body_is_occluded(tmp_path:
                 latest = forwarder.latest
                 return latest is not None and bool(np.allclose(here, in_ned(latest)[0], atol=0.05))
 
+            def at_takeoff_altitude(pv: object) -> bool:  # within PX4's take-off acceptance
+                return on_vision(pv) and abs(pv.position.down_m + 1.0) <= 0.1  # type: ignore[attr-defined]
+
             # the event, not one sample: under load a telemetry sample and the newest forwarded
-            # pose can be tenths of a second apart while the vehicle still settles
-            pv = await first(tel.subscribe_position_velocity_ned(), on_vision, 5.0)
+            # pose can be tenths of a second apart, and a sample from the climb can come after
+            # Hold (0.90 m seen, load 18), while the vehicle still settles at 1 m
+            pv = await first(tel.subscribe_position_velocity_ned(), at_takeoff_altitude, 5.0)
             hover = np.array([pv.position.north_m, pv.position.east_m, pv.position.down_m])
-            assert hover[2] == pytest.approx(-1.0, abs=0.1)
 
             async def setpoints() -> None:
                 while True:
