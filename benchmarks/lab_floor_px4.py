@@ -18,7 +18,10 @@ K --seed S``, ``--vehicle`` for the mass and drag too: printed, so any run can b
 again). A profile ``NAME+a.b=VALUE`` sets a field of
 the shipped one (``antx-adaptive+learning.adaptive.repeats=3``). Run directories are kept
 under ``--out``: a run there is resumed for the trials it lacks, or with ``--again K``
-resumed flying trial K's setpoints again (the same setpoints twice: their floor). For every
+resumed flying trial K's setpoints again (the same setpoints twice: their floor). With
+``--identify`` each new run's vehicle is identified first on the same PX4 and rig (``gcs
+identify``, kept as ``NAME-id-identify``) and the run (``NAME-id``) flies the profile it wrote,
+as the README advises for one's own vehicle. For every
 group of flights of identical setpoints the table gives the floor of the group and of each
 pair, the scatter within the trials and between the flights. The load average before and
 after each flight is in its log: the rig and PX4 each take a good part of a core, so fly one
@@ -26,6 +29,7 @@ point at a time on a 2-core machine and nothing else beside it.
 
     .venv/bin/python benchmarks/lab_floor_px4.py --point 100:30:1:30:1 --profiles antx-adaptive
     .venv/bin/python benchmarks/lab_floor_px4.py --draw 6 --seed 1 --parallel 2
+    .venv/bin/python benchmarks/lab_floor_px4.py --point 100:30:1:30:1 --identify
     .venv/bin/python benchmarks/lab_floor_px4.py --table        # the table of what was flown
 
 Nothing is asserted.
@@ -145,11 +149,14 @@ def fly(
     iterations: int,
     again: int | None = None,
     trajectory: Path | None = None,
+    identify: bool = False,
 ) -> None:
     """One flight into ``out/NAME`` (kept), its output in ``out/NAME.log``: a new run (on
     ``trajectory``, default the packaged eight), or the run resumed for ``iterations`` more
-    trials (the first flying trial ``again``'s setpoints)."""
-    name = name_of(point, profile, trajectory)
+    trials (the first flying trial ``again``'s setpoints). With ``identify`` a new run's
+    vehicle is first identified (``gcs identify`` on the same PX4 and rig, the run kept as
+    ``out/NAME-identify``) and the run flies the identified profile (``NAME`` ends in ``-id``)."""
+    name = name_of(point, profile, trajectory) + ("-id" if identify else "")
     run = out / name
     # the trials still to fly in a run already there (all of them again with --again)
     left = iterations if not run.exists() or again is not None else iterations - flown(run)
@@ -158,6 +165,9 @@ def fly(
     work = out / f".{name}-px4"
     work.mkdir(parents=True, exist_ok=True)
     params = {} if point is GPS else point.px4_params()
+    if identify:  # SIH's battery runs down in the identification's two minutes and PX4 then
+        # refuses to arm ("Battery unhealthy"): kept above 80 %, as a lab swaps the battery
+        params = {**params, "SIM_BAT_MIN_PCT": 80.0}
     vehicle = Px4Sitl(build, work, params, ready=STARTED_LINE)
     t0 = time.monotonic()
     load = os.getloadavg()[0]
@@ -168,8 +178,20 @@ def fly(
             if point is not GPS:
                 rig = stack.enter_context(LabRig(vehicle.instance, point.rig_args()))
                 source += ["--mocap", rig.url]
-            args = ["fly", *source, "--iter", str(iterations),
-                    "--profile", str(profile_file(work, profile, mocap=point is not GPS)),
+            flown_profile = profile_file(work, profile, mocap=point is not GPS)
+            text = ""
+            if identify and not run.exists():
+                identified = work / "identified.yaml"
+                ident = subprocess.run(
+                    [sys.executable, "-m", "gcs", "identify", *source, "--profile",
+                     str(flown_profile), "--run", str(out / f"{name}-identify"),
+                     "--out", str(identified)],
+                    cwd=ROOT, capture_output=True, text=True, timeout=FLY_TIMEOUT_S,
+                    env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
+                )  # fmt: skip
+                text = ident.stdout + ident.stderr + "\n"
+                flown_profile = identified
+            args = ["fly", *source, "--iter", str(iterations), "--profile", str(flown_profile),
                     "--run", str(run)]  # fmt: skip
             args += [] if trajectory is None else ["--trajectory", str(trajectory.resolve())]
             if run.exists():
@@ -181,9 +203,9 @@ def fly(
                     text=True, timeout=FLY_TIMEOUT_S,
                     env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
                 )  # fmt: skip
-                text = proc.stdout + proc.stderr
+                text += proc.stdout + proc.stderr
             except subprocess.TimeoutExpired as exc:
-                text = f"{exc.stdout or ''}{exc.stderr or ''}\nno end after {FLY_TIMEOUT_S} s"
+                text += f"{exc.stdout or ''}{exc.stderr or ''}\nno end after {FLY_TIMEOUT_S} s"
     finally:
         vehicle.stop()
     meta = {"load_before": round(load, 2), "load_after": round(os.getloadavg()[0], 2),
@@ -305,6 +327,11 @@ def main() -> None:
     parser.add_argument(
         "--again", type=int, help="resume each run, flying trial K's setpoints again first"
     )
+    parser.add_argument(
+        "--identify",
+        action="store_true",
+        help="identify each new run's vehicle first (gcs identify) and fly the identified profile",
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     if not args.table:
@@ -320,7 +347,14 @@ def main() -> None:
             list(
                 pool.map(
                     lambda item: fly(
-                        build, args.out, item[0], item[1], args.iter, args.again, args.trajectory
+                        build,
+                        args.out,
+                        item[0],
+                        item[1],
+                        args.iter,
+                        args.again,
+                        args.trajectory,
+                        args.identify,
                     ),
                     plan,
                 )
@@ -328,7 +362,10 @@ def main() -> None:
     for run in sorted(
         p
         for p in args.out.iterdir()
-        if p.is_dir() and not p.is_symlink() and not p.name.startswith(".")
+        if p.is_dir()
+        and not p.is_symlink()
+        and not p.name.startswith(".")
+        and not p.name.endswith("-identify")
     ):
         try:
             print(json.dumps(summary(run)), flush=True)
