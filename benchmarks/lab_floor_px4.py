@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import os
 import subprocess
@@ -122,6 +123,8 @@ def name_of(point: LabConditions | None, profile: str, trajectory: Path | None =
     )
     if point.mass_kg is not None or point.drag_n_s_m is not None:
         name += f"-kg{point.mass_kg or 1:g}-kdv{point.drag_n_s_m or 1:g}"
+    if point.evp_noise_m is not None:
+        name += f"-evp{point.evp_noise_m:g}"
     return name + (f"-t{trajectory.stem}" if trajectory else "")
 
 
@@ -313,6 +316,11 @@ def main() -> None:
     )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
+        "--evp-noise",
+        type=float,
+        help="EKF2_EVP_NOISE [m] of every lab point (default: PX4's 0.1 m)",
+    )
+    parser.add_argument(
         "--profiles",
         default="antx-adaptive,antx",
         help="comma-separated; NAME+a.b=VALUE sets a field (learning.limits.max_step_m=0.2)",
@@ -338,6 +346,11 @@ def main() -> None:
         points = [parse_point(p) for p in args.point] + draw_points(
             args.draw, args.seed, args.vehicle
         )
+        if args.evp_noise is not None:
+            points = [
+                p if p is GPS else dataclasses.replace(p, evp_noise_m=args.evp_noise)
+                for p in points
+            ]
         for p in points:
             print("point", json.dumps("gps" if p is GPS else p.__dict__), flush=True)
         build = Px4Build(build_dir()[0])

@@ -14,7 +14,7 @@ GOOD_GPS = {
 }  # fmt: skip
 GOOD_MOCAP = GOOD_GPS | {
     "EKF2_GPS_CTRL": 0, "EKF2_HGT_REF": 3, "EKF2_EV_CTRL": 15, "EKF2_EV_DELAY": 5.0,
-    "EKF2_MAG_TYPE": 5, "EKF2_BARO_CTRL": 0,
+    "EKF2_MAG_TYPE": 5, "EKF2_BARO_CTRL": 1, "EKF2_EVP_NOISE": 0.01,
 }  # fmt: skip
 
 
@@ -33,6 +33,17 @@ def test_px4_defaults_warn_on_link_loss_offboard_loss_and_takeover() -> None:
     levels = {v.param: v.level for v in judge(defaults, "gps")}
     assert levels["NAV_DLL_ACT"] == levels["COM_OBL_RC_ACT"] == "warn"
     assert levels["COM_RC_OVERRIDE"] == "warn" and levels["COM_RC_IN_MODE"] == "ok"
+
+
+def test_px4_defaults_on_mocap_warn_as_the_flight_s_own_check_does() -> None:
+    # PX4 v1.16's EKF2_EVP_NOISE 0.1 m; the barometer turned off as some labs do
+    defaults = GOOD_MOCAP | {"EKF2_EVP_NOISE": 0.1, "EKF2_BARO_CTRL": 0}
+    rows = {v.param: v for v in judge(defaults, "mocap")}
+    assert rows["EKF2_EVP_NOISE"].level == rows["EKF2_BARO_CTRL"].level == "warn"
+    assert "set EKF2_EVP_NOISE to 0.01" in rows["EKF2_EVP_NOISE"].note
+    assert "EKF2_BARO_CTRL 1" in rows["EKF2_BARO_CTRL"].note
+    flight = {f.text for f in ekf2_findings(defaults, forward=True) if f.level == "warning"}
+    assert {rows["EKF2_EVP_NOISE"].note, rows["EKF2_BARO_CTRL"].note} <= flight  # one source
 
 
 def test_vision_not_fused_with_mocap_is_refused_with_the_fix() -> None:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from gcs.flight.mocap.preflight import ekf2_findings
+import pytest
+
+from gcs.flight.mocap.preflight import ekf2_findings, ev_noise_granted
 
 INDOOR = {"EKF2_EV_CTRL": 15, "EKF2_HGT_REF": 3, "EKF2_GPS_CTRL": 0, "EKF2_EV_DELAY": 5.0}
 
@@ -66,3 +68,35 @@ def test_no_barometer_without_gps_is_a_warning_naming_the_landing() -> None:
     warned = [f.text for f in found if f.level == "warning"]
     assert len(warned) == 1 and "EKF2_BARO_CTRL 1" in warned[0] and "landing" in warned[0]
     assert [f.level for f in ekf2_findings({**INDOOR, "EKF2_BARO_CTRL": 1}, True)] == ["info"]
+
+
+@pytest.mark.parametrize(
+    ("evp", "mode", "std", "granted"),
+    [
+        (0.1, 0, 0.005, 0.1),  # PX4's default: the parameter bounds the 5 mm sent from below
+        (0.01, 0, 0.005, 0.01),  # PX4's smallest: 1 cm, whatever is sent
+        (0.01, 0, 0.05, 0.05),  # a noisier mocap said so: the message's
+        (0.02, 1, 0.005, 0.02),  # noise mode 1: the parameter alone
+        (0.001, 1, 0.005, 0.01),  # ... never below 1 cm
+    ],
+)
+def test_the_noise_ekf2_grants_a_pose_is_the_largest_bound(evp, mode, std, granted) -> None:
+    params = {"EKF2_EVP_NOISE": evp, "EKF2_EV_NOISE_MD": mode}
+    assert ev_noise_granted(params, std) == granted
+
+
+def test_px4_s_default_vision_noise_warns_with_the_fix_only_when_gcs_forwards() -> None:
+    default = {**INDOOR, "EKF2_EVP_NOISE": 0.1}
+    warned = [f.text for f in ekf2_findings(default, True) if f.level == "warning"]
+    assert len(warned) == 1 and warned[0].startswith("EKF2_EVP_NOISE = 0.1 m")
+    assert "0.1 m noisy (gcs sends 0.005 m)" in warned[0] and "to 0.01" in warned[0]
+    assert levels(default, forward=False) == ["info"]  # another bridge: its covariance unknown
+    # within twice what gcs sends (at least 1 cm): nothing to say; unread: not judged
+    for evp in (0.01, 0.02):
+        assert levels({**INDOOR, "EKF2_EVP_NOISE": evp}) == ["info"]
+    assert ev_noise_granted(INDOOR) is None and levels(INDOOR) == ["info"]
+    # a mocap sent as 3 cm noisy: 0.05 m is within twice that, 0.07 m is not
+    assert [f.level for f in ekf2_findings(default | {"EKF2_EVP_NOISE": 0.05}, True,
+                                           position_std_m=0.03)] == ["info"]  # fmt: skip
+    assert "warning" in [f.level for f in ekf2_findings(default | {"EKF2_EVP_NOISE": 0.07}, True,
+                                                        position_std_m=0.03)]  # fmt: skip

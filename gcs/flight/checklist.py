@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from gcs.flight.mocap.preflight import ekf2_findings
+from gcs.flight.mocap.preflight import EKF2_FLOAT_PARAMS, EKF2_INT_PARAMS, ekf2_findings
 from gcs.flight.preflight import link_loss_warnings
 from gcs.io.settings import FlightSettings
 
@@ -138,8 +138,7 @@ def _from_findings(param: str) -> Callable[..., Judgement]:
     def judge(value: float | None, params: dict[str, float | None]) -> Judgement:
         if value is None:
             return "warn", f"could not read {param}: not checked"
-        ekf2 = {n: params.get(n) for n in
-                ("EKF2_EV_CTRL", "EKF2_HGT_REF", "EKF2_GPS_CTRL", "EKF2_EV_DELAY")}  # fmt: skip
+        ekf2 = {n: params.get(n) for n in EKF2_INT_PARAMS + EKF2_FLOAT_PARAMS}
         for finding in ekf2_findings(ekf2, forward=True):
             if finding.level != "info" and finding.text.startswith(param):
                 return ("refuse" if finding.level == "refuse" else "warn"), finding.text
@@ -208,10 +207,14 @@ _MOCAP = (
          _one_of({5: ""}, {0: "0 (Automatic) fuses the magnetometer",
                            1: "1 (magnetic heading) fuses the magnetometer"},
                  "set EKF2_MAG_TYPE to 5 and EKF2_EV_CTRL bit 3 (yaw)")),
-    Item("EKF2_BARO_CTRL", "0 (off)",
-         "the barometer drifts indoors and in the propellers' wash",
-         _one_of({0: ""}, {1: "1 fuses the barometer beside the mocap's height"},
-                 "set EKF2_BARO_CTRL to 0")),
+    Item("EKF2_BARO_CTRL", "1 (on, beside the vision height reference)",
+         "a second height source: if the mocap is lost PX4 still knows its height and can "
+         "detect its landing (without it PX4 v1.16 SIH descended blind and stayed armed)",
+         _from_findings("EKF2_BARO_CTRL")),
+    Item("EKF2_EVP_NOISE", "0.01 m (PX4's smallest)",
+         "the least noise EKF2 grants each mocap pose, whatever gcs sends with it; PX4's "
+         "0.1 m follows a millimetre mocap loosely",
+         _from_findings("EKF2_EVP_NOISE")),
 )  # fmt: skip
 
 

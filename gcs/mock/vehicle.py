@@ -272,6 +272,9 @@ class Px4Params:
             "EKF2_MAG_TYPE": (integer, 5 if cfg.vision.enabled else 0),
             "EKF2_BARO_CTRL": (integer, 1),  # PX4's default (the mock has no barometer model)
             "EKF2_EV_DELAY": (real, p.ekf2_ev_delay_ms),
+            # as a lab sets them (docs/real-vehicle.md); the mock's vision model does not read them
+            "EKF2_EVP_NOISE": (real, 0.01),
+            "EKF2_EV_NOISE_MD": (integer, 0),
             "EKF2_NOAID_TOUT": (integer, round(p.ekf2_noaid_tout_s * 1e6)),
             "GF_ACTION": (integer, p.gf_action),
             "GF_MAX_HOR_DIST": (real, p.gf_max_hor_dist_m),

@@ -84,6 +84,10 @@ class LabConditions:
         thrust-to-weight ratio falls as the mass rises); None keeps PX4's 1 kg.
     drag_n_s_m : float or None
         The SIH vehicle's linear drag [N s/m] (``SIH_KDV``); None keeps PX4's 1.
+    evp_noise_m : float or None
+        What PX4 is told of the mocap's position noise [m] (``EKF2_EVP_NOISE``: EKF2 weighs a
+        vision position as at least this noisy, whatever the message's covariance says);
+        None keeps PX4's 0.1 m.
     """
 
     rate_hz: float = 120.0
@@ -93,6 +97,7 @@ class LabConditions:
     match_ev_delay: bool = False
     mass_kg: float | None = None
     drag_n_s_m: float | None = None
+    evp_noise_m: float | None = None
 
     def rig_args(self) -> list[str]:
         """The rig's options (:func:`px4.lab_rig.rig_command`) for these conditions."""
@@ -110,6 +115,8 @@ class LabConditions:
             params["SIH_MASS"] = self.mass_kg
         if self.drag_n_s_m is not None:
             params["SIH_KDV"] = self.drag_n_s_m
+        if self.evp_noise_m is not None:
+            params["EKF2_EVP_NOISE"] = self.evp_noise_m
         return params
 
 

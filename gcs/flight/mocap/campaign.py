@@ -181,7 +181,9 @@ async def before_arming(vehicle: Vehicle, mocap: MocapLink, note: Note) -> Ekf2C
     params: dict[str, float | int | None] = dict(await vehicle.read_int_params(EKF2_INT_PARAMS))
     for name in EKF2_FLOAT_PARAMS:
         params[name] = await vehicle.read_float_param(name)
-    findings = ekf2_findings(params, mocap.settings.forward, mocap.settings.message)
+    findings = ekf2_findings(
+        params, mocap.settings.forward, mocap.settings.message, mocap.settings.position_std_m
+    )
     for f in findings:
         note(f.text, f.level != "info")
     refused = [f.text for f in findings if f.level == "refuse"]
