@@ -266,6 +266,9 @@ def test_a_rotated_room_passes_the_frame_check_and_losing_the_mocap_mid_trial_la
         re.search(r"mocap check: 1\.00 m moves.*?following\s+\w+", out, re.S)[0].split()
     )
     assert "pre-flight frame check" not in out, out  # the rotated room is not refused
+    # the lab keeps PX4's default vision noise (EKF2_EVP_NOISE 0.1 m): read from the firmware,
+    # warned about with the fix, and flown
+    assert "warning: EKF2_EVP_NOISE = 0.1 m" in out and "to 0.01" in out, out
     assert "the mapping is not judged in the air" in out, out  # forwarded: (2) alone
     assert code == 2, out
     assert "mocap" in out.splitlines()[-1], out
