@@ -17,9 +17,10 @@ $(VENV)/.installed: pyproject.toml
 PYTEST  := $(BIN)/python -m pytest -n 2 --dist worksteal -q
 FAST    := -m "not e2e and not px4 and not live"
 FLIGHTS := -m "(e2e or px4 or live) and not lab_floor"
-# a real-time flight keeps about 0.4 of a core busy (its vehicle, gcs, MAVSDK's server) and
-# spends the rest waiting on the clock: three at once fit beside the quick tests
-FLIGHT_WORKERS ?= 3
+# a real-time flight keeps about 0.3-0.4 of a core busy (its vehicle, gcs, MAVSDK's server) and
+# spends the rest waiting on the clock: four at once leave the quick tests (at nice 10) the rest
+# of two cores, and both parts end at about the same time (docs/testing.md)
+FLIGHT_WORKERS ?= 4
 # the tests that compare numbers with records made on another machine (tests/records.py), and
 # those that hold a result bit for bit on one machine (workers vs one process, resumed vs not,
 # kept learner vs new): run again as on another CPU by test-other-cpu
