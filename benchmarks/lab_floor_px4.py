@@ -144,6 +144,20 @@ def flown(run: Path) -> int:
         return 0
 
 
+def run_gcs(args: list[str]) -> str:
+    """Run ``gcs ARGS`` from the checkout, wide lines, and return its output (standard output
+    then error); one that has not ended after ``FLY_TIMEOUT_S`` is stopped and its output so far
+    returned with a line saying so."""
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "gcs", *args], cwd=ROOT, capture_output=True, text=True,
+            timeout=FLY_TIMEOUT_S, env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
+        )  # fmt: skip
+    except subprocess.TimeoutExpired as exc:
+        return f"{exc.stdout or ''}{exc.stderr or ''}\nno end after {FLY_TIMEOUT_S} s"
+    return proc.stdout + proc.stderr
+
+
 def fly(
     build: Px4Build,
     out: Path,
@@ -185,14 +199,10 @@ def fly(
             text = ""
             if identify and not run.exists():
                 identified = work / "identified.yaml"
-                ident = subprocess.run(
-                    [sys.executable, "-m", "gcs", "identify", *source, "--profile",
-                     str(flown_profile), "--run", str(out / f"{name}-identify"),
-                     "--out", str(identified)],
-                    cwd=ROOT, capture_output=True, text=True, timeout=FLY_TIMEOUT_S,
-                    env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
-                )  # fmt: skip
-                text = ident.stdout + ident.stderr + "\n"
+                ident_run = str(out / f"{name}-identify")
+                text = run_gcs(["identify", *source, "--profile", str(flown_profile),
+                                "--run", ident_run, "--out", str(identified)])  # fmt: skip
+                text += "\n"
                 flown_profile = identified
             args = ["fly", *source, "--iter", str(iterations), "--profile", str(flown_profile),
                     "--run", str(run)]  # fmt: skip
@@ -200,15 +210,7 @@ def fly(
             if run.exists():
                 args = ["fly", *source, "--resume", str(run), "--iter", str(left)]
                 args += [] if again is None else ["--again", str(again)]
-            try:
-                proc = subprocess.run(
-                    [sys.executable, "-m", "gcs", *args], cwd=ROOT, capture_output=True,
-                    text=True, timeout=FLY_TIMEOUT_S,
-                    env={**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"},
-                )  # fmt: skip
-                text += proc.stdout + proc.stderr
-            except subprocess.TimeoutExpired as exc:
-                text += f"{exc.stdout or ''}{exc.stderr or ''}\nno end after {FLY_TIMEOUT_S} s"
+            text += run_gcs(args)
     finally:
         vehicle.stop()
     meta = {"load_before": round(load, 2), "load_after": round(os.getloadavg()[0], 2),
