@@ -12,6 +12,7 @@ import signal
 import socket
 import subprocess
 import sys
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -83,6 +84,26 @@ def test_two_local_workers_give_the_json_of_one(
     data = json.loads(reference)
     assert data["definition"]["seed"] == 5 and data["definition"]["gcs_version"]
     assert len(data["results"]) == 2 and len(data["results"][0]["plants_results"]) == 4
+
+
+def test_a_local_cluster_serves_http_on_loopback_on_a_free_port_and_says_nothing() -> None:
+    """The scheduler of a LocalCluster serves a small HTTP interface even without its dashboard;
+    Dask's default port 8787 would be taken by a second study (or the user's own cluster) and
+    Dask would then warn on the terminal. gcs's asks for a free port on loopback: with 8787 held
+    here, nothing is said."""
+    held = socket.socket()
+    try:
+        held.bind(("127.0.0.1", 8787))
+        held.listen()
+    except OSError:
+        pass  # another program has it: held all the same
+    with held, warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        with connect(Cluster(workers=1)) as client:
+            http = client.cluster.scheduler.http_server
+            assert (http.address, client.submit(sum, [1, 2]).result()) == ("127.0.0.1", 3)
+            assert http.port != 8787
+    assert not [str(w.message) for w in said if "8787" in str(w.message)]
 
 
 @pytest.fixture

@@ -299,11 +299,16 @@ def connect(cluster: Cluster) -> Iterator[Any]:
         for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
             environ[name] = cluster.blas_threads
     with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+        # no dashboard; the scheduler still serves its small HTTP interface, which would take
+        # port 8787 and, when another study or a user's cluster has it, warn on the terminal:
+        # on loopback, on a free port
         local = LocalCluster(
             n_workers=n,
             threads_per_worker=1,
             processes=True,
+            host="127.0.0.1",
             dashboard_address=None,
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
             silence_logs=logging.ERROR,
         )
     try:
