@@ -195,11 +195,12 @@ def test_telemetry_dropout_fault_silences_positions(tmp_path: Path) -> None:
 
             async def collect() -> None:
                 # until 0.3 s of positions have come after a pause of more than half the silence
+                resumed_ms = None
                 async for message in direct.subscribe_message("LOCAL_POSITION_NED"):
                     stamps.append(int(json.loads(message.fields_json)["time_boot_ms"]))
-                    pauses = [i for i in range(1, len(stamps))
-                              if stamps[i] - stamps[i - 1] > silence_ms / 2]  # fmt: skip
-                    if pauses and stamps[-1] - stamps[pauses[-1]] >= 300:
+                    if len(stamps) > 1 and stamps[-1] - stamps[-2] > silence_ms / 2:
+                        resumed_ms = stamps[-1]
+                    if resumed_ms is not None and stamps[-1] - resumed_ms >= 300:
                         return
 
             collecting = asyncio.create_task(collect())
