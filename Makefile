@@ -16,7 +16,7 @@ $(VENV)/.installed: pyproject.toml
 
 PYTEST  := $(BIN)/python -m pytest -n 2 --dist worksteal -q
 FAST    := -m "not e2e and not px4 and not live"
-FLIGHTS := -m "(e2e or px4 or live) and not lab_floor"
+FLIGHTS := -m "e2e or px4 or live"
 # a real-time flight keeps about 0.3-0.4 of a core busy (its vehicle, gcs, MAVSDK's server) and
 # spends the rest waiting on the clock: four at once leave the quick tests (at nice 10) the rest
 # of two cores, and both parts end at about the same time (docs/testing.md)
@@ -64,7 +64,7 @@ test-px4: setup
 	$(BIN)/python -m pytest -n 2 --dist worksteal -q -m "px4 and not lab_floor" tests/px4
 
 # learning at the floor on real firmware in a lab as real ones are: one flight of about five
-# minutes whose bound is statistical; not part of make test (6 of 7 there; docs/testing.md)
+# minutes whose bound is statistical (part of make test too; docs/testing.md)
 test-lab-floor: setup
 	$(BIN)/python -m pytest -q -m lab_floor tests/px4
 

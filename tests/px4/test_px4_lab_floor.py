@@ -5,8 +5,8 @@ firmware: the rise was the floor's measure"): Motive at 100 Hz, 30 ms from the b
 to the frame with EKF2_EV_DELAY told 30 ms (a careful lab), 1 mm of marker noise per axis,
 and the room's axes turned 30 deg from gcs's mapping (PX4, on vision only, flies in the
 room's frame). The README's flight in it: ``gcs fly --mocap ... --profile antx-adaptive``, the
-floor measured from three flights of trial 0 (two repeats), so that the scatter between flights
-is measured too (``gcs.core.floor``). What the test asserts is the issue's bound: no learned
+floor measured from four flights of trial 0 (three repeats), so that the scatter between flights
+is measured too (``gcs.core.floor``). What the test asserts is the bound: no learned
 trial from j = 2 on above 2 floors. How close to the floor the trials came (the goal: within
 1.5 floors, the median within 1.25) is a figure, kept in the test's record;
 ``benchmarks/lab_floor_px4.py`` flies this point and others for the table.
@@ -24,11 +24,14 @@ its model holds; the paper's eight is flown by ``benchmarks/lab_floor_px4.py``. 
 times as shipped on the paper's eight, this test held 7 times; docs/testing.md has the runs
 on both.
 
-Not part of ``make test`` (marked ``lab_floor``; ``make test-lab-floor`` flies it): in it, this
-flight held in 6 of 7 runs (a quiet CI run gave 1.72 and 2.05 floors at j = 2, 3, 2.05 floors
-from its step's prediction where noise alone gives 1.14), and a learner with a right model and
-the shipped estimate's weights holds the bound in about 97 % of flights here: ten in a row are
-not assured (docs/testing.md).
+**The floor from four flights, not three** (the shipped profile's two repeats): one flight's
+e_pos at the floor varies by 22-31 % of the floor from flight to flight, so a floor drawn from
+three flights is itself a draw. Replayed on twelve recorded flights of identical setpoints at
+this point on this eight (``benchmarks/floor_targets.py --run``), a learner with a right model
+and the shipped estimate's weights holds the bound on two trials in 98.4 % of flights against a
+floor from three flights and in 99.8 % against one from four (docs/testing.md): ten flights in
+a row about 85 % and 98 % of the time. It is part of ``make test`` (the flights go first, and
+this one first of them); ``make test-lab-floor`` flies it alone.
 """
 
 from __future__ import annotations
@@ -49,8 +52,8 @@ pytestmark = [pytest.mark.px4, pytest.mark.lab_floor]
 #: the lab: 100 Hz, 30 ms told to EKF2, 1 mm, the room turned 30 deg
 LAB = LabConditions(rate_hz=100.0, latency_ms=30.0, noise_mm=1.0, yaw_offset_deg=30.0,
                     match_ev_delay=True)  # fmt: skip
-#: trial 0 and two repeats (the floor), then learned trials j = 1, 2, 3
-REPEATS = 2
+#: trial 0 and three repeats (the floor from four flights), then learned trials j = 1, 2, 3
+REPEATS = 3
 TRIALS = REPEATS + 4
 #: the issue's bound on a learned trial from j = 2 on [floors]
 BOUND = 2.0
@@ -83,7 +86,7 @@ def test_learning_stays_within_two_floors_in_a_realistic_lab(
 ) -> None:
     """The README's adaptive flight in the lab of :data:`LAB` on the eight of
     :func:`eight_this_vehicle_follows`: it lands and disarms, the floor
-    comes from the three flights of trial 0, and no learned trial from j = 2 on is above
+    comes from the four flights of trial 0, and no learned trial from j = 2 on is above
     :data:`BOUND` floors."""
     px4 = px4_factory(params=LAB.px4_params(), ready=STARTED_LINE)
     run_path = tmp_path / "run"
