@@ -6,10 +6,22 @@ MavlinkDirect plugins (Param, Geofence and Events are opened per use). MAVSDK's 
 
 Position samples: MAVSDK's ``position_velocity_ned`` has no time stamp, so LOCAL_POSITION_NED
 is read raw through MavlinkDirect (its ``time_boot_ms``).
+
+**No MAVSDK object is destroyed under a call of its own.** MAVSDK's asyncio commands run its
+blocking call in an executor thread; a timeout or a cancellation ends the await, not the call,
+which returns when MAVSDK's own timeout ends it (a command without an answer: about 1.5 s).
+Destroying the plugin or the ``Mavsdk`` instance meanwhile leaves that thread blocked for
+good, and with it ``asyncio.run``'s exit (it joins the executor's threads) and the
+interpreter's: gcs would hang after landing. So every call runs as a task the link keeps until
+the thread returns (:meth:`MavsdkLink._call`), a plugin opened for one call is destroyed when
+that call has returned, and :meth:`MavsdkLink.close` waits for the calls still running before
+destroying anything (at most :data:`CALLS_SETTLE_S`; a call still running then keeps its
+objects alive instead).
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 import threading
@@ -60,6 +72,14 @@ _LOG_LEVELS = {
 #: vehicles do not serve it) its callback gets an empty message, compid 0, and MAVSDK warns.
 _HARMLESS = frozenset({"Unexpected component ID 0"})
 
+#: how long :meth:`MavsdkLink.close` waits for MAVSDK calls still running in executor threads
+#: (a timed-out or cancelled call: MAVSDK ends a command without an answer in about 1.5 s, a
+#: parameter list in about 12 s) [s]
+CALLS_SETTLE_S = 15.0
+
+#: the MAVSDK objects of calls that outlived :data:`CALLS_SETTLE_S`: kept, never destroyed
+_KEPT_ALIVE: list[object] = []
+
 
 def route_mavsdk_log(level: LogLevel, message: str, file: str | None, line: int) -> bool:
     """Send a line of the C++ core's log to Python logging instead of coloured stderr."""
@@ -68,13 +88,19 @@ def route_mavsdk_log(level: LogLevel, message: str, file: str | None, line: int)
     return True
 
 
-async def _call(call: Callable[[], Awaitable[_T]]) -> _T:
+async def _refused_as_command(call: Callable[[], Awaitable[_T]]) -> _T:
     """Run one MAVSDK call; its error becomes CommandRefused naming the result."""
     try:
         return await call()
     except MavsdkError as exc:
         result = getattr(exc, "result", None)
         raise CommandRefused(getattr(result, "name", None) or str(exc)) from None
+
+
+def _consume(task: asyncio.Task[Any]) -> None:
+    """Read a finished call's outcome, so that one nobody awaits any more is not reported."""
+    if not task.cancelled():
+        task.exception()
 
 
 class MavsdkLink(VehicleLink):
@@ -91,6 +117,44 @@ class MavsdkLink(VehicleLink):
         self._direct: MavlinkDirectAsync | None = None
         self._raised: tuple[int, Previous | None] | None = None
         self._raised_others: dict[int, Previous] = {}
+        self._running: set[asyncio.Task[Any]] = set()
+
+    async def _call(
+        self, call: Callable[[], Awaitable[_T]], then: Callable[[], None] | None = None
+    ) -> _T:
+        """Run one MAVSDK call as a task the link keeps until its thread has returned.
+
+        Parameters
+        ----------
+        call : callable
+            Makes the call's awaitable (a MAVSDK asyncio plugin method).
+        then : callable, optional
+            Run when the call has returned, even if its caller stopped waiting (the
+            destroy of a plugin opened for this call).
+
+        Returns
+        -------
+        object
+            What the call returned.
+
+        Raises
+        ------
+        CommandRefused
+            MAVSDK's error, naming its result.
+        """
+
+        async def run() -> _T:
+            try:
+                return await _refused_as_command(call)
+            finally:
+                if then is not None:
+                    then()
+
+        task = asyncio.ensure_future(run())
+        self._running.add(task)
+        task.add_done_callback(self._running.discard)
+        task.add_done_callback(_consume)
+        return await asyncio.shield(task)
 
     async def connect(self, url: str, timeout_s: float) -> bool:
         self._enter_flight()
@@ -122,15 +186,27 @@ class MavsdkLink(VehicleLink):
         return True
 
     async def close(self) -> None:
-        for plugin in (self._action, self._offboard, self._telemetry):
-            if plugin is not None:
-                plugin.destroy()
+        plugins = [p for p in (self._action, self._offboard, self._telemetry) if p is not None]
+        objects = [*plugins, *([self._mavsdk] if self._mavsdk is not None else [])]
+        running = set(self._running)
+        if running:
+            _, still = await asyncio.wait(running, timeout=CALLS_SETTLE_S)
+            if still:  # destroying them now would block this process's exit for good
+                _mavsdk_log.warning(
+                    "%d MAVSDK call(s) still running after %g s: the link is left open",
+                    len(still), CALLS_SETTLE_S,
+                )  # fmt: skip
+                _KEPT_ALIVE.extend([*objects, *self._direct_and_system(), *still])
+                objects = []
+        for obj in objects:
+            obj.destroy()
         self._action = self._offboard = self._telemetry = self._direct = None
-        if self._mavsdk is not None:
-            self._mavsdk.destroy()
-            self._mavsdk = None
+        self._mavsdk = None
         self._system = None
         self._leave_flight()
+
+    def _direct_and_system(self) -> list[object]:
+        return [o for o in (self._direct, self._system) if o is not None]
 
     def _enter_flight(self) -> None:
         """The flight loop, and what MAVSDK starts for it, keep their streams at rate on a busy
@@ -156,7 +232,7 @@ class MavsdkLink(VehicleLink):
         return _need(self._system)
 
     async def is_connected(self) -> bool:
-        return bool(await self.system.is_connected())
+        return bool(await self._call(self.system.is_connected))
 
     # -- streams
     async def positions(self) -> AsyncIterator[PositionReport]:
@@ -221,50 +297,47 @@ class MavsdkLink(VehicleLink):
     # -- commands
     async def set_position_rate(self, rate_hz: float) -> None:
         telemetry = _need(self._telemetry)
-        await _call(lambda: telemetry.set_rate_position_velocity_ned(rate_hz))
+        await self._call(lambda: telemetry.set_rate_position_velocity_ned(rate_hz))
 
     async def set_landed_state_rate(self, rate_hz: float) -> None:
         telemetry = _need(self._telemetry)
-        await _call(lambda: telemetry.set_rate_landed_state(rate_hz))
+        await self._call(lambda: telemetry.set_rate_landed_state(rate_hz))
 
     async def set_takeoff_altitude(self, altitude_m: float) -> None:
         action = _need(self._action)
-        await _call(lambda: action.set_takeoff_altitude(float(altitude_m)))
+        await self._call(lambda: action.set_takeoff_altitude(float(altitude_m)))
 
     async def arm(self) -> None:
-        await _call(_need(self._action).arm)
+        await self._call(_need(self._action).arm)
 
     async def disarm(self) -> None:
-        await _call(_need(self._action).disarm)
+        await self._call(_need(self._action).disarm)
 
     async def takeoff(self) -> None:
-        await _call(_need(self._action).takeoff)
+        await self._call(_need(self._action).takeoff)
 
     async def land(self) -> None:
-        await _call(_need(self._action).land)
+        await self._call(_need(self._action).land)
 
     async def start_offboard(self) -> None:
-        await _call(_need(self._offboard).start)
+        await self._call(_need(self._offboard).start)
 
     async def stop_offboard(self) -> None:
-        await _call(_need(self._offboard).stop)
+        await self._call(_need(self._offboard).stop)
 
     async def set_position_ned(
         self, north_m: float, east_m: float, down_m: float, yaw_deg: float
     ) -> None:
         offboard = _need(self._offboard)
         setpoint = PositionNedYaw(north_m, east_m, down_m, yaw_deg)
-        await _call(lambda: offboard.set_position_ned(setpoint))
+        await self._call(lambda: offboard.set_position_ned(setpoint))
 
     # -- parameters, origin, geofence
     async def _with_param(self, use: Callable[[Any], Awaitable[_T]]) -> _T:
         from mavsdk.asyncio.plugins.param import ParamAsync
 
         param = ParamAsync(self.system)
-        try:
-            return await _call(lambda: use(param))
-        finally:
-            param.destroy()
+        return await self._call(lambda: use(param), then=param.destroy)
 
     async def get_param_int(self, name: str) -> int:
         return int(await self._with_param(lambda p: p.get_param_int(name)))
@@ -284,12 +357,12 @@ class MavsdkLink(VehicleLink):
         return values | {p.name: float(p.value) for p in found.float_params}
 
     async def get_gps_global_origin(self) -> tuple[float, float, float]:
-        origin = await _call(_need(self._telemetry).get_gps_global_origin)
+        origin = await self._call(_need(self._telemetry).get_gps_global_origin)
         return (origin.latitude_deg, origin.longitude_deg, origin.altitude_m)
 
     async def set_gps_global_origin(self, lat_deg: float, lon_deg: float, alt_m: float) -> None:
         direct = _need(self._direct)
-        target = await self.system.get_system_id()
+        target = await self._call(self.system.get_system_id)
         fields = {
             "target_system": target,
             "latitude": round(lat_deg * 1e7),
@@ -298,7 +371,7 @@ class MavsdkLink(VehicleLink):
             "time_usec": 0,
         }
         message = MavlinkMessage("SET_GPS_GLOBAL_ORIGIN", 0, 0, target, 0, json.dumps(fields))
-        await _call(lambda: direct.send_message(message))
+        await self._call(lambda: direct.send_message(message))
 
     async def upload_inclusion_polygon(self, vertices_deg: list[tuple[float, float]]) -> None:
         from mavsdk.asyncio.plugins.geofence import (
@@ -312,10 +385,7 @@ class MavsdkLink(VehicleLink):
         fence = GeofenceAsync(self.system)
         points = [Point(lat, lon) for lat, lon in vertices_deg]
         data = GeofenceData([Polygon(points, FenceType.INCLUSION)], [])
-        try:
-            await _call(lambda: fence.upload_geofence(data))
-        finally:
-            fence.destroy()
+        await self._call(lambda: fence.upload_geofence(data), then=fence.destroy)
 
     def mocap_plugin(self) -> Any:
         from mavsdk.plugins.mocap import Mocap
