@@ -130,7 +130,7 @@ class MavsdkLink(VehicleLink):
             Makes the call's awaitable (a MAVSDK asyncio plugin method).
         then : callable, optional
             Run when the call has returned, even if its caller stopped waiting (the
-            destroy of a plugin opened for this call).
+            destroy of a plugin opened for this call); never while it may still run.
 
         Returns
         -------
@@ -145,10 +145,20 @@ class MavsdkLink(VehicleLink):
 
         async def run() -> _T:
             try:
-                return await _refused_as_command(call)
-            finally:
+                result = await _refused_as_command(call)
+            except asyncio.CancelledError:
+                # the loop is closing while the call may still run in its thread: destroying
+                # its objects now would block that thread, so they are kept instead
                 if then is not None:
+                    _KEPT_ALIVE.append(then)
+                raise
+            except BaseException:
+                if then is not None:  # the call returned, with an error
                     then()
+                raise
+            if then is not None:
+                then()
+            return result
 
         task = asyncio.ensure_future(run())
         self._running.add(task)
