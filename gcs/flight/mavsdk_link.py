@@ -196,27 +196,25 @@ class MavsdkLink(VehicleLink):
         return True
 
     async def close(self) -> None:
-        plugins = [p for p in (self._action, self._offboard, self._telemetry) if p is not None]
-        objects = [*plugins, *([self._mavsdk] if self._mavsdk is not None else [])]
-        running = set(self._running)
-        if running:
-            _, still = await asyncio.wait(running, timeout=CALLS_SETTLE_S)
+        # the plugins and Mavsdk are destroyed; MavlinkDirect and the System are only dropped
+        owned = [self._action, self._offboard, self._telemetry, self._mavsdk]
+        kept = [self._direct, self._system]
+        if self._running:
+            _, still = await asyncio.wait(set(self._running), timeout=CALLS_SETTLE_S)
             if still:  # destroying them now would block this process's exit for good
                 _mavsdk_log.warning(
                     "%d MAVSDK call(s) still running after %g s: the link is left open",
                     len(still), CALLS_SETTLE_S,
                 )  # fmt: skip
-                _KEPT_ALIVE.extend([*objects, *self._direct_and_system(), *still])
-                objects = []
-        for obj in objects:
-            obj.destroy()
+                _KEPT_ALIVE.extend([*owned, *kept, *still])
+                owned = []
+        for obj in owned:
+            if obj is not None:
+                obj.destroy()
         self._action = self._offboard = self._telemetry = self._direct = None
         self._mavsdk = None
         self._system = None
         self._leave_flight()
-
-    def _direct_and_system(self) -> list[object]:
-        return [o for o in (self._direct, self._system) if o is not None]
 
     def _enter_flight(self) -> None:
         """The flight loop, and what MAVSDK starts for it, keep their streams at rate on a busy
