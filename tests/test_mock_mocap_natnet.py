@@ -4,6 +4,7 @@ server's frames under a latency (pose and time stamps), stepped without real tim
 from __future__ import annotations
 
 import math
+import socket
 import struct
 import time
 
@@ -166,3 +167,35 @@ def test_a_negative_or_absurd_latency_is_refused() -> None:
     for latency_s in (-0.001, 1.5, math.nan):
         with pytest.raises(ValueError, match="latency_s"):
             NatNetServer(lambda t: None, latency_s=latency_s)
+
+
+def test_a_server_never_gets_a_data_port_another_reusable_socket_holds() -> None:
+    # Servers and their clients bind the data port with SO_REUSEADDR. Set before binding to
+    # port 0, Linux may hand out a port such a socket already holds: two servers would share a
+    # port and each client would read the other vehicle's frames (a "jump" of a metre). A
+    # thousand held ports out of the ephemeral range make that near certain over 300 servers.
+    held = []
+    try:
+        for _ in range(1000):
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            held.append(sock)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind(("127.0.0.1", 0))
+        taken = {sock.getsockname()[1] for sock in held}
+        shared = []
+        for _ in range(300):
+            server = NatNetServer(lambda t: None)
+            try:
+                if server.data_port in taken:
+                    shared.append(server.data_port)
+                # a client beside it still binds the port, as beside a real Motive
+                client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                client.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                client.bind(("0.0.0.0", server.data_port))
+                client.close()
+            finally:
+                server.close()
+        assert shared == []
+    finally:
+        for sock in held:
+            sock.close()

@@ -9,8 +9,10 @@ socket (Motive's 1511) sends every ``NAT_FRAMEOFDATA`` to the multicast group (M
 with a multicast TTL of 0: they never leave the machine. Parallel servers are kept apart by
 their data ports, which the system hands out once: a client learns the data port and the group
 from ``NAT_SERVERINFO`` and listens on that port only (Linux delivers a group's datagrams to
-the sockets bound to their destination port). The data socket is bound with ``SO_REUSEADDR``
-so that a client on the same machine can bind the same port, as beside a real Motive.
+the sockets bound to their destination port). The data socket gets ``SO_REUSEADDR`` once bound,
+so that a client on the same machine can bind the same port, as beside a real Motive; set
+before the bind, Linux may hand out a port another such socket already holds, and two
+servers' frames would then reach each other's clients.
 
 Each frame, at ``rate_hz`` on a grid of the monotonic clock, the true pose comes from
 ``pose_fn(t_s - latency_s)`` in the system's own axes (Motive: Y up); the rigid body's markers
@@ -280,8 +282,11 @@ class NatNetServer:
         self._data = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self._cmd.bind((host, command_port))
-            self._data.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            # the port first, then SO_REUSEADDR: set before binding to port 0, Linux may hand
+            # out a port that another SO_REUSEADDR socket holds (another server's, or its
+            # client's), and two servers' frames would reach both clients
             self._data.bind((host, 0))
+            self._data.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(host))
             self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
             self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
