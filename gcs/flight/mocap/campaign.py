@@ -367,7 +367,9 @@ async def _frame_check(
     fence = vehicle.fence
     home = await vehicle.hold_position()
     floor = (settings.settle_tolerance_m, settings.settle_speed_m_s)
-    first = await _window(vehicle, mocap, home, settings, "before the frame check", tolerances)
+    first = await _window(
+        vehicle, mocap, home, settings, "the hover before the frame check", tolerances
+    )
     if tolerances is None:
         try:
             stats = hover_stats(first[0], first[1], home)
@@ -383,7 +385,10 @@ async def _frame_check(
         step[axis] = length_m
         if fence is not None and fence.setpoint_problem(home + step) is not None:
             step = -step  # the other way stays inside the arena
-        for target, what in ((home + step, f"the {name} move"), (home, f"home after {name}")):
+        for target, what in (
+            (home + step, f"the hover after the {name} move"),
+            (home, f"the hover home after the {name} move"),
+        ):
             await vehicle.goto(target, settings.transit_speed_m_s)
             windows.append(await _window(vehicle, mocap, target, settings, what, tolerances))
             cmds.append(target - home)
