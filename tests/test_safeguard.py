@@ -42,6 +42,24 @@ def test_revert_to_the_best_trial_with_a_smaller_step() -> None:
     assert calm.action == "continue"
 
 
+def test_a_repeat_of_the_best_trials_setpoints_is_never_called_worse() -> None:
+    # trial 3 flew trial 0's setpoints again and came out above the threshold (a floor
+    # measured from repeats scatters so): falling back to the same setpoints would only halve
+    # the next step
+    sp = np.concatenate([np.repeat(history(1), 4, axis=0), history(2)[1:]])
+    e = np.array([0.780, 0.848, 0.938, 0.901, 0.607])
+    d = safeguard(e[:4], sp[:4], 0.0283, ARENA, SafeguardSettings())
+    assert d.threshold_m == pytest.approx(0.780 + 3 * np.sqrt(2) * 0.0283)
+    assert e[3] > d.threshold_m
+    assert d.action == "continue" and d.step == 1.0 and d.anchor_trial == 3
+    assert "setpoints of trial 0 again" in d.reason
+    # a learned trial as far above the same best trial is called worse
+    learned = safeguard(
+        np.append(e[:3], 0.901), sp[[0, 1, 2, 4]], 0.0283, ARENA, SafeguardSettings()
+    )
+    assert learned.action == "revert" and learned.anchor_trial == 0 and learned.step == 0.5
+
+
 def test_single_trial_continues() -> None:
     d = safeguard(np.array([0.5]), history(1), 0.0, ARENA, SafeguardSettings())
     assert d.action == "continue" and d.anchor_trial == 0

@@ -7,9 +7,13 @@ A pure decision on the e_pos history. Trial ``j`` is *worse* when
 ``e_best`` the smallest e_pos of the earlier trials and ``sigma`` the scatter of one trial's
 e_pos at the floor (:class:`gcs.core.floor.Floor`): the difference of two trials' e_pos
 scatters by ``sqrt(2) sigma`` when nothing but the vehicle's non-repeatability separates them,
-so with ``k = 2`` a trial is called worse by chance with probability 2.3 % (and less, since
-``e_best`` is the minimum of several). Then the next update starts from the best trial's
-setpoints and takes only a fraction ``step`` of the QP's step from there:
+so with ``k = 2`` a trial is called worse by chance with probability 2.3 % (more when
+``e_best`` is the smallest of several trials at the floor, which sits below their mean).
+A trial that flew the best trial's setpoints again (a repeat measuring the floor) is never
+called worse: identical setpoints differ by the vehicle's non-repeatability alone, and a fall
+back to the same setpoints would only shorten the next step. Otherwise, when worse, the next
+update starts from the best trial's setpoints and takes only a fraction ``step`` of the QP's
+step from there:
 ``U_next = U_best + step (U* - U_best)``. ``U*`` satisfies the arena and every setpoint
 limit of the model in use; ``U_best`` satisfied those of the model it was learned with. When a
 model refresh changed the relative degree since, the deviation bound is aligned differently
@@ -151,7 +155,9 @@ def safeguard(
     newest = e.size - 1
     best = int(np.argmin(e[:-1])) if e.size > 1 else newest
     threshold = float(e[best] + settings.k_sigma * np.sqrt(2.0) * scatter_m)
-    worse = e.size > 1 and e[newest] > threshold
+    above = e.size > 1 and e[newest] > threshold
+    repeat = above and np.array_equal(sp[newest], sp[best])
+    worse = above and not repeat
     anchor = best if worse else newest
     overall = int(np.argmin(e))
     (n_lo, n_hi), (e_lo, e_hi), _ = arena.bounds()
@@ -163,6 +169,11 @@ def safeguard(
             f"trial {newest} e_pos {e[newest]:.4f} m is above the best trial {best} "
             f"({e[best]:.4f} m) by more than {settings.k_sigma:g} sqrt(2) x scatter "
             f"({scatter_m:.4f} m): start from trial {best} with step {settings.step:g}"
+        )
+    elif repeat:
+        reason = (
+            f"trial {newest} e_pos {e[newest]:.4f} m is above {threshold:.4f} m, but it flew "
+            f"the setpoints of trial {best} again: nothing but noise to fall back from: continue"
         )
     else:
         reason = f"trial {newest} e_pos {e[newest]:.4f} m within {threshold:.4f} m: continue"
