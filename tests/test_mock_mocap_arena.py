@@ -17,6 +17,7 @@ from gcs.flight.mocap.client import MocapClient
 from gcs.io.mocap_source import parse_mocap_url
 from gcs.mock.cli import arena_options
 from gcs.mock.mocap.arena import (
+    CARRY_S,
     Arena,
     ArenaFault,
     ArenaOptions,
@@ -68,6 +69,30 @@ def test_nothing_is_tracked_before_a_pose_is_published_then_the_pose_in_room_axe
         assert math.degrees(turn) < 1.0
     # Motive's Y is up: the height is the room's second coordinate, whatever the yaw offset
     np.testing.assert_allclose(got.pos_m[tracked][:, 1], 1.5, atol=1.5e-3)
+
+
+def test_a_pose_not_published_again_moves_on_at_its_velocity_for_at_most_carry_s() -> None:
+    # the mock's loop published once and then missed its steps (a loaded machine): the body it
+    # stands for keeps moving in the frames, as a real one would, and stops after CARRY_S
+    arena = Arena(ArenaOptions(rate_hz=200.0, noise_m=0.0, yaw_offset_deg=30.0)).start()
+    pos, vel = np.array([1.0, -2.0, -1.5]), np.array([1.0, -0.5, 0.2])
+    try:
+        t_pub_s = arena.server.now_s()
+        arena.publish(pos, quat_from_euler(0.0, 0.0, 0.3), vel)
+        t_after_s = arena.server.now_s()
+        deadline = time.monotonic() + WAIT_S
+        while not any(f.t_pose_s > t_after_s + CARRY_S + 0.1 for f in list(arena.server.sent)):
+            assert time.monotonic() < deadline, "no frames"
+            time.sleep(0.01)
+    finally:
+        arena.stop()
+    room = mapping_for("optitrack", 30.0)
+    frames = [f for f in arena.server.sent if f.t_pose_s > t_after_s]
+    carried = [min(f.t_pose_s - t_pub_s, CARRY_S) for f in frames]
+    assert min(carried) < 0.05 and max(carried) == CARRY_S
+    for f, dt in zip(frames, carried, strict=True):
+        # t_pub_s is known within the publication's own microseconds
+        np.testing.assert_allclose(room.position_to_ned(f.true_pos_m), pos + dt * vel, atol=1e-3)
 
 
 @pytest.mark.live  # frames lost to a fault window counted in real time

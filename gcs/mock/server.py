@@ -224,7 +224,7 @@ class MockServer(Commands, Vision, Missions):
             return
         ph = self.vehicle.physics
         roll, pitch, yaw, *_ = ph.attitude()
-        arena.publish(ph.pos, quat_from_euler(roll, pitch, yaw))
+        arena.publish(ph.pos, quat_from_euler(roll, pitch, yaw), ph.vel)
         if self.vehicle.first_offboard_t_s is not None:
             arena.on_first_offboard()
 
