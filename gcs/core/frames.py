@@ -116,6 +116,20 @@ class FrameMapping:
         if not math.isfinite(self.yaw_offset_deg):
             raise ValueError("mocap frame: yaw_offset_deg must be finite")
         object.__setattr__(self, "origin_m", origin)
+        # the matrices once: a mocap maps every frame with them (read-only, shared)
+        axes = self._frame(self.north_axis)
+        yaw = math.radians(self.yaw_offset_deg)
+        c, s = math.cos(yaw), math.sin(yaw)
+        rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        cache = {
+            "_axes": axes,
+            "_body_axes": self._frame(self.body_forward_axis or self.north_axis),
+            "_matrix": rz @ axes,
+            "_origin": np.array(origin),
+        }
+        for name, value in cache.items():
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
 
     def _frame(self, forward_axis: str) -> np.ndarray:
         forward = _unit(forward_axis, "axis")
@@ -131,10 +145,10 @@ class FrameMapping:
         Returns
         -------
         numpy.ndarray
-            Shape (3, 3); rows are north, east, down in system coordinates. Its determinant
-            is +1 for a right-handed system, -1 for a left-handed one.
+            Shape (3, 3), read-only; rows are north, east, down in system coordinates. Its
+            determinant is +1 for a right-handed system, -1 for a left-handed one.
         """
-        return self._frame(self.north_axis)
+        return self._axes
 
     def body_axes(self) -> np.ndarray:
         """Signed permutation ``B`` taking the rigid body's own axes to FRD.
@@ -142,9 +156,9 @@ class FrameMapping:
         Returns
         -------
         numpy.ndarray
-            Shape (3, 3); rows are forward, right, down in rigid-body coordinates.
+            Shape (3, 3), read-only; rows are forward, right, down in rigid-body coordinates.
         """
-        return self._frame(self.body_forward_axis or self.north_axis)
+        return self._body_axes
 
     def matrix(self) -> np.ndarray:
         """``M = Rz(yaw_offset) A``: system vectors to NED vectors.
@@ -152,12 +166,9 @@ class FrameMapping:
         Returns
         -------
         numpy.ndarray
-            Shape (3, 3).
+            Shape (3, 3), read-only.
         """
-        yaw = math.radians(self.yaw_offset_deg)
-        c, s = math.cos(yaw), math.sin(yaw)
-        rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        return rz @ self.axes()
+        return self._matrix
 
     def position_to_ned(self, pos_m: np.ndarray) -> np.ndarray:
         """Positions in system coordinates to NED.
@@ -173,7 +184,7 @@ class FrameMapping:
             Same shape [m], NED.
         """
         p = _points(pos_m, "pos_m")
-        return (p - np.asarray(self.origin_m)) @ self.matrix().T
+        return (p - self._origin) @ self._matrix.T
 
     def position_from_ned(self, pos_ned_m: np.ndarray) -> np.ndarray:
         """NED positions to system coordinates (inverse of :meth:`position_to_ned`).
@@ -189,7 +200,7 @@ class FrameMapping:
             Same shape [m], system frame.
         """
         p = _points(pos_ned_m, "pos_ned_m")
-        return p @ self.matrix() + np.asarray(self.origin_m)
+        return p @ self._matrix + self._origin
 
     def attitude_to_ned(self, quat_wxyz: np.ndarray) -> np.ndarray:
         """Rigid-body orientations (body to system world) to FRD-to-NED quaternions.
@@ -204,7 +215,7 @@ class FrameMapping:
         numpy.ndarray
             Same shape; ``w >= 0``.
         """
-        m, b = self.matrix(), self.body_axes()
+        m, b = self._matrix, self._body_axes
         return _map_quats(quat_wxyz, lambda r: m @ r @ b.T)
 
     def attitude_from_ned(self, quat_ned_wxyz: np.ndarray) -> np.ndarray:
@@ -220,7 +231,7 @@ class FrameMapping:
         numpy.ndarray
             Same shape; ``w >= 0``.
         """
-        m, b = self.matrix(), self.body_axes()
+        m, b = self._matrix, self._body_axes
         return _map_quats(quat_ned_wxyz, lambda r: m.T @ r @ b)
 
 
