@@ -7,6 +7,7 @@ from hypothesis import settings
 # tests/synthetic.py is a helper module shared by several test files
 sys.path.insert(0, str(Path(__file__).parent))
 
+from flight_slots import flight_slot, worker_number  # noqa: E402
 from px4.sitl import ENV_VAR, ROOT, Px4Build, Px4BuildError, build_dir  # noqa: E402
 
 # No test is timed (numbers live in benchmarks/): Hypothesis's per-example deadline, 200 ms by
@@ -50,6 +51,17 @@ def pytest_collection_modifyitems(config, items) -> None:
     )
     workers = getattr(config, "workerinput", {}).get("workercount", 2)
     items[:] = [item for part in range(workers) for item in items[part::workers]]
+
+
+@pytest.fixture(autouse=True)
+def _a_flight_slot_of_the_machine(request: pytest.FixtureRequest):
+    """A test of the flights holds one of the machine's flight slots while it runs
+    (tests/flight_slots.py: two test runs on one machine share them)."""
+    if not any(request.node.get_closest_marker(m) for m in ("e2e", "px4", "live")):
+        yield
+        return
+    with flight_slot(worker_number()):
+        yield
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
