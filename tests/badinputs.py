@@ -331,6 +331,7 @@ def _profile_cases() -> Iterator[Case]:
         ("vehicle.max_vertical_jerk_m_s3", "high", "vehicle.max_vertical_jerk_m_s3"),
         ("vehicle.max_yaw_rate_deg_s", 0.0, "vehicle.max_yaw_rate_deg_s"),
         ("model.delay_s", -0.1, "model"),
+        ("model.den", [2.225073858507e-311, 0.0, 0.0], "model"),  # dividing by it overflows
         ("learning.weights.we", 0.0, "learning.weights.we"),
         ("arena.north_m", [3.0, -3.0], "arena.north_m"),
         ("arena.east_m", [0.0, 0.0], "arena.east_m"),

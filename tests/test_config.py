@@ -201,6 +201,7 @@ _DELETE = object()
         ("learning.weights.we", 0.0, "learning.weights.we"),
         ("model.delay_s", -0.05, "model"),
         ("model.den", [1.0, 2.0], "model"),  # not strictly proper
+        ("model.den", [2.225073858507e-311, 0.0, 0.0], "model"),  # num / den[0] overflows
         # bad algorithm name
         ("learning.algorithm", "smooth", "learning.algorithm"),
         ("learning.algorithm", "KILC", "learning.algorithm"),

@@ -202,6 +202,12 @@ def from_transfer_function(
         raise ModelError("num and den must be non-empty and non-zero")
     if num.size >= den.size:
         raise ModelError("the transfer function must be strictly proper (len(num) < len(den))")
+    with np.errstate(over="ignore"):
+        scaled = np.concatenate([num, den]) / den[0]
+    if not np.all(np.isfinite(scaled)):
+        raise ModelError(
+            f"num and den divided by den[0] = {den[0]:.3g} overflow: give them at a usable scale"
+        )
     if delay_s < 0 or not np.isfinite(delay_s):
         raise ModelError(f"delay_s must be >= 0, got {delay_s}")
     if not (dt_s > 0 and np.isfinite(dt_s)):
