@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import glob
 import math
+import re
 
 import numpy as np
 import pytest
@@ -105,6 +106,13 @@ def test_each_check_names_what_it_saw() -> None:
     jumped[100:, 1] += 0.6
     (first, *_) = _run(EstimateMonitor(FENCE), t, jumped, still)
     assert first[0] == pytest.approx(t[100]) and "jumped 0.60 m" in first[1]
+    # a jump out of the arena and its margin (an estimate reset by 5 m): both, the breach first
+    reset = hover.copy()
+    reset[100:, 1] += 5.0
+    (first, *_) = _run(EstimateMonitor(FENCE), t, reset, still)
+    assert first[0] == pytest.approx(t[100]), first
+    assert re.fullmatch(r".* is 2\.00 m outside the arena .*, after the position jumped 5\.00 m .*",
+                        first[1]), first  # fmt: skip
     # a drift: the position walks at 3 m/s, the velocity says it stands still
     drifting = hover.copy()
     drifting[100:, 0] += 3.0 * (t[100:] - t[100])

@@ -18,6 +18,9 @@ Two rules, both on the profile's arena (a box in local NED):
   - *drift*: over the last :data:`DRIFT_WINDOW_S` the position moved more than ``drift_m``
     against the integral of the velocity: the estimate contradicts itself.
 
+  A sample that both leaves the arena and jumps names both (an estimate reset to a position
+  outside: the vehicle may be where it was, its frame is not).
+
 A measurement that breaks one of these is a *breach*: the flight layer stops at once (Hold,
 land; :meth:`gcs.flight.vehicle.Vehicle.trip`). The thresholds are set from the shared PX4 SITL
 data (GPS and vision) and the mock-gps profile, so that a vehicle that is merely poor is never
@@ -273,6 +276,8 @@ class EstimateMonitor:
         dt = t_vehicle_s - last[0]
         residual = p - last[1] - 0.5 * (v + last[2]) * dt
         jump = self._jump_problem(residual, dt)
+        if problem and jump:  # an estimate's reset that left the arena: both say what happened
+            return f"{problem}, after {jump}"
         return problem or jump or self._drift_problem(t_vehicle_s, residual, dt)
 
     def _speed_problem(self, v: np.ndarray) -> str | None:

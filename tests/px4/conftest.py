@@ -60,7 +60,8 @@ def px4_factory(px4_build: Px4Build, tmp_path: Path, request) -> Iterator:
     """Start vehicles: ``px4_factory(params=None, ready=READY_LINE)`` returns a started
     :class:`Px4Sitl` (its ``ready`` line printed), each in a
     fresh working directory under the test's tmp dir, stopped after the test; on failure its
-    output and ULog logs are copied to ``logs/px4-failures/<test>/`` (the path is printed)."""
+    output and ULog logs are copied to ``logs/px4-failures/<test>/`` (the path is printed) and
+    a digest of them printed (a CI transcript keeps it when the files are gone)."""
     vehicles: list[Px4Sitl] = []
 
     def start(params: dict[str, float] | None = None, ready: str = READY_LINE) -> Px4Sitl:
@@ -77,6 +78,7 @@ def px4_factory(px4_build: Px4Build, tmp_path: Path, request) -> Iterator:
             dest = FAILURES / f"{request.node.name}-{stamp}-{i}"
             vehicle.keep(dest)
             print(f"PX4 output and ULog of the failed test kept in {dest.relative_to(ROOT)}")
+            print(vehicle.digest())
 
 
 @pytest.fixture

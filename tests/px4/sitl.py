@@ -35,6 +35,8 @@ from pathlib import Path
 
 from pymavlink import mavutil
 
+from px4.ulog import failure_digest
+
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_BUILD = ROOT.parent / "shared" / "px4-v1.16-sitl"
 ENV_VAR = "PX4_SITL_DIR"
@@ -491,6 +493,12 @@ class Px4Sitl:
         for ulog in self.ulogs():
             shutil.copy2(ulog, dest / ulog.name)
         return dest
+
+    def digest(self) -> str:
+        """Its console's last events and its newest log's last seconds (:func:`failure_digest`)."""
+        out = self.workdir / "px4-output.txt"
+        text = out.read_text(errors="replace") if out.exists() else ""
+        return failure_digest(text, self.ulogs())
 
     # --- MAVLink ---------------------------------------------------------------------------
     def monitor(self) -> Px4Monitor:

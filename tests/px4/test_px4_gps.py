@@ -81,6 +81,11 @@ def test_fly_two_trials_then_ctrl_c_lands_and_resume_completes_on_the_same_vehic
         assert "trial 2 flown" in resumed and "landed and disarmed" in resumed, resumed
         mon.wait("disarmed after the resumed run", lambda s: s.armed is False, 10)
     assert RunDir.open(run).complete_trials() == [0, 1, 2]
+    # What a failed test prints for CI, read here from a flight that passed: the console's
+    # events and the landing's last seconds in PX4's own log.
+    digest = px4.digest()
+    assert "Disarmed by external command" in digest, digest
+    assert re.search(r"^ +[\d.]+ LAND +True +False ", digest, re.MULTILINE), digest
     figures = session_figures(run, out)
     px4_figures.update(figures, fault=fault)
     e0, e1, _ = figures["e_pos_m"]

@@ -326,3 +326,72 @@ def px4_gaps(run: RunDir, log: FlightLog, lines: Sequence[tuple[float, str]]) ->
         setpoint_period_s=median_gap(log.setpoints_s, trials),
         tick_s=log.tick_s,
     )
+
+
+#: vehicle_status.nav_state names (PX4 v1.16 msg/VehicleStatus.msg), for a failure's digest
+NAV_STATE_NAMES = {0: "MANUAL", 1: "ALTCTL", 2: "POSCTL", 3: "MISSION", 4: "HOLD", 5: "RTL",
+                   10: "ACRO", 12: "DESCEND", 13: "TERMINATION", 14: "OFFBOARD", 15: "STAB",
+                   17: "TAKEOFF", 18: "LAND", 20: "PRECLAND", 21: "ORBIT"}  # fmt: skip
+#: PX4 console lines a reader of a failed flight wants first
+CONSOLE_EVENTS = ("WARN", "ERROR", "INFO  [commander]", "INFO  [navigator]")
+
+
+def failure_digest(output: str, ulogs: Sequence[Path], last_s: float = 40.0) -> str:
+    """What a failed firmware flight did, short enough for a CI transcript.
+
+    The last 25 of PX4's console warnings, errors and commander/navigator messages, then the
+    last ``last_s`` seconds of its newest log once a second: navigation state, armed and landed,
+    the estimated position and velocity (NED, local frame) and the position setpoint (NaN where
+    PX4 set none).
+
+    Parameters
+    ----------
+    output : str
+        PX4's console output.
+    ulogs : sequence of Path
+        Its ``.ulg`` files, oldest first.
+    last_s : float
+        Seconds of the newest log to show [s].
+
+    Returns
+    -------
+    str
+        Lines of text; a log that cannot be read says why in one line.
+    """
+    lines = [ln for ln in output.splitlines() if ln.startswith(CONSOLE_EVENTS)]
+    out = ["PX4 console (last warnings, errors, commander and navigator messages):"]
+    out += ["  " + ln.strip() for ln in lines[-25:]]
+    if not ulogs:
+        return "\n".join([*out, "no ULog written"])
+    topics = ["vehicle_local_position", "vehicle_local_position_setpoint", "vehicle_status",
+              "vehicle_land_detected"]  # fmt: skip
+    try:
+        ulog = ULog(str(ulogs[-1]), topics)
+    except Exception as exc:  # a log cut short by the failure is worth a line, not a crash
+        return "\n".join([*out, f"{ulogs[-1].name}: unreadable ({exc})"])
+    data = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
+    if "vehicle_local_position" not in data:
+        return "\n".join([*out, f"{ulogs[-1].name}: no vehicle_local_position"])
+    pos = data["vehicle_local_position"]
+    t_pos = np.asarray(pos["timestamp"]) * 1e-6
+
+    def at(name: str, field: str, t: float) -> float:
+        if name not in data:
+            return math.nan
+        stamps = np.asarray(data[name]["timestamp"]) * 1e-6
+        i = int(np.searchsorted(stamps, t, side="right")) - 1
+        return float(data[name][field][i]) if i >= 0 else math.nan
+
+    out.append(f"{ulogs[-1].name}, the last {last_s:g} s once a second (PX4's clock; NED m, m/s):")
+    out.append("      t  state       armed landed   x      y      z     vx     vy     vz"
+               "    sp_x   sp_y   sp_z")  # fmt: skip
+    for t in np.arange(max(t_pos[0], t_pos[-1] - last_s), t_pos[-1] + 1e-9, 1.0):
+        state = at("vehicle_status", "nav_state", t)
+        name = NAV_STATE_NAMES.get(int(state), str(state)) if math.isfinite(state) else "?"
+        armed = at("vehicle_status", "arming_state", t) == 2
+        landed = at("vehicle_land_detected", "landed", t) == 1
+        values = [at("vehicle_local_position", f, t) for f in ("x", "y", "z", "vx", "vy", "vz")]
+        values += [at("vehicle_local_position_setpoint", f, t) for f in ("x", "y", "z")]
+        numbers = " ".join(f"{v:6.2f}" for v in values)
+        out.append(f"  {t:7.1f} {name:<11} {armed!s:<5} {landed!s:<6} {numbers}")
+    return "\n".join(out)
