@@ -4,6 +4,12 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
+# Python keeps the modules it compiles, and pytest the test modules it rewrites, in
+# __pycache__ (ignored by git). Where PYTHONDONTWRITEBYTECODE is set, every test worker and
+# every process a test starts (Dask workers, gcs, the mock) would compile gcs and the tests
+# again: make's commands run without it (docs/testing.md)
+unexport PYTHONDONTWRITEBYTECODE
+
 .PHONY: setup test test-flights test-quick test-fast test-other-cpu test-px4 test-lab-floor fly fly-mocap lint bench clean
 
 setup: $(VENV)/.installed
