@@ -27,3 +27,15 @@ def test_an_axis_that_explains_the_validation_less_than_the_profile_is_named_onc
     assert found is not None, lines
     assert (float(found[1]), float(found[2])) == (1.37, 19.55)
     assert weaker_lines([axis("x", 20.0, 20.0)], "antx") == []  # as good: no warning
+
+
+def test_an_axis_explained_less_than_by_its_mean_is_named_even_when_the_profile_did_worse() -> None:
+    """Seen on firmware over GPS at load 14-21: VAF -146.8 % (the profile's -305.3 %)."""
+    lines = weaker_lines([axis("x", -146.8, -305.34), axis("y", 12.0, -38.7)], "antx")
+    assert len(lines) == 1, lines
+    assert re.fullmatch(
+        r"warning: x: the identified model explains the validation experiment less than its "
+        r"mean does \(VAF -146\.80 %\): .* before flying this model",
+        lines[0],
+    ), lines
+    assert weaker_lines([axis("x", -1.0, math.nan)], "antx")[0].startswith("warning: x: ")

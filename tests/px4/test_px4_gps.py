@@ -103,7 +103,10 @@ def test_identify_with_short_experiments(px4_booting, px4_figures, tmp_path: Pat
     where it explains it better, no warning. Short experiments on a GPS hover that wanders
     0.1-0.7 m support no more: in three runs the east axis's VAF was 40-62 % and in four the
     gains 1.1-1.8 (north: VAF 91 %), where the shipped 60 s gave 80-90 %; east once came out
-    at 0.01 % (antx's -19 %) and once at 1.37 % (antx's 19.55 %), so the VAFs are figures.
+    at 0.01 % (antx's -19 %) and once at 1.37 % (antx's 19.55 %), so the VAFs are figures. On
+    a machine at load 14-21 the hover wandered 0.89 m (95 %) and neither model explained the
+    validation experiment (VAF x -147 %, antx's -305 %; gains 3.0 and 3.2): an axis explained
+    less than by its mean may have any gain, but gcs must name it.
 
     Then the README's next step on the same vehicle, not rebooted: one trial of ``gcs fly`` with
     the identified profile. On the identification's disarm PX4 returned to OFFBOARD (the last
@@ -163,9 +166,15 @@ def test_identify_with_short_experiments(px4_booting, px4_figures, tmp_path: Pat
             said,
         )
     }
+    unexplained = set(re.findall(
+        r"warning: ([xy]): the identified model explains the validation experiment less than "
+        r"its mean does", said))  # fmt: skip
     for axis, m in models.items():
         assert m["max_pole_abs"] < 1.0, (axis, m)  # stable
-        assert 0.5 < m["dc_gain"] < 2.0, (axis, m)
+        if m["vaf_here_pct"] < 0.0:  # the experiment showed nothing of this axis: gcs says so
+            assert axis in unexplained or axis in warned, (axis, m, out)
+        else:
+            assert 0.5 < m["dc_gain"] < 2.0, (axis, m)
         weaker = m["vaf_here_pct"] < m["vaf_antx_pct"]
         if abs(m["vaf_here_pct"] - m["vaf_antx_pct"]) > 0.05:  # not a tie within rounding
             assert (axis in warned) == weaker, (axis, m, warned, out)
