@@ -372,14 +372,13 @@ def failure_digest(output: str, ulogs: Sequence[Path], last_s: float = 40.0) -> 
     data = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
     if "vehicle_local_position" not in data:
         return "\n".join([*out, f"{ulogs[-1].name}: no vehicle_local_position"])
-    pos = data["vehicle_local_position"]
-    t_pos = np.asarray(pos["timestamp"]) * 1e-6
+    stamps_s = {name: np.asarray(d["timestamp"]) * 1e-6 for name, d in data.items()}
+    t_pos = stamps_s["vehicle_local_position"]
 
     def at(name: str, field: str, t: float) -> float:
         if name not in data:
             return math.nan
-        stamps = np.asarray(data[name]["timestamp"]) * 1e-6
-        i = int(np.searchsorted(stamps, t, side="right")) - 1
+        i = int(np.searchsorted(stamps_s[name], t, side="right")) - 1
         return float(data[name][field][i]) if i >= 0 else math.nan
 
     out.append(f"{ulogs[-1].name}, the last {last_s:g} s once a second (PX4's clock; NED m, m/s):")
