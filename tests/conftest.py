@@ -8,6 +8,7 @@ from hypothesis import settings
 sys.path.insert(0, str(Path(__file__).parent))
 
 from flight_slots import flight_slot, worker_number  # noqa: E402
+from pause_watch import PauseWatch  # noqa: E402
 from px4.sitl import ENV_VAR, ROOT, Px4Build, Px4BuildError, build_dir  # noqa: E402
 
 # No test is timed (numbers live in benchmarks/): Hypothesis's per-example deadline, 200 ms by
@@ -25,6 +26,9 @@ collect_ignore = [] if _PX4_PRESENT else ["px4"]
 
 
 def pytest_configure(config) -> None:
+    if not hasattr(config, "workerinput"):  # the session's own process (tests/pause_watch.py)
+        config.pause_watch = PauseWatch()
+        config.pause_watch.start()
     if _PX4_CHOSEN:  # a build the user named must be one
         try:
             Px4Build(_PX4_DIR).check()
@@ -65,7 +69,12 @@ def _a_flight_slot_of_the_machine(request: pytest.FixtureRequest):
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
-    """One line on the real-firmware tests: how many ran and passed, or why none ran."""
+    """One line on the machine's pauses (tests/pause_watch.py); one on the real-firmware tests:
+    how many ran and passed, or why none ran."""
+    watch = getattr(config, "pause_watch", None)
+    if watch is not None:
+        watch.stop()
+        terminalreporter.write_line(watch.summary())
     if not _PX4_PRESENT:
         where = _PX4_DIR.relative_to(ROOT.parent)
         terminalreporter.write_line(
