@@ -38,6 +38,12 @@ class TrialAborted(GcsError, RuntimeError):
     """A trial stopped before its end (watchdog, Ctrl-C, link loss); it is marked incomplete."""
 
 
+class TrialPaused(TrialAborted):
+    """A trial's stream fell behind (a setpoint sent late) while the vehicle stayed under
+    offboard control: the trial's data are spoiled, the vehicle is not in danger, and the
+    campaign flies the trial again (``flight.paused_trial_retries``)."""
+
+
 class UpdateInfeasible(GcsError, ValueError):
     """The setpoint limits admit no next input (box, step or deviation bound); names the limit."""
 

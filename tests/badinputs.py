@@ -398,6 +398,8 @@ def _profile_cases() -> Iterator[Case]:
         ("flight.hover_measure_s", 0.5, "hover_measure_s"),
         ("flight.fence_margin_m", 0.0, "fence_margin_m"),
         ("flight.fence_speed_factor", 0.5, "fence_speed_factor"),
+        ("flight.paused_trial_retries", -1, "paused_trial_retries"),
+        ("flight.paused_trial_retries", 1.5, "paused_trial_retries"),
     ):
         yield Case(
             k,
@@ -1606,6 +1608,7 @@ def _mocap_cases() -> Iterator[Case]:
         ({"message": "pose"}, "an unknown message", "mocap.message"),
         ({"measurement": "truth"}, "an unknown measurement", "mocap.measurement"),
         ({"position_std_m": 0.0}, "a zero position standard deviation", "position_std_m"),
+        ({"max_age_s": 0.0}, "a zero stale limit", "mocap.max_age_s"),
         ({"forward": "yes"}, "forward not true or false", "mocap.forward"),
         ({"url": "optitrack://motive.local/drone"}, "a host name for OptiTrack", "IPv4"),
         ({"colour": 1}, "an unknown field", "mocap.colour"),

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,7 @@ from test_flight_e2e import (
 )
 from virtual import fly_virtual
 
-from gcs.errors import TrialAborted, VehicleError
+from gcs.errors import TrialAborted, TrialPaused, VehicleError
 from gcs.flight.campaign import (
     CampaignPlan,
     Status,
@@ -166,4 +167,66 @@ def test_cancellation_mid_trial_lands_and_marks_incomplete(tmp_path: Path) -> No
     assert j == 0 and not rec.complete and "interrupted" in reason
     assert np.isfinite(rec.pos_ned_m[:20]).all()
     assert "emergency stop: landed and disarmed" in statuses
+    assert drone.stats()["modes"][-1]["armed"] is False
+
+
+def _pausing(pauses: int, trial: int, events: list[object]):  # type: ignore[no-untyped-def]
+    """An event callback that blocks the loop for 0.6 s (virtual) in the first ``pauses``
+    attempts of ``trial``, at its 20th sample, as a machine that paused gcs would."""
+    attempts = itertools.count()
+    paused: set[int] = set()
+    started = [-1]
+
+    def on_event(event: object) -> None:
+        events.append(event)
+        if isinstance(event, TrialStarted) and event.trial == trial:
+            started[0] = next(attempts)
+        at = started[0]
+        ours = isinstance(event, TrialProgress) and event.trial == trial and event.k >= 20
+        if ours and 0 <= at < pauses and at not in paused:
+            paused.add(at)
+            asyncio.get_running_loop().advance(0.6)  # type: ignore[attr-defined]
+
+    return on_event
+
+
+def test_a_trial_whose_stream_fell_behind_is_kept_and_flown_again() -> None:
+    source = CircleSource()
+    events: list[object] = []
+    with SimulatedDrone(seed=0) as drone:
+        plan = CampaignPlan(drone.url, 0, 2, T_ILC_S, SETTINGS, FENCE)
+        fly_virtual(fly_campaign(plan, source, _pausing(1, 1, events)))
+    assert [j for j, _ in source.recorded] == [0, 1]
+    ((j, partial, reason),) = source.incomplete
+    assert j == 1 and not partial.complete and "late" in reason
+    assert 20 <= np.isfinite(partial.pos_ned_m[:, 0]).sum() < partial.pos_ned_m.shape[0]
+    for _, rec in source.recorded:  # the trial flown again streamed on time
+        assert rec.complete and rec.max_send_late_s < SETTINGS.max_setpoint_late_s
+    texts = [e.text for e in events if isinstance(e, Status)]
+    agains = [t for t in texts if "flying trial" in t]
+    assert len(agains) == 1, texts
+    again = agains[0]
+    assert again.startswith("trial 1 stopped at sample ") and "ms late (limit 400 ms)" in again
+    assert again.endswith("flying trial 1 again (1 of 2)")
+    after = texts[texts.index(again) :]
+    assert after[1] == "moving to the start point of trial 1" and "holding" in after[-3]
+    assert [e.trial for e in events if isinstance(e, TrialStarted)] == [0, 1, 1]
+    assert sum(t.startswith("measuring the hover") for t in texts) == 1
+    assert texts[-1] == "landed and disarmed"
+    assert drone.stats()["modes"][-1]["armed"] is False
+
+
+def test_a_trial_paused_more_often_than_the_profile_allows_ends_the_flight() -> None:
+    source = CircleSource()
+    events: list[object] = []
+    settings = replace(SETTINGS, paused_trial_retries=1)
+    with SimulatedDrone(seed=0) as drone:
+        plan = CampaignPlan(drone.url, 0, 2, T_ILC_S, settings, FENCE)
+        with pytest.raises(TrialPaused, match="late"):
+            fly_virtual(fly_campaign(plan, source, _pausing(2, 0, events)))
+    assert not source.recorded
+    assert [j for j, _, _ in source.incomplete] == [0, 0]
+    texts = [e.text for e in events if isinstance(e, Status)]
+    assert sum("flying trial 0 again (1 of 1)" in t for t in texts) == 1
+    assert texts[-1] == "emergency stop: landed and disarmed"
     assert drone.stats()["modes"][-1]["armed"] is False

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from gcs.errors import ProfileError, TrajectoryError, TrialAborted
+from gcs.errors import ProfileError, TrajectoryError, TrialAborted, TrialPaused
 from gcs.flight.clock import LoopClock, VehicleClock
 from gcs.flight.link import TelemetrySample
 from gcs.flight.manoeuvres import heading_deg, min_jerk
@@ -362,7 +362,8 @@ def test_trial_watchdog_aborts_with_partial_recording() -> None:
     assert len(vehicle.sent) < 20
 
 
-def test_trial_aborts_on_late_setpoint() -> None:
+@pytest.mark.parametrize("problem", [None, "flight mode is HOLD, not OFFBOARD"])
+def test_trial_stops_on_a_late_setpoint_as_paused_unless_control_is_lost(problem) -> None:
     settings = FlightSettings(stream_rate_hz=20, max_setpoint_late_s=0.05)
     vehicle = FakeVehicle()
 
@@ -372,10 +373,17 @@ def test_trial_aborts_on_late_setpoint() -> None:
             await asyncio.sleep(0.005)
         # the loop blocked for 0.2 s (as by a heavy call in it): the next send is late
         asyncio.get_running_loop().advance(0.2)  # type: ignore[attr-defined]
-        with pytest.raises(TrialAborted, match="late"):
+        vehicle.problem = problem
+        with pytest.raises(TrialAborted) as info:
             await fly
+        return info.value
 
-    run(_with_telemetry(vehicle, scenario()))
+    exc = run(_with_telemetry(vehicle, scenario()))
+    if problem is None:  # the stream fell behind, the vehicle did not: flown again
+        assert isinstance(exc, TrialPaused) and "ms late (limit 50 ms)" in str(exc)
+    else:  # a lost control is named first, and ends the flight
+        assert not isinstance(exc, TrialPaused) and "HOLD" in str(exc)
+    assert not exc.recording.complete and exc.recording.abort_reason in str(exc)
 
 
 def test_trial_streams_and_records_on_the_vehicle_clock() -> None:

@@ -7,6 +7,7 @@ UDP to the mock process) keeps its own tests in tests/test_fly_e2e.py.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import signal
 
@@ -219,3 +220,29 @@ def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path, tiny, monkeyp
     stats = drone.stats()
     assert stats["modes"][-1]["armed"] is False
     assert stats["faults"]["link_loss_at_s"] is not None and stats["faults"]["link_loss_at_s"] > 0
+
+
+def test_a_trial_gcs_fell_behind_in_is_kept_flown_again_and_the_run_completes(
+    tmp_path, tiny, monkeypatch
+) -> None:
+    run_path = tmp_path / "run"
+
+    def machine_pause() -> None:  # the machine left gcs unscheduled for 0.6 s
+        asyncio.get_running_loop().advance(0.6)  # type: ignore[attr-defined]
+
+    with SimulatedDrone(seed=1) as drone:
+        on_trial(monkeypatch, 1, machine_pause)
+        code, out = fly(drone, tmp_path, tiny, run_path)
+    assert code == 0, out
+    limit_ms = CI_FLIGHT["max_setpoint_late_s"] * 1e3
+    assert f"ms late (limit {limit_ms:.0f} ms): gcs fell behind its stream" in out, out
+    assert "flying trial 1 again (1 of 2)" in out, out
+    assert out.count("trial 1 started") == 2, out
+    run = RunDir.open(run_path)
+    assert run.complete_trials() == [0, 1]
+    kept = json.loads((run_path / "aborted" / "trial-001-attempt-1.json").read_text())
+    assert kept["status"] == "incomplete" and "late" in kept["reason"]
+    assert drone.stats()["modes"][-1]["armed"] is False
+    code, out = run_gcs("report", run_path, "--json")
+    assert code == 0, out
+    assert [row["trial"] for row in json.loads(out)["rows"]] == [0, 1]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ import pytest
 from gcs.core.frames import mapping_for
 from gcs.flight.clock import fit_clock
 from gcs.flight.mocap.campaign import with_mocap
+from gcs.flight.mocap.health import HealthLimits
 from gcs.flight.mocap.link import MocapLink, trial_mocap
 from gcs.flight.mocap.reader import SAMPLE
 from gcs.flight.trial import TrialRecording
@@ -127,3 +129,13 @@ def test_a_stream_pausing_across_k0_still_puts_k0_on_the_grid() -> None:
     # k = 0..2 on the chord across the pause, the rest on the circle
     np.testing.assert_allclose(on_grid[3:], circle_ned(rec.t_s[3:]), atol=2e-4)
     np.testing.assert_allclose(on_grid[:3], circle_ned(rec.t_s[:3]), atol=0.01)
+
+
+def test_the_profiles_stale_limit_is_the_watchs_and_the_gap_it_flies_through() -> None:
+    source = parse_mocap_url("optitrack://127.0.0.1/drone")
+    default = MocapLink(source, MOTIVE, MocapSettings())
+    assert default.limits == HealthLimits() and default.max_gap_s == HealthLimits().max_age_s
+    wider = MocapLink(source, MOTIVE, MocapSettings(max_age_s=0.8))
+    assert wider.limits == replace(HealthLimits(), max_age_s=0.8) and wider.max_gap_s == 0.8
+    given = HealthLimits(max_age_s=0.3)
+    assert MocapLink(source, MOTIVE, MocapSettings(max_age_s=0.8), limits=given).limits is given

@@ -42,7 +42,7 @@ from typing import Protocol
 import numpy as np
 
 from gcs.core.trajectory import setpoint_array
-from gcs.errors import MocapError, TrajectoryError, TrialAborted, VehicleError
+from gcs.errors import MocapError, TrajectoryError, TrialAborted, TrialPaused, VehicleError
 from gcs.flight.clock import rate_warning
 from gcs.flight.fence import Fence, format_ned
 from gcs.flight.geofence import GeofenceState, install_geofence
@@ -490,7 +490,12 @@ class _Campaign:
             await self.record_session(session, "recording the mocap checks")
 
     async def fly_trials(self, hover: np.ndarray, setpoints: np.ndarray) -> None:
-        """Trial after trial: to its start point, settled, flown, recorded (and planned)."""
+        """Trial after trial: to its start point, settled, flown, recorded (and planned).
+
+        A trial whose stream fell behind (:class:`gcs.errors.TrialPaused`) is kept as an
+        incomplete attempt and flown again from its start point, at most
+        ``settings.paused_trial_retries`` times.
+        """
         first, iterations = self.plan.first_trial, self.plan.iterations
         for number, j in enumerate(range(first, first + iterations), start=1):
             self.j = j
@@ -498,16 +503,47 @@ class _Campaign:
                 hover, setpoints = await self.vehicle.hover_while(
                     asyncio.to_thread(_plan, self.source, j, self.fence), f"setpoints of trial {j}"
                 )
-            await self.to_start(j, number, hover)
-            stop = await self.fly_trial(j, number, iterations, setpoints)
+            attempt = 0
+            while True:
+                await self.to_start(j, hover, measure=number == 1 and attempt == 0)
+                try:
+                    stop = await self.fly_trial(j, number, iterations, setpoints)
+                    break
+                except TrialPaused as exc:
+                    attempt += 1
+                    await self.keep_paused(j, exc, attempt)
             if stop:
                 self.emit(Status(f"no further trial after trial {j}: {stop}"))
                 break
 
-    async def to_start(self, j: int, number: int, hover: np.ndarray) -> None:
+    async def keep_paused(self, j: int, exc: TrialPaused, attempt: int) -> None:
+        """Keep the paused attempt of trial ``j`` as incomplete, hovering, and say that it is
+        flown again; or raise ``exc`` when this ``attempt`` is one more than the profile allows.
+        """
+        retries = self.settings.paused_trial_retries
+        if attempt > retries:
+            raise exc
+        partial = exc.recording  # type: ignore[attr-defined]
+        if self.mocap is not None:
+            partial = await asyncio.to_thread(mocap_steps.with_mocap, partial, self.mocap)
+        self.run = None  # kept below: no longer in flight
+        self.emit(TrialFinished(j, partial))
+        reason = str(exc)
+        await self.vehicle.hover_while(
+            asyncio.to_thread(self.source.record_incomplete, j, partial, reason),
+            f"recording the paused attempt of trial {j}",
+        )
+        self.note(
+            f"{reason.replace('trial aborted', f'trial {j} stopped', 1)}: gcs fell behind its "
+            f"stream, the vehicle stayed under control; flying trial {j} again ({attempt} of "
+            f"{retries})",
+            warning=True,
+        )
+
+    async def to_start(self, j: int, hover: np.ndarray, measure: bool) -> None:
         """Move to trial ``j``'s start point, settle there and hold it (the initial reset).
 
-        Before the first trial the hover there is measured and judged.
+        With ``measure`` (before the first trial) the hover there is measured and judged.
         """
         vehicle, settings, emit = self.vehicle, self.settings, self.emit
         check_battery(vehicle.battery_pct, settings.min_battery_pct, f"trial {j}")
@@ -515,7 +551,7 @@ class _Campaign:
         await vehicle.goto(hover, settings.transit_speed_m_s)
         session = self.session
         assert session is not None
-        if number == 1:
+        if measure:
             record = await measure_hover(vehicle, hover, j, settings, emit)
             v = record.verdict
             session = _with_hover(session, record, v.tolerance_m, v.speed_tolerance_m_s)

@@ -23,10 +23,12 @@ telemetry periods apart is flagged "interpolated across a gap". The first-send t
 setpoint is kept too, mapped to vehicle time, and the trial's own clock fit (its vehicle-time
 rate) comes with the recording.
 
-Watchdog (checked after every send): a setpoint sent more than ``max_setpoint_late_s`` after its
-deadline, position telemetry older than ``max_telemetry_age_s``, link loss, or any flight mode
-other than OFFBOARD ends the trial with :class:`gcs.errors.TrialAborted`, whose ``recording``
-attribute holds the partial recording (``complete=False``).
+Watchdog (checked after every send): position telemetry older than ``max_telemetry_age_s``,
+link loss, any flight mode other than OFFBOARD, or a breach of the vehicle's watches ends the
+trial with :class:`gcs.errors.TrialAborted`; a setpoint sent more than ``max_setpoint_late_s``
+after its deadline while none of those is wrong ends it with :class:`gcs.errors.TrialPaused`
+(the stream fell behind, the vehicle did not: the campaign flies the trial again). Either's
+``recording`` attribute holds the partial recording (``complete=False``).
 
 Progress. ``on_progress(k, n, err_m)`` is called at most 10 times a second; ``err_m`` is the
 horizontal distance between the newest measured position and the setpoint that was in force
@@ -43,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gcs.core.trajectory import setpoint_array
-from gcs.errors import TrajectoryError, TrialAborted
+from gcs.errors import TrajectoryError, TrialAborted, TrialPaused
 from gcs.flight.clock import ClockFit, fit_clock
 from gcs.flight.link import TelemetrySample
 from gcs.flight.manoeuvres import sleep_until
@@ -259,13 +261,15 @@ class TrialRun:
                 late_s = issued_s - deadline_s
                 self.max_send_late_s = max(self.max_send_late_s, late_s)
                 problem = vehicle.control_problem()
-                if late_s > settings.max_setpoint_late_s:
+                paused = problem is None and late_s > settings.max_setpoint_late_s
+                if paused:
                     problem = (
                         f"setpoint {min(k, n - 1)} sent {late_s * 1e3:.0f} ms late "
                         f"(limit {settings.max_setpoint_late_s * 1e3:.0f} ms)"
                     )
                 if problem is not None:
-                    exc = TrialAborted(f"trial aborted at sample {min(k, n)}/{n}: {problem}")
+                    kind = TrialPaused if paused else TrialAborted
+                    exc = kind(f"trial aborted at sample {min(k, n)}/{n}: {problem}")
                     exc.recording = self.recording(problem)  # type: ignore[attr-defined]
                     raise exc
                 if self.on_progress is not None and issued_s >= next_progress_s:
@@ -360,8 +364,9 @@ async def fly_trial(
 
     Returns: complete recording: grid times, positions and velocities at k = 0..N, send times.
 
-    Raises ``TrialAborted``: late setpoint, stale telemetry, link loss or a mode other than
-    OFFBOARD; its ``recording`` attribute holds the partial recording; ``TrajectoryError``:
+    Raises ``TrialPaused``: a late setpoint; ``TrialAborted``: stale telemetry, link loss, a
+    breach or a mode other than OFFBOARD; either's ``recording`` attribute holds the partial
+    recording; ``TrajectoryError``:
     ``setpoints_ned_m`` is not a finite (N, 3) array, or ``yaw_deg`` not N finite values.
     """
     run = TrialRun(vehicle, setpoints_ned_m, t_ilc_s, settings, on_progress, yaw_deg)

@@ -125,7 +125,15 @@ class FlightSettings:
     transit_speed_m_s : float
         Peak speed of moves between trials (to the start point) [m/s].
     max_setpoint_late_s : float
-        A trial aborts when a setpoint is sent later than this after its deadline [s].
+        A trial stops when a setpoint is sent later than this after its deadline [s]: its
+        stream, and so its data, are spoiled. The vehicle stays under offboard control (PX4
+        holds the last setpoint, which MAVSDK re-sends at 20 Hz from its own thread, and
+        leaves offboard only after ``COM_OF_LOSS_T``, 1 s by default), so the trial is flown
+        again (``paused_trial_retries``).
+    paused_trial_retries : int
+        How many times a trial stopped by a late setpoint is flown again, from its start
+        point, before the flight ends with an emergency stop (0: at once). Each stopped
+        attempt is kept in the run's ``aborted/`` folder.
     max_telemetry_age_s : float
         A trial (or a move, or a hover) aborts when the newest position sample is older than
         this [s].
@@ -185,6 +193,7 @@ class FlightSettings:
     hover_before_trial_s: float = ranged(4.0, ge=0)
     transit_speed_m_s: float = ranged(1.0, gt=0)
     max_setpoint_late_s: float = ranged(0.1, gt=0)
+    paused_trial_retries: int = ranged(2, ge=0)
     max_telemetry_age_s: float = ranged(0.5, gt=0)
     link_regain_s: float = ranged(10.0, gt=0)
     yaw_deg: float = 0.0
@@ -362,6 +371,9 @@ class MocapSettings:
         Pre-flight: largest distance between estimate and mocap [m].
     check_move_m : float
         Length of the pre-flight move per horizontal axis [m]; 0 skips it.
+    max_age_s : float
+        The stream is stale, and the flight ends, when its newest frame is older than this
+        [s] (:class:`gcs.flight.mocap.health.HealthLimits`, where the default's reason is).
     """
 
     url: str | None = None
@@ -376,6 +388,7 @@ class MocapSettings:
     measurement: str = ranged("mocap", choices=MEASUREMENTS)
     agreement_m: float = ranged(0.15, gt=0)
     check_move_m: float = ranged(0.3, ge=0)
+    max_age_s: float = ranged(0.4, gt=0)
 
     def mapping(self, source: MocapSource) -> FrameMapping:
         """The frame mapping for ``source`` (its system's convention unless ``frame`` is set).

@@ -56,7 +56,7 @@ class MocapLink:
     settings : MocapSettings
         Forwarding and checks.
     limits : HealthLimits or None
-        Stream health thresholds (defaults if None).
+        Stream health thresholds; None: the defaults, with ``settings.max_age_s``.
     connect_timeout_s : float
         How long to wait for the mocap server [s].
     """
@@ -72,7 +72,7 @@ class MocapLink:
         self.source = source
         self.mapping = mapping
         self.settings = settings
-        self.limits = limits or HealthLimits()
+        self.limits = limits or HealthLimits(max_age_s=settings.max_age_s)
         self.client = MocapClient(
             source, on_sample=self._on_sample, connect_timeout_s=connect_timeout_s
         )
