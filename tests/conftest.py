@@ -7,8 +7,8 @@ from hypothesis import settings
 # tests/synthetic.py is a helper module shared by several test files
 sys.path.insert(0, str(Path(__file__).parent))
 
+import pause_watch  # noqa: E402
 from flight_slots import flight_slot, worker_number  # noqa: E402
-from pause_watch import PauseWatch  # noqa: E402
 from px4.sitl import ENV_VAR, ROOT, Px4Build, Px4BuildError, build_dir  # noqa: E402
 
 # No test is timed (numbers live in benchmarks/): Hypothesis's per-example deadline, 200 ms by
@@ -27,13 +27,19 @@ collect_ignore = [] if _PX4_PRESENT else ["px4"]
 
 def pytest_configure(config) -> None:
     if not hasattr(config, "workerinput"):  # the session's own process (tests/pause_watch.py)
-        config.pause_watch = PauseWatch()
-        config.pause_watch.start()
+        config.pause_watch = pause_watch.start_process()
     if _PX4_CHOSEN:  # a build the user named must be one
         try:
             Px4Build(_PX4_DIR).check()
         except Px4BuildError as exc:
             raise pytest.UsageError(f"{ENV_VAR}: {exc}") from None
+
+
+def pytest_unconfigure(config) -> None:
+    watch = getattr(config, "pause_watch", None)
+    if watch is not None and watch.poll() is None:  # no summary was printed (interrupted)
+        watch.kill()
+        watch.wait()
 
 
 def pytest_collection_modifyitems(config, items) -> None:
@@ -73,8 +79,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
     how many ran and passed, or why none ran."""
     watch = getattr(config, "pause_watch", None)
     if watch is not None:
-        watch.stop()
-        terminalreporter.write_line(watch.summary())
+        terminalreporter.write_line(pause_watch.summary_of(watch))
     if not _PX4_PRESENT:
         where = _PX4_DIR.relative_to(ROOT.parent)
         terminalreporter.write_line(

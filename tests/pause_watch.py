@@ -4,15 +4,19 @@ A flight's streams are watched for gaps (a setpoint sent late, a stale mocap str
 test of the flights fails when the machine pauses gcs's threads for longer than those limits.
 Whether such a pause was the machine's (every real-time thread late at the same moment, time
 the host took from the virtual machine) or one process's own is not in a failed flight's
-output. So the test session keeps one thread of its own at the flight threads' priority
-(:func:`gcs.io.scheduling.raise_thread`) that wakes every :data:`PERIOD_S` and notes each wake
-later than :data:`PAUSE_S`, and reads the host's steal time (``/proc/stat``); the session's
-summary says what it saw, with wall-clock times to set beside a failed flight's.
+output. So the test session starts a process of its own (``python tests/pause_watch.py``: a thread
+in pytest's process would wait for the interpreter lock whenever a test holds it) whose thread
+at the flight threads' priority (:func:`gcs.io.scheduling.raise_thread`) wakes every
+:data:`PERIOD_S` and notes each wake later than :data:`PAUSE_S`, and which reads the host's
+steal time (``/proc/stat``). When its input closes it prints one line: what it saw, with
+wall-clock times to set beside a failed flight's, for the session's summary.
 """
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -115,3 +119,29 @@ class PauseWatch:
             for at_s, late_s in sorted(longest)
         )
         return f"{head}: {len(self.pauses)} in {watched_s:.0f} s, the longest {listed}{steal}"
+
+
+def start_process() -> subprocess.Popen[str]:
+    """This module as a process watching until its input closes (:func:`main`)."""
+    return subprocess.Popen(
+        [sys.executable, __file__], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+
+
+def summary_of(process: subprocess.Popen[str]) -> str:
+    """Close the input of a :func:`start_process` process; the line it printed."""
+    out, _ = process.communicate("", timeout=10)
+    return out.strip() or f"machine pauses: the watch ended with code {process.returncode}"
+
+
+def main() -> None:
+    """Watch until standard input closes, then print :meth:`PauseWatch.summary`."""
+    watch = PauseWatch()
+    watch.start()
+    sys.stdin.read()
+    watch.stop()
+    print(watch.summary(), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from synthetic import CI_FLIGHT, SHORT
+from synthetic import CI_FLIGHT, CI_MOCAP, SHORT
 
 from gcs.io.mocap_samples import read_mocap_csv
 from gcs.io.records import MOCAP_GRID_COLUMNS
@@ -51,10 +51,11 @@ QUICK_SETTLE = {"settle_tolerance_m": 0.1}
 
 
 def profile(tmp: Path, flight: dict | None = None, **mocap: object) -> Path:
-    """antx.yaml with :data:`CI_FLIGHT` (and ``flight``) and the section ``mocap``."""
+    """antx.yaml with :data:`CI_FLIGHT` (and ``flight``) and the section ``mocap`` (with
+    :data:`CI_MOCAP` unless it says otherwise)."""
     data = yaml.safe_load((ROOT / "profiles" / "antx.yaml").read_text())
     data["flight"] = dict(data.get("flight") or {}, **CI_FLIGHT, **(flight or {}))
-    data["mocap"] = mocap
+    data["mocap"] = {**CI_MOCAP, **mocap}
     path = tmp / "antx-mocap.yaml"
     path.write_text(yaml.safe_dump(data))
     return path

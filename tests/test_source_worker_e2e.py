@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 import yaml
 from flight_gaps import gaps
-from synthetic import CI_FLIGHT
+from synthetic import CI_FLIGHT, CI_MOCAP
 from test_mocap_e2e import INDOOR, TIMEOUT_S
 
 from gcs.app.fly import FlyRequest, fly_run, plan_fly, start_run
@@ -45,7 +45,7 @@ def adaptive_mocap_profile(tmp: Path) -> Path:
     data["learning"]["adaptive"]["repeats"] = 1
     # no frame check after take-off: it proves the mapping (tests/test_mocap_e2e.py), not the
     # streams during learning, and its five settles cost a minute a flight on the wire
-    data["mocap"] = {"check_move_m": 0.0}
+    data["mocap"] = {**CI_MOCAP, "check_move_m": 0.0}
     path = tmp / "antx-adaptive-mocap.yaml"
     path.write_text(yaml.safe_dump(data))
     return path

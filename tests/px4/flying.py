@@ -9,6 +9,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import yaml
+from synthetic import CI_MOCAP
 from test_fly_e2e import ROOT
 from test_fly_e2e import gcs as _gcs
 
@@ -151,12 +152,13 @@ def sitl_profile(
 ) -> Path:
     """The shipped profile ``name`` for a firmware flight, written to ``tmp``: the watchdog
     limits ``limits`` (default :data:`SITL_LIMITS`; the lab flights give the mock's
-    ``CI_FLIGHT``), a ``mocap`` section when given (a lab), any ``sections`` updated, and
+    ``CI_FLIGHT``), a ``mocap`` section when given (a lab; with ``CI_MOCAP`` unless it says
+    otherwise), any ``sections`` updated, and
     ``fields`` set by their dotted names (``{"learning.adaptive.repeats": 1}``)."""
     data = yaml.safe_load((ROOT / "profiles" / f"{name}.yaml").read_text())
     data["flight"] = dict(data.get("flight") or {}, **(SITL_LIMITS if limits is None else limits))
     if mocap is not None:
-        data["mocap"] = dict(mocap)
+        data["mocap"] = {**CI_MOCAP, **mocap}
     for key, values in sections.items():
         data[key] = dict(data.get(key) or {}, **values)
     for dotted, value in (fields or {}).items():
