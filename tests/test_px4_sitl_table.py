@@ -59,3 +59,9 @@ def test_the_frame_check_line_shows_without_its_prefix() -> None:
         "t", {"check": "mocap check: 1.00 m moves; wander 0.2 m", "reason": "r"}
     )
     assert text == "frame check 1.00 m moves; wander 0.2 m; gcs: r"
+
+
+def test_a_pause_shows_its_length_the_late_setpoint_and_the_modes_after_it() -> None:
+    events = [[16.4, "mode AUTO.LAND"], [16.7, "landing"], [23.4, "disarmed"]]
+    text = table.figures_text("t", {"pause": {"pause_s": 0.6, "late_ms": 567, "events": events}})
+    assert text == "paused 0.6 s: the next setpoint 567 ms late; PX4's modes after it: AUTO.LAND"

@@ -50,7 +50,10 @@ payload link (heartbeat: armed, mode; EXTENDED_SYS_STATE: landed state), which s
 back, so PX4 never counts the test as a ground station. Every wait is on an event (a line of
 gcs or PX4, a state PX4 reported) with a bound, never a fixed time. A failed test keeps PX4's
 output and ULog, what each gcs process said and the test's run directories in
-`logs/px4-failures/` and prints where.
+`logs/px4-failures/` and prints where, followed by a digest that outlives those files in a
+CI transcript: PX4's last warnings and commander/navigator messages, and the last 40 s of its
+newest log once a second (navigation state, armed, landed, estimated position and velocity,
+position setpoint).
 
 `make test` runs them whenever a PX4 SITL build is there (`PX4_SITL_DIR`, else the team's
 shared build beside the checkout, `DEFAULT_BUILD` in `tests/px4/sitl.py`), flights first, and
@@ -183,6 +186,12 @@ def figures_text(test: str, figures: dict) -> str:
         modes = [what for _, what in f.get("events", []) if what.startswith("mode ")]
         if modes:
             parts.append("PX4's modes: " + " -> ".join(m.removeprefix("mode ") for m in modes))
+    if "pause" in figures:
+        p = figures["pause"]
+        parts.append(f"paused {p['pause_s']:g} s: the next setpoint {p['late_ms']} ms late")
+        modes = [w.removeprefix("mode ") for _, w in p.get("events", []) if w.startswith("mode ")]
+        if modes:
+            parts.append("PX4's modes after it: " + " -> ".join(modes))
     if "check" in figures:  # gcs's line of the frame check's figures
         parts.append("frame check " + figures["check"].removeprefix("mocap check: "))
     lost = [("gcs_stopped_after_s", "gcs stopped"), ("landed_after_s", "landed"),
