@@ -21,8 +21,10 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 PYTEST  := $(BIN)/python -m pytest -n 2 --dist worksteal -q
-FAST    := -m "not e2e and not px4 and not live"
-FLIGHTS := -m "e2e or px4 or live"
+FAST    := -m "not e2e and not px4 and not live and not processes"
+FLIGHTS := -m "e2e or px4 or live or processes"
+# what test-other-cpu takes of NUMERIC_TESTS: all but the flights, Dask's clusters included
+NUMERIC := -m "not e2e and not px4 and not live"
 # a real-time flight keeps about 0.3-0.4 of a core busy (its vehicle, gcs, MAVSDK's server) and
 # spends the rest waiting on the clock: four at once leave the quick tests (at nice 10) the rest
 # of two cores, and both parts end at about the same time (docs/testing.md)
@@ -44,7 +46,8 @@ NUMERIC_TESTS := tests/test_trajectory_regression.py tests/test_learning_regress
 test: setup
 	$(MAKE) --no-print-directory -j2 --output-sync=target test-flights test-quick
 
-# the real-time flights and servers, and the real firmware
+# the real-time flights and servers, the real firmware, and the tests that start Dask clusters
+# or install the wheel (at a normal priority: the flights' threads are real-time)
 test-flights: setup
 	$(BIN)/python -m pytest -n $(FLIGHT_WORKERS) --dist worksteal -q $(FLIGHTS)
 
@@ -56,14 +59,15 @@ test-quick: setup
 	nice -n 10 $(PYTEST) $(FAST) --hypothesis-seed=$(HYPOTHESIS_SEED)
 	nice -n 10 $(MAKE) --no-print-directory test-other-cpu PYTEST="$(PYTEST) --hypothesis-seed=$(HYPOTHESIS_SEED)"
 
-# everything but the real-time flights and servers and the real firmware
+# everything but the real-time flights and servers, the real firmware, and the tests that start
+# Dask clusters or install the wheel: the tests that run in their own process
 test-fast: setup
 	$(PYTEST) $(FAST)
 
 # numpy without its SIMD dispatch and OpenBLAS on another kernel (tools/other_cpu.py checks that
 # both changed, or fails): the records of tests/data must hold there too (docs/results.md)
 test-other-cpu: setup
-	$(BIN)/python tools/other_cpu.py $(PYTEST) $(FAST) $(NUMERIC_TESTS)
+	$(BIN)/python tools/other_cpu.py $(PYTEST) $(NUMERIC) $(NUMERIC_TESTS)
 
 # the real-firmware tests alone
 test-px4: setup

@@ -38,6 +38,7 @@ def without_seconds(document: dict) -> dict:
     ]}  # fmt: skip
 
 
+@pytest.mark.processes
 def test_a_small_adaptive_study_on_two_workers_is_one_process_s_bit_for_bit(tmp_path: Path) -> None:
     args = ["montecarlo", "--levels", "0.05,0.4", "--plants", "6", "--repeats", "2", "--samples",
             "60", "--adaptive"]  # fmt: skip
@@ -102,6 +103,7 @@ def test_a_short_studys_here_on_threads_by_default_with_the_rows_of_workers_0(
     assert rows["default"] == rows["0"]  # every bit
 
 
+@pytest.mark.processes
 def test_a_study_judged_long_moves_its_other_tasks_to_a_local_cluster(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

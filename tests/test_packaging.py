@@ -13,6 +13,7 @@ import sys
 import zipfile
 from pathlib import Path
 
+import pytest
 from synthetic import ROOT
 
 FILES = sorted(
@@ -43,6 +44,7 @@ def test_fly_finds_the_packaged_profile_and_trajectory_from_another_directory(
     assert list(tmp_path.iterdir()) == []  # --check creates nothing, not even logs/
 
 
+@pytest.mark.processes
 def test_an_installed_wheel_carries_the_files_and_finds_them_by_name(tmp_path: Path) -> None:
     source = tmp_path / "source"  # a copy: building in the checkout would leave build/ there
     source.mkdir()

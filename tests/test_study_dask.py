@@ -75,6 +75,7 @@ def reference(study_file: Path, tmp_path_factory: pytest.TempPathFactory) -> byt
     return (out / "study.json").read_bytes()
 
 
+@pytest.mark.processes
 def test_two_local_workers_give_the_json_of_one(
     study_file: Path, reference: bytes, tmp_path: Path
 ) -> None:
@@ -86,6 +87,7 @@ def test_two_local_workers_give_the_json_of_one(
     assert len(data["results"]) == 2 and len(data["results"][0]["plants_results"]) == 4
 
 
+@pytest.mark.processes
 def test_a_local_cluster_serves_http_on_loopback_on_a_free_port_and_says_nothing() -> None:
     """The scheduler of a LocalCluster serves a small HTTP interface even without its dashboard;
     Dask's default port 8787 would be taken by a second study (or the user's own cluster) and
@@ -154,6 +156,7 @@ def real_cluster(tmp_path: Path) -> Iterator[tuple[str, list[subprocess.Popen]]]
                 p.wait()
 
 
+@pytest.mark.processes
 def test_a_real_scheduler_and_two_workers_give_the_same_json(
     study_file: Path, reference: bytes, real_cluster: tuple[str, list], tmp_path: Path
 ) -> None:
@@ -164,6 +167,7 @@ def test_a_real_scheduler_and_two_workers_give_the_same_json(
     assert (out / "study.json").read_bytes() == reference
 
 
+@pytest.mark.processes
 def test_a_worker_killed_mid_study_changes_nothing(
     study_file: Path, reference: bytes, real_cluster: tuple[str, list], tmp_path: Path
 ) -> None:
@@ -188,6 +192,7 @@ def test_a_worker_killed_mid_study_changes_nothing(
     assert text.encode() == reference
 
 
+@pytest.mark.processes
 def test_an_interrupted_study_resumes_the_missing_chunks(
     study_file: Path, reference: bytes, tmp_path: Path
 ) -> None:
