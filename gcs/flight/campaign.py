@@ -11,8 +11,11 @@ the vehicle at rest before ``u(0)``), settle, and hold it for ``settings.hover_b
 so that every trial starts from the same state; fly it, hover at its end while
 ``source.record`` runs (in a worker thread), ask ``source.setpoints_for`` for the next sequence
 (worker thread, still hovering). A settle that times out is judged like the first hover:
-flown on with wider tolerances (and a warning), or refused. After the last trial: land and
-disarm. Every trial's vehicle-time rate is checked (:func:`gcs.flight.clock.rate_warning`).
+flown on with wider tolerances (and a warning), or refused. A trial whose stream fell behind
+(a late setpoint, :class:`gcs.errors.TrialPaused`) is handed to ``source.record_incomplete``,
+hovering, and flown again from its start point, at most ``settings.paused_trial_retries``
+times. After the last trial: land and disarm. Every trial's vehicle-time rate is checked
+(:func:`gcs.flight.clock.rate_warning`).
 
 The fence (:mod:`gcs.flight.fence`): before take-off the campaign says what it watches, uploads
 the arena to the autopilot as its own geofence (:mod:`gcs.flight.geofence`; a refusal is a
