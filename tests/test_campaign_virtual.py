@@ -173,18 +173,16 @@ def test_cancellation_mid_trial_lands_and_marks_incomplete(tmp_path: Path) -> No
 def _pausing(pauses: int, trial: int, events: list[object]):  # type: ignore[no-untyped-def]
     """An event callback that blocks the loop for 0.6 s (virtual) in the first ``pauses``
     attempts of ``trial``, at its 20th sample, as a machine that paused gcs would."""
-    attempts = itertools.count()
+    attempt = [-1]  # the attempt of ``trial`` in flight (0 the first)
     paused: set[int] = set()
-    started = [-1]
 
     def on_event(event: object) -> None:
         events.append(event)
         if isinstance(event, TrialStarted) and event.trial == trial:
-            started[0] = next(attempts)
-        at = started[0]
+            attempt[0] += 1
         ours = isinstance(event, TrialProgress) and event.trial == trial and event.k >= 20
-        if ours and 0 <= at < pauses and at not in paused:
-            paused.add(at)
+        if ours and attempt[0] < pauses and attempt[0] not in paused:
+            paused.add(attempt[0])
             asyncio.get_running_loop().advance(0.6)  # type: ignore[attr-defined]
 
     return on_event

@@ -527,8 +527,7 @@ class _Campaign:
         if attempt > retries:
             raise exc
         partial = exc.recording  # type: ignore[attr-defined]
-        if self.mocap is not None:
-            partial = await asyncio.to_thread(mocap_steps.with_mocap, partial, self.mocap)
+        partial = await asyncio.to_thread(mocap_steps.with_mocap, partial, self.mocap)
         self.run = None  # kept below: no longer in flight
         self.emit(TrialFinished(j, partial))
         reason = str(exc)
