@@ -144,8 +144,9 @@ def fit_room(log: Log) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def up_axis(q: np.ndarray) -> np.ndarray:
-    """The body's z axis in the world frame of unit quaternions ``q`` (n, 4; w, x, y, z): (n, 3)."""
-    w, x, y, z = q.T
+    """The body's z axis in the world frame of quaternions ``q`` (n, 4; w, x, y, z; interpolated,
+    so normalised here): (n, 3)."""
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
     return np.column_stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)])
 
 
@@ -153,8 +154,7 @@ def thrust_axis(log: Log, t_s: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """PX4's estimated minus the true body z axis, horizontal components in the room (n, 2)."""
     fields = tuple(f"q[{i}]" for i in range(4))
     estimated = up_axis(log.at("vehicle_attitude", fields, t_s))
-    true = log.at("vehicle_attitude_groundtruth", fields, t_s)
-    true = up_axis(true / np.linalg.norm(true, axis=1, keepdims=True))
+    true = up_axis(log.at("vehicle_attitude_groundtruth", fields, t_s))
     return estimated[:, :2] - true[:, :2] @ rot.T
 
 
