@@ -10,6 +10,7 @@ printed table within one unit of its last digit (docs/results.md, "Reproducibili
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -91,6 +92,9 @@ def test_a_short_studys_here_on_threads_by_default_with_the_rows_of_workers_0(
     # two threads here (one per core) against --workers 0, the tasks one after the other
     monkeypatch.setattr(study_cluster, "machine_workers", lambda: 2)
     monkeypatch.setattr(study_cluster, "busy_cores", lambda: 0.0)  # not the machine's load
+    # nor its speed: the estimate is timed on the wall clock, and a starved run must not start
+    # a cluster here (the placement between the two is the next test's, on given estimates)
+    monkeypatch.setattr(study_cluster, "LOCAL_CLUSTER_COST_S", math.inf)
     rows, lines = {}, {}
     for name, extra in (("default", []), ("0", ["--workers", "0"])):
         out = tmp_path / f"mc-{name}.json"

@@ -131,7 +131,7 @@ def test_states_become_ned_poses_from_the_first_one_carried_forward_with_their_v
     port = free_port()
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
     with (
-        SihTruth(port, max_age_s=0.5) as truth,
+        SihTruth(port, max_age_s=WAIT_S) as truth,  # not out of view after a stall here
         socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out,
     ):
         assert truth(time.monotonic()) is None  # nothing yet: out of view

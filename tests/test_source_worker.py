@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import select
 import signal
 import threading
 from pathlib import Path
@@ -169,8 +170,15 @@ def test_the_worker_ends_when_the_flight_process_is_killed() -> None:
     assert proc.stdout is not None
     pid = int(proc.stdout.readline())
     assert running(pid)
-    proc.kill()
-    proc.communicate(timeout=30)  # the output closes once every process holding it ended
+    pidfd = os.pidfd_open(pid)  # readable once the worker has ended
+    try:
+        proc.kill()
+        proc.communicate(timeout=30)  # the output closes once every process holding it ended
+        # the worker closed its files on its way out; at nice 19 on a loaded machine it may
+        # wait for a core before it is gone
+        assert select.select([pidfd], [], [], 20.0)[0], "the worker outlived its killed parent"
+    finally:
+        os.close(pidfd)
     assert not running(pid)
 
 
