@@ -944,6 +944,21 @@ def _adaptive_cases() -> Iterator[Case]:
             "learning.adaptive.refresh_noise",
         )
 
+    k = "profile field: learning.adaptive.refresh_takeback"
+    for value in ("yes", 1):
+        yield Case(
+            k,
+            "fly",
+            f"learning.adaptive.refresh_takeback {value!r}",
+            lambda ws, v=value: _fly(
+                ws,
+                profile=ws.profile(
+                    "learning.adaptive.refresh_takeback", v, base="antx-adaptive.yaml"
+                ),
+            ),
+            "learning.adaptive.refresh_takeback",
+        )
+
     k = "profile field: learning.adaptive.refresh_max_move"
     for value in (0, -0.5, "far", float("nan")):
         yield Case(

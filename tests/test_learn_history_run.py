@@ -327,6 +327,9 @@ def test_the_live_table_says_each_decision_as_it_happens(tmp_path):
     record = run.read_learn_record(2)
     axis = record["decision"]["axes"][0]
     axis["refresh"] = {**axis["refresh"], "accepted": True, "moved": 0.26}
+    east = record["decision"]["axes"][1]
+    back = "taken back: the profile's model predicted trial 2 better (z = 2.61 > 1.64)"
+    east["refresh"] = {**axis["refresh"], "moved": 0.82, "reason": back, "takeback_z": 2.61}
     record["decision"]["safeguard"] = {
         "action": "revert", "anchor_trial": 1, "step": 0.5, "epos_m": 0.05, "best_trial": 1,
         "best_epos_m": 0.02, "threshold_m": 0.03, "reason": "",
@@ -338,7 +341,7 @@ def test_the_live_table_says_each_decision_as_it_happens(tmp_path):
     text = "\n".join(learning_lines(outcome))
     assert "trial 2: 1.04x the floor" in text and "converged" in text
     assert "fell back to trial 1 with step 0.5" in text
-    assert "model refreshed: north moved 26 %" in text
+    assert f"model refreshed: north moved 26 %; east {back}" in text
     assert "trial 3 (j = 2): setpoints" in text
     assert "estimate" not in text  # the report has the weights; the live table what changed
     repeat = LearnOutcome(0, 1, run.path / "setpoints-001.csv", ("-", "-"), 0, 0, repeat_of=0)

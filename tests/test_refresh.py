@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 import scipy.signal
+import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -17,6 +18,7 @@ from gcs.core.refresh import (
     fit_output_error,
     model_change,
     model_from_transfer_function,
+    prediction_loss_z,
     refresh_model,
     simulate_tf,
     transfer_function,
@@ -337,3 +339,69 @@ def test_a_move_the_convergence_contradicts_is_rejected_only_where_learning_conv
 def test_max_move_must_be_positive_and_finite(bad: float) -> None:
     with pytest.raises(ValueError, match="max_move"):
         RefreshSettings(max_move=bad)
+
+
+# ------------------------------------------------------------------ prediction_loss_z
+
+
+def test_prediction_loss_z_without_lags_is_the_t_statistic_of_the_loss_differential() -> None:
+    rng = np.random.default_rng(3)
+    e1, e2 = rng.normal(0, 1.2, 300), rng.normal(0, 1.0, 300)
+    g = e1**2 - e2**2
+    n = g.size
+    t = scipy.stats.ttest_1samp(g, 0.0).statistic  # variance with n - 1
+    assert prediction_loss_z(e1, e2, 0) == pytest.approx(t * np.sqrt(n / (n - 1)), rel=1e-12)
+
+
+@pytest.mark.parametrize("lag", [1, 5, 20])
+def test_prediction_loss_z_is_the_bartlett_long_run_variance_as_a_quadratic_form(lag) -> None:
+    rng = np.random.default_rng(lag)
+    e1 = np.convolve(rng.standard_normal(240), np.ones(8) / 8, "same")
+    e2 = np.convolve(rng.standard_normal(240), np.ones(8) / 8, "same")
+    g = e1**2 - e2**2
+    n = g.size
+    c = g - g.mean()
+    gap = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    weights = np.clip(1.0 - gap / (lag + 1.0), 0.0, None)  # Bartlett's kernel
+    long_run = c @ weights @ c / n
+    assert prediction_loss_z(e1, e2, lag) == pytest.approx(g.mean() / np.sqrt(long_run / n))
+
+
+def test_prediction_loss_z_is_antisymmetric_zero_for_equal_losses_and_batched() -> None:
+    rng = np.random.default_rng(5)
+    e1, e2 = rng.standard_normal((2, 3, 100))
+    z = prediction_loss_z(e1, e2, 4)
+    assert z.shape == (3,)
+    np.testing.assert_allclose(prediction_loss_z(e2, e1, 4), -z, rtol=1e-12)
+    for k in range(3):
+        assert z[k] == prediction_loss_z(e1[k], e2[k], 4)
+    assert prediction_loss_z(e1[0], -e1[0], 4) == 0.0  # the same squares
+    assert prediction_loss_z(2 * e1[0], e1[0], 4) > 0  # the other predicted better
+
+
+def test_prediction_loss_z_is_about_standard_normal_when_both_predict_alike() -> None:
+    """Correlated errors of equal variance, the lag their correlation time: the one-sided 5 %
+    point is exceeded in about 5 % of the trials (binomial 99.9 % bounds over 2000)."""
+    rng = np.random.default_rng(11)
+    kernel = np.ones(10) / np.sqrt(10)
+    draws = rng.standard_normal((2, 2000, 280 + 9))
+    e = np.apply_along_axis(lambda x: np.convolve(x, kernel, "valid"), -1, draws)
+    z = prediction_loss_z(e[0], e[1], 20)
+    share = np.mean(z > scipy.stats.norm.ppf(0.95))
+    low, high = scipy.stats.binom.interval(0.999, 2000, 0.05)
+    assert low / 2000 - 0.02 <= share <= high / 2000 + 0.02
+    assert abs(np.median(z)) < 0.1
+
+
+@pytest.mark.parametrize(
+    "e1, e2, lag, match",
+    [
+        (np.zeros(5), np.zeros(6), 1, "one shape"),
+        (np.zeros(1), np.zeros(1), 1, "N >= 2"),
+        (np.zeros(5), np.zeros(5), -1, "lag"),
+        (np.zeros(5), np.zeros(5), 1.5, "lag"),
+    ],
+)
+def test_prediction_loss_z_refusals(e1, e2, lag, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        prediction_loss_z(e1, e2, lag)

@@ -201,3 +201,18 @@ def test_a_plant_whose_trial_is_refused_stops_alone(plan: StudyPlan) -> None:
         LearnerBatch(paper.settings, ref, 0)
     with pytest.raises(ValueError, match="shape"):
         LearnerBatch(paper.settings, ref, 2).step(u, y)
+
+
+def test_the_takeback_holds_alike_batched_and_per_plant(plan: StudyPlan) -> None:
+    """``refresh_takeback``: the same plants go back to the nominal model, at the same step,
+    in the batch as in a learner per plant."""
+    adaptive = plan.settings[1]
+    back = dataclasses.replace(
+        adaptive, adaptive=dataclasses.replace(adaptive.adaptive, refresh_takeback=True)
+    )
+    batch, flown, _ = _fly_batch(plan, back, batched=True)
+    each, flown_each, _ = _fly_batch(plan, back, batched=False)
+    np.testing.assert_allclose(flown, flown_each, rtol=0, atol=1e-9)
+    assert batch.failed == each.failed == [None] * plan.plants
+    judged = [ax.refresh.takeback_z for learner in each._each for ax in learner.last.record.axes]
+    assert np.isfinite(judged).any()  # refreshed models were judged

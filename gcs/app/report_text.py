@@ -216,7 +216,9 @@ def decision_lines(record: dict) -> list[str]:
         if not isinstance(r, dict):
             continue
         accepted |= r["accepted"]
-        if r["accepted"]:
+        if r["accepted"] and str(r.get("reason", "")).startswith("taken back"):
+            refresh.append(f"{name} {r['reason']}")
+        elif r["accepted"]:
             refresh.append(f"{name} moved {100 * _num(r.get('moved')):.0f} %")
         else:
             refresh.append(f"{name} kept ({r.get('reason')})")

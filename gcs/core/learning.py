@@ -16,7 +16,7 @@ setpoints flown, ``Y = y(1..N)`` the measured positions and ``Yd = yd(1..N)`` th
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -50,7 +50,10 @@ from gcs.core.refresh import (
     RefreshResult,
     RefreshSettings,
     fit_ar_noise,
+    model_change,
+    prediction_loss_z,
     refresh_models,
+    transfer_function,
 )
 from gcs.core.robustness import RobustnessWeight, repeat_cutoff, robustness_weight
 from gcs.core.safeguard import SafeguardDecision, SafeguardSettings, feasible_step, safeguard
@@ -77,6 +80,7 @@ __all__ = [
     "plan_next_trial",
     "data_estimates",
     "refresh_axes",
+    "takeback_axes",
     "converged_with_model",
 ]
 
@@ -262,6 +266,10 @@ REFRESH_NOISE = ("white", "measured")
 #: Largest order of the refresh's autoregressive noise model [samples] (1 s at 0.05 s).
 REFRESH_NOISE_MAX_ORDER = 20
 
+#: The take-back's threshold: the one-sided 5 % point of the standard normal (a refreshed model
+#: is taken back when the profile's predicted the newest trial better at that level).
+TAKEBACK_Z = 1.6448536269514722
+
 
 @dataclass(frozen=True)
 class AdaptiveSettings:
@@ -292,6 +300,13 @@ class AdaptiveSettings:
         trial 0), a refresh that moves the model by more than this where learning acts is
         rejected: such a move contradicts the convergence (``max_move`` of
         :class:`gcs.core.refresh.RefreshSettings`); None: no limit.
+    refresh_takeback : bool
+        With ``refresh``: judge a refreshed model by the next trial, which it has not seen:
+        the model in use and the profile's each predict the newest trial from the trials
+        before it; where the profile's predicted significantly better
+        (:func:`gcs.core.refresh.prediction_loss_z` above ``TAKEBACK_Z``, the errors'
+        correlation taken as ``refresh_block_s``), the axis goes back to the profile's model
+        and is not refreshed again in that step (:func:`refresh_axes`).
     refresh_noise : str
         The non-repeatable error the refresh assumes: ``"white"``, of the floor's variance;
         ``"measured"``, an autoregressive model of it fitted to the flights of identical
@@ -324,6 +339,7 @@ class AdaptiveSettings:
     refresh_block_s: float = 1.0
     refresh_noise: str = "white"
     refresh_max_move: float | None = None
+    refresh_takeback: bool = False
     robustness_cutoff_rad_s: float | str | None = None
     robustness_order: int = 2
     safeguard: bool = False
@@ -655,6 +671,10 @@ def refresh_axes(
 ) -> list[RefreshResult]:
     """The refresh of one axis of K plants from their pairs of trials of different setpoints.
 
+    With ``adaptive.refresh_takeback``, the models in use are judged first
+    (:func:`takeback_axes`): a plant whose model is taken back gets the profile's model, and
+    no refresh in this step; the others are refreshed, their record carrying the judgement.
+
     Parameters
     ----------
     settings, adaptive
@@ -676,14 +696,22 @@ def refresh_axes(
     Returns
     -------
     list of RefreshResult
-        One per plant (:func:`gcs.core.refresh.refresh_models`).
+        One per plant (:func:`gcs.core.refresh.refresh_models`, or the take-back).
     """
+    n_plants = len(models)
+    out: list[RefreshResult | None] = [None] * n_plants
+    z = np.full(n_plants, np.nan)
+    if adaptive.refresh_takeback:
+        z, back = takeback_axes(settings, adaptive, models, u, y, axis)
+        out = list(back)
+    todo = np.array([k for k in range(n_plants) if out[k] is None], dtype=int)
+    if todo.size == 0:
+        return out  # type: ignore[return-value]
     r_m2 = _noise_variances(models, u, y, floors, axis)
     du, dy = np.diff(u, axis=1), np.diff(y, axis=1)
     moved = np.max(np.abs(du), axis=2) > IDENTICAL_TOL_M  # (K, T-1): repeats left out
-    out: list[RefreshResult | None] = [None] * len(models)
-    for pattern in np.unique(moved, axis=0):  # the plants whose pairs moved alike
-        rows = np.flatnonzero(np.all(moved == pattern, axis=1))
+    for pattern in np.unique(moved[todo], axis=0):  # the plants whose pairs moved alike
+        rows = todo[np.all(moved[todo] == pattern, axis=1)]
         results = refresh_models(
             [models[k] for k in rows], du[rows][:, pattern], dy[rows][:, pattern], r_m2[rows],
             adaptive.refresh_settings(), settings.weights.wdu / settings.weights.we,
@@ -691,8 +719,117 @@ def refresh_axes(
             None if converged is None else [converged[k] for k in rows],
         )  # fmt: skip
         for k, result in zip(rows, results, strict=True):
-            out[k] = result
+            out[k] = result if np.isnan(z[k]) else replace(result, takeback_z=float(z[k]))
     return out  # type: ignore[return-value]
+
+
+def takeback_axes(
+    settings: LearnerSettings,
+    adaptive: AdaptiveSettings,
+    models: Sequence[DiscreteModel],
+    u: np.ndarray,
+    y: np.ndarray,
+    axis: int,
+) -> tuple[np.ndarray, list[RefreshResult | None]]:
+    """Judge each plant's refreshed model of one axis by the newest trial, which it never saw.
+
+    The refresh accepts a candidate that explains held-out blocks of the pairs it was fitted
+    to; the newest trial was flown after it and is new data. The model in use and the
+    profile's (``settings.models``) each predict it as the learning step does: the estimate
+    ``d_hat`` from the trials before it with that model (:func:`data_estimates`, or Table I's
+    estimate), then ``F u_newest + d_hat``. Where the profile's predicted significantly better
+    (:func:`gcs.core.refresh.prediction_loss_z` above :data:`TAKEBACK_Z`, the errors'
+    correlation taken as ``adaptive.refresh_block_s``, the time the refresh's blocks assume
+    independent), the refresh is taken back: the profile's model again, recorded as a
+    refresh to it.
+
+    Parameters
+    ----------
+    settings, adaptive
+        As :func:`plan_next_trial`.
+    models : sequence of DiscreteModel
+        Each plant's model of the axis in use (the one that planned the newest trial).
+    u, y : ndarray, shape (K, T, N)
+        Setpoints and positions of every trial, learning coordinates [m].
+    axis : int
+        Index of the axis in ``settings.axes``.
+
+    Returns
+    -------
+    z : ndarray, shape (K,)
+        The statistic per plant; NaN where not judged (the model in use is the profile's, or
+        fewer than two trials).
+    results : list of RefreshResult or None
+        Per plant: the take-back (``accepted``, the profile's model, how far it moved from
+        the model in use, the two models' mean square prediction errors as the current's and
+        the candidate's held-out losses), or None where the model in use stays.
+    """
+    prior = settings.models[axis]
+    n_plants, n_trials = u.shape[0], u.shape[1]
+    z = np.full(n_plants, np.nan)
+    out: list[RefreshResult | None] = [None] * n_plants
+    rows = [k for k in range(n_plants) if not _same_model(models[k], prior)]
+    if n_trials < 2 or not rows:
+        return z, out
+    in_use = [models[k] for k in rows]
+    errors = []
+    for candidates in (in_use, [prior] * len(rows)):
+        d_hat = _estimates(settings, adaptive, candidates, u[rows, :-1], y[rows, :-1])
+        newest = model_outputs(candidates, u[rows, -1:])[:, 0]
+        errors.append(newest + d_hat - y[rows, -1])
+    lag = int(round(adaptive.refresh_block_s / prior.dt_s))
+    stat = prediction_loss_z(errors[0], errors[1], lag)
+    band = settings.weights.wdu / settings.weights.we
+    b1, a1 = transfer_function(prior)
+    for i, k in enumerate(rows):
+        z[k] = stat[i]
+        if not stat[i] > TAKEBACK_Z:
+            continue
+        b0, a0 = transfer_function(models[k])
+        moved = float(
+            model_change(b0[None], a0[None], b1[None], a1[None], models[k].delay_samples,
+                         prior.dt_s, band, prior.delay_samples)[0]
+        )  # fmt: skip
+        out[k] = RefreshResult(
+            model=prior,
+            accepted=True,
+            reason=(
+                f"taken back: the profile's model predicted trial {n_trials - 1} better "
+                f"(z = {stat[i]:.2f} > {TAKEBACK_Z:.2f})"
+            ),
+            moved=moved,
+            candidate_moved=moved,
+            cv_loss_current_m2=float(np.mean(errors[0][i] ** 2)),
+            cv_loss_candidate_m2=float(np.mean(errors[1][i] ** 2)),
+            pairs=0,
+            snr=float("nan"),
+            takeback_z=float(stat[i]),
+        )
+    return z, out
+
+
+def _same_model(a: DiscreteModel, b: DiscreteModel) -> bool:
+    """The same model: one object, or equal matrices, sample time and delay."""
+    return a is b or (
+        a.dt_s == b.dt_s
+        and a.delay_samples == b.delay_samples
+        and all(np.array_equal(getattr(a, m), getattr(b, m)) for m in "ABC")
+    )
+
+
+def _estimates(
+    settings: LearnerSettings,
+    adaptive: AdaptiveSettings,
+    models: Sequence[DiscreteModel],
+    u: np.ndarray,
+    y: np.ndarray,
+) -> np.ndarray:
+    """The estimate ``d_hat`` (K, N) of one axis of K plants as the learning step makes it."""
+    if adaptive.noise == "table1":
+        return np.array(
+            [table1_estimate_of(settings, m, u[k], y[k])[0] for k, m in enumerate(models)]
+        )
+    return data_estimates(settings, adaptive, models, u, y)[0]
 
 
 def converged_with_model(epos_m: np.ndarray) -> bool:

@@ -24,6 +24,11 @@ band where the update inverts the model (``|F|^2 >= W_du / W_e``): ``max |F_new 
 That is the quantity that decides convergence of norm-optimal ILC, ``|1 - F_true / F| < 1``,
 so a move of 0.3 means the old model was about 30 % off where learning acts.
 
+The next trial judges a refresh once more, on data it has never seen: the refreshed model and
+the one it replaced each predict that trial from the trials before it, and
+:func:`prediction_loss_z` says whether the old one predicted significantly better (the
+learning's take-back, ``refresh_takeback`` in :mod:`gcs.core.learning`).
+
 Everything is vectorised over a leading batch axis; :func:`refresh_model` is the one-axis
 entry point the learning step uses, :func:`refresh_models` the same for the plants of a batch.
 """
@@ -55,6 +60,7 @@ __all__ = [
     "model_change",
     "ArNoise",
     "fit_ar_noise",
+    "prediction_loss_z",
 ]
 
 
@@ -132,6 +138,10 @@ class RefreshResult:
         Informative pairs used.
     snr : float
         Signal-to-noise of the newest pair (``mean (F dU)^2 / 2 r``).
+    takeback_z : float
+        With the learning's take-back: how much better the profile's model predicted the
+        newest trial than the model in use (:func:`prediction_loss_z`); NaN when not judged
+        (no take-back, or the model in use is the profile's).
     """
 
     model: DiscreteModel
@@ -143,6 +153,7 @@ class RefreshResult:
     cv_loss_candidate_m2: float
     pairs: int
     snr: float
+    takeback_z: float = float("nan")
 
     def as_dict(self) -> dict:
         """JSON-ready dictionary (the model as its discrete state space)."""
@@ -155,6 +166,7 @@ class RefreshResult:
             "cv_loss_candidate_m2": self.cv_loss_candidate_m2,
             "pairs": self.pairs,
             "snr": self.snr,
+            "takeback_z": self.takeback_z,
             "model": self.model.as_dict(),
         }
 
@@ -620,6 +632,48 @@ def model_change(
     band[:, 0] = True  # DC always counts
     rel = np.abs(f_new / np.where(f_old == 0, 1.0, f_old) - 1.0)
     return np.max(np.where(band, rel, 0.0), axis=-1)
+
+
+def prediction_loss_z(err_current_m: np.ndarray, err_other_m: np.ndarray, lag: int) -> np.ndarray:
+    """How much better another model predicted one trial than the current one, in standard
+    errors: the Diebold-Mariano statistic of the squared prediction errors.
+
+    The loss differential ``g(k) = e_current(k)^2 - e_other(k)^2`` has mean zero when both
+    predict equally well; its mean over the trial, divided by its standard error, is about
+    standard normal then. The errors of one flight are correlated in time, so the variance of
+    the mean is the Newey-West (Bartlett-weighted) long-run variance up to ``lag`` samples
+    (Diebold and Mariano, J. Bus. Econ. Stat. 13(3), 1995; Newey and West, Econometrica
+    55(3), 1987). Positive: the other model predicted better.
+
+    Parameters
+    ----------
+    err_current_m, err_other_m : ndarray, shape (..., N)
+        Prediction errors of the two models on the same samples [m].
+    lag : int
+        Largest autocovariance lag kept [samples], ``>= 0`` (about the errors' correlation
+        time).
+
+    Returns
+    -------
+    ndarray, shape (...)
+        The statistic; 0 where the two losses are identical.
+    """
+    e1 = np.asarray(err_current_m, dtype=float)
+    e2 = np.asarray(err_other_m, dtype=float)
+    if e1.shape != e2.shape or e1.ndim < 1 or e1.shape[-1] < 2:
+        raise ValueError(f"two error series (..., N >= 2) of one shape, got {e1.shape}, {e2.shape}")
+    if int(lag) != lag or lag < 0:
+        raise ValueError(f"lag must be an integer >= 0, got {lag}")
+    g = e1 * e1 - e2 * e2
+    n = g.shape[-1]
+    mean = g.mean(axis=-1)
+    c = g - mean[..., None]
+    var = np.sum(c * c, axis=-1) / n
+    for k in range(1, min(int(lag), n - 1) + 1):
+        var = var + 2.0 * (1.0 - k / (lag + 1.0)) * np.sum(c[..., k:] * c[..., :-k], axis=-1) / n
+    scale = np.sqrt(np.maximum(var, 0.0) / n)
+    tiny = np.finfo(float).tiny
+    return np.where(scale > tiny, mean / np.maximum(scale, tiny), 0.0)
 
 
 @dataclass(frozen=True)

@@ -311,7 +311,8 @@ def _learned_axes(f: Fields) -> tuple[int, ...]:
 def _adaptive(f: Fields) -> AdaptiveSettings:
     """``learning.adaptive``: the options beyond the paper (absent: the paper's method)."""
     d = AdaptiveSettings()
-    flag = {k: f.value(k, bool, getattr(d, k)) for k in ("drift_offset", "refresh", "safeguard")}
+    flags = ("drift_offset", "refresh", "refresh_takeback", "safeguard")
+    flag = {k: f.value(k, bool, getattr(d, k)) for k in flags}
     cutoff = f.raw("robustness_cutoff_rad_s", None)
     order = f.integer("robustness_order", d.robustness_order)
     try:
@@ -325,6 +326,7 @@ def _adaptive(f: Fields) -> AdaptiveSettings:
             refresh_max_move=None
             if f.raw("refresh_max_move", None) is None
             else f.number("refresh_max_move", positive=True),
+            refresh_takeback=flag["refresh_takeback"],
             robustness_cutoff_rad_s=cutoff
             if cutoff is None or cutoff == "auto"
             else f.number("robustness_cutoff_rad_s", positive=True),
