@@ -33,6 +33,10 @@ model's delay within +-2 samples).
 
 ``--refresh-max-move M`` sets ``learning.adaptive.refresh_max_move`` of the adaptive profile.
 
+``--refresh-takeback off,on`` flies the adaptive profile once per choice of
+``learning.adaptive.refresh_takeback`` (the same seeds, so the same wander); the summary adds
+the refreshed models taken back.
+
 ``--plants off35`` flies plants 35 % off the profile's model instead (``max |F_model / F_true -
 1|`` over the learning band: 0.35 north, 0.35 east, against 0.22 and 0.18 for the tests'
 plants), where the refresh has a model to correct.
@@ -41,7 +45,7 @@ Usage::
 
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
         [--seeds 4] [--trials 16] [--refresh-noise white,measured] [--plants tests]
-        [--latency 0.05] [--refresh-max-move 1.0] [--json out.json]
+        [--latency 0.05] [--refresh-max-move 1.0] [--refresh-takeback off,on] [--json out.json]
 """
 
 from __future__ import annotations
@@ -104,6 +108,7 @@ def run(
     plants: str = "tests",
     latency_s: float = 0.0,
     max_move: float | None = None,
+    takeback: str = "",
 ) -> dict:
     """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions."""
     ref = sample_reference(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, DT_S)
@@ -117,6 +122,9 @@ def run(
         learner.adaptive = dataclasses.replace(learner.adaptive, refresh_noise=refresh_noise)
     if max_move is not None and learner.adaptive is not None:
         learner.adaptive = dataclasses.replace(learner.adaptive, refresh_max_move=max_move)
+    if takeback and learner.adaptive is not None:
+        on = takeback == "on"
+        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_takeback=on)
     u = ref[:-1].copy()
     lag = int(round(latency_s / DT_S))
     epos, steps = [], []
@@ -134,12 +142,18 @@ def run(
                 round(100 * ax["refresh"]["moved"]) if ax["refresh"]["accepted"] else None
                 for ax in rec["axes"]
             ]
-            steps.append({"moved_pct": moved, "safeguard": rec["safeguard"]["action"]})
+            back = [
+                bool(ax["refresh"]) and ax["refresh"]["reason"].startswith("taken back")
+                for ax in rec["axes"]
+            ]
+            steps.append(
+                {"moved_pct": moved, "taken_back": back, "safeguard": rec["safeguard"]["action"]}
+            )
     floor = learner.floor
     w = learner.settings.weights
     errors = [model_error(learner.models[a], plants[a], w.wdu / w.we) for a in range(2)]
     return {
-        "profile": profile + (f"/{refresh_noise}" if refresh_noise else ""),
+        "profile": label(profile, refresh_noise, takeback),
         "model_error": errors,
         "sigma_m": sigma_m,
         "corr_s": corr_s,
@@ -153,11 +167,21 @@ def run(
     }
 
 
+def label(profile: str, refresh_noise: str = "", takeback: str = "") -> str:
+    """A variant's name: the profile, then its refresh noise and take-back where chosen."""
+    return "/".join(
+        [profile] + [x for x in (refresh_noise, takeback and f"takeback {takeback}") if x]
+    )
+
+
 def line(r: dict) -> str:
     f = r["floor_m"]
     est = f"{r['floor_estimate_m'] / f:.2f}" if r["floor_estimate_m"] else "-"
     moves = " ".join(
-        "/".join("-" if m is None else str(m) for m in s["moved_pct"])
+        "/".join(
+            "-" if m is None else ("B" if b else str(m))
+            for m, b in zip(s["moved_pct"], s.get("taken_back", (False, False)), strict=True)
+        )
         + ("R" if s["safeguard"] == "revert" else "")
         for s in r["steps"]
     )
@@ -183,18 +207,28 @@ def main() -> None:
     parser.add_argument(
         "--refresh-max-move", type=float, help="learning.adaptive.refresh_max_move (adaptive)"
     )
+    parser.add_argument(
+        "--refresh-takeback",
+        default="",
+        help="refresh_takeback choices for the adaptive profile, off and/or on, comma-separated "
+        "(default: the profile's own)",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
-    variants = [("antx", "")] + [("antx-adaptive", n) for n in args.refresh_noise.split(",")]
-    labels = [p + (f"/{n}" if n else "") for p, n in variants]
+    variants = [("antx", "", "")] + [
+        ("antx-adaptive", n, tb)
+        for n in args.refresh_noise.split(",")
+        for tb in args.refresh_takeback.split(",")
+    ]
+    labels = [label(*v) for v in variants]
     runs = []
     t0 = time.monotonic()
     for corr in (float(c) for c in args.corr.split(",")):
-        for profile, noise in variants:
+        for profile, noise, takeback in variants:
             for seed in range(args.seeds):
                 runs.append(
                     run(profile, args.sigma, corr, seed, args.trials, noise, args.plants,
-                        args.latency, args.refresh_max_move)
+                        args.latency, args.refresh_max_move, takeback)
                 )  # fmt: skip
                 print(line(runs[-1]), flush=True)
     summary = []
@@ -215,8 +249,10 @@ def main() -> None:
             if profile != "antx":
                 moves = [m for r in rs for st in r["steps"] for m in st["moved_pct"] if m]
                 err = [100 * max(r["model_error"]) for r in rs]
+                backs = sum(b for r in rs for st in r["steps"] for b in st["taken_back"])
                 extra = (
-                    f"; moves accepted {len(moves)}, largest {max(moves, default=0)} %; "
+                    f"; moves accepted {len(moves)}, largest {max(moves, default=0)} %, "
+                    f"taken back {backs}; "
                     f"model error at the end {' '.join(f'{e:.0f}' for e in err)} %"
                 )
             print(

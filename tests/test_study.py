@@ -183,3 +183,10 @@ def test_a_plant_beyond_memory_is_refused(tmp_path: Path) -> None:
 def test_the_documented_example_parses() -> None:
     study = load_study(ROOT / "docs" / "studies" / "antx-wdu.yaml")
     assert len(study.settings) == 6 and study.uncertainty["levels"] == (0.2, 0.4)
+
+
+@pytest.mark.parametrize("value", [True, False])
+def test_a_setting_turns_the_takeback_on_or_off(tmp_path: Path, value: bool) -> None:
+    settings = [{"profile": "antx-adaptive", "refresh_takeback": value}]
+    study = load_study(write_study(tmp_path, settings=settings, grid=None))
+    assert study.settings[0].profile.learning.adaptive.refresh_takeback is value

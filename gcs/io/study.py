@@ -51,6 +51,7 @@ SETTING_KEYS: dict[str, tuple[str, ...]] = {
     "noise": ("learning", "adaptive", "noise"),
     "drift_offset": ("learning", "adaptive", "drift_offset"),
     "refresh": ("learning", "adaptive", "refresh"),
+    "refresh_takeback": ("learning", "adaptive", "refresh_takeback"),
     "robustness_cutoff_rad_s": ("learning", "adaptive", "robustness_cutoff_rad_s"),
     "safeguard": ("learning", "adaptive", "safeguard"),
     "safeguard_k_sigma": ("learning", "adaptive", "safeguard_k_sigma"),
