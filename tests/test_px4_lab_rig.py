@@ -41,12 +41,6 @@ R = 6_378_137.0
 RESOLUTION_M = 0.02
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def yaw_quat(yaw_rad: float) -> list[float]:
     return [math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2)]
 
@@ -107,13 +101,13 @@ class Spiral:
 @contextlib.contextmanager
 def streamed(count: int, epoch_s: float = 0.0) -> Iterator[tuple[SihTruth, Spiral]]:
     """A SihTruth that has received ``count`` states of the spiral over loopback."""
-    port = free_port()
     spiral = Spiral()
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
     with (
-        SihTruth(port, max_age_s=0.5, epoch_s=epoch_s) as truth,
+        SihTruth(0, max_age_s=0.5, epoch_s=epoch_s) as truth,  # a free port, held from here
         socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out,
     ):
+        port = truth.port
         for i in range(count):
             out.sendto(spiral.message(mav, i), ("127.0.0.1", port))
         assert truth.wait_received(count, 5.0)
@@ -128,12 +122,12 @@ def test_instance_ports() -> None:
 
 
 def test_states_become_ned_poses_from_the_first_one_carried_forward_with_their_velocity() -> None:
-    port = free_port()
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
     with (
-        SihTruth(port, max_age_s=WAIT_S) as truth,  # not out of view after a stall here
+        SihTruth(0, max_age_s=WAIT_S) as truth,  # not out of view after a stall here
         socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out,
     ):
+        port = truth.port
         assert truth(time.monotonic()) is None  # nothing yet: out of view
         out.sendto(state(mav, 0.0, 0.0, 0.0), ("127.0.0.1", port))
         assert truth.wait_first(5.0)

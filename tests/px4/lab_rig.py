@@ -224,7 +224,7 @@ class SihTruth:
     Parameters
     ----------
     port : int
-        UDP port to listen on (:func:`sih_display_port`).
+        UDP port to listen on (:func:`sih_display_port`); 0: a free one, then in :attr:`port`.
     max_age_s : float
         A state older than this is not served (the body counts as out of view) [s]. PX4 SITL's
         clock stops while the machine starves it of CPU (0.5 s and more at a load average of
@@ -259,6 +259,7 @@ class SihTruth:
         self._stop = threading.Event()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", port))
+        self.port = self._sock.getsockname()[1]
         self._sock.settimeout(0.2)
         self._mav = mavlink2.MAVLink(None)
         self._mav.robust_parsing = True
