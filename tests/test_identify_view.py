@@ -6,11 +6,21 @@ import math
 import re
 from types import SimpleNamespace
 
+import pytest
+
 from gcs.app.identify_view import weaker_lines
+from gcs.core.model import dc_gain, from_transfer_function
 
 
-def axis(name: str, vaf_pct: float, vaf_profile_pct: float) -> SimpleNamespace:
-    return SimpleNamespace(axis=name, vaf_pct=vaf_pct, vaf_profile_pct=vaf_profile_pct)
+def loop(gain: float):  # noqa: ANN201
+    """A second-order position loop of that steady-state gain (0.05 s)."""
+    return from_transfer_function([4.0 * gain], [1.0, 2.8, 4.0], 0.0, 0.05)
+
+
+def axis(name: str, vaf_pct: float, vaf_profile_pct: float, gain: float = 1.0) -> SimpleNamespace:
+    return SimpleNamespace(
+        axis=name, vaf_pct=vaf_pct, vaf_profile_pct=vaf_profile_pct, model=loop(gain)
+    )
 
 
 def test_an_axis_that_explains_the_validation_less_than_the_profile_is_named_once() -> None:
@@ -39,3 +49,22 @@ def test_an_axis_explained_less_than_by_its_mean_is_named_even_when_the_profile_
         lines[0],
     ), lines
     assert weaker_lines([axis("x", -1.0, math.nan)], "antx")[0].startswith("warning: x: ")
+
+
+@pytest.mark.parametrize("gain", [2.086, 0.45, 3.0])
+def test_an_axis_of_an_implausible_steady_state_gain_is_named(gain: float) -> None:
+    """Seen on firmware over GPS, 30 s experiments: east's gain 2.09 at a VAF of 57.6 %, above
+    the profile's 54.9 %: no other warning, but the gain says the slow response is unknown."""
+    lines = weaker_lines([axis("x", 93.4, 85.6), axis("y", 57.6, 54.9, gain)], "antx")
+    assert len(lines) == 1, lines
+    shown = f"{dc_gain(loop(gain)):.2f}"
+    assert re.fullmatch(
+        rf"warning: y: the identified model's steady-state gain is {re.escape(shown)}, where a "
+        r"position loop holds 1: .* keep antx's model for this axis",
+        lines[0],
+    ), lines
+    assert float(shown) == pytest.approx(gain, abs=0.005)  # the loop's gain, independently
+    within = [axis("y", 57.6, 54.9, g) for g in (0.55, 1.0, 1.9)]
+    assert weaker_lines(within, "antx") == []
+    # one line per axis: a weaker axis is named as weaker, whatever its gain
+    assert "less than antx's" in weaker_lines([axis("y", 10.0, 50.0, 3.0)], "antx")[0]

@@ -16,6 +16,7 @@ from rich.table import Table
 from gcs.app.fly_view import live_progress, say
 from gcs.app.identify_fit import AxisResult
 from gcs.app.identify_plan import Experiments, IdentifyPlan
+from gcs.core.model import dc_gain
 from gcs.core.trajectory import Box
 from gcs.io.rundir import RunDir
 from gcs.io.settings import IdentifySettings
@@ -89,6 +90,12 @@ def model_lines(results: Sequence[AxisResult]) -> list[str]:
     return lines
 
 
+#: Steady-state gains of a position loop gcs takes as plausible: PX4's position controller
+#: holds a constant setpoint (gain 1); an identified gain beyond a factor of 2 says the
+#: experiments did not pin the slow response.
+PLAUSIBLE_GAIN = (0.5, 2.0)
+
+
 def weaker_lines(results: Sequence[AxisResult], profile_name: str) -> list[str]:
     """One warning per axis whose identified model explains the validation experiment less
     than the input profile's model did (both simulated free-running on trial 1).
@@ -99,7 +106,9 @@ def weaker_lines(results: Sequence[AxisResult], profile_name: str) -> list[str]:
     the validation experiment less than its mean does (a negative VAF) is named too, also when
     the input profile's did worse: then the experiment did not show the axis's dynamics (seen
     on firmware over GPS on a machine at load 14-21: the hover wandered 0.89 m (95 %), VAF
-    -146.8 % against -305.3 %, a steady-state gain of 3.0 identified).
+    -146.8 % against -305.3 %, a steady-state gain of 3.0 identified). Else an axis whose
+    steady-state gain lies outside :data:`PLAUSIBLE_GAIN` is named (seen over GPS on 30 s
+    experiments: 2.09 at a VAF of 57.6 %, the profile's 54.9 %). One line per axis at most.
 
     Parameters
     ----------
@@ -123,6 +132,14 @@ def weaker_lines(results: Sequence[AxisResult], profile_name: str) -> list[str]:
                 "show this axis's dynamics through the hover's wander; identify again with "
                 "longer experiments (identification.duration_s) or a steadier hover before "
                 "flying this model"
+            )
+        elif not PLAUSIBLE_GAIN[0] < (gain := dc_gain(r.model)) < PLAUSIBLE_GAIN[1]:
+            lines.append(
+                f"warning: {r.axis}: the identified model's steady-state gain is {gain:.2f}, "
+                "where a position loop holds 1: the experiments did not pin its slow response "
+                "through the hover's wander; identify again with longer experiments "
+                "(identification.duration_s) or a steadier hover, or keep "
+                f"{profile_name}'s model for this axis"
             )
     return lines
 
