@@ -95,20 +95,20 @@ def test_fly_two_trials_then_ctrl_c_lands_and_resume_completes_on_the_same_vehic
 
 
 def test_identify_with_short_experiments(px4_booting, px4_figures, tmp_path: Path) -> None:
-    """`gcs identify` with two 30 s PRBS experiments (60 s shipped): the profile it writes loads;
-    per axis the model is stable and a position loop (steady-state gain within a factor of 2 of
-    1), or gcs names the axis. How well each axis explains the validation experiment (trial 1) against the profile's
-    model it was identified beside (antx) is simulated here with scipy: where the identified
-    one explains it less, gcs says so in a warning naming the axis, with the same two VAFs;
-    where it explains it better, no warning. Short experiments on a GPS hover that wanders
-    0.1-0.7 m support no more: in three runs the east axis's VAF was 40-62 % and in four the
-    gains 1.1-1.8 (north: VAF 91 %), where the shipped 60 s gave 80-90 %; east once came out
-    at 0.01 % (antx's -19 %) and once at 1.37 % (antx's 19.55 %), so the VAFs are figures. On
-    a machine at load 14-21 the hover wandered 0.89 m (95 %) and neither model explained the
-    validation experiment (VAF x -147 %, antx's -305 %; gains 3.0 and 3.2): an axis explained
-    less than by its mean may have any gain, but gcs must name it. Nor does a positive VAF pin
-    the gain (east once 2.09 at 57.6 %, antx's 54.9 %, at load 11-20): a gain beyond a factor
-    of 2 of 1 is named too.
+    """`gcs identify` with two 30 s PRBS experiments (60 s shipped): the profile it writes
+    loads; per axis the model is stable and a position loop (steady-state gain within a factor
+    of 2 of 1), or gcs names the axis. How well each axis explains the validation experiment
+    (trial 1) against the profile's model it was identified beside (antx) is simulated here with
+    scipy: where the identified one explains it less, gcs says so in a warning naming the axis,
+    with the same two VAFs; where it explains it better, no warning. Short experiments on a GPS
+    hover that wanders 0.1-0.7 m support no more: in three runs the east axis's VAF was 40-62 %
+    and in four the gains 1.1-1.8 (north: VAF 91 %), where the shipped 60 s gave 80-90 %; east
+    once came out at 0.01 % (antx's -19 %) and once at 1.37 % (antx's 19.55 %), so the VAFs are
+    figures. On a machine at load 14-21 the hover wandered 0.89 m (95 %) and neither model
+    explained the validation experiment (VAF x -147 %, antx's -305 %; gains 3.0 and 3.2): an
+    axis explained less than by its mean may have any gain, but gcs must name it. Nor does a
+    positive VAF pin the gain (east once 2.09 at 57.6 %, antx's 54.9 %, at load 11-20): a gain
+    beyond a factor of 2 of 1 is named too.
 
     Then the README's next step on the same vehicle, not rebooted: one trial of ``gcs fly`` with
     the identified profile. On the identification's disarm PX4 returned to OFFBOARD (the last
