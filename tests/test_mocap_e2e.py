@@ -176,10 +176,13 @@ OWN_ESTIMATE = {
          r"pre-flight frame check: the mocap saw the vehicle's east motion (8\d|9\d) deg off "
          r"\(gain -?0\.\d\d, out of the horizontal plane\)", QUICK_SETTLE),
         # gcs forwards the mocap 90 deg off to a vehicle with its own heading: the position
-        # loop turns, the estimate runs against the velocity, the fence's watch ends it (while
-        # settling, at antx's own tolerance)
+        # loop turns and the vehicle spirals out faster and faster while settling. Two watches
+        # see it, each rightly, and whichever sees it first ends the flight: the fence's (the
+        # estimate runs against the velocity) or the mocap's (the body moved faster between
+        # two frames than a multirotor can; about 5 mm over its limit in one CI run)
         ("forwarded, room 90 deg", 90.0, {},
-         "the estimate contradicts itself while waiting for settling", {}),
+         r"(the estimate contradicts itself|mocap position jumped \d\.\d+ m in [\d.]+ ms "
+         r"\(more than \d\.\d+ m possible\)) while waiting for settling", {}),
     ],
 )  # fmt: skip
 def test_a_wrong_mapping_is_refused_after_take_off_before_the_first_trial(
