@@ -1,3 +1,4 @@
+import contextlib
 import sys
 from pathlib import Path
 
@@ -8,7 +9,13 @@ from hypothesis import settings
 sys.path.insert(0, str(Path(__file__).parent))
 
 import pause_watch  # noqa: E402
-from flight_slots import flight_slot, worker_number  # noqa: E402
+from flight_slots import (  # noqa: E402
+    deal,
+    firmware_slot_count,
+    flight_slot,
+    slot_directory,
+    worker_number,
+)
 from px4.sitl import ENV_VAR, ROOT, Px4Build, Px4BuildError, build_dir  # noqa: E402
 
 # No test is timed (numbers live in benchmarks/): Hypothesis's per-example deadline, 200 ms by
@@ -49,9 +56,10 @@ def pytest_collection_modifyitems(config, items) -> None:
     The end-to-end tests run in real time (tens of seconds to minutes each), the rest in
     milliseconds. ``make test`` runs ``pytest -n 2 --dist worksteal``: the workers start on
     equal parts of this order and an idle one steals from the end of another's queue. Dealt in
-    turn, each part starts with its share of the real-firmware flights, then of the mock's,
-    then quick tests: the vehicles fly at once from the start, and the quick tests fill the end
-    instead of one worker finishing a long flight alone."""
+    turn (tests/flight_slots.py, :func:`deal`), as many parts as the machine has firmware slots
+    start with their share of the real-firmware flights, the others with the mock's, then quick
+    tests: the vehicles fly at once from the start, and the quick tests fill the end instead of
+    one worker finishing a long flight alone."""
     items.sort(
         key=lambda item: (
             item.get_closest_marker("px4") is None,
@@ -60,17 +68,26 @@ def pytest_collection_modifyitems(config, items) -> None:
         )
     )
     workers = getattr(config, "workerinput", {}).get("workercount", 2)
-    items[:] = [item for part in range(workers) for item in items[part::workers]]
+    items[:] = deal(
+        items, workers, firmware_slot_count(), lambda item: item.get_closest_marker("px4")
+    )
 
 
 @pytest.fixture(autouse=True)
 def _a_flight_slot_of_the_machine(request: pytest.FixtureRequest):
-    """A test of the flights holds one of the machine's flight slots while it runs
-    (tests/flight_slots.py: two test runs on one machine share them)."""
+    """A test of the flights holds one of the machine's flight slots while it runs, one of the
+    real firmware first a firmware slot (tests/flight_slots.py: two test runs on one machine
+    share them)."""
     if not any(request.node.get_closest_marker(m) for m in ("e2e", "px4", "live")):
         yield
         return
-    with flight_slot(worker_number()):
+    worker = worker_number()
+    with contextlib.ExitStack() as held:
+        if request.node.get_closest_marker("px4"):
+            held.enter_context(
+                flight_slot(worker, firmware_slot_count(), slot_directory("firmware"))
+            )
+        held.enter_context(flight_slot(worker))
         yield
 
 

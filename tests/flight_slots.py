@@ -15,6 +15,17 @@ So each test of the flights (markers ``e2e``, ``px4``, ``live``) holds one of
 if there is one, else waits for the slot of its worker's number: one run alone never waits,
 two runs share the slots. Processes that are not gcs's tests take no slot; at a normal priority
 they cannot delay a flight's streams anyway.
+
+A flight on the real firmware weighs more than one on the mock: PX4 SITL, gcs and, in a lab, the
+rig serving its motion capture keep about half a core busy between them (measured on 2026-12-01:
+PX4 17 %, gcs 19 %, the rig 16 % of a core), a mock flight about a third. ``make test`` deals the
+firmware's flights first, so four of them flew at once on two cores, all the real-time work the
+cores had; with two runs beside each other, PX4's clock then ran at 0.84-0.98x wall time, gcs
+sent setpoints 402-477 ms late and aborted, and a take-off did not happen within 30 s (three runs
+of eight). So a test of the firmware (marker ``px4``) first
+holds one of :func:`firmware_slot_count` firmware slots (one per core), then a flight slot.
+Taken in that order, the two kinds cannot wait for each other in a cycle: whoever holds a flight
+slot holds every slot it needs.
 """
 
 from __future__ import annotations
@@ -22,22 +33,35 @@ from __future__ import annotations
 import fcntl
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
 
 SLOTS_PER_CORE = 2
+"""Real-time flights of any kind at once, per core."""
+FIRMWARE_SLOTS_PER_CORE = 1
+"""Flights on the real firmware at once, per core (each also holds a flight slot)."""
+
+
+def cores() -> int:
+    """The cores this process may run on (at least 1)."""
+    return max(1, len(os.sched_getaffinity(0)))
 
 
 def slot_count() -> int:
-    """Slots of this machine: :data:`SLOTS_PER_CORE` per core this process may run on."""
-    return SLOTS_PER_CORE * max(1, len(os.sched_getaffinity(0)))
+    """Flight slots of this machine: :data:`SLOTS_PER_CORE` per core."""
+    return SLOTS_PER_CORE * cores()
 
 
-def slot_directory() -> Path:
-    """Where the slots' lock files are (one directory per user)."""
-    return Path(tempfile.gettempdir()) / f"gcs-test-flight-slots-{os.getuid()}"
+def firmware_slot_count() -> int:
+    """Firmware slots of this machine: :data:`FIRMWARE_SLOTS_PER_CORE` per core."""
+    return FIRMWARE_SLOTS_PER_CORE * cores()
+
+
+def slot_directory(kind: str = "flight") -> Path:
+    """Where the lock files of one kind of slot (``"flight"``, ``"firmware"``) are, per user."""
+    return Path(tempfile.gettempdir()) / f"gcs-test-{kind}-slots-{os.getuid()}"
 
 
 def worker_number() -> int:
@@ -94,3 +118,46 @@ def flight_slot(
     finally:
         fcntl.flock(handle, fcntl.LOCK_UN)
         handle.close()
+
+
+def deal(items: list, workers: int, firmware_workers: int, firmware: Callable) -> list:
+    """Deal tests to the workers' equal parts, the firmware's to the first ``firmware_workers``.
+
+    ``pytest-xdist``'s ``worksteal`` gives each worker an equal, contiguous part of the order
+    (the last parts one more where they do not divide) and lets an idle one steal from the end
+    of another's. The firmware's flights wait for one of :func:`firmware_slot_count` slots: dealt
+    to every worker's head, all but that many workers would start by waiting. So they are dealt
+    in turn to the first ``firmware_workers`` parts, and what follows in ``items`` in turn to
+    every part, starting after those, each part up to its size.
+
+    Parameters
+    ----------
+    items : list
+        Tests in the order they should start (the firmware's first).
+    workers : int
+        Number of workers (parts), at least 1.
+    firmware_workers : int
+        Parts that take the firmware's tests first (clipped to 1..``workers``).
+    firmware : callable
+        ``firmware(item)``: True for a test of the firmware.
+
+    Returns
+    -------
+    list
+        The same items, part after part.
+    """
+    sizes, left = [], len(items)
+    for i in range(workers):
+        sizes.append(left // (workers - i))
+        left -= sizes[-1]
+    parts: list[list] = [[] for _ in range(workers)]
+    first = min(max(firmware_workers, 1), workers)
+    turn = {True: 0, False: first % workers}
+    for item in items:
+        kind = bool(firmware(item))
+        k = turn[kind]
+        while len(parts[k]) >= sizes[k]:
+            k = (k + 1) % workers
+        parts[k].append(item)
+        turn[kind] = (k + 1) % (first if kind else workers)
+    return [item for part in parts for item in part]

@@ -1,11 +1,24 @@
-"""The machine's flight slots (tests/flight_slots.py): a free slot first, else the worker's."""
+"""The machine's flight slots (tests/flight_slots.py): a free slot first, else the worker's;
+the firmware's slots apart; the firmware's tests dealt to as many workers as it has slots."""
 
 from __future__ import annotations
 
 import threading
 from pathlib import Path
 
-from flight_slots import SLOTS_PER_CORE, flight_slot, slot_count, worker_number
+from flight_slots import (
+    FIRMWARE_SLOTS_PER_CORE,
+    SLOTS_PER_CORE,
+    cores,
+    deal,
+    firmware_slot_count,
+    flight_slot,
+    slot_count,
+    slot_directory,
+    worker_number,
+)
+from hypothesis import given
+from hypothesis import strategies as st
 
 
 def test_free_slots_are_taken_first_then_a_test_waits_for_its_workers_slot(
@@ -38,3 +51,73 @@ def test_two_slots_per_core_and_the_worker_number(monkeypatch) -> None:
     assert worker_number() == 7
     monkeypatch.delenv("PYTEST_XDIST_WORKER")
     assert worker_number() == 0
+
+
+def test_firmware_slots_one_per_core_in_their_own_directory() -> None:
+    assert firmware_slot_count() == FIRMWARE_SLOTS_PER_CORE * cores() < slot_count()
+    assert slot_directory("firmware") != slot_directory() == slot_directory("flight")
+
+
+def test_a_firmware_test_waits_for_a_firmware_slot_while_a_mock_flight_flies(
+    tmp_path: Path,
+) -> None:
+    """Two pools as conftest takes them: a firmware slot, then a flight slot."""
+    firmware, flights = tmp_path / "firmware", tmp_path / "flight"
+    order: list[str] = []
+    second_started = threading.Event()
+
+    def second_firmware_test() -> None:
+        second_started.set()
+        with flight_slot(1, 1, firmware), flight_slot(1, 4, flights) as k:
+            order.append(f"second firmware flight in slot {k}")
+
+    with flight_slot(0, 1, firmware), flight_slot(0, 4, flights):
+        waiter = threading.Thread(target=second_firmware_test)
+        waiter.start()
+        second_started.wait()
+        with flight_slot(2, 4, flights) as k:  # a mock flight is not held back
+            order.append(f"mock flight in slot {k}")
+        order.append("first firmware flight lets go")
+    waiter.join()
+    assert order == [
+        "mock flight in slot 1",
+        "first firmware flight lets go",
+        "second firmware flight in slot 0",
+    ]
+
+
+def _parts(dealt: list, workers: int) -> list[list]:
+    """Split as pytest-xdist's worksteal does: equal contiguous parts, the last ones longer."""
+    parts, left, at = [], len(dealt), 0
+    for i in range(workers):
+        size = left // (workers - i)
+        parts.append(dealt[at : at + size])
+        at, left = at + size, left - size
+    return parts
+
+
+def test_the_firmware_tests_head_the_first_parts_and_the_mocks_the_others() -> None:
+    items = [f"px4-{k}" for k in range(5)] + [f"mock-{k}" for k in range(7)] + ["quick"] * 8
+    parts = _parts(deal(items, 4, 2, lambda item: item.startswith("px4")), 4)
+    assert [p[0] for p in parts] == ["px4-0", "px4-1", "mock-0", "mock-1"]
+    assert parts[0][:3] == ["px4-0", "px4-2", "px4-4"] and parts[1][:2] == ["px4-1", "px4-3"]
+
+
+@given(
+    st.lists(st.booleans(), max_size=40),
+    st.integers(min_value=1, max_value=6),
+    st.integers(min_value=0, max_value=8),
+)
+def test_dealing_keeps_every_item_and_each_kinds_order(
+    kinds: list[bool], workers: int, firmware_workers: int
+) -> None:
+    items = list(enumerate(sorted(kinds, reverse=True)))  # the firmware's first, as conftest
+    dealt = deal(items, workers, firmware_workers, lambda item: item[1])
+    assert sorted(dealt) == items
+    parts = _parts(dealt, workers)
+    for part in parts:  # within a part, the given order
+        assert part == sorted(part)
+    first = min(max(firmware_workers, 1), workers)
+    room = sum(len(p) for p in parts[:first])
+    # the firmware's tests go to the first parts as long as those have room for them
+    assert sum(1 for p in parts[:first] for item in p if item[1]) == min(sum(kinds), room)
