@@ -1,17 +1,19 @@
 """Studies on Dask: the same JSON on one worker, two, and a real scheduler with its workers.
 
 The real cluster is ``dask scheduler`` and two ``dask worker`` processes started here on
-loopback with free ports; one test kills a worker in the middle of a study.
+loopback on ports the system chose; one test kills a worker in the middle of a study.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -47,10 +49,24 @@ STUDY = {
 }
 
 
-def free_port() -> int:
+@contextlib.contextmanager
+def a_closed_port() -> Iterator[int]:
+    """A loopback port held bound but not listening while the block runs: nothing can accept
+    a connection there, so a client is refused at once."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+        yield s.getsockname()[1]
+
+
+def scheduler_address(scheduler: subprocess.Popen) -> str:
+    """The address ``dask scheduler --port 0`` says it listens on (its log on stderr); the rest
+    of the log is drained in a thread so that the scheduler never blocks on a full pipe."""
+    assert scheduler.stderr is not None
+    for line in scheduler.stderr:
+        if "Scheduler at:" in line:
+            threading.Thread(target=scheduler.stderr.read, daemon=True).start()
+            return line.split("Scheduler at:", 1)[1].strip()
+    raise AssertionError(f"dask scheduler ended (code {scheduler.wait()}) before listening")
 
 
 @pytest.fixture(scope="module")
@@ -110,15 +126,16 @@ def test_a_local_cluster_serves_http_on_loopback_on_a_free_port_and_says_nothing
 
 @pytest.fixture
 def real_cluster(tmp_path: Path) -> Iterator[tuple[str, list[subprocess.Popen]]]:
-    """``dask scheduler`` and two ``dask worker`` processes on loopback, free ports."""
-    port = free_port()
-    address = f"tcp://127.0.0.1:{port}"
+    """``dask scheduler`` and two ``dask worker`` processes on loopback, on ports the system
+    chose (``--port 0``; the scheduler says which)."""
     env = os.environ | {"OPENBLAS_NUM_THREADS": "1"}
     common = {"env": env, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     scheduler = subprocess.Popen(
-        [str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(port),
-         "--no-dashboard"], start_new_session=True, **common,
+        [str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
+         "--no-dashboard"], start_new_session=True, env=env, stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
+    address = scheduler_address(scheduler)
     workers = [
         subprocess.Popen(
             [
@@ -229,13 +246,17 @@ def test_an_unreachable_scheduler_is_one_line(
     study_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setattr(study_cluster, "CONNECT_TIMEOUT_S", 1.0)
-    address = f"tcp://127.0.0.1:{free_port()}"  # nothing listens there
-    out = tmp_path / "o"
-    code, output = run_cli("study", str(study_file), "--out", str(out), "--scheduler", address)
-    assert code == 2, output
-    assert len(output.strip().splitlines()) == 1 and "unreachable" in output and address in output
-    assert not out.exists()
-    code, output = run_cli("montecarlo", "--plants", "2", "--repeats", "1", "--scheduler", address)
+    with a_closed_port() as port:
+        address = f"tcp://127.0.0.1:{port}"
+        out = tmp_path / "o"
+        code, output = run_cli("study", str(study_file), "--out", str(out), "--scheduler", address)
+        assert code == 2, output
+        assert len(output.strip().splitlines()) == 1
+        assert "unreachable" in output and address in output
+        assert not out.exists()
+        code, output = run_cli(
+            "montecarlo", "--plants", "2", "--repeats", "1", "--scheduler", address
+        )
     assert code == 2 and "unreachable" in output and len(output.strip().splitlines()) == 1
 
 
