@@ -343,6 +343,7 @@ def main() -> None:
         help="identify each new run's vehicle first (gcs identify) and fly the identified profile",
     )
     args = parser.parse_args()
+    args.out = args.out.resolve()  # PX4 resolves its paths from its own working directory
     args.out.mkdir(parents=True, exist_ok=True)
     if not args.table:
         points = [parse_point(p) for p in args.point] + draw_points(
