@@ -50,27 +50,38 @@ def pytest_unconfigure(config) -> None:
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Flights first, the real firmware's first of all (the lab floor's long flight, where it
-    is selected, at the head), dealt in turn to the workers.
+    """Flights first, the real firmware's first of all, longest first (their ``flight_s``
+    markers), dealt to the workers.
 
     The end-to-end tests run in real time (tens of seconds to minutes each), the rest in
     milliseconds. ``make test`` runs ``pytest -n 2 --dist worksteal``: the workers start on
-    equal parts of this order and an idle one steals from the end of another's queue. Dealt in
-    turn (tests/flight_slots.py, :func:`deal`), as many parts as the machine has firmware slots
-    start with their share of the real-firmware flights, the others with the mock's, then quick
-    tests: the vehicles fly at once from the start, and the quick tests fill the end instead of
-    one worker finishing a long flight alone."""
+    equal parts of this order and an idle one steals from the end of another's queue. Dealt
+    (tests/flight_slots.py, :func:`deal`), as many parts as the machine has firmware slots
+    start with their share of the real-firmware flights, each flight to the part with the least
+    firmware flight time so far, the others with the mock's, then quick tests: the vehicles fly
+    at once from the start, the firmware's parts end together, and the quick tests fill the end
+    instead of one worker finishing a long flight alone."""
     items.sort(
         key=lambda item: (
             item.get_closest_marker("px4") is None,
-            item.get_closest_marker("lab_floor") is None,
+            -flight_s(item),
             item.get_closest_marker("e2e") is None,
         )
     )
     workers = getattr(config, "workerinput", {}).get("workercount", 2)
     items[:] = deal(
-        items, workers, firmware_slot_count(), lambda item: item.get_closest_marker("px4")
+        items,
+        workers,
+        firmware_slot_count(),
+        lambda item: item.get_closest_marker("px4"),
+        flight_s,
     )
+
+
+def flight_s(item) -> float:
+    """A firmware test's expected length [s], its ``flight_s`` marker (0 without one)."""
+    marker = item.get_closest_marker("flight_s")
+    return float(marker.args[0]) if marker is not None else 0.0
 
 
 @pytest.fixture(autouse=True)

@@ -3,9 +3,11 @@ the firmware's slots apart; the firmware's tests dealt to as many workers as it 
 
 from __future__ import annotations
 
+import ast
 import threading
 from pathlib import Path
 
+import pytest
 from flight_slots import (
     FIRMWARE_SLOTS_PER_CORE,
     SLOTS_PER_CORE,
@@ -121,3 +123,32 @@ def test_dealing_keeps_every_item_and_each_kinds_order(
     room = sum(len(p) for p in parts[:first])
     # the firmware's tests go to the first parts as long as those have room for them
     assert sum(1 for p in parts[:first] for item in p if item[1]) == min(sum(kinds), room)
+
+
+@given(
+    st.lists(st.floats(min_value=0.0, max_value=600.0), max_size=20),
+    st.integers(min_value=1, max_value=4),
+)
+def test_the_firmwares_parts_end_within_one_flight_of_each_other(
+    lengths: list[float], firmware_workers: int
+) -> None:
+    items = [(k, s) for k, s in enumerate(sorted(lengths, reverse=True))] + [(-1, 0.0)] * 60
+    dealt = deal(items, 4, firmware_workers, lambda item: item[0] >= 0, lambda item: item[1])
+    parts = _parts(dealt, 4)
+    sums = [sum(s for k, s in p if k >= 0) for p in parts[:firmware_workers]]
+    # each flight went to the least loaded part: no part ends more than the longest flight
+    # after another
+    assert max(sums) - min(sums) <= max(lengths, default=0.0) + 1e-9, sums
+    assert sum(sums) == pytest.approx(sum(lengths))
+
+
+def test_every_firmware_test_says_its_length() -> None:
+    """The deal needs each firmware test's ``flight_s``: a test without it would be dealt as 0 s."""
+    missing = []
+    for path in sorted((Path(__file__).parent / "px4").glob("test_*.py")):
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.FunctionDef) and node.name.startswith("test_"):
+                marks = [ast.unparse(d) for d in node.decorator_list]
+                if not any(m.startswith("pytest.mark.flight_s(") for m in marks):
+                    missing.append(f"{path.name}::{node.name}")
+    assert not missing, missing

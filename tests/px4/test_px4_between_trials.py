@@ -107,6 +107,7 @@ def refresh_reasons(run: RunDir, j: int) -> list[str]:
     return [str((ax.get("refresh") or {}).get("reason")) for ax in decision["axes"]]
 
 
+@pytest.mark.flight_s(98)
 def test_learning_between_trials_does_not_delay_vision_or_setpoints_at_px4(
     px4_factory,
     px4_build,

@@ -30,6 +30,7 @@ OFFBOARD = 6 << 16  # PX4 custom_mode: main mode 6
 FAILSAFE_S = 60.0  # bounds of the waits below, not waits
 
 
+@pytest.mark.flight_s(59)
 def test_gcs_killed_mid_trial_px4_lands_and_keeps_the_arena_fence(
     px4_booting, px4_figures, tmp_path: Path
 ) -> None:
@@ -90,6 +91,7 @@ def test_gcs_killed_mid_trial_px4_lands_and_keeps_the_arena_fence(
 PAUSE_S = 0.6
 
 
+@pytest.mark.flight_s(61)
 def test_a_pause_of_the_machine_mid_trial_is_ridden_through_by_flying_the_trial_again(
     px4_booting, px4_figures, tmp_path: Path
 ) -> None:

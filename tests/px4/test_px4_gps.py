@@ -42,6 +42,7 @@ def session_figures(run: Path, out: str) -> dict:
     return figures
 
 
+@pytest.mark.flight_s(149)
 def test_fly_two_trials_then_ctrl_c_lands_and_resume_completes_on_the_same_vehicle(
     px4_booting, px4_figures, tmp_path: Path
 ) -> None:
@@ -94,6 +95,7 @@ def test_fly_two_trials_then_ctrl_c_lands_and_resume_completes_on_the_same_vehic
     assert e1 < e0, figures
 
 
+@pytest.mark.flight_s(184)
 def test_identify_with_short_experiments(px4_booting, px4_figures, tmp_path: Path) -> None:
     """`gcs identify` with two 30 s PRBS experiments (60 s shipped): the profile it writes
     loads; per axis the model is stable and a position loop (steady-state gain within a factor
@@ -201,6 +203,7 @@ def free_run_vaf(model, u: np.ndarray, y: np.ndarray) -> float:  # type: ignore[
     return float(100.0 * (1.0 - np.var(error) / np.var(y)))
 
 
+@pytest.mark.flight_s(126)
 def test_until_converged_reaches_a_verdict(px4_booting, px4_figures, tmp_path: Path) -> None:
     """`gcs fly --profile antx-adaptive --until-converged --iter 5` on eight-short: trial 0
     and its two repeats (the profile's default) measure the floor, its scatter between the

@@ -209,6 +209,7 @@ def lab_px4(px4_factory, lab_conditions: LabConditions) -> Px4Sitl:
     return px4_factory(params=lab_conditions.px4_params(), ready=STARTED_LINE)
 
 
+@pytest.mark.flight_s(2)
 def test_a_mirrored_mapping_is_refused_before_take_off(
     lab_px4: Px4Sitl, lab_conditions: LabConditions, tmp_path: Path, tiny: Path, px4_figures: dict
 ) -> None:
@@ -229,6 +230,7 @@ def test_a_mirrored_mapping_is_refused_before_take_off(
     px4_figures.update(exit_code=code, refused=lines[0][:120], armed=armed_ever)
 
 
+@pytest.mark.flight_s(95)
 def test_a_rotated_room_passes_the_frame_check_and_losing_the_mocap_mid_trial_lands(
     px4_factory, lab_conditions: LabConditions, tmp_path: Path, tiny: Path, px4_figures: dict
 ) -> None:
@@ -324,6 +326,7 @@ async def _origin_before_vision_then_a_dropout(px4: Px4Sitl, rig: LabRig, mon: P
     }  # fmt: skip
 
 
+@pytest.mark.flight_s(7)
 def test_the_origin_set_before_vision_and_a_vision_dropout_leave_the_height_on_the_mocap(
     lab_px4: Px4Sitl, lab_conditions: LabConditions, px4_figures: dict
 ) -> None:

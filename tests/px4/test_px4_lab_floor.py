@@ -81,6 +81,7 @@ def lab_adaptive_profile(tmp: Path) -> Path:
     )  # fmt: skip
 
 
+@pytest.mark.flight_s(274)
 def test_learning_stays_within_two_floors_in_a_realistic_lab(
     px4_factory, tmp_path: Path, px4_figures: dict
 ) -> None:

@@ -10,6 +10,7 @@ from px4.sitl import Ports, Px4Sitl, _px4_lock_held, _udp_free
 pytestmark = pytest.mark.px4
 
 
+@pytest.mark.flight_s(9)
 def test_two_vehicles_run_side_by_side_with_their_parameters(px4_factory, px4_figures) -> None:
     """Two vehicles at once (instance numbers probed), a parameter set at start-up and one over
     MAVLink, both stopped by pid with their instance freed."""
