@@ -359,11 +359,13 @@ async def _frame_check(
     """Fly home, north, home, east, home with a hover window at each; judge them. The move is
     ``length_m``, or the profile's lengthened to four times the first window's wander.
 
-    The windows after the first settle within the tolerances of the first window's hover
+    The first window of the first check measures the hover as the hover before the first
+    trial does: after ``hover_before_trial_s`` of hold, whatever the vehicle's wander. The
+    windows after it settle within the tolerances of that hover
     (:func:`gcs.flight.hover.widened`, as a trial's start does after a loose hover): a vehicle
     that wanders by decimetres never settles within the profile's few centimetres, and would
-    spend the whole settle timeout at every window. Those tolerances are returned for the
-    check flown once more."""
+    spend the whole settle timeout at every window (the first one's did: 20 s of each lab
+    flight on PX4 SIH). Those tolerances are returned for the check flown once more."""
     fence = vehicle.fence
     home = await vehicle.hold_position()
     floor = (settings.settle_tolerance_m, settings.settle_speed_m_s)
@@ -411,11 +413,15 @@ async def _window(
     what: str,
     tolerances: tuple[float, float] | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Settle at ``target`` within ``tolerances`` (distance [m], speed [m/s]; the profile's
-    when None) or give up after the settle timeout, then hover a window: the estimate's times
-    and positions, the mocap's (mapped to NED), and the window's span."""
-    tolerance_m, speed_m_s = tolerances or (settings.settle_tolerance_m, settings.settle_speed_m_s)
-    await vehicle.settle(target, tolerance_m, speed_m_s)
+    """Settle at ``target`` within ``tolerances`` (distance [m], speed [m/s]) or give up after
+    the settle timeout; with None, hold ``hover_before_trial_s`` instead (the hover is not
+    measured yet). Then hover a window: the estimate's times and positions, the mocap's
+    (mapped to NED), and the window's span."""
+    if tolerances is None:
+        if settings.hover_before_trial_s > 0:
+            await vehicle.hold(settings.hover_before_trial_s, f"the hold before {what}")
+    else:
+        await vehicle.settle(target, *tolerances)
     samples = await vehicle.hold(MOVE_WINDOW_S, what)
     mocap.require_tracked()
     t_e = np.array([s.t_s for s in samples])
