@@ -1,5 +1,6 @@
 import contextlib
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -93,12 +94,16 @@ def _a_flight_slot_of_the_machine(request: pytest.FixtureRequest):
         yield
         return
     worker = worker_number()
+    asked = time.monotonic()
     with contextlib.ExitStack() as held:
         if request.node.get_closest_marker("px4"):
             held.enter_context(
                 flight_slot(worker, firmware_slot_count(), slot_directory("firmware"))
             )
         held.enter_context(flight_slot(worker))
+        # how long the slots kept the test waiting, in its record (tests/px4/conftest.py)
+        request.node.user_properties.append(("slot_wait_s", time.monotonic() - asked))
+        request.node.user_properties.append(("worker", worker))
         yield
 
 

@@ -111,6 +111,8 @@ def px4_figures(request) -> Iterator[dict]:
         "doc": (request.node.function.__doc__ or "").strip(),
         "passed": not _failed(request.node),
         "duration_s": round(time.monotonic() - t0, 1),
+        # the flight slots' wait before the test and its worker (tests/conftest.py)
+        **{k: round(v, 1) if isinstance(v, float) else v for k, v in request.node.user_properties},
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "figures": figures,
     }
