@@ -105,6 +105,7 @@ def px4_figures(request) -> Iterator[dict]:
     t0 = time.monotonic()
     yield figures
     FIGURES.mkdir(parents=True, exist_ok=True)
+    slots = dict(request.node.user_properties)
     record = {
         "test": request.node.name,
         "file": request.node.path.name,
@@ -112,7 +113,8 @@ def px4_figures(request) -> Iterator[dict]:
         "passed": not _failed(request.node),
         "duration_s": round(time.monotonic() - t0, 1),
         # the flight slots' wait before the test and its worker (tests/conftest.py)
-        **{k: round(v, 1) if isinstance(v, float) else v for k, v in request.node.user_properties},
+        "slot_wait_s": round(slots.get("slot_wait_s", 0.0), 1),
+        "worker": slots.get("worker"),
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "figures": figures,
     }
