@@ -193,12 +193,15 @@ def decision_lines(record: dict) -> list[str]:
     lines = []
     guard = decision.get("safeguard")
     if isinstance(guard, dict) and guard.get("action") == "revert":
+        compared = guard.get("compared_trial", guard.get("best_trial"))
+        compared_m = guard.get("compared_epos_m", guard.get("best_epos_m"))
+        against = f" against {1e3 * _num(compared_m):.1f} mm" if compared_m is not None else ""
         lines.append(
-            f"safeguard: trial {j} came out worse than trial "
-            f"{guard.get('compared_trial', guard.get('best_trial'))} "
-            f"(e_pos {1e3 * _num(guard.get('epos_m')):.1f} mm > "
-            f"{1e3 * _num(guard.get('threshold_m')):.1f} mm): fell back to trial "
-            f"{guard.get('anchor_trial')} with step {_num(guard.get('step')):g}"
+            f"safeguard: trial {j} came out worse than trial {compared} "
+            f"(e_pos {1e3 * _num(guard.get('epos_m')):.1f} mm{against}, "
+            f"above its allowance of {1e3 * _num(guard.get('threshold_m')):.1f} mm): "
+            f"fell back to trial {guard.get('anchor_trial')} with step "
+            f"{_num(guard.get('step')):g}"
         )
         raised = [
             f"{name} {_num(ax.get('step')):.2f}"
