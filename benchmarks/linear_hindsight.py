@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 from estimate_replay import find_runs
+from scipy.linalg import toeplitz
 
 from gcs.core.metrics import epos
 from gcs.io.rundir import RunDir
@@ -36,12 +37,8 @@ from gcs.io.rundir import RunDir
 
 def lagged(du: np.ndarray, taps: int) -> np.ndarray:
     """The regressors of a coupled FIR: ``du`` (N, 2) delayed by 0..taps-1 samples, (N, 2 taps)."""
-    n = du.shape[0]
-    cols = np.zeros((n, du.shape[1] * taps))
-    for a in range(du.shape[1]):
-        for k in range(taps):
-            cols[k:, a * taps + k] = du[: n - k, a]
-    return cols
+    zeros = np.zeros(taps)
+    return np.hstack([toeplitz(du[:, a], zeros) for a in range(du.shape[1])])
 
 
 def hindsight_misses(
@@ -72,11 +69,9 @@ def hindsight_misses(
         if not others:
             continue
         x = np.vstack([lagged(learned[i][0] - u0, taps) for i in others])
-        h = []
-        for a in range(2):
-            y = np.concatenate([learned[i][1][:, a] - y0[:, a] for i in others])
-            h.append(np.linalg.solve(x.T @ x + ridge * np.eye(x.shape[1]), x.T @ y))
-        pred = y0 + lagged(learned[t][0] - u0, taps) @ np.column_stack(h)
+        y = np.vstack([learned[i][1] - y0 for i in others])
+        h = np.linalg.solve(x.T @ x + ridge * np.eye(x.shape[1]), x.T @ y)  # (2 taps, 2)
+        pred = y0 + lagged(learned[t][0] - u0, taps) @ h
         out[t] = float(np.sqrt(np.mean(np.sum((learned[t][1] - pred) ** 2, axis=1))))
     return out
 
