@@ -103,6 +103,27 @@ def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     assert drone.stats()["modes"][-1]["armed"] is False
 
 
+#: the estimate steps 0.4 m east this long after arming: in the last 0.2 s of the hold before
+#: trial 1 as the campaign flew it when the settle came before the hold
+JUMP_AT_S = 26.5
+
+
+def test_a_trial_starts_settled_at_its_start_point_whatever_the_hold_left() -> None:
+    """The settle is the last thing before u(0): a vehicle pushed off the start point near the
+    end of the hold (here its estimate steps 0.4 m, twice the settle tolerance) starts its
+    trial once it is back within the tolerance, not where the hold left it (0.38 m off when
+    the settle came first)."""
+    source = CircleSource()
+    faults = Faults(jump_at_s=JUMP_AT_S, jump_ned_m=(0.0, 0.4, 0.0))
+    with SimulatedDrone(seed=0, faults=faults) as drone:
+        fly_virtual(fly_campaign(CampaignPlan(drone.url, 0, 2, T_ILC_S, SETTINGS, FENCE), source))
+    session = source.sessions[-1]
+    assert [j for j, _ in source.recorded] == [0, 1]
+    for _, rec in source.recorded:
+        offset_m = np.linalg.norm(rec.pos_ned_m[0] - rec.setpoints_ned_m[0])
+        assert offset_m <= session.tolerance_m, (offset_m, session.tolerance_m)
+
+
 def test_link_loss_mid_trial_marks_it_incomplete(tmp_path: Path) -> None:
     source = CircleSource(duration_s=8.0)
     events: list[object] = []

@@ -7,8 +7,9 @@ start offboard at the current position, move to the start point, hold it for
 (:mod:`gcs.flight.hover`): a vehicle that drifts or oscillates is refused, any other gives the
 settle tolerances, and the measurement goes to ``source.record_session``. For each trial: move
 to its hover point (``source.hover_point_for``: the trajectory's start, where learning assumes
-the vehicle at rest before ``u(0)``), settle, and hold it for ``settings.hover_before_trial_s``
-so that every trial starts from the same state; fly it, hover at its end while
+the vehicle at rest before ``u(0)``), hold it for ``settings.hover_before_trial_s`` (the state
+the previous trial left decays) and settle there, so that every trial starts from a settled
+vehicle; fly it, hover at its end while
 ``source.record`` runs (in a worker thread), ask ``source.setpoints_for`` for the next sequence
 (worker thread, still hovering). A settle that times out is judged like the first hover:
 flown on with wider tolerances (and a warning), or refused. A trial whose stream fell behind
@@ -543,9 +544,11 @@ class _Campaign:
         )
 
     async def to_start(self, j: int, hover: np.ndarray, measure: bool) -> None:
-        """Move to trial ``j``'s start point, settle there and hold it (the initial reset).
+        """Move to trial ``j``'s start point, hold it (the initial reset) and settle there.
 
-        With ``measure`` (before the first trial) the hover there is measured and judged.
+        With ``measure`` (before the first trial) the hover there is measured and judged. The
+        settle comes last, so that the trial starts from a settled vehicle: within the
+        session's tolerances of the point, at rest.
         """
         vehicle, settings, emit = self.vehicle, self.settings, self.emit
         check_battery(vehicle.battery_pct, settings.min_battery_pct, f"trial {j}")
@@ -563,6 +566,13 @@ class _Campaign:
                     f"the vehicle does not hold the start point {format_ned(hover)}: it "
                     f"{record.verdict.reason}"
                 )
+        if settings.hover_before_trial_s > 0:
+            # the initial reset of ILC: let the state the previous trial left decay
+            emit(Status(f"holding the start point for {settings.hover_before_trial_s:g} s"))
+            await vehicle.hold(settings.hover_before_trial_s, f"the hold before trial {j}")
+        # the settle last: learning assumes the vehicle at rest at the start point at u(0),
+        # and a vehicle that wanders by decimetres, settled before the hold, was carried up
+        # to 0.8 m away during it (PX4 SIH on vision)
         record = await settle_at_start(vehicle, hover, j, session, settings, emit)
         if record is not None:
             tolerances = widened(
@@ -570,10 +580,6 @@ class _Campaign:
             )
             session = _with_hover(session, record, *tolerances)
             await self.record_session(session, "recording the hover")
-        if settings.hover_before_trial_s > 0:
-            # the initial reset of ILC: let the state the previous trial left decay
-            emit(Status(f"holding the start point for {settings.hover_before_trial_s:g} s"))
-            await vehicle.hold(settings.hover_before_trial_s, f"the hold before trial {j}")
 
     async def fly_trial(
         self, j: int, number: int, iterations: int, setpoints: np.ndarray
