@@ -259,7 +259,8 @@ def _round(value: float | None, digits: int) -> float | None:
 
 
 def summary(run: Path) -> dict:
-    """Per trial e_pos [m] and in floors, what the step before it predicted of it (e_pos [m],
+    """Per trial e_pos [m] and in floors, where it began (its distance from the start point),
+    what the step before it predicted of it (e_pos [m],
     the flight's distance from the prediction in floors and what noise alone gives, setpoint
     samples at a limit), the
     refresh's changes, the safeguard's decisions and the floors of every group of identical
@@ -294,6 +295,8 @@ def summary(run: Path) -> dict:
         "epos_m": [r["epos_m"] and round(r["epos_m"], 4) for r in rows],
         "floor_m": floor,
         "floors": [r["epos_m"] and round(r["epos_m"] / floor, 2) for r in rows] if floor else None,
+        # how far from the start point each trial began (the initial reset learning assumes)
+        "start_offset_m": [_round(r.get("start_offset_m"), 3) for r in rows],
         # what the learning step before each trial predicted of it, and how far it flew from that
         "predicted_m": [_round(r.get("predicted_epos_m"), 4) for r in rows],
         "miss_floors": [_round(r.get("prediction_miss_ratio"), 2) for r in rows],

@@ -43,7 +43,7 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     assert [r["iteration"] for r in rows] == [0, 1]
     assert set(rows[0]) == {
         "iteration", "status", "reason", "epos_m", "epos_pct", "change_pct",
-        "max_err_m", "epos_3d_m", "rms_north_m", "rms_east_m", "rms_down_m",
+        "max_err_m", "epos_3d_m", "rms_north_m", "rms_east_m", "rms_down_m", "start_offset_m",
         "vehicle_time_rate", "trial", "repeat_of", "sp_rms_m", "sp_max_m",
         "predicted_epos_m", "prediction_miss_m", "limits_active",
     }  # fmt: skip
@@ -53,6 +53,11 @@ def test_learn_then_report_round_trip(tmp_path: Path) -> None:
     assert rows[0]["predicted_epos_m"] is None and rows[1]["prediction_miss_m"] > 0
     assert rows[1]["limits_active"] is None
     assert rows[0]["sp_rms_m"] == 0.0  # trial 0 flies the reference
+    # where each trial began: its first measured position against the start point
+    for r in rows:
+        first = run.read_trial(r["trial"])
+        offset = first.pos_ned_m[0, :2] - run.reference().pos_ned_m[0, :2]
+        assert r["start_offset_m"] == pytest.approx(np.hypot(*offset), rel=1e-8, abs=1e-12)
     dev = run.read_setpoints(1)[:, :2] - run.reference().pos_ned_m[:-1, :2]
     assert rows[1]["sp_rms_m"] == pytest.approx(np.sqrt(np.mean(np.sum(dev**2, axis=1))))
     assert rows[1]["sp_max_m"] == pytest.approx(np.max(np.hypot(dev[:, 0], dev[:, 1])))

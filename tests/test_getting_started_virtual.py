@@ -58,7 +58,7 @@ def test_the_getting_started_walkthrough_runs_as_written(
     assert "from the setpoint in force (lag included)" in text  # the live error per segment
     assert "verdict: e_pos" in text
     doc = json.loads((tmp_path / "run.json").read_text())
-    assert doc["version"] == 5 and doc["verdict"]["flights"] == 2
+    assert doc["version"] == 6 and doc["verdict"]["flights"] == 2
     assert len((tmp_path / "table.csv").read_text().splitlines()) == 3  # header + 2 trials
     assert (tmp_path / "plots" / "epos.svg").is_file()
     best = load_trajectory(tmp_path / "best-setpoints.csv")

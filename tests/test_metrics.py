@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from gcs.core.metrics import IterationMetrics, epos, iteration_table, max_error
+from gcs.core.metrics import IterationMetrics, epos, iteration_table, max_error, start_offset
 
 
 def test_epos_eq10_by_hand():
@@ -18,6 +18,15 @@ def test_epos_eq10_by_hand():
     expected = (5.0 + 0.0 + 1.0 + math.sqrt(2.0)) / 4.0
     assert epos(ref, pos) == pytest.approx(expected, rel=1e-15)
     assert max_error(ref, pos) == 5.0
+
+
+def test_start_offset_is_the_first_samples_horizontal_distance():
+    ref = np.array([[1.0, -2.0], [5.0, 5.0], [9.0, 9.0]])
+    pos = np.array([[4.0, 2.0], [5.0, 5.0], [0.0, 0.0]])  # 3-4-5 at k = 0; later ones ignored
+    assert start_offset(ref, pos) == 5.0
+    assert start_offset(ref, ref) == 0.0
+    with pytest.raises(ValueError, match="expected two"):
+        start_offset(ref, pos[:, :1])
 
 
 def test_epos_random_against_loop():

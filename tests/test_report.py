@@ -314,7 +314,7 @@ def test_json_is_a_documented_document_with_the_run_and_rounded_numbers(tmp_path
                 make_adaptive_run(tmp_path / "b", trials=4, gust_m=0.01)):  # fmt: skip
         doc = json.loads(invoke("report", run.path, "--json").output)
         _validate(doc, schema)
-        assert (doc["format"], doc["version"]) == ("gcs-report", 5)
+        assert (doc["format"], doc["version"]) == ("gcs-report", 6)
         assert doc["run"]["run_id"] == "run" and doc["run"]["profile"] == run.profile().name
         for value in _floats(doc):
             assert len(repr(value).lstrip("-").replace(".", "").lstrip("0")) <= 13, value

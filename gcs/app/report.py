@@ -33,7 +33,7 @@ from gcs.core.floor import (
     floor_verdicts,
 )
 from gcs.core.learning import AdaptiveSettings
-from gcs.core.metrics import IterationMetrics, iteration_table
+from gcs.core.metrics import IterationMetrics, iteration_table, start_offset
 from gcs.core.trials import (
     iteration_of,
     repeat_of,
@@ -75,7 +75,7 @@ __all__ = [
 ]
 
 #: The ``format`` and ``version`` fields of ``gcs report --json`` (docs/report.md).
-REPORT_FORMAT, REPORT_VERSION = "gcs-report", 5
+REPORT_FORMAT, REPORT_VERSION = "gcs-report", 6
 
 #: Significant digits of every number in the JSON document.
 JSON_DIGITS = 9
@@ -230,8 +230,11 @@ def run_metrics(run: RunDir, measurement: str | None = None) -> list[IterationMe
     rows = iteration_table([errors[j][0] for j in order], [errors[j][1] for j in order], order)
     out = []
     for i, r in enumerate(rows):
-        e3, rms_n, rms_e, rms_d = trial_errors_3d(records[r.iteration])
-        r = replace(r, epos_3d_m=e3, rms_north_m=rms_n, rms_east_m=rms_e, rms_down_m=rms_d)
+        record = records[r.iteration]
+        e3, rms_n, rms_e, rms_d = trial_errors_3d(record)
+        start_m = start_offset(record.ref_ned_m[:, :2], record.pos_ned_m[:, :2])
+        r = replace(r, epos_3d_m=e3, rms_north_m=rms_n, rms_east_m=rms_e, rms_down_m=rms_d,
+                    start_offset_m=start_m)  # fmt: skip
         out.append(r if i == 0 or order[i] - order[i - 1] == 1 else replace(r, delta_pct=None))
     return out
 
@@ -340,7 +343,7 @@ def trial_clock_rates(run: RunDir) -> dict[int, float | None]:
 #: The metric keys of a JSON row (null for a trial that is not complete).
 METRIC_KEYS = (
     "epos_m", "epos_pct", "change_pct", "max_err_m", "epos_3d_m", "rms_north_m", "rms_east_m",
-    "rms_down_m",
+    "rms_down_m", "start_offset_m",
 )  # fmt: skip
 
 
@@ -351,7 +354,8 @@ def metrics_json(
     learning: RunLearning | None = None,
 ) -> list[dict]:
     """One JSON object per trial: iteration, status, epos_m, epos_pct, change_pct, max_err_m,
-    epos_3d_m, rms_north_m, rms_east_m, rms_down_m (every key is defined in docs/report.md).
+    epos_3d_m, rms_north_m, rms_east_m, rms_down_m, start_offset_m (every key is defined in
+    docs/report.md).
 
     Table IV's unsigned change (``IterationMetrics.delta_pct``) is not a key: ``change_pct``
     carries the same number with its sign (version 3 of the document).

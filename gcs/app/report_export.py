@@ -23,9 +23,9 @@ __all__ = ["TABLE_COLUMNS", "write_rows_csv", "write_table_csv", "best_learned_t
 #: The columns of ``--csv``, in order (the keys of the JSON rows that are one value each).
 TABLE_COLUMNS = (
     "trial", "iteration", "status", "epos_m", "epos_pct", "change_pct", "max_err_m",
-    "epos_3d_m", "rms_north_m", "rms_east_m", "rms_down_m", "vehicle_time_rate", "repeat_of",
-    "sp_rms_m", "sp_max_m", "floor_m", "floor_ratio", "floor_z", "at_floor", "converged",
-    "reason",
+    "epos_3d_m", "rms_north_m", "rms_east_m", "rms_down_m", "start_offset_m",
+    "vehicle_time_rate", "repeat_of", "sp_rms_m", "sp_max_m", "floor_m", "floor_ratio",
+    "floor_z", "at_floor", "converged", "reason",
 )  # fmt: skip
 
 

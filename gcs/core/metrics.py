@@ -6,7 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["IterationMetrics", "axis_rms", "epos", "epos_3d", "iteration_table", "max_error"]
+__all__ = [
+    "IterationMetrics", "axis_rms", "epos", "epos_3d", "iteration_table", "max_error",
+    "start_offset",
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -29,6 +32,9 @@ class IterationMetrics:
         Average 3-D position error (:func:`epos_3d`) [m]; None where not computed.
     rms_north_m, rms_east_m, rms_down_m : float or None
         RMS error per axis (:func:`axis_rms`) [m]; None where not computed.
+    start_offset_m : float or None
+        How far from the start point the trial began (:func:`start_offset`) [m]; None where
+        not computed.
     """
 
     iteration: int
@@ -40,6 +46,7 @@ class IterationMetrics:
     rms_north_m: float | None = None
     rms_east_m: float | None = None
     rms_down_m: float | None = None
+    start_offset_m: float | None = None
 
 
 def _horizontal_errors(ref_ne_m: np.ndarray, pos_ne_m: np.ndarray) -> np.ndarray:
@@ -83,6 +90,27 @@ def max_error(ref_ne_m: np.ndarray, pos_ne_m: np.ndarray) -> float:
     float
     """
     return float(np.max(_horizontal_errors(ref_ne_m, pos_ne_m)))
+
+
+def start_offset(ref_ne_m: np.ndarray, pos_ne_m: np.ndarray) -> float:
+    """Horizontal distance of the measured position at k = 0 from the reference's [m].
+
+    Learning assumes every trial starts at rest at the start point (the initial reset, the
+    paper's eq. 1); a trial that began elsewhere carries a disturbance that does not repeat.
+
+    Parameters
+    ----------
+    ref_ne_m : ndarray, shape (N+1, 2)
+        Desired north and east positions, k = 0..N [m]; row 0 is the start point.
+    pos_ne_m : ndarray, shape (N+1, 2)
+        Measured north and east positions, k = 0..N [m].
+
+    Returns
+    -------
+    float
+        ``sqrt((x_m(0) - x_d(0))^2 + (y_m(0) - y_d(0))^2)`` [m].
+    """
+    return float(_horizontal_errors(ref_ne_m, pos_ne_m)[0])
 
 
 def _ned_pair(ref_ned_m: np.ndarray, pos_ned_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

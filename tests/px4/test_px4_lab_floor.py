@@ -114,6 +114,8 @@ def test_learning_stays_within_two_floors_in_a_realistic_lab(
         floor_m=floor_m,
         e_pos_m=[round(r["epos_m"], 4) for r in rows],
         floors={j: round(x, 2) for j, x in sorted(learned.items())},
+        # how far from the start point each trial began, by the mocap [m]
+        start_offset_m=[round(r["start_offset_m"], 3) for r in rows],
         # how far each learned trial came out from what the step before it predicted, and
         # how far noise alone puts it [floors]
         from_prediction={
