@@ -18,7 +18,10 @@ K --seed S``, ``--vehicle`` for the mass and drag too: printed, so any run can b
 again). A profile ``NAME+a.b=VALUE`` sets a field of
 the shipped one (``antx-adaptive+learning.adaptive.repeats=3``). Run directories are kept
 under ``--out``: a run there is resumed for the trials it lacks, or with ``--again K``
-resumed flying trial K's setpoints again (the same setpoints twice: their floor). With
+resumed flying trial K's setpoints again (the same setpoints twice: their floor); with
+``--then-again K,K,...`` each flight is followed, on the same PX4 not restarted, by one flight
+of one trial per K flying trial K's setpoints again (identical setpoints within one boot of the
+firmware, learned ones as well as trial 0's). With
 ``--identify`` each new run's vehicle is identified first on the same PX4 and rig (``gcs
 identify``, kept as ``NAME-id-identify``) and the run (``NAME-id``) flies the profile it wrote,
 as the README advises for one's own vehicle. For every
@@ -167,12 +170,15 @@ def fly(
     again: int | None = None,
     trajectory: Path | None = None,
     identify: bool = False,
+    then_again: tuple[int, ...] = (),
 ) -> None:
     """One flight into ``out/NAME`` (kept), its output in ``out/NAME.log``: a new run (on
     ``trajectory``, default the packaged eight), or the run resumed for ``iterations`` more
     trials (the first flying trial ``again``'s setpoints). With ``identify`` a new run's
     vehicle is first identified (``gcs identify`` on the same PX4 and rig, the run kept as
-    ``out/NAME-identify``) and the run flies the identified profile (``NAME`` ends in ``-id``)."""
+    ``out/NAME-identify``) and the run flies the identified profile (``NAME`` ends in ``-id``).
+    Then, per trial K of ``then_again``, one more flight of one trial on the same PX4 and rig,
+    not restarted: trial K's setpoints again (``gcs fly --resume RUN --iter 1 --again K``)."""
     name = name_of(point, profile, trajectory) + ("-id" if identify else "")
     run = out / name
     # the trials still to fly in a run already there (all of them again with --again)
@@ -211,6 +217,9 @@ def fly(
                 args = ["fly", *source, "--resume", str(run), "--iter", str(left)]
                 args += [] if again is None else ["--again", str(again)]
             text += run_gcs(args)
+            for k in then_again:
+                text += "\n" + run_gcs(["fly", *source, "--resume", str(run), "--iter", "1",
+                                         "--again", str(k)])  # fmt: skip
     finally:
         vehicle.stop()
     meta = {"load_before": round(load, 2), "load_after": round(os.getloadavg()[0], 2),
@@ -341,6 +350,12 @@ def main() -> None:
         "--again", type=int, help="resume each run, flying trial K's setpoints again first"
     )
     parser.add_argument(
+        "--then-again",
+        default="",
+        help="after each flight, on the same PX4 not restarted, one trial per K of K,K,...: "
+        "trial K's setpoints again",
+    )
+    parser.add_argument(
         "--identify",
         action="store_true",
         help="identify each new run's vehicle first (gcs identify) and fly the identified profile",
@@ -374,6 +389,7 @@ def main() -> None:
                         args.again,
                         args.trajectory,
                         args.identify,
+                        tuple(int(k) for k in args.then_again.split(",") if k),
                     ),
                     plan,
                 )
