@@ -21,7 +21,10 @@ under ``--out``: a run there is resumed for the trials it lacks, or with ``--aga
 resumed flying trial K's setpoints again (the same setpoints twice: their floor); with
 ``--then-again K,K,...`` each flight is followed, on the same PX4 not restarted, by one flight
 of one trial per K flying trial K's setpoints again (identical setpoints within one boot of the
-firmware, learned ones as well as trial 0's). With
+firmware, learned ones as well as trial 0's), and with ``--warm N`` a new run flies after a
+first flight of N trials of it on the same PX4 (``NAME-warm``: later in the firmware's boot;
+``--boot-wait S``: S seconds on the ground after PX4 has started instead).
+With
 ``--identify`` each new run's vehicle is identified first on the same PX4 and rig (``gcs
 identify``, kept as ``NAME-id-identify``) and the run (``NAME-id``) flies the profile it wrote,
 as the README advises for one's own vehicle. For every
@@ -171,6 +174,8 @@ def fly(
     trajectory: Path | None = None,
     identify: bool = False,
     then_again: tuple[int, ...] = (),
+    warm: int = 0,
+    boot_wait_s: float = 0.0,
 ) -> None:
     """One flight into ``out/NAME`` (kept), its output in ``out/NAME.log``: a new run (on
     ``trajectory``, default the packaged eight), or the run resumed for ``iterations`` more
@@ -178,7 +183,11 @@ def fly(
     vehicle is first identified (``gcs identify`` on the same PX4 and rig, the run kept as
     ``out/NAME-identify``) and the run flies the identified profile (``NAME`` ends in ``-id``).
     Then, per trial K of ``then_again``, one more flight of one trial on the same PX4 and rig,
-    not restarted: trial K's setpoints again (``gcs fly --resume RUN --iter 1 --again K``)."""
+    not restarted: trial K's setpoints again (``gcs fly --resume RUN --iter 1 --again K``).
+    With ``warm`` a new run is flown after a first flight of ``warm`` trials of the same
+    profile and trajectory on the same PX4 (kept as ``out/NAME-warm``): the run's trials come
+    that much later in the firmware's boot; with ``boot_wait_s`` the first flight waits that
+    long on the ground after PX4 has started."""
     name = name_of(point, profile, trajectory) + ("-id" if identify else "")
     run = out / name
     # the trials still to fly in a run already there (all of them again with --again)
@@ -196,6 +205,7 @@ def fly(
     load = os.getloadavg()[0]
     try:
         vehicle.start()
+        time.sleep(boot_wait_s)  # on the ground, disarmed: the firmware's boot, not an event
         with contextlib.ExitStack() as stack:
             source = ["--connect", vehicle.url]
             if point is not GPS:
@@ -210,9 +220,13 @@ def fly(
                                 "--run", ident_run, "--out", str(identified)])  # fmt: skip
                 text += "\n"
                 flown_profile = identified
+            path = [] if trajectory is None else ["--trajectory", str(trajectory.resolve())]
             args = ["fly", *source, "--iter", str(iterations), "--profile", str(flown_profile),
-                    "--run", str(run)]  # fmt: skip
-            args += [] if trajectory is None else ["--trajectory", str(trajectory.resolve())]
+                    "--run", str(run), *path]  # fmt: skip
+            if warm and not run.exists():
+                text += run_gcs(["fly", *source, "--iter", str(warm), "--profile",
+                                 str(flown_profile), "--run", str(out / f"{name}-warm"),
+                                 *path]) + "\n"  # fmt: skip
             if run.exists():
                 args = ["fly", *source, "--resume", str(run), "--iter", str(left)]
                 args += [] if again is None else ["--again", str(again)]
@@ -356,6 +370,18 @@ def main() -> None:
         "trial K's setpoints again",
     )
     parser.add_argument(
+        "--warm",
+        type=int,
+        default=0,
+        help="before each new run, a flight of N trials of it on the same PX4 (NAME-warm)",
+    )
+    parser.add_argument(
+        "--boot-wait",
+        type=float,
+        default=0.0,
+        help="seconds PX4 waits on the ground after it has started, before the first flight",
+    )
+    parser.add_argument(
         "--identify",
         action="store_true",
         help="identify each new run's vehicle first (gcs identify) and fly the identified profile",
@@ -390,6 +416,8 @@ def main() -> None:
                         args.trajectory,
                         args.identify,
                         tuple(int(k) for k in args.then_again.split(",") if k),
+                        args.warm,
+                        args.boot_wait,
                     ),
                     plan,
                 )
@@ -400,7 +428,7 @@ def main() -> None:
         if p.is_dir()
         and not p.is_symlink()
         and not p.name.startswith(".")
-        and not p.name.endswith("-identify")
+        and not p.name.endswith(("-identify", "-warm"))
     ):
         try:
             print(json.dumps(summary(run)), flush=True)
