@@ -21,7 +21,15 @@ the truth, as it was the delay earlier, onto the vision poses, by least squares,
 - ``tilt``: PX4's attitude estimate against the true attitude, as the horizontal components of
   the body's thrust axis (the room's north, east) [deg], RMS: the accelerometer's specific force
   goes to the room through that attitude, so a tilt error of x deg puts about g x pi / 180 of
-  horizontal acceleration [m/s^2] into the estimate where the vision does not pull it back.
+  horizontal acceleration [m/s^2] into the estimate where the vision does not pull it back;
+- ``accel bias``: EKF2's estimate of the accelerometer's horizontal bias (body x and y,
+  ``estimator_states`` 13 and 14), as the standard deviation EKF2 grants it (the median over the
+  trial) [mm/s^2] and how far the estimate moved within the trial (the RMS of its distance from
+  its mean over the trial) [mm/s^2]. A bias estimate that moves is a horizontal acceleration
+  the estimate integrates until the vision pulls it back;
+- ``arming``: which arming since PX4 started the trial was flown in (0: the vehicle's first
+  flight after PX4 started). PX4 logs each arming in a file of its own; a PX4 that started again
+  begins its clock again, which is how the logs of one directory are told apart by start.
 
 Per pair of flights of identical setpoints (trial 0 and its repeats, a trial and its
 ``--again`` flights), the RMS per axis of the difference between their tracks: of the truth
@@ -64,7 +72,10 @@ TOPICS = (
     "estimator_innovations",
     "vehicle_attitude",
     "vehicle_attitude_groundtruth",
+    "estimator_states",
 )
+#: EKF2's state indices of the accelerometer's x and y bias (PX4 v1.16's 24 states)
+ACCEL_BIAS_XY = (13, 14)
 #: the delays tried for the mocap [s]: the rig's latency is 0-50 ms
 DELAYS_S = np.arange(0.0, 0.1001, 0.002)
 #: the grid the tracks are compared on [s]
@@ -84,6 +95,9 @@ class Trial:
     velocity_mm_s: tuple[float, float]
     innovation_mm: tuple[float, float]
     tilt_deg: tuple[float, float]
+    arming: int
+    accel_bias_sd_mm_s2: float
+    accel_bias_moved_mm_s2: float
 
 
 @dataclass(frozen=True)
@@ -143,6 +157,19 @@ def fit_room(log: Log) -> tuple[np.ndarray, np.ndarray, float]:
     return best[1], best[2], best[3]
 
 
+def accel_bias(log: Log, t_s: np.ndarray) -> tuple[float, float]:
+    """EKF2's horizontal accelerometer bias over ``t_s`` [s]: the median of the standard
+    deviation it grants the estimate (the larger of x and y) [mm/s^2], and how far the estimate
+    moved: the RMS of its distance (x and y together) from its mean over ``t_s`` [mm/s^2]."""
+    states = log.data["estimator_states"]
+    stamps = states["timestamp"] * 1e-6
+    inside = (stamps >= t_s[0]) & (stamps <= t_s[-1])
+    sd = np.sqrt(np.column_stack([states[f"covariances[{i}]"][inside] for i in ACCEL_BIAS_XY]))
+    bias = np.column_stack([states[f"states[{i}]"][inside] for i in ACCEL_BIAS_XY])
+    moved = np.sqrt(np.mean(np.sum((bias - bias.mean(axis=0)) ** 2, axis=1)))
+    return float(np.median(sd.max(axis=1))) * 1e3, float(moved) * 1e3
+
+
 def up_axis(q: np.ndarray) -> np.ndarray:
     """The body's z axis in the world frame of quaternions ``q`` (n, 4; w, x, y, z; interpolated,
     so normalised here): (n, 3)."""
@@ -178,10 +205,12 @@ def flight_of(path: Path) -> tuple[RunDir, list[Path]]:
 
 
 class Room:
-    """One PX4 log with the room's turn and the mocap's delay fitted (:func:`fit_room`)."""
+    """One PX4 log with the room's turn and the mocap's delay fitted (:func:`fit_room`), and
+    which arming since PX4 started it logs (``arming``, set by :func:`rooms_of`)."""
 
     def __init__(self, path: Path) -> None:
         self.log = Log(path)
+        self.arming = 0
         self.rot, self.offset, self.delay_s = fit_room(self.log)
         stamps = self.log.data["vehicle_local_position"]["timestamp"] * 1e-6
         self.span_s = (float(stamps[0]), float(stamps[-1]))
@@ -206,6 +235,7 @@ class Room:
         keep = (ti >= t_s[0]) & (ti <= t_s[-1])
         innovation = np.column_stack([innov["ev_hpos[0]"][keep], innov["ev_hpos[1]"][keep]])
         tilt = np.degrees(rms(thrust_axis(log, t_s, self.rot)))
+        bias_sd, bias_moved = accel_bias(log, t_s)
         velocity = log.at("vehicle_local_position", ("vx", "vy"), t_s) - self.truth(
             ("vx", "vy"), t_s
         )
@@ -217,14 +247,27 @@ class Room:
             velocity_mm_s=rms_axes(velocity),
             innovation_mm=rms_axes(innovation),
             tilt_deg=tuple(round(float(v), 2) for v in tilt),
+            arming=self.arming,
+            accel_bias_sd_mm_s2=round(bias_sd, 1),
+            accel_bias_moved_mm_s2=round(bias_moved, 1),
         )
         return trial, true_now, estimate
+
+
+def rooms_of(paths: list[Path]) -> list[Room]:
+    """The logs of ``paths`` (in the order PX4 wrote them: its folders and files are named by
+    the date and time) with each one's arming since PX4 started: a log that starts earlier on
+    PX4's clock than the one before it is the first of a PX4 started again."""
+    rooms = [Room(p) for p in paths]
+    for before, room in itertools.pairwise(rooms):
+        room.arming = before.arming + 1 if room.span_s[0] > before.span_s[0] else 0
+    return rooms
 
 
 def analyse(path: Path) -> Flight:
     """The errors of every trial and pair of one flight directory."""
     rd, paths = flight_of(path)
-    rooms = [Room(p) for p in paths]
+    rooms = rooms_of(paths)
     grid = np.arange(rd.n_samples) * rd.t_ilc_s
     trials, tracks = [], {}
     for j in rd.complete_trials():
@@ -261,20 +304,60 @@ def medians(rows: list, field: str, digits: int = 0) -> str:
     return both(tuple(statistics.median(v[i] for v in values) for i in (0, 1)), digits)
 
 
+def summary(label: str, rows: list[Trial]) -> str:
+    """One line of medians over ``rows``: the estimate's, velocity's, innovations' and tilt's
+    errors (north / east) and the accel bias's sd and movement."""
+    sd = statistics.median(t.accel_bias_sd_mm_s2 for t in rows)
+    moved = statistics.median(t.accel_bias_moved_mm_s2 for t in rows)
+    return (
+        f"  {label}: estimate {medians(rows, 'estimate_mm')} mm; "
+        f"velocity {medians(rows, 'velocity_mm_s')} mm/s; "
+        f"innovation {medians(rows, 'innovation_mm')} mm; "
+        f"tilt {medians(rows, 'tilt_deg', 2)} deg; "
+        f"accel bias sd {sd:.0f}, moved {moved:.1f} mm/s^2"
+    )
+
+
+def by_arming(trials: list[Trial]) -> list[str]:
+    """:func:`summary` over the trials of the first arming since PX4 started and over those of
+    the later ones."""
+    first = [t for t in trials if t.arming == 0]
+    later = [t for t in trials if t.arming > 0]
+    return [
+        summary(f"{label} ({len(rows)} trials)", rows)
+        for label, rows in (("first arming", first), ("later armings", later))
+        if rows
+    ]
+
+
+def by_trial(flights: list[Flight]) -> list[str]:
+    """:func:`summary` per trial number over the flights (flights of one plan: the same
+    number is the same part of each), with the armings it was flown in."""
+    numbers = sorted({t.trial for f in flights for t in f.trials})
+    lines = []
+    for j in numbers:
+        rows = [t for f in flights for t in f.trials if t.trial == j]
+        armings = ",".join(str(a) for a in sorted({t.arming for t in rows}))
+        lines.append(summary(f"trial {j} ({len(rows)} flights, arming {armings})", rows))
+    return lines
+
+
 def table(flights: list[Flight]) -> str:
     """Markdown tables of the trials and the pairs, and the medians over all flights."""
     out = [
-        "| flight | trial | e_pos [mm] | mocap [mm] | estimate N / E [mm] | "
-        "velocity N / E [mm/s] | innovation N / E [mm] | tilt N / E [deg] |",
-        "|---|---|---|---|---|---|---|---|",
+        "| flight | trial | arming | e_pos [mm] | mocap [mm] | estimate N / E [mm] | "
+        "velocity N / E [mm/s] | innovation N / E [mm] | tilt N / E [deg] | "
+        "accel bias: sd, moved [mm/s^2] |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for f in flights:
         name = f"{f.name} ({f.turn_deg:+.1f} deg, {f.delay_ms:.0f} ms)"
         for t in f.trials:
             out.append(
-                f"| {name} | {t.trial} | {t.epos_mm:.0f} | {t.mocap_mm:.1f} | "
+                f"| {name} | {t.trial} | {t.arming} | {t.epos_mm:.0f} | {t.mocap_mm:.1f} | "
                 f"{both(t.estimate_mm)} | {both(t.velocity_mm_s)} | {both(t.innovation_mm)} | "
-                f"{both(t.tilt_deg, 2)} |"
+                f"{both(t.tilt_deg, 2)} | {t.accel_bias_sd_mm_s2:.0f}, "
+                f"{t.accel_bias_moved_mm_s2:.1f} |"
             )
     out += [
         "",
@@ -301,6 +384,10 @@ def table(flights: list[Flight]) -> str:
         f"  pairs: truth {medians(pairs, 'truth_mm')} mm; "
         f"estimate {medians(pairs, 'estimate_mm')} mm; "
         f"estimate's error {medians(pairs, 'error_mm')} mm",
+        "by arming since PX4 started (0: the vehicle's first flight after PX4 started):",
+        *by_arming(trials),
+        "by trial:",
+        *by_trial(flights),
     ]
     return "\n".join(out)
 
