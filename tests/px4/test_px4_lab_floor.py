@@ -37,7 +37,10 @@ this one first of them); ``make test-lab-floor`` flies it alone.
 same PX4, the j = 2 setpoints of ten such flights scored 1.15 floors (median of twenty), and in
 nine of the ten the test's own flight of them (in the vehicle's first flight after PX4
 started) came out above both later ones; after a first flight of four trials, in two of eight
-(docs/learning-floor.md, "The same learned setpoints, flown again on the same PX4").
+(docs/learning-floor.md, "The same learned setpoints, flown again on the same PX4"). When all
+the flights of j = 2's setpoints fail, the setpoints are wrong: the refresh after j = 1 moved a
+model far and the step's prediction missed (the report's "after trial 4" and "the step
+before trial 5" lines).
 """
 
 from __future__ import annotations
