@@ -304,13 +304,13 @@ def medians(rows: list, field: str, digits: int = 0) -> str:
     return both(tuple(statistics.median(v[i] for v in values) for i in (0, 1)), digits)
 
 
-def summary(label: str, rows: list[Trial]) -> str:
-    """One line of medians over ``rows``: the estimate's, velocity's, innovations' and tilt's
-    errors (north / east) and the accel bias's sd and movement."""
+def summary(rows: list[Trial]) -> str:
+    """The medians over ``rows`` (one or more): the estimate's, velocity's, innovations' and
+    tilt's errors (north / east) and the accel bias's sd and movement."""
     sd = statistics.median(t.accel_bias_sd_mm_s2 for t in rows)
     moved = statistics.median(t.accel_bias_moved_mm_s2 for t in rows)
     return (
-        f"  {label}: estimate {medians(rows, 'estimate_mm')} mm; "
+        f"estimate {medians(rows, 'estimate_mm')} mm; "
         f"velocity {medians(rows, 'velocity_mm_s')} mm/s; "
         f"innovation {medians(rows, 'innovation_mm')} mm; "
         f"tilt {medians(rows, 'tilt_deg', 2)} deg; "
@@ -324,7 +324,7 @@ def by_arming(trials: list[Trial]) -> list[str]:
     first = [t for t in trials if t.arming == 0]
     later = [t for t in trials if t.arming > 0]
     return [
-        summary(f"{label} ({len(rows)} trials)", rows)
+        f"  {label} ({len(rows)} trials): {summary(rows)}"
         for label, rows in (("first arming", first), ("later armings", later))
         if rows
     ]
@@ -338,7 +338,7 @@ def by_trial(flights: list[Flight]) -> list[str]:
     for j in numbers:
         rows = [t for f in flights for t in f.trials if t.trial == j]
         armings = ",".join(str(a) for a in sorted({t.arming for t in rows}))
-        lines.append(summary(f"trial {j} ({len(rows)} flights, arming {armings})", rows))
+        lines.append(f"  trial {j} ({len(rows)} flights, arming {armings}): {summary(rows)}")
     return lines
 
 
@@ -372,15 +372,13 @@ def table(flights: list[Flight]) -> str:
             )
     trials = [t for f in flights for t in f.trials]
     pairs = [p for f in flights for p in f.pairs]
-    mocap = statistics.median(t.mocap_mm for t in trials) if trials else float("nan")
     out += [
         "",
         f"medians over {len(flights)} flights, {len(trials)} trials and {len(pairs)} pairs "
         "(north / east):",
-        f"  trials: mocap {mocap:.1f} mm; estimate {medians(trials, 'estimate_mm')} mm; "
-        f"velocity {medians(trials, 'velocity_mm_s')} mm/s; "
-        f"innovation {medians(trials, 'innovation_mm')} mm; "
-        f"tilt {medians(trials, 'tilt_deg', 2)} deg",
+        f"  trials: mocap {statistics.median(t.mocap_mm for t in trials):.1f} mm; {summary(trials)}"
+        if trials
+        else "  trials: -",
         f"  pairs: truth {medians(pairs, 'truth_mm')} mm; "
         f"estimate {medians(pairs, 'estimate_mm')} mm; "
         f"estimate's error {medians(pairs, 'error_mm')} mm",
