@@ -24,7 +24,7 @@ missed, which makes a gap in the log longer than it was, never shorter.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -336,13 +336,61 @@ NAV_STATE_NAMES = {0: "MANUAL", 1: "ALTCTL", 2: "POSCTL", 3: "MISSION", 4: "HOLD
 CONSOLE_EVENTS = ("WARN", "ERROR", "INFO  [commander]", "INFO  [navigator]")
 
 
+#: Topics fed by work items PX4 SITL runs on its interval timer, as the default logging profile
+#: names them: the barometer, magnetometer and GPS simulators (through the sensor data they
+#: feed), the battery simulator and the CPU-load monitor.
+TIMER_FED = ("vehicle_air_data", "vehicle_magnetometer", "vehicle_gps_position",
+             "battery_status", "cpuload")  # fmt: skip
+#: SIH's IMU: published from the simulator's own loop, not the interval timer.
+IMU = "sensor_combined"
+
+
+def timer_stopped(last_s: Mapping[str, float], min_gap_s: float = 2.0) -> str | None:
+    """Say, in one line, whether PX4 SITL's interval timer stopped before its IMU did.
+
+    PX4 SITL's emulation of the hardware timer can lose its list of calls (see ``SITL_PARAMS``
+    in tests/px4/sitl.py): the simulated barometer, compass, GPS and battery and the CPU-load
+    monitor stop for good while SIH's IMU, and EKF2 and the controllers it feeds, go on. A
+    flight that then fails has failed on the simulator, and this line says so at the top of
+    the digest.
+
+    Parameters
+    ----------
+    last_s : mapping of str to float
+        The time of each topic's last message in the log (PX4's clock) [s]; topics the log
+        does not hold are absent.
+    min_gap_s : float
+        How long the IMU must have gone on after a topic's last message for it to count as
+        stopped [s] (the slowest of them, the CPU load, comes every 0.5 s).
+
+    Returns
+    -------
+    str or None
+        The line, when the IMU went on ``min_gap_s`` past at least two of :data:`TIMER_FED`;
+        None otherwise (one topic alone may stop for a reason of its own).
+    """
+    if IMU not in last_s:
+        return None
+    end_s = last_s[IMU]
+    stopped = [n for n in TIMER_FED if n in last_s and end_s - last_s[n] > min_gap_s]
+    if len(stopped) < 2:
+        return None
+    since_s = min(last_s[n] for n in stopped)
+    return (
+        f"PX4 SITL's interval timer stopped at {since_s:.2f} s of PX4's clock: no "
+        f"{', '.join(stopped)} after it while its IMU ({IMU}) went on to {end_s:.2f} s "
+        "(the simulated barometer, compass and GPS gone: a fault of the simulator)"
+    )
+
+
 def failure_digest(output: str, ulogs: Sequence[Path], last_s: float = 40.0) -> str:
     """What a failed firmware flight did, short enough for a CI transcript.
 
-    The last 25 of PX4's console warnings, errors and commander/navigator messages, then the
-    last ``last_s`` seconds of its newest log once a second: navigation state, armed and landed,
-    the estimated position and velocity (NED, local frame) and the position setpoint (NaN where
-    PX4 set none).
+    First, when the newest log shows it, that PX4 SITL's interval timer stopped
+    (:func:`timer_stopped`). Then the last 25 of PX4's console warnings, errors and
+    commander/navigator messages, then the last ``last_s`` seconds of its newest log once a
+    second: navigation state, armed and landed, the estimated position and velocity (NED,
+    local frame) and the position setpoint (NaN where PX4 set none).
 
     Parameters
     ----------
@@ -364,12 +412,16 @@ def failure_digest(output: str, ulogs: Sequence[Path], last_s: float = 40.0) -> 
     if not ulogs:
         return "\n".join([*out, "no ULog written"])
     topics = ["vehicle_local_position", "vehicle_local_position_setpoint", "vehicle_status",
-              "vehicle_land_detected"]  # fmt: skip
+              "vehicle_land_detected", *TIMER_FED, IMU]  # fmt: skip
     try:
         ulog = ULog(str(ulogs[-1]), topics)
     except Exception as exc:  # a log cut short by the failure is worth a line, not a crash
         return "\n".join([*out, f"{ulogs[-1].name}: unreadable ({exc})"])
     data = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
+    ends_s = {name: d["timestamp"][-1] * 1e-6 for name, d in data.items() if len(d["timestamp"])}
+    stopped = timer_stopped(ends_s)
+    if stopped:
+        out.insert(0, stopped)
     if "vehicle_local_position" not in data:
         return "\n".join([*out, f"{ulogs[-1].name}: no vehicle_local_position"])
     stamps_s = {name: np.asarray(d["timestamp"]) * 1e-6 for name, d in data.items()}
