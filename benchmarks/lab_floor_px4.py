@@ -184,15 +184,20 @@ def fly(
     ``out/NAME-identify``) and the run flies the identified profile (``NAME`` ends in ``-id``).
     Then, per trial K of ``then_again``, one more flight of one trial on the same PX4 and rig,
     not restarted: trial K's setpoints again (``gcs fly --resume RUN --iter 1 --again K``).
+    Called again on the same ``out``, it flies only what did not end in a complete trial:
+    the run's missing trials, then the missing flights of ``then_again``.
     With ``warm`` a new run is flown after a first flight of ``warm`` trials of the same
     profile and trajectory on the same PX4 (kept as ``out/NAME-warm``): the run's trials come
     that much later in the firmware's boot; with ``boot_wait_s`` the first flight waits that
     long on the ground after PX4 has started."""
     name = name_of(point, profile, trajectory) + ("-id" if identify else "")
     run = out / name
-    # the trials still to fly in a run already there (all of them again with --again)
-    left = iterations if not run.exists() or again is not None else iterations - flown(run)
-    if left <= 0:
+    # what is still to fly of a run already there: its trials, then the flights of
+    # then_again that did not end in a complete trial (all again with --again)
+    done = 0 if not run.exists() or again is not None else flown(run)
+    left = iterations - done
+    agains_left = then_again[max(0, done - iterations) :]
+    if left <= 0 and not agains_left:
         return  # complete: no PX4 or rig started for it
     work = out / f".{name}-px4"
     work.mkdir(parents=True, exist_ok=True)
@@ -230,8 +235,9 @@ def fly(
             if run.exists():
                 args = ["fly", *source, "--resume", str(run), "--iter", str(left)]
                 args += [] if again is None else ["--again", str(again)]
-            text += run_gcs(args)
-            for k in then_again:
+            if left > 0:
+                text += run_gcs(args)
+            for k in agains_left:
                 text += "\n" + run_gcs(["fly", *source, "--resume", str(run), "--iter", "1",
                                          "--again", str(k)])  # fmt: skip
     finally:
