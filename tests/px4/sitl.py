@@ -385,7 +385,15 @@ class Px4Sitl:
         -------
         Px4Sitl
             Itself, ready.
+
+        Raises
+        ------
+        RuntimeError
+            When its PX4 still runs (a second start would leave the first PX4 running, unseen,
+            on its instance until the machine stops).
         """
+        if self.alive():
+            raise RuntimeError(f"PX4 instance {self.instance} already started: stop() it first")
         bin_dir = self.build.runnable()
         refused: set[int] = set()
         while True:
