@@ -59,13 +59,14 @@ _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 #: inside the timer's call (``ScheduleOnInterval`` in its ``Run``; PX4 v1.16,
 #: ``src/modules/gyro_calibration/GyroCalibration.cpp``). On SITL the timer is a POSIX
 #: emulation whose list of calls is unlocked while a call runs
-#: (``platforms/posix/src/px4/common/drv_hrt.cpp``, ``hrt_call_invoke``): when the machine is
-#: loaded enough that the module's work queue runs before the timer's thread takes the list
-#: back, the entry goes into the list twice and every call behind it is lost. The barometer,
-#: magnetometer, GPS and battery simulators and the CPU-load monitor then stop for good at the
-#: arming while the IMU and everything fed by it go on (docs/testing.md). On a flight
-#: controller the timer is hardware; SIH's gyros carry no offset to calibrate (noise and the
-#: earth's rotation only, ``src/modules/simulation/simulator_sih/sih.cpp``), so it is left out.
+#: (``platforms/posix/src/px4/common/drv_hrt.cpp``, ``hrt_call_invoke``): should the module's
+#: work queue get in before the timer's thread takes the list back, the entry goes into the list
+#: twice and every call behind it is lost. That is the one way found in PX4's source for what
+#: a few loaded runs met: the barometer, magnetometer, GPS and battery simulators and the
+#: CPU-load monitor stopping for good at an arming while the IMU and everything fed by it went
+#: on. It was not reproduced (docs/testing.md). On a flight controller the timer is hardware;
+#: SIH's gyros carry no offset to calibrate (noise and the earth's rotation only,
+#: ``src/modules/simulation/simulator_sih/sih.cpp``), so the module is left out either way.
 SITL_PARAMS: dict[str, float] = {"IMU_GYRO_CAL_EN": 0}
 
 
