@@ -516,7 +516,9 @@ class LabRig(MocapServerProcess):
     args : list of str
         Options of the rig (:func:`rig_command`: ``--rate``, ``--latency-ms``...).
     ready_timeout_s : float
-        How long to wait for the READY line [s].
+        How long to wait for the READY line [s]: as long as for PX4's own start, since on a
+        machine running two suites the rig's imports alone have taken over 20 s (the bound
+        only ends a rig that never starts).
 
     Attributes
     ----------
@@ -529,7 +531,7 @@ class LabRig(MocapServerProcess):
     """
 
     def __init__(
-        self, instance: int, args: list[str] | None = None, ready_timeout_s: float = 20.0
+        self, instance: int, args: list[str] | None = None, ready_timeout_s: float = 90.0
     ) -> None:
         program = [sys.executable, "-c", _RUN, *_PATH, str(instance)]
         super().__init__(args, ready_timeout_s, program=program, name="lab rig")
