@@ -44,8 +44,18 @@ def test_one_stream_alone_that_stops_is_not_the_timer() -> None:
     assert "vehicle_air_data" not in line
 
 
-def test_the_gap_must_exceed_the_bound_and_topics_the_log_lacks_are_not_judged() -> None:
-    ends = {IMU: 100.0, "vehicle_air_data": 98.1, "cpuload": 98.1}
+def test_the_gap_must_exceed_the_bound() -> None:
+    ends = {**HEALTHY, IMU: 100.0, "vehicle_air_data": 98.1, "cpuload": 98.1}
     assert timer_stopped(ends) is None  # 1.9 s: within the bound
-    assert timer_stopped(ends, min_gap_s=1.5) is not None
-    assert timer_stopped({"vehicle_air_data": 1.0, "cpuload": 1.0}) is None  # no IMU logged
+    line = timer_stopped(ends, min_gap_s=1.5)
+    assert line is not None and "98.10 s" in line
+
+
+def test_topics_a_default_log_lacks_stopped_before_it_and_without_the_imu_nothing_is_judged():
+    # a log opened at an arming after the timer stopped (at the disarming before) holds none
+    only_imu = {IMU: 40.0, "cpuload": 39.8}
+    line = timer_stopped(only_imu)
+    assert line is not None and "before this log began" in line
+    assert "cpuload" not in line and "vehicle_air_data" in line
+    # a log without SIH's IMU (another logging profile) is not judged at all
+    assert timer_stopped({"vehicle_air_data": 1.0, "cpuload": 1.0}) is None

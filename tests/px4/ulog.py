@@ -358,7 +358,9 @@ def timer_stopped(last_s: Mapping[str, float], min_gap_s: float = 2.0) -> str | 
     ----------
     last_s : mapping of str to float
         The time of each topic's last message in the log (PX4's clock) [s]; topics the log
-        does not hold are absent.
+        does not hold are absent. A log holding SIH's IMU was written with PX4's default
+        logging profile, which logs every topic of :data:`TIMER_FED`: one absent from it
+        stopped before the log began (at the disarming before, say).
     min_gap_s : float
         How long the IMU must have gone on after a topic's last message for it to count as
         stopped [s] (the slowest of them, the CPU load, comes every 0.5 s).
@@ -372,14 +374,15 @@ def timer_stopped(last_s: Mapping[str, float], min_gap_s: float = 2.0) -> str | 
     if IMU not in last_s:
         return None
     end_s = last_s[IMU]
-    stopped = [n for n in TIMER_FED if n in last_s and end_s - last_s[n] > min_gap_s]
+    stopped = [n for n in TIMER_FED if end_s - last_s.get(n, -math.inf) > min_gap_s]
     if len(stopped) < 2:
         return None
-    since_s = min(last_s[n] for n in stopped)
+    seen = [last_s[n] for n in stopped if n in last_s]
+    since = f"at {min(seen):.2f} s of PX4's clock" if seen else "before this log began"
     return (
-        f"PX4 SITL's interval timer stopped at {since_s:.2f} s of PX4's clock: no "
-        f"{', '.join(stopped)} after it while its IMU ({IMU}) went on to {end_s:.2f} s "
-        "(the simulated barometer, compass and GPS gone: a fault of the simulator)"
+        f"PX4 SITL's interval timer stopped {since}: no {', '.join(stopped)} after it while "
+        f"its IMU ({IMU}) went on to {end_s:.2f} s (the simulated barometer, compass and GPS "
+        "gone: a fault of the simulator)"
     )
 
 
