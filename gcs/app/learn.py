@@ -353,6 +353,8 @@ def learn_run(
         check_learned(sp, profile, ref)
     except TrajectoryError as exc:
         raise RunLogError(f"{run.path}: learned from trial {j}: {exc}; nothing written") from None
+    # read everything before writing: a damaged estimate refuses the step with nothing written
+    prediction = trial_prediction(run, profile, j, record, None)
     path = run.write_learned(j, step.d_hat_m, step.p_m2, sp)
     return LearnOutcome(
         trial=j,
@@ -361,7 +363,7 @@ def learn_run(
         methods=step.methods,
         active_constraints=step.active_constraints,
         next_iteration=j + 1,
-        prediction=trial_prediction(run, profile, j, record, None),
+        prediction=prediction,
     )
 
 
