@@ -33,14 +33,20 @@ floor from three flights and in 99.8 % against one from four (docs/testing.md): 
 a row about 85 % and 98 % of the time. It is part of ``make test`` (the flights go first, and
 this one first of them); ``make test-lab-floor`` flies it alone.
 
-**When it fails, it fails at j = 2, and mostly not for the setpoints**: flown again later on the
-same PX4, the j = 2 setpoints of ten such flights scored 1.15 floors (median of twenty), and in
-nine of the ten the test's own flight of them (in the vehicle's first flight after PX4
-started) came out above both later ones; after a first flight of four trials, in two of eight
-(docs/learning-floor.md, "The same learned setpoints, flown again on the same PX4"). When all
-the flights of j = 2's setpoints fail, the setpoints are wrong: the refresh after j = 1 moved a
-model far and the step's prediction missed (the report's "after trial 4" and "the step
-before trial 5" lines).
+**Two flights, as a lab with a battery change flies it**: trial 0 and its repeats (the floor)
+in the vehicle's first flight after PX4 started, then ``gcs fly --resume`` learns j = 1, 2, 3 in
+a second flight of the same PX4. The first flight after PX4 starts flies its later trials worse
+than any flight after it: the j = 2 setpoints of ten one-flight runs, flown again later on the
+same PX4, scored 1.15 floors (median of twenty), and in nine of the ten the test's own flight of
+them came out above both later ones (docs/learning-floor.md, "The same learned setpoints, flown
+again on the same PX4"; the cause is PX4's, not found). Flown in one flight, this test failed
+its bound in five of twenty-four fresh-clone runs of one day, mostly at j = 2. Nineteen flights
+alternated on 2026-12-03 (docs/testing.md, "Two flights"): j = 2 at 1.03 floors (median of
+eight, largest 1.63) in two flights against 1.45 (median of eleven, largest 2.19, one above the
+bound) in one, 254 against 304 mm; the floor is measured alike in both (the first four trials of
+the first flight). When j = 2 still fails, look first at its setpoints: the refresh after
+j = 1 moved a model far and the step's prediction missed (the report's "after trial 4" and
+"the step before trial 5" lines).
 """
 
 from __future__ import annotations
@@ -64,12 +70,17 @@ LAB = LabConditions(rate_hz=100.0, latency_ms=30.0, noise_mm=1.0, yaw_offset_deg
 #: trial 0 and three repeats (the floor from four flights), then learned trials j = 1, 2, 3
 REPEATS = 3
 TRIALS = REPEATS + 4
+#: the first flight's trials: trial 0 and its repeats (the floor); the second flies the rest
+FLOOR_TRIALS = REPEATS + 1
 #: the issue's bound on a learned trial from j = 2 on [floors]
 BOUND = 2.0
 #: one loop of the eight [s]: the paper's 5 s asks more than the SIH vehicle gives (above)
 PERIOD_S = 7.5
-#: a hung flight, not a slow one: six trials of the 19 s eight, the frame check, the hover
+#: a hung flight, not a slow one: four trials of the 19 s eight, the frame check, the hover
 FLY_TIMEOUT_S = 1200.0
+#: the two flights' length [s] (the firmware tests' order and slots): 335-421 s, median 412,
+#: beside another lab flight, where one flight took 284 (274 on a quiet machine)
+FLIGHT_S = 400
 
 
 def eight_this_vehicle_follows(tmp: Path) -> Path:
@@ -90,28 +101,33 @@ def lab_adaptive_profile(tmp: Path) -> Path:
     )  # fmt: skip
 
 
-@pytest.mark.flight_s(274)
+@pytest.mark.flight_s(FLIGHT_S)
 def test_learning_stays_within_two_floors_in_a_realistic_lab(
     px4_factory, tmp_path: Path, px4_figures: dict
 ) -> None:
     """The README's adaptive flight in the lab of :data:`LAB` on the eight of
-    :func:`eight_this_vehicle_follows`: it lands and disarms, the floor
-    comes from the four flights of trial 0, and no learned trial from j = 2 on is above
+    :func:`eight_this_vehicle_follows`, in two flights of one PX4 as a lab with a battery change
+    flies it: the floor from the four flights of trial 0 in the first, then ``gcs fly --resume``
+    learns on in the second; each lands and disarms, and no learned trial from j = 2 on is above
     :data:`BOUND` floors."""
     px4 = px4_factory(params=LAB.px4_params(), ready=STARTED_LINE)
     run_path = tmp_path / "run"
+    outputs = []
     with lab_rig(px4, LAB) as rig, px4.monitor() as mon:
-        gcs = Gcs(
-            "fly", "--connect", px4.url, "--mocap", rig.url, "--iter", TRIALS,
-            "--profile", lab_adaptive_profile(tmp_path), "--run", run_path,
-            "--trajectory", eight_this_vehicle_follows(tmp_path),
-        )  # fmt: skip
-        code = gcs.wait(FLY_TIMEOUT_S)
-        out = gcs.output()
-        mon.wait("on the ground", lambda s: s.landed_state == LANDED, 60)
-        mon.wait("disarmed", lambda s: s.armed is False, 30)
-    assert code == 0, out
-    assert "landed and disarmed" in out, out
+        vehicle = ["--connect", px4.url, "--mocap", rig.url]
+        for flight in (
+            ["--iter", FLOOR_TRIALS, "--profile", lab_adaptive_profile(tmp_path),
+             "--run", run_path, "--trajectory", eight_this_vehicle_follows(tmp_path)],
+            ["--iter", TRIALS - FLOOR_TRIALS, "--resume", run_path],
+        ):  # fmt: skip
+            gcs = Gcs("fly", *vehicle, *flight)
+            code = gcs.wait(FLY_TIMEOUT_S)
+            outputs.append(gcs.output())
+            assert code == 0, outputs[-1]
+            assert "landed and disarmed" in outputs[-1], outputs[-1]
+            mon.wait("on the ground", lambda s: s.landed_state == LANDED, 60)
+            mon.wait("disarmed", lambda s: s.armed is False, 30)
+    out = "\n".join(outputs)
     assert RunDir.open(run_path).complete_trials() == list(range(TRIALS)), out
     rows = report_rows(run_path)
     floor_m = rows[0]["floor_m"]
