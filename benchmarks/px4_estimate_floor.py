@@ -22,11 +22,12 @@ the truth, as it was the delay earlier, onto the vision poses, by least squares,
   the body's thrust axis (the room's north, east) [deg], RMS: the accelerometer's specific force
   goes to the room through that attitude, so a tilt error of x deg puts about g x pi / 180 of
   horizontal acceleration [m/s^2] into the estimate where the vision does not pull it back;
-- ``accel bias``: EKF2's estimate of the accelerometer's horizontal bias (body x and y,
-  ``estimator_states`` 13 and 14), as the standard deviation EKF2 grants it (the median over the
-  trial) [mm/s^2] and how far the estimate moved within the trial (the RMS of its distance from
-  its mean over the trial) [mm/s^2]. A bias estimate that moves is a horizontal acceleration
-  the estimate integrates until the vision pulls it back;
+- ``accel bias``: EKF2's estimate of the accelerometer's horizontal bias (body x and y:
+  ``estimator_states`` states 13 and 14, covariances 12 and 13), as the standard deviation
+  EKF2 grants it (the median over the trial) [mm/s^2] and how far the estimate moved within
+  the trial (the RMS of its distance from its mean over the trial) [mm/s^2]. A bias estimate
+  that moves is a horizontal acceleration the estimate integrates until the vision pulls it
+  back;
 - ``arming``: which arming since PX4 started the trial was flown in (0: the vehicle's first
   flight after PX4 started). PX4 logs each arming in a file of its own; a PX4 that started again
   begins its clock again, which is how the logs of one directory are told apart by start.
@@ -74,8 +75,11 @@ TOPICS = (
     "vehicle_attitude_groundtruth",
     "estimator_states",
 )
-#: EKF2's state indices of the accelerometer's x and y bias (PX4 v1.16's 24 states)
-ACCEL_BIAS_XY = (13, 14)
+#: EKF2's indices of the accelerometer's x and y bias in PX4 v1.16's ``estimator_states``: in
+#: ``states`` (25: the attitude quaternion's four first) and in ``covariances`` (the 24 variances
+#: of the error state: the attitude's three first), one apart
+ACCEL_BIAS_STATES_XY = (13, 14)
+ACCEL_BIAS_COVARIANCES_XY = (12, 13)
 #: the delays tried for the mocap [s]: the rig's latency is 0-50 ms
 DELAYS_S = np.arange(0.0, 0.1001, 0.002)
 #: the grid the tracks are compared on [s]
@@ -164,8 +168,10 @@ def accel_bias(log: Log, t_s: np.ndarray) -> tuple[float, float]:
     states = log.data["estimator_states"]
     stamps = states["timestamp"] * 1e-6
     inside = (stamps >= t_s[0]) & (stamps <= t_s[-1])
-    sd = np.sqrt(np.column_stack([states[f"covariances[{i}]"][inside] for i in ACCEL_BIAS_XY]))
-    bias = np.column_stack([states[f"states[{i}]"][inside] for i in ACCEL_BIAS_XY])
+    sd = np.sqrt(
+        np.column_stack([states[f"covariances[{i}]"][inside] for i in ACCEL_BIAS_COVARIANCES_XY])
+    )
+    bias = np.column_stack([states[f"states[{i}]"][inside] for i in ACCEL_BIAS_STATES_XY])
     moved = np.sqrt(np.mean(np.sum((bias - bias.mean(axis=0)) ** 2, axis=1)))
     return float(np.median(sd.max(axis=1))) * 1e3, float(moved) * 1e3
 
