@@ -199,8 +199,9 @@ _MOCAP = (
     Item("EKF2_GPS_CTRL", "0 (no GPS)",
          "indoors GPS is absent or reflected; fused beside vision it pulls the estimate",
          _from_findings("EKF2_GPS_CTRL")),
-    Item("EKF2_EV_DELAY", "the mocap's own latency: a few ms (at most 50)",
-         "gcs stamps each pose when it arrives, so only the mocap's latency is left",
+    Item("EKF2_EV_DELAY", "the mocap's latency and the link's: a few ms (at most 50)",
+         "PX4 stamps each pose when it arrives (gcs does not synchronise clocks with it), "
+         "so the delay is the mocap's own plus the link from gcs to the vehicle",
          _from_findings("EKF2_EV_DELAY")),
     Item("EKF2_MAG_TYPE", "5 (None)",
          "indoors steel and motors disturb the magnetometer; the yaw comes from the mocap",

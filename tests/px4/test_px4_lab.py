@@ -77,7 +77,7 @@ class LabConditions:
         Heading of the room's north axis against gcs's mapping [deg] (``--yaw-offset-deg``).
     match_ev_delay : bool
         Set PX4's EKF2_EV_DELAY to ``latency_ms`` (a lab that measured its latency and told
-        PX4: gcs stamps each pose on arrival, so the mocap's own latency is what is left);
+        PX4: PX4 stamps each pose on arrival, and on loopback the link adds well under a ms);
         False leaves it at 0, PX4's default.
     mass_kg : float or None
         The SIH vehicle's mass [kg] (``SIH_MASS``; its four rotors give 20 N at most, so the

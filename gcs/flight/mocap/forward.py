@@ -3,9 +3,12 @@
 Each tracked sample is mapped to NED/FRD and sent as MAVLink ``VISION_POSITION_ESTIMATE``
 (roll, pitch, yaw, pose covariance) or ``ODOMETRY`` (frame ``LOCAL_FRD``, estimator type
 ``VISION``, quality 100, the same covariance; velocity unknown: NaN), stamped with the
-sample's receipt time on the monotonic clock in microseconds: the clock of MAVSDK's own
-time synchronisation with PX4 (``steady_clock``), so PX4's receiver can map it to its own time
-and ``EKF2_EV_DELAY`` only has to hold the mocap's own latency (cameras, solve). Untracked
+sample's receipt time on the monotonic clock in microseconds (MAVSDK's ``steady_clock``).
+PX4's receiver maps a stamp to its own clock only once its time synchronisation with the
+sender has converged, and MAVSDK answers PX4's TIMESYNC requests only after
+``enable_timesync()``, which gcs does not call: so PX4 stamps each pose when it arrives, and
+``EKF2_EV_DELAY`` holds the latency from the body's motion to PX4 (the mocap's cameras and
+solve, the network, gcs, the link to the vehicle). Untracked
 samples are not sent: PX4 then sees vision stop, which is what it must see.
 
 Which message. ``VISION_POSITION_ESTIMATE`` (the default) reaches EKF2 in frame NED: PX4 aligns

@@ -13,8 +13,9 @@ PX4 (v1.14-v1.16) fuses external vision as its parameters say:
 fused for the horizontal position (else the vehicle flies on something else: refused), a GPS
 height reference indoors without GPS is refused, the barometer as reference is a warning (it
 drifts indoors by decimetres), GPS fused alongside is a warning, and the delay is reported
-(gcs stamps each pose with its receipt time, so the delay should hold only the mocap's own
-latency: a few milliseconds; more than 50 ms is a warning). When a bridge other than gcs feeds
+(PX4 stamps each pose when it arrives: gcs does not synchronise clocks with PX4, so the delay
+is the mocap's own latency plus the link from gcs to the vehicle: a few milliseconds; more than
+50 ms is a warning). When a bridge other than gcs feeds
 the vehicle, vision not being fused is a warning only.
 
 The noise EKF2 grants the mocap. gcs sends each pose with its covariance
@@ -201,8 +202,9 @@ def ekf2_findings(
     if delay is not None and not 0.0 <= float(delay) <= MAX_EV_DELAY_MS:
         out.append(
             Finding(
-                f"EKF2_EV_DELAY = {delay:g} ms: gcs stamps each pose when it arrives, so the "
-                f"delay should be the mocap's own latency (a few ms, at most {MAX_EV_DELAY_MS:g})",
+                f"EKF2_EV_DELAY = {delay:g} ms: PX4 stamps each pose when it arrives, so the "
+                f"delay should be the mocap's latency and the link's (a few ms, at most "
+                f"{MAX_EV_DELAY_MS:g})",
                 "warning",
             )
         )
