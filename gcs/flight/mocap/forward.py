@@ -8,8 +8,8 @@ PX4's receiver maps a stamp to its own clock only once its time synchronisation 
 sender has converged, and MAVSDK answers PX4's TIMESYNC requests only after
 ``enable_timesync()``, which gcs does not call: so PX4 stamps each pose when it arrives, and
 ``EKF2_EV_DELAY`` holds the latency from the body's motion to PX4 (the mocap's cameras and
-solve, the network, gcs, the link to the vehicle). Untracked
-samples are not sent: PX4 then sees vision stop, which is what it must see.
+solve, the network, gcs, the link to the vehicle). Untracked samples are not sent: PX4 then
+sees vision stop, which is what it must see.
 
 Which message. ``VISION_POSITION_ESTIMATE`` (the default) reaches EKF2 in frame NED: PX4 aligns
 its heading to the vision yaw, with no magnetometer or GPS. ``ODOMETRY`` goes out in

@@ -15,8 +15,8 @@ height reference indoors without GPS is refused, the barometer as reference is a
 drifts indoors by decimetres), GPS fused alongside is a warning, and the delay is reported
 (PX4 stamps each pose when it arrives: gcs does not synchronise clocks with PX4, so the delay
 is the mocap's own latency plus the link from gcs to the vehicle: a few milliseconds; more than
-50 ms is a warning). When a bridge other than gcs feeds
-the vehicle, vision not being fused is a warning only.
+50 ms is a warning). When a bridge other than gcs feeds the vehicle, vision not being fused
+is a warning only.
 
 The noise EKF2 grants the mocap. gcs sends each pose with its covariance
 (``mocap.position_std_m``, 5 mm); EKF2 takes the larger of that, ``EKF2_EVP_NOISE`` and 1 cm
