@@ -99,3 +99,8 @@ def test_montecarlo_tables_are_those_recorded(tmp_path: Path, record: str, args:
     now = _without_seconds(json.loads(out.read_text()))
     recorded = _without_seconds(json.loads((DATA / record).read_text()))
     assert_json_close(now, recorded, 0.0, study_atol(recorded), record)
+    if "--adaptive" in args:  # the comparison line of each level, beside the paper's rows
+        assert "(adaptive)" in result.output and "j = 2..5" in result.output, result.output
+        assert "diverged" in result.output, result.output
+    else:  # the paper's study alone says nothing of the new options
+        assert "adaptive" not in result.output, result.output
