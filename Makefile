@@ -29,6 +29,12 @@ NUMERIC := -m "not e2e and not px4 and not live"
 # spends the rest waiting on the clock: four at once leave the quick tests (at nice 10) the rest
 # of two cores, and both parts end at about the same time (docs/testing.md)
 FLIGHT_WORKERS ?= 4
+# pytest runs a worker per core, and OpenBLAS (numpy's copy and scipy's) starts a thread per
+# core in each: on 2 cores, four BLAS threads spinning against each other. The tests that run in
+# their own process get one BLAS thread per worker unless OPENBLAS_NUM_THREADS says otherwise
+# (measured on 2 quiet cores: make test-fast 126-134 s with the default, 80-82 s with one;
+# docs/testing.md). The flights keep the default: the processes they start run as a user's do
+test-fast test-quick test-other-cpu: export OPENBLAS_NUM_THREADS ?= 1
 # the tests that compare numbers with records made on another machine (tests/records.py), and
 # those that hold a result bit for bit on one machine (workers vs one process, resumed vs not,
 # kept learner vs new): run again as on another CPU by test-other-cpu
