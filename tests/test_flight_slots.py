@@ -4,6 +4,8 @@ the firmware's slots apart; the firmware's tests dealt to as many workers as it 
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -152,3 +154,41 @@ def test_every_firmware_test_says_its_length() -> None:
                 if not any(m.startswith("pytest.mark.flight_s(") for m in marks):
                     missing.append(f"{path.name}::{node.name}")
     assert not missing, missing
+
+
+def test_the_deal_is_of_the_tests_that_run_after_m_deselects(tmp_path: Path) -> None:
+    """Collected with ``-m`` as the flights part of ``make test`` is, each of the first parts
+    starts with a firmware flight: the suite's hook deals what ``-m`` left, not every test."""
+    tests = Path(__file__).parent
+    (tmp_path / "conftest.py").write_text(
+        "import importlib.util\nimport pytest\n"
+        f"spec = importlib.util.spec_from_file_location('suite', {str(tests / 'conftest.py')!r})\n"
+        "suite = importlib.util.module_from_spec(spec)\nspec.loader.exec_module(suite)\n"
+        "pytest_collection_modifyitems = suite.pytest_collection_modifyitems\n\n"
+        "@pytest.hookimpl(tryfirst=True)\n"
+        "def pytest_configure(config):\n"
+        "    config.workerinput = {'workercount': 4}\n"
+        "    for name in ('px4', 'e2e', 'flight_s'):\n"
+        "        config.addinivalue_line('markers', name)\n"
+    )
+    lengths = [400, 184, 149, 126, 98, 95, 61]
+    flights = "".join(
+        f"@pytest.mark.px4\n@pytest.mark.flight_s({s})\ndef test_px4_{s}(): pass\n" for s in lengths
+    )
+    mocks = "".join(f"@pytest.mark.e2e\ndef test_mock_{k}(): pass\n" for k in range(40))
+    quick = "".join(f"def test_quick_{k}(): pass\n" for k in range(400))
+    (tmp_path / "test_synthetic.py").write_text(f"import pytest\n{flights}{mocks}{quick}")
+    out = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", "--strict-markers",
+         "-p", "no:xdist", "-p", "no:cacheprovider", "-m", "px4 or e2e", str(tmp_path)],
+        cwd=tmp_path, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stdout + out.stderr
+    order = [line.split("::")[-1] for line in out.stdout.splitlines() if "::" in line]
+    assert len(order) == len(lengths) + 40, out.stdout
+    parts = _parts(order, 4)
+    heads = [p[0] for p in parts]
+    # the longest flights head the firmware's parts (three on two cores), the mocks the others
+    first = min(firmware_slot_count(), 4)
+    assert heads[:first] == [f"test_px4_{s}" for s in lengths[:first]], parts
+    assert all(head.startswith("test_mock_") for head in heads[first:]), parts
