@@ -60,9 +60,10 @@ def pytest_collection_modifyitems(config, items) -> None:
     equal parts of this order and an idle one steals from the end of another's queue. Dealt
     (tests/flight_slots.py, :func:`deal`), as many parts as the machine has firmware slots
     start with their share of the real-firmware flights, each flight to the part with the least
-    firmware flight time so far, the others with the mock's, then quick tests: the vehicles fly
-    at once from the start, the firmware's parts end together, and the quick tests fill the end
-    instead of one worker finishing a long flight alone.
+    flight time so far, the others with the mock's; the mock's long flights go, longest first,
+    to the part with the least flight time so far, then the other tests in turn: the vehicles
+    fly at once from the start, the parts' flights end together, and the quick tests fill the
+    end instead of one worker finishing a long flight alone.
 
     It runs last (``trylast``), after ``-m`` and ``--deselect`` have taken out the tests that do
     not run, so that the parts are those of the tests that do. Dealt before them, the flights
@@ -88,7 +89,8 @@ def pytest_collection_modifyitems(config, items) -> None:
 
 
 def flight_s(item) -> float:
-    """A firmware test's expected length [s], its ``flight_s`` marker (0 without one)."""
+    """A flight's expected length [s], its ``flight_s`` marker (0 without one): every firmware
+    test has one, and the mock's flights of 20 s or more."""
     marker = item.get_closest_marker("flight_s")
     return float(marker.args[0]) if marker is not None else 0.0
 

@@ -136,11 +136,14 @@ def deal(
     (the last parts one more where they do not divide) and lets an idle one steal from the end
     of another's. The firmware's flights wait for one of :func:`firmware_slot_count` slots: dealt
     to every worker's head, all but that many workers would start by waiting. So each of them
-    goes to the one of the first ``firmware_workers`` parts with the least firmware flight time
-    dealt so far (the lowest such part on a tie: in turn where the lengths are equal), and what
-    follows in ``items`` in turn to every part, starting after those, each part up to its size.
-    Given longest first, the firmware's flights then end at about the same time in every part
-    (dealt in turn, one part's flights took 608 s and the other's 455 s of a run's 623 s).
+    goes to the one of the first ``firmware_workers`` parts with the least flight time dealt so
+    far (the lowest such part on a tie: in turn where the lengths are equal). Then each other
+    test with a length (the mock's long flights) goes to the part, of all of them, with the
+    least flight time dealt so far, firmware's included, and what follows in ``items`` in turn
+    to every part, starting after the firmware's parts, each part up to its size. Given longest
+    first, the flights then end at about the same time in every part (dealt in turn, one part's
+    firmware flights took 608 s and the other's 455 s of a run's 623 s; with the mock's flights
+    in turn after the firmware's, the mock's went on 130 s after the firmware's last landed).
 
     Parameters
     ----------
@@ -153,7 +156,8 @@ def deal(
     firmware : callable
         ``firmware(item)``: True for a test of the firmware.
     length : callable, optional
-        ``length(item)``: a firmware test's expected length [s]; every one 1 s if not given.
+        ``length(item)``: a test's expected length [s], 0 where not known; if not given, 1 s
+        for every firmware test and 0 for the others.
 
     Returns
     -------
@@ -166,15 +170,21 @@ def deal(
         left -= sizes[-1]
     parts: list[list] = [[] for _ in range(workers)]
     first = min(max(firmware_workers, 1), workers)
-    dealt_s = [0.0] * first  # firmware flight time dealt to each of the first parts
+    dealt_s = [0.0] * workers  # flight time dealt to each part
+
+    def seconds(item) -> float:
+        if length is None:
+            return 1.0 if firmware(item) else 0.0
+        return float(length(item))
+
     turn = first % workers
     for item in items:
-        if firmware(item) and any(len(parts[k]) < sizes[k] for k in range(first)):
-            k = min(
-                (k for k in range(first) if len(parts[k]) < sizes[k]),
-                key=lambda k: (dealt_s[k], k),
-            )
-            dealt_s[k] += 1.0 if length is None else float(length(item))
+        s = seconds(item)
+        # the firmware's to the first parts; another flight of known length to any part
+        open_ = [k for k in range(first if firmware(item) else workers) if len(parts[k]) < sizes[k]]
+        if open_ and (firmware(item) or s > 0.0):
+            k = min(open_, key=lambda k: (dealt_s[k], k))
+            dealt_s[k] += s
             parts[k].append(item)
             continue
         k = turn

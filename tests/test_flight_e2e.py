@@ -106,6 +106,7 @@ def _best_lag_correlation(measured: np.ndarray, commanded: np.ndarray) -> tuple[
     return best
 
 
+@pytest.mark.flight_s(36)
 def test_campaign_flies_two_trials_lands_and_disarms(tmp_path: Path) -> None:
     source = CircleSource()
     events: list[object] = []

@@ -144,6 +144,30 @@ def test_the_firmwares_parts_end_within_one_flight_of_each_other(
     assert sum(sums) == pytest.approx(sum(lengths))
 
 
+@given(
+    st.lists(st.floats(min_value=1.0, max_value=600.0), max_size=12),
+    st.lists(st.floats(min_value=1.0, max_value=100.0), max_size=12),
+    st.integers(min_value=1, max_value=4),
+)
+def test_the_mocks_long_flights_even_out_every_parts_flight_time(
+    firmware_s: list[float], mock_s: list[float], firmware_workers: int
+) -> None:
+    """The mock's flights of known length fill the parts with the least flight time dealt,
+    the firmware's parts included: a part with a mock flight ends at most the longest mock
+    flight after the least loaded part, and no firmware flight leaves the firmware's parts."""
+    firmware_s, mock_s = sorted(firmware_s, reverse=True), sorted(mock_s, reverse=True)
+    items = [("px4", s) for s in firmware_s] + [("mock", s) for s in mock_s]
+    items += [("quick", 0.0)] * 80
+    dealt = deal(items, 4, firmware_workers, lambda item: item[0] == "px4", lambda item: item[1])
+    parts = _parts(dealt, 4)
+    assert sum(1 for p in parts[:firmware_workers] for i in p if i[0] == "px4") == len(firmware_s)
+    sums = [sum(s for _, s in p) for p in parts]
+    for k, part in enumerate(parts):  # its last mock flight went to the least loaded part
+        if any(i[0] == "mock" for i in part):
+            assert sums[k] - min(sums) <= mock_s[0] + 1e-9, sums
+    assert sum(sums) == pytest.approx(sum(firmware_s) + sum(mock_s))
+
+
 def test_every_firmware_test_says_its_length() -> None:
     """The deal needs each firmware test's ``flight_s``: a test without it would be dealt as 0 s."""
     missing = []

@@ -79,6 +79,7 @@ def final_state(stats_path: Path) -> dict:
     return stats["modes"][-1]
 
 
+@pytest.mark.flight_s(71)
 def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
     tmp_path: Path, tiny: Path
 ) -> None:
@@ -109,6 +110,7 @@ def test_ctrl_c_mid_trial_lands_marks_incomplete_and_resume_continues(
     assert last["armed"] is False
 
 
+@pytest.mark.flight_s(28)
 def test_link_loss_mid_trial_aborts_lands_and_keeps_logs(tmp_path: Path, tiny: Path) -> None:
     run_path = tmp_path / "run"
     stats = tmp_path / "stats.json"

@@ -68,6 +68,7 @@ def tiny(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.mark.flight_s(80)
 def test_indoor_flight_on_mocap_only_forwards_vision_logs_it_and_learns(
     tmp_path: Path, tiny: Path
 ) -> None:
@@ -112,6 +113,7 @@ def test_indoor_flight_on_mocap_only_forwards_vision_logs_it_and_learns(
     assert code == 0 and "e_pos by mocap" in report and "the mocap by" in report
 
 
+@pytest.mark.flight_s(69)
 def test_occlusion_mid_trial_aborts_lands_keeps_logs_and_resume_completes(
     tmp_path: Path, tiny: Path
 ) -> None:
@@ -164,6 +166,7 @@ OWN_ESTIMATE = {
 }
 
 
+@pytest.mark.flight_s(40)  # each case: 29-45 s
 @pytest.mark.parametrize(
     ("case", "room_yaw_deg", "mocap", "refusal", "flight"),
     [

@@ -74,6 +74,7 @@ def cpu_burner(seconds: float) -> Iterator[None]:
         hog.wait()
 
 
+@pytest.mark.flight_s(63)
 def test_learning_between_trials_does_not_delay_the_vision_or_the_setpoints(
     tmp_path: Path,
 ) -> None:
