@@ -1,5 +1,6 @@
 """The machine's flight slots (tests/flight_slots.py): a free slot first, else the worker's;
-the firmware's slots apart; the firmware's tests dealt to as many workers as it has slots."""
+the firmware's slots apart; the firmware's tests dealt to as many workers as it has slots, the
+mock's long flights to the parts with the least flight time, after ``-m`` has deselected."""
 
 from __future__ import annotations
 
