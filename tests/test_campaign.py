@@ -138,6 +138,34 @@ def test_a_settle_timeout_on_a_vehicle_that_hovers_widens_the_tolerances() -> No
     assert "flying on with tolerances 0.60 m, 0.10 m/s" in event.text  # where it hovers now
 
 
+def test_a_settle_timeout_judges_a_drift_over_all_the_hover_since_the_move() -> None:
+    """A vehicle that hovered at the point for the whole settle and wanders 0.7 m away from it
+    over the 4 s around the timeout: the settle's last 2 s and the 2 s measured after them
+    both drift away at 0.35 m/s, over the 0.3 m/s limit; over the 22 s it hovered there its
+    trend is 0.03 m/s, and it is flown on. One that drifts at 0.35 m/s all along is refused."""
+    settings = FlightSettings(hover_measure_s=2.0)
+    end_s = 100.0 + settings.settle_timeout_s
+
+    def wander(t: float) -> np.ndarray:
+        return TARGET + [0.35 * max(t - (end_s - 2.0), 0.0), 0.0, 0.0]
+
+    session = FlightSession("udpin://", 0, navigation_source({}), (), 0.2, 0.1)
+    for position, ok in ((wander, True), (lambda t: TARGET + [0.35 * (t - 100.0), 0, 0], False)):
+        vehicle, events = HoverVehicle(position), []
+        coming = settle_at_start(vehicle, TARGET, 3, session, settings, events.append)
+        if ok:
+            record = asyncio.run(coming)
+            assert record is not None and record.verdict.ok, record
+            assert record.stats.duration_s == pytest.approx(settings.settle_timeout_s + 2.0, 0.01)
+            # least squares over 0..22 s of a ramp from 18 s: 0.35 (64/3 + 56) / 22 / (22^2 / 12)
+            assert record.stats.drift_m_s == pytest.approx(0.0305, abs=0.002)
+            assert "flying on with tolerances" in events[0].text
+        else:
+            with pytest.raises(VehicleError, match="it drifts away at 0.35 m/s"):
+                asyncio.run(coming)
+        assert vehicle.holds == [settings.hover_measure_s]  # the last 2 s, then 2 s more
+
+
 def test_a_settle_timeout_on_a_vehicle_that_oscillates_is_refused() -> None:
     vehicle = HoverVehicle(lambda t: TARGET + [0.3 * np.sin(2 * np.pi * t), 0.0, 0.0])
     session = FlightSession("udpin://", 0, navigation_source({}), (), 0.2, 0.1)
