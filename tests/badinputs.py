@@ -944,20 +944,19 @@ def _adaptive_cases() -> Iterator[Case]:
             "learning.adaptive.refresh_noise",
         )
 
-    k = "profile field: learning.adaptive.refresh_takeback"
-    for value in ("yes", 1):
-        yield Case(
-            k,
-            "fly",
-            f"learning.adaptive.refresh_takeback {value!r}",
-            lambda ws, v=value: _fly(
-                ws,
-                profile=ws.profile(
-                    "learning.adaptive.refresh_takeback", v, base="antx-adaptive.yaml"
+    # the options that are on or off, each given a word and a number
+    for flag, values in (("refresh_takeback", ("yes", 1)), ("refresh_minmax_step", ("on", 0))):
+        field = f"learning.adaptive.{flag}"
+        for value in values:
+            yield Case(
+                f"profile field: {field}",
+                "fly",
+                f"{field} {value!r}",
+                lambda ws, f=field, v=value: _fly(
+                    ws, profile=ws.profile(f, v, base="antx-adaptive.yaml")
                 ),
-            ),
-            "learning.adaptive.refresh_takeback",
-        )
+                field,
+            )
 
     k = "profile field: learning.adaptive.refresh_max_move"
     for value in (0, -0.5, "far", float("nan")):

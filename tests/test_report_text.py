@@ -58,3 +58,14 @@ def test_a_record_of_an_older_run_without_the_compared_e_pos_still_reads() -> No
     del guard["best_epos_m"]
     line = decision_lines(record)[0]
     assert "nan" not in line and "(e_pos 500.0 mm, above its allowance" in line, line
+
+
+def test_a_step_cut_by_the_profiles_model_names_the_axis_and_the_fraction() -> None:
+    """``minmax_step`` below 1 on an axis: one line with that axis and its fraction; records
+    without the field (older runs) or at 1 say nothing of it."""
+    record = _revert_record(0.5, 0.4, 0.45)
+    record["decision"]["safeguard"] = None
+    assert not any(line.startswith("step cut") for line in decision_lines(record))
+    record["decision"]["axes"] = [{"minmax_step": 1.0}, {"minmax_step": 0.574}]
+    cut = [line for line in decision_lines(record) if line.startswith("step cut")]
+    assert len(cut) == 1 and cut[0].endswith("fraction taken east 0.57"), cut

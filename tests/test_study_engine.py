@@ -203,16 +203,29 @@ def test_a_plant_whose_trial_is_refused_stops_alone(plan: StudyPlan) -> None:
         LearnerBatch(paper.settings, ref, 2).step(u, y)
 
 
-def test_the_takeback_holds_alike_batched_and_per_plant(plan: StudyPlan) -> None:
-    """``refresh_takeback``: the same plants go back to the nominal model, at the same step,
-    in the batch as in a learner per plant."""
+def _decided(learner, option: str) -> list[float]:  # noqa: ANN001
+    """What ``option`` decided for each axis of a learner's newest step."""
+    axes = learner.last.record.axes
+    if option == "refresh_takeback":
+        return [ax.refresh.takeback_z for ax in axes]
+    return [ax.minmax_step for ax in axes]
+
+
+@pytest.mark.parametrize("option", ["refresh_takeback", "refresh_minmax_step"])
+def test_the_refresh_options_hold_alike_batched_and_per_plant(plan: StudyPlan, option: str) -> None:
+    """``refresh_takeback``: the same plants go back to the nominal model, at the same step;
+    ``refresh_minmax_step``: the same fractions of the same updates; in the batch as in a
+    learner per plant. Each option acts on some plant: refreshed models judged, steps cut."""
     adaptive = plan.settings[1]
-    back = dataclasses.replace(
-        adaptive, adaptive=dataclasses.replace(adaptive.adaptive, refresh_takeback=True)
+    on = dataclasses.replace(
+        adaptive, adaptive=dataclasses.replace(adaptive.adaptive, **{option: True})
     )
-    batch, flown, _ = _fly_batch(plan, back, batched=True)
-    each, flown_each, _ = _fly_batch(plan, back, batched=False)
+    batch, flown, _ = _fly_batch(plan, on, batched=True)
+    each, flown_each, _ = _fly_batch(plan, on, batched=False)
     np.testing.assert_allclose(flown, flown_each, rtol=0, atol=1e-9)
     assert batch.failed == each.failed == [None] * plan.plants
-    judged = [ax.refresh.takeback_z for learner in each._each for ax in learner.last.record.axes]
-    assert np.isfinite(judged).any()  # refreshed models were judged
+    decided = [x for learner in each._each for x in _decided(learner, option)]
+    if option == "refresh_takeback":
+        assert np.isfinite(decided).any()  # refreshed models were judged
+    else:
+        assert all(0.0 <= f <= 1.0 for f in decided) and min(decided) < 0.9

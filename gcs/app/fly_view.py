@@ -223,7 +223,8 @@ def learning_lines(outcome: LearnOutcome) -> list[str]:
     for line in decision_lines(record):  # the report has them all; live, what changed
         if line.startswith(("model kept", "estimate")):
             continue
-        style = {"safeguard": "yellow", "model refreshed": "cyan"}.get(line.split(":")[0], "dim")
+        styles = {"safeguard": "yellow", "model refreshed": "cyan", "step cut": "cyan"}
+        style = styles.get(line.split(":")[0], "dim")
         lines.append(f"  [{style}]{escape(line)}[/]")
     return lines
 

@@ -227,6 +227,16 @@ def decision_lines(record: dict) -> list[str]:
             refresh.append(f"{name} kept ({r.get('reason')})")
     if refresh:
         lines.append(("model refreshed: " if accepted else "model kept: ") + "; ".join(refresh))
+    shared = [
+        f"{name} {_num(ax.get('minmax_step')):.2f}"
+        for name, ax in zip(("north", "east"), decision["axes"], strict=True)
+        if _num(ax.get("minmax_step", 1.0)) < 1.0
+    ]
+    if shared:
+        lines.append(
+            "step cut: the profile's model expects the refreshed model's whole update to "
+            "overshoot; fraction taken " + ", ".join(shared)
+        )
     noise = []
     for name, ax in zip(("north", "east"), decision["axes"], strict=True):
         n = ax.get("noise") if isinstance(ax.get("noise"), dict) else {}

@@ -40,6 +40,7 @@ from gcs.core.learning import (
     converged_with_model,
     data_estimates,
     history_decisions,
+    minmax_steps,
     newest_step,
     plan_next_trial,
     refresh_axes,
@@ -642,13 +643,20 @@ class LearnerBatch:
                     continue
                 target[i] = result.u_m
                 self.active_constraints[k, a] = result.active_constraints
+            minmax = np.ones(live.size)
+            ok = np.array([self.failed[k] is None for k in live], dtype=bool)
+            if adaptive.refresh_minmax_step and ok.any():
+                kept = [models[i] for i in np.flatnonzero(ok)]
+                minmax[ok] = minmax_steps(s, adaptive, kept, a, u[ok], ya[ok], d_hat[ok],
+                                          self._yd[:, a], u_anchor[ok], target[ok])  # fmt: skip
             for i, k in enumerate(live):
                 if self.failed[k] is not None:
                     continue
                 limits = self._shared[a].limits  # every model's, the same arena and bounds
                 out[k, :, a] = step_from_anchor(
-                    models[i], self._yd[:, a], limits, u_anchor[i], target[i], steps[i]
-                )[0]
+                    models[i], self._yd[:, a], limits, u_anchor[i], target[i],
+                    steps[i] * minmax[i],
+                )[0]  # fmt: skip
                 new_models[i][a] = models[i]
         for i, k in enumerate(live):
             self._models[k] = tuple(new_models[i])

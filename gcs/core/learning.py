@@ -56,7 +56,13 @@ from gcs.core.refresh import (
     transfer_function,
 )
 from gcs.core.robustness import RobustnessWeight, repeat_cutoff, robustness_weight
-from gcs.core.safeguard import SafeguardDecision, SafeguardSettings, feasible_step, safeguard
+from gcs.core.safeguard import (
+    SafeguardDecision,
+    SafeguardSettings,
+    feasible_step,
+    minmax_step,
+    safeguard,
+)
 from gcs.core.trajectory import Box
 from gcs.core.update import (
     InputUpdate,
@@ -81,6 +87,7 @@ __all__ = [
     "data_estimates",
     "refresh_axes",
     "takeback_axes",
+    "minmax_steps",
     "converged_with_model",
 ]
 
@@ -307,6 +314,14 @@ class AdaptiveSettings:
         (:func:`gcs.core.refresh.prediction_loss_z` above ``TAKEBACK_Z``, the errors'
         correlation taken as ``refresh_block_s``), the axis goes back to the profile's model
         and is not refreshed again in that step (:func:`refresh_axes`).
+    refresh_minmax_step : bool
+        With ``refresh``: while a refreshed model is in use, take of its update only the
+        fraction that minimises the larger of the two models' predicted errors of the next
+        trial, the refreshed model's and the profile's (:func:`minmax_steps`): the whole step
+        where the profile's model expects it to help as much or more, less where it expects
+        the step to overshoot. A refresh is judged on held-out blocks of the pairs it was
+        fitted to; this keeps its first steps within what the profile's model, which learning
+        converged with, also foresees.
     refresh_noise : str
         The non-repeatable error the refresh assumes: ``"white"``, of the floor's variance;
         ``"measured"``, an autoregressive model of it fitted to the flights of identical
@@ -340,6 +355,7 @@ class AdaptiveSettings:
     refresh_noise: str = "white"
     refresh_max_move: float | None = None
     refresh_takeback: bool = False
+    refresh_minmax_step: bool = False
     robustness_cutoff_rad_s: float | str | None = None
     robustness_order: int = 2
     safeguard: bool = False
@@ -452,7 +468,10 @@ class AxisRecord:
     step : float
         Fraction of the update taken from the anchor's setpoints: 1, or after a safeguard
         revert its step, raised as far as the limits need
-        (:func:`gcs.core.safeguard.feasible_step`).
+        (:func:`gcs.core.safeguard.feasible_step`); times ``minmax_step``.
+    minmax_step : float
+        With ``refresh_minmax_step``: the fraction of the update that the model in use and
+        the profile's both expect to help (:func:`minmax_steps`); 1 otherwise.
     """
 
     axis: str
@@ -461,6 +480,7 @@ class AxisRecord:
     robustness: dict | None
     update: UpdateResult
     step: float = 1.0
+    minmax_step: float = 1.0
 
     def as_dict(self) -> dict:
         """JSON-ready dictionary (without the setpoints)."""
@@ -468,6 +488,7 @@ class AxisRecord:
         return {
             "axis": self.axis,
             "step": self.step,
+            "minmax_step": self.minmax_step,
             "noise": self.noise.as_dict(),
             "refresh": None if self.refresh is None else self.refresh.as_dict(),
             "robustness": self.robustness,
@@ -832,6 +853,66 @@ def _estimates(
     return data_estimates(settings, adaptive, models, u, y)[0]
 
 
+def minmax_steps(
+    settings: LearnerSettings,
+    adaptive: AdaptiveSettings,
+    models: Sequence[DiscreteModel],
+    axis: int,
+    u: np.ndarray,
+    y: np.ndarray,
+    d_hat: np.ndarray,
+    yd: np.ndarray,
+    u_anchor: np.ndarray,
+    target: np.ndarray,
+) -> np.ndarray:
+    """How much of each plant's update to take where its model of one axis is not the
+    profile's (``refresh_minmax_step``).
+
+    The model in use and the profile's (``settings.models``) each predict the next trial's
+    error as the learning step does, from its own estimate ``d_hat`` of the trials so far:
+    ``yd - F (U_anchor + s (U* - U_anchor)) - d_hat``. The step ``s`` in ``[0, 1]`` minimises
+    the larger of the two (:func:`gcs.core.safeguard.minmax_step`).
+
+    Parameters
+    ----------
+    settings, adaptive
+        As :func:`plan_next_trial`.
+    models : sequence of DiscreteModel
+        Each plant's model of the axis in use (after this step's refresh).
+    axis : int
+        Index of the axis in ``settings.axes``.
+    u, y : ndarray, shape (K, T, N)
+        Setpoints and positions of every trial, learning coordinates [m].
+    d_hat : ndarray, shape (K, N)
+        Each plant's estimate with the model in use [m].
+    yd : ndarray, shape (N,)
+        The reference yd(1..N), learning coordinates [m].
+    u_anchor, target : ndarray, shape (K, N)
+        The anchor's setpoints and eq. (8)'s [m].
+
+    Returns
+    -------
+    ndarray, shape (K,)
+        The fraction per plant; 1 where the model in use is the profile's.
+    """
+    prior = settings.models[axis]
+    out = np.ones(len(models))
+    rows = [k for k in range(len(models)) if not _same_model(models[k], prior)]
+    if not rows:
+        return out
+    moves = np.stack([u_anchor[rows], target[rows] - u_anchor[rows]], axis=1)  # (R, 2, N)
+    d_prior = _estimates(settings, adaptive, [prior] * len(rows), u[rows], y[rows])
+    predicted = []
+    for candidates, d in (([models[k] for k in rows], d_hat[rows]), ([prior] * len(rows), d_prior)):
+        f = model_outputs(candidates, moves)
+        predicted.append((yd - f[:, 0] - d, f[:, 1]))
+    for i, k in enumerate(rows):
+        out[k] = minmax_step(
+            np.stack([p[0][i] for p in predicted]), np.stack([p[1][i] for p in predicted])
+        )
+    return out
+
+
 def converged_with_model(epos_m: np.ndarray) -> bool:
     """Whether learning has converged with the model in use: its newest trial came out better
     than trial 0. Where it has, the vehicle is within the model's convergence region, and
@@ -1009,9 +1090,14 @@ def _plan_axis(
     robust, robust_rec = robustness_of(settings, adaptive, model, axis, ref, sp, y_abs, u[0])
     update = updates(axis, model)
     result = update.solve(d_hat, u[anchor], robust)
-    u_next, step = step_from_anchor(model, yd, update.limits, u[anchor], result.u_m, step)
+    minmax = 1.0
+    if adaptive.refresh_minmax_step:
+        minmax = minmax_steps(settings, adaptive, [model], axis, u[None], y[None], d_hat[None],
+                              yd, u[anchor][None], result.u_m[None])[0]  # fmt: skip
+        minmax = float(minmax)
+    u_next, step = step_from_anchor(model, yd, update.limits, u[anchor], result.u_m, step * minmax)
     name = AXIS_NAMES[settings.axes[axis]]
-    record = AxisRecord(name, noise_rec, refresh, robust_rec, result, step)
+    record = AxisRecord(name, noise_rec, refresh, robust_rec, result, step, minmax)
     return _AxisPlan(u_next, d_hat, p, model, state, record)
 
 

@@ -20,6 +20,10 @@ model refresh changed the relative degree since, the deviation bound is aligned 
 and ``U_best`` may break today's bound: :func:`feasible_step` then takes the smallest step at
 least ``step`` that keeps every limit (the limits are linear in the step, so the feasible
 steps are an interval that contains 1, ``U*`` itself).
+
+Where two models disagree on what the next step does (a refreshed model and the profile's),
+:func:`minmax_step` takes the fraction of the step that minimises the larger of their
+predicted errors: the step both models expect to help.
 """
 
 from __future__ import annotations
@@ -31,7 +35,13 @@ import numpy as np
 from gcs.core.trajectory import Box
 from gcs.core.update import SetpointLimits
 
-__all__ = ["SafeguardSettings", "SafeguardDecision", "safeguard", "feasible_step"]
+__all__ = [
+    "SafeguardSettings",
+    "SafeguardDecision",
+    "safeguard",
+    "feasible_step",
+    "minmax_step",
+]
 
 
 @dataclass(frozen=True)
@@ -248,3 +258,64 @@ def feasible_step(
         if bound.size:
             lowest = max(lowest, float(np.max(bound)))
     return min(lowest, 1.0)
+
+
+def minmax_step(error0_m: np.ndarray, change_m: np.ndarray) -> float:
+    """The fraction ``s`` of a step that minimises the larger of several models' predicted
+    errors, ``max_m || e0_m - s g_m ||^2`` over ``s`` in ``[0, 1]``.
+
+    Model ``m`` predicts the next trial's tracking error ``e0_m`` at the anchor's setpoints
+    and ``e0_m - s g_m`` a fraction ``s`` of the way to the update's (``g_m = F_m (U* -
+    U_anchor)``). Each is a convex quadratic in ``s``, so their maximum is convex and its
+    minimum lies at an end of the interval, at one model's own minimum, or where two of them
+    cross; every such point is tried. Among equal values the largest step wins: with one
+    model, or models that agree, the whole step (``s = 1`` where each model's error falls all
+    the way).
+
+    Parameters
+    ----------
+    error0_m : ndarray, shape (M, N)
+        Each model's predicted error at the anchor's setpoints [m].
+    change_m : ndarray, shape (M, N)
+        Each model's predicted output change of the whole step [m].
+
+    Returns
+    -------
+    float
+        ``s`` in ``[0, 1]``.
+    """
+    e0, g = np.asarray(error0_m, dtype=float), np.asarray(change_m, dtype=float)
+    if e0.ndim != 2 or e0.shape != g.shape:
+        raise ValueError(f"error0_m and change_m must be (M, N) of one shape: {e0.shape}, "
+                         f"{g.shape}")  # fmt: skip
+    # || e0 - s g ||^2 = c - 2 b s + a s^2 per model
+    a, b, c = np.sum(g * g, axis=1), np.sum(e0 * g, axis=1), np.sum(e0 * e0, axis=1)
+    points = [0.0, 1.0]
+    with np.errstate(all="ignore"):  # a vanishing a or b: an infinite point, dropped below
+        points += list(b / a)
+        for m in range(a.size):
+            for n in range(m + 1, a.size):
+                # where models m and n predict the same error
+                points += _roots(a[m] - a[n], b[m] - b[n], c[m] - c[n])
+    candidates = np.unique(np.clip([p for p in points if np.isfinite(p)], 0.0, 1.0))
+    worst = np.max(c[:, None] - 2.0 * b[:, None] * candidates + a[:, None] * candidates**2,
+                   axis=0)  # fmt: skip
+    # the largest step among those within rounding of the smallest worst case
+    best = np.flatnonzero(worst <= np.min(worst) * (1.0 + 1e-12) + 1e-300)
+    return float(candidates[best[-1]])
+
+
+def _roots(a: float, b: float, c: float) -> list[float]:
+    """The real roots of ``a s^2 - 2 b s + c = 0`` (linear where ``a`` vanishes against the
+    others), in the form that loses no digits to cancellation."""
+    scale = max(abs(a), abs(b), abs(c))
+    if not scale > 0:
+        return []
+    a, b, c = a / scale, b / scale, c / scale
+    if abs(a) < 1e-12:
+        return [c / (2.0 * b)] if b != 0 else []
+    disc = b * b - a * c
+    if disc < 0:
+        return []
+    q = b + np.copysign(np.sqrt(disc), b)
+    return [q / a, c / q] if q != 0 else [b / a]
