@@ -37,6 +37,10 @@ model's delay within +-2 samples).
 ``learning.adaptive.refresh_takeback`` (the same seeds, so the same wander); the summary adds
 the refreshed models taken back.
 
+``--minmax-step off,on`` flies the adaptive profile once per choice of
+``learning.adaptive.refresh_minmax_step`` (the same seeds); the summary adds the steps it cut
+and their median fraction.
+
 ``--plants off35`` flies plants 35 % off the profile's model instead (``max |F_model / F_true -
 1|`` over the learning band: 0.35 north, 0.35 east, against 0.22 and 0.18 for the tests'
 plants), where the refresh has a model to correct.
@@ -45,7 +49,8 @@ Usage::
 
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
         [--seeds 4] [--trials 16] [--refresh-noise white,measured] [--plants tests]
-        [--latency 0.05] [--refresh-max-move 1.0] [--refresh-takeback off,on] [--json out.json]
+        [--latency 0.05] [--refresh-max-move 1.0] [--refresh-takeback off,on]
+        [--minmax-step off,on] [--json out.json]
 """
 
 from __future__ import annotations
@@ -109,6 +114,7 @@ def run(
     latency_s: float = 0.0,
     max_move: float | None = None,
     takeback: str = "",
+    minmax: str = "",
 ) -> dict:
     """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions."""
     ref = sample_reference(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, DT_S)
@@ -125,6 +131,9 @@ def run(
     if takeback and learner.adaptive is not None:
         on = takeback == "on"
         learner.adaptive = dataclasses.replace(learner.adaptive, refresh_takeback=on)
+    if minmax and learner.adaptive is not None:
+        on = minmax == "on"
+        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_minmax_step=on)
     u = ref[:-1].copy()
     lag = int(round(latency_s / DT_S))
     epos, steps = [], []
@@ -147,13 +156,14 @@ def run(
                 for ax in rec["axes"]
             ]
             steps.append(
-                {"moved_pct": moved, "taken_back": back, "safeguard": rec["safeguard"]["action"]}
-            )
+                {"moved_pct": moved, "taken_back": back, "safeguard": rec["safeguard"]["action"],
+                 "minmax_step": [ax["minmax_step"] for ax in rec["axes"]]}
+            )  # fmt: skip
     floor = learner.floor
     w = learner.settings.weights
     errors = [model_error(learner.models[a], plants[a], w.wdu / w.we) for a in range(2)]
     return {
-        "profile": label(profile, refresh_noise, takeback),
+        "profile": label(profile, refresh_noise, takeback, minmax),
         "model_error": errors,
         "sigma_m": sigma_m,
         "corr_s": corr_s,
@@ -167,11 +177,11 @@ def run(
     }
 
 
-def label(profile: str, refresh_noise: str = "", takeback: str = "") -> str:
-    """A variant's name: the profile, then its refresh noise and take-back where chosen."""
-    return "/".join(
-        [profile] + [x for x in (refresh_noise, takeback and f"takeback {takeback}") if x]
-    )
+def label(profile: str, refresh_noise: str = "", takeback: str = "", minmax: str = "") -> str:
+    """A variant's name: the profile, then its refresh noise, take-back and minmax step where
+    chosen."""
+    chosen = (refresh_noise, takeback and f"takeback {takeback}", minmax and f"minmax {minmax}")
+    return "/".join([profile] + [x for x in chosen if x])
 
 
 def line(r: dict) -> str:
@@ -213,22 +223,29 @@ def main() -> None:
         help="refresh_takeback choices for the adaptive profile, off and/or on, comma-separated "
         "(default: the profile's own)",
     )
+    parser.add_argument(
+        "--minmax-step",
+        default="",
+        help="refresh_minmax_step choices for the adaptive profile, off and/or on, "
+        "comma-separated (default: the profile's own)",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
-    variants = [("antx", "", "")] + [
-        ("antx-adaptive", n, tb)
+    variants = [("antx", "", "", "")] + [
+        ("antx-adaptive", n, tb, mm)
         for n in args.refresh_noise.split(",")
         for tb in args.refresh_takeback.split(",")
+        for mm in args.minmax_step.split(",")
     ]
     labels = [label(*v) for v in variants]
     runs = []
     t0 = time.monotonic()
     for corr in (float(c) for c in args.corr.split(",")):
-        for profile, noise, takeback in variants:
+        for profile, noise, takeback, minmax in variants:
             for seed in range(args.seeds):
                 runs.append(
                     run(profile, args.sigma, corr, seed, args.trials, noise, args.plants,
-                        args.latency, args.refresh_max_move, takeback)
+                        args.latency, args.refresh_max_move, takeback, minmax)
                 )  # fmt: skip
                 print(line(runs[-1]), flush=True)
     summary = []
@@ -250,9 +267,11 @@ def main() -> None:
                 moves = [m for r in rs for st in r["steps"] for m in st["moved_pct"] if m]
                 err = [100 * max(r["model_error"]) for r in rs]
                 backs = sum(b for r in rs for st in r["steps"] for b in st["taken_back"])
+                cut = [f for r in rs for st in r["steps"] for f in st["minmax_step"] if f < 1]
                 extra = (
                     f"; moves accepted {len(moves)}, largest {max(moves, default=0)} %, "
-                    f"taken back {backs}; "
+                    f"taken back {backs}; steps cut {len(cut)} (median "
+                    f"{np.median(cut) if cut else 1:.2f}); "
                     f"model error at the end {' '.join(f'{e:.0f}' for e in err)} %"
                 )
             print(

@@ -121,7 +121,7 @@ def main() -> None:
     ap.add_argument("--json", type=Path, help="write every row here")
     args = ap.parse_args()
     cfg, profile = load_mock_config(args.mock_config), load_profile(args.profile)
-    policies = ["learn on", *args.policies.split(",")]
+    policies = ["learn on", *(p for p in args.policies.split(",") if p)]
     rows = []
     for seed in (int(s) for s in args.seeds.split(",")):
         for policy in policies:
