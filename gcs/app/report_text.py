@@ -234,8 +234,8 @@ def decision_lines(record: dict) -> list[str]:
     ]
     if shared:
         lines.append(
-            "step cut: the profile's model expects the refreshed model's whole update to "
-            "overshoot; fraction taken " + ", ".join(shared)
+            "step cut: the profile's model foresees less from the refreshed model's whole "
+            "update than from part of it; fraction taken " + ", ".join(shared)
         )
     noise = []
     for name, ax in zip(("north", "east"), decision["axes"], strict=True):

@@ -320,8 +320,8 @@ class AdaptiveSettings:
         trial, the refreshed model's and the profile's (:func:`minmax_steps`): the whole step
         where the profile's model expects it to help as much or more, less where it expects
         the step to overshoot. A refresh is judged on held-out blocks of the pairs it was
-        fitted to; this keeps its first steps within what the profile's model, which learning
-        converged with, also foresees.
+        fitted to, and the take-back only after a trial has been flown with it; this keeps
+        each step with it within what the profile's model also foresees.
     refresh_noise : str
         The non-repeatable error the refresh assumes: ``"white"``, of the floor's variance;
         ``"measured"``, an autoregressive model of it fitted to the flights of identical
