@@ -901,15 +901,13 @@ def minmax_steps(
     if not rows:
         return out
     moves = np.stack([u_anchor[rows], target[rows] - u_anchor[rows]], axis=1)  # (R, 2, N)
-    d_prior = _estimates(settings, adaptive, [prior] * len(rows), u[rows], y[rows])
-    predicted = []
-    for candidates, d in (([models[k] for k in rows], d_hat[rows]), ([prior] * len(rows), d_prior)):
-        f = model_outputs(candidates, moves)
-        predicted.append((yd - f[:, 0] - d, f[:, 1]))
+    priors = [prior] * len(rows)
+    d_prior = _estimates(settings, adaptive, priors, u[rows], y[rows])
+    # per model (in use, profile's): the response to the anchor and to the whole step
+    f = np.stack([model_outputs([models[k] for k in rows], moves), model_outputs(priors, moves)])
+    error0 = yd - f[:, :, 0] - np.stack([d_hat[rows], d_prior])  # (2, R, N)
     for i, k in enumerate(rows):
-        out[k] = minmax_step(
-            np.stack([p[0][i] for p in predicted]), np.stack([p[1][i] for p in predicted])
-        )
+        out[k] = minmax_step(error0[:, i], f[:, i, 1])
     return out
 
 
@@ -1092,9 +1090,8 @@ def _plan_axis(
     result = update.solve(d_hat, u[anchor], robust)
     minmax = 1.0
     if adaptive.refresh_minmax_step:
-        minmax = minmax_steps(settings, adaptive, [model], axis, u[None], y[None], d_hat[None],
-                              yd, u[anchor][None], result.u_m[None])[0]  # fmt: skip
-        minmax = float(minmax)
+        one = (u[None], y[None], d_hat[None], yd, u[anchor][None], result.u_m[None])
+        minmax = float(minmax_steps(settings, adaptive, [model], axis, *one)[0])
     u_next, step = step_from_anchor(model, yd, update.limits, u[anchor], result.u_m, step * minmax)
     name = AXIS_NAMES[settings.axes[axis]]
     record = AxisRecord(name, noise_rec, refresh, robust_rec, result, step, minmax)
