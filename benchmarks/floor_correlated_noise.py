@@ -41,6 +41,10 @@ the refreshed models taken back.
 ``learning.adaptive.refresh_minmax_step`` (the same seeds); the summary adds the steps it cut
 and their median fraction.
 
+``--holdout off,on`` flies the adaptive profile once per choice of
+``learning.adaptive.refresh_holdout`` (the same seeds); the summary adds the refreshes fitted
+to the trials before the newest that the newest did not confirm.
+
 ``--plants off35`` flies plants 35 % off the profile's model instead (``max |F_model / F_true -
 1|`` over the learning band: 0.35 north, 0.35 east, against 0.22 and 0.18 for the tests'
 plants), where the refresh has a model to correct.
@@ -50,7 +54,7 @@ Usage::
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
         [--seeds 4] [--trials 16] [--refresh-noise white,measured] [--plants tests]
         [--latency 0.05] [--refresh-max-move 1.0] [--refresh-takeback off,on]
-        [--minmax-step off,on] [--json out.json]
+        [--minmax-step off,on] [--holdout off,on] [--json out.json]
 """
 
 from __future__ import annotations
@@ -115,6 +119,7 @@ def run(
     max_move: float | None = None,
     takeback: str = "",
     minmax: str = "",
+    holdout: str = "",
 ) -> dict:
     """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions."""
     ref = sample_reference(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, DT_S)
@@ -134,6 +139,9 @@ def run(
     if minmax and learner.adaptive is not None:
         on = minmax == "on"
         learner.adaptive = dataclasses.replace(learner.adaptive, refresh_minmax_step=on)
+    if holdout and learner.adaptive is not None:
+        on = holdout == "on"
+        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_holdout=on)
     u = ref[:-1].copy()
     lag = int(round(latency_s / DT_S))
     epos, steps = [], []
@@ -157,13 +165,15 @@ def run(
             ]
             steps.append(
                 {"moved_pct": moved, "taken_back": back, "safeguard": rec["safeguard"]["action"],
-                 "minmax_step": [ax["minmax_step"] for ax in rec["axes"]]}
+                 "minmax_step": [ax["minmax_step"] for ax in rec["axes"]],
+                 "not_adopted": [bool(ax["refresh"]) and "not adopted" in ax["refresh"]["reason"]
+                                 for ax in rec["axes"]]}
             )  # fmt: skip
     floor = learner.floor
     w = learner.settings.weights
     errors = [model_error(learner.models[a], plants[a], w.wdu / w.we) for a in range(2)]
     return {
-        "profile": label(profile, refresh_noise, takeback, minmax),
+        "profile": label(profile, refresh_noise, takeback, minmax, holdout),
         "model_error": errors,
         "sigma_m": sigma_m,
         "corr_s": corr_s,
@@ -177,10 +187,15 @@ def run(
     }
 
 
-def label(profile: str, refresh_noise: str = "", takeback: str = "", minmax: str = "") -> str:
-    """A variant's name: the profile, then its refresh noise, take-back and minmax step where
-    chosen."""
-    chosen = (refresh_noise, takeback and f"takeback {takeback}", minmax and f"minmax {minmax}")
+def label(
+    profile: str, refresh_noise: str = "", takeback: str = "", minmax: str = "", holdout: str = ""
+) -> str:
+    """A variant's name: the profile, then its refresh noise, take-back, minmax step and
+    hold-out where chosen."""
+    chosen = (
+        refresh_noise, takeback and f"takeback {takeback}", minmax and f"minmax {minmax}",
+        holdout and f"holdout {holdout}",
+    )  # fmt: skip
     return "/".join([profile] + [x for x in chosen if x])
 
 
@@ -229,23 +244,30 @@ def main() -> None:
         help="refresh_minmax_step choices for the adaptive profile, off and/or on, "
         "comma-separated (default: the profile's own)",
     )
+    parser.add_argument(
+        "--holdout",
+        default="",
+        help="refresh_holdout choices for the adaptive profile, off and/or on, "
+        "comma-separated (default: the profile's own)",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
-    variants = [("antx", "", "", "")] + [
-        ("antx-adaptive", n, tb, mm)
+    variants = [("antx", "", "", "", "")] + [
+        ("antx-adaptive", n, tb, mm, ho)
         for n in args.refresh_noise.split(",")
         for tb in args.refresh_takeback.split(",")
         for mm in args.minmax_step.split(",")
+        for ho in args.holdout.split(",")
     ]
     labels = [label(*v) for v in variants]
     runs = []
     t0 = time.monotonic()
     for corr in (float(c) for c in args.corr.split(",")):
-        for profile, noise, takeback, minmax in variants:
+        for profile, noise, takeback, minmax, holdout in variants:
             for seed in range(args.seeds):
                 runs.append(
                     run(profile, args.sigma, corr, seed, args.trials, noise, args.plants,
-                        args.latency, args.refresh_max_move, takeback, minmax)
+                        args.latency, args.refresh_max_move, takeback, minmax, holdout)
                 )  # fmt: skip
                 print(line(runs[-1]), flush=True)
     summary = []
@@ -268,10 +290,11 @@ def main() -> None:
                 err = [100 * max(r["model_error"]) for r in rs]
                 backs = sum(b for r in rs for st in r["steps"] for b in st["taken_back"])
                 cut = [f for r in rs for st in r["steps"] for f in st["minmax_step"] if f < 1]
+                held = sum(b for r in rs for st in r["steps"] for b in st["not_adopted"])
                 extra = (
                     f"; moves accepted {len(moves)}, largest {max(moves, default=0)} %, "
                     f"taken back {backs}; steps cut {len(cut)} (median "
-                    f"{np.median(cut) if cut else 1:.2f}); "
+                    f"{np.median(cut) if cut else 1:.2f}); not adopted {held}; "
                     f"model error at the end {' '.join(f'{e:.0f}' for e in err)} %"
                 )
             print(

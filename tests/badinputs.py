@@ -945,7 +945,11 @@ def _adaptive_cases() -> Iterator[Case]:
         )
 
     # the options that are on or off, each given a word and a number
-    for flag, values in (("refresh_takeback", ("yes", 1)), ("refresh_minmax_step", ("on", 0))):
+    flags = (
+        ("refresh_takeback", ("yes", 1)), ("refresh_minmax_step", ("on", 0)),
+        ("refresh_holdout", ("true", 1)),
+    )  # fmt: skip
+    for flag, values in flags:
         field = f"learning.adaptive.{flag}"
         for value in values:
             yield Case(

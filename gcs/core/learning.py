@@ -87,6 +87,7 @@ __all__ = [
     "data_estimates",
     "refresh_axes",
     "takeback_axes",
+    "holdout_axes",
     "minmax_steps",
     "converged_with_model",
 ]
@@ -322,6 +323,12 @@ class AdaptiveSettings:
         the step to overshoot. A refresh is judged on held-out blocks of the pairs it was
         fitted to, and the take-back only after a trial has been flown with it; this keeps
         each step with it within what the profile's model also foresees.
+    refresh_holdout : bool
+        With ``refresh``: fit the refresh to the trials before the newest, and use the
+        candidate only where it predicts the newest trial, which it was not fitted to,
+        significantly better than the model in use (:func:`gcs.core.refresh.
+        prediction_loss_z` below ``-TAKEBACK_Z``; :func:`holdout_axes`). A refreshed model is
+        then never flown before a trial has confirmed it; the cost is one trial's delay.
     refresh_noise : str
         The non-repeatable error the refresh assumes: ``"white"``, of the floor's variance;
         ``"measured"``, an autoregressive model of it fitted to the flights of identical
@@ -356,6 +363,7 @@ class AdaptiveSettings:
     refresh_max_move: float | None = None
     refresh_takeback: bool = False
     refresh_minmax_step: bool = False
+    refresh_holdout: bool = False
     robustness_cutoff_rad_s: float | str | None = None
     robustness_order: int = 2
     safeguard: bool = False
@@ -728,20 +736,122 @@ def refresh_axes(
     todo = np.array([k for k in range(n_plants) if out[k] is None], dtype=int)
     if todo.size == 0:
         return out  # type: ignore[return-value]
-    r_m2 = _noise_variances(models, u, y, floors, axis)
-    du, dy = np.diff(u, axis=1), np.diff(y, axis=1)
+    fit = u.shape[1] - 1 if adaptive.refresh_holdout else u.shape[1]  # the trials fitted to
+    du, dy = np.diff(u[:, :fit], axis=1), np.diff(y[:, :fit], axis=1)
+    r_m2 = _noise_variances(models, u[:, :fit], y[:, :fit], floors, axis) if fit > 1 else None
     moved = np.max(np.abs(du), axis=2) > IDENTICAL_TOL_M  # (K, T-1): repeats left out
     for pattern in np.unique(moved[todo], axis=0):  # the plants whose pairs moved alike
         rows = todo[np.all(moved[todo] == pattern, axis=1)]
         results = refresh_models(
-            [models[k] for k in rows], du[rows][:, pattern], dy[rows][:, pattern], r_m2[rows],
+            [models[k] for k in rows], du[rows][:, pattern], dy[rows][:, pattern],
+            np.ones(rows.size) if r_m2 is None else r_m2[rows],
             adaptive.refresh_settings(), settings.weights.wdu / settings.weights.we,
             None if noises is None else [noises[k] for k in rows],
             None if converged is None else [converged[k] for k in rows],
         )  # fmt: skip
         for k, result in zip(rows, results, strict=True):
             out[k] = result if np.isnan(z[k]) else replace(result, takeback_z=float(z[k]))
+    if adaptive.refresh_holdout:
+        out = holdout_axes(settings, adaptive, models, out, u, y)  # type: ignore[arg-type]
     return out  # type: ignore[return-value]
+
+
+def holdout_axes(
+    settings: LearnerSettings,
+    adaptive: AdaptiveSettings,
+    models: Sequence[DiscreteModel],
+    results: Sequence[RefreshResult],
+    u: np.ndarray,
+    y: np.ndarray,
+) -> list[RefreshResult]:
+    """Judge each plant's refresh, fitted to the trials before the newest, by the newest.
+
+    The candidate and the model in use each predict the newest trial as the learning step
+    does (:func:`prediction_errors`); the candidate is used only where it predicted
+    significantly better (:func:`gcs.core.refresh.prediction_loss_z` of its errors against
+    the model in use's below ``-TAKEBACK_Z``). A candidate not used is recorded as not
+    accepted, its statistic in ``holdout_z``.
+
+    Parameters
+    ----------
+    settings, adaptive
+        As :func:`plan_next_trial`.
+    models : sequence of DiscreteModel
+        Each plant's model of the axis in use.
+    results : sequence of RefreshResult
+        Each plant's refresh from the trials before the newest (a take-back stands as it is).
+    u, y : ndarray, shape (K, T, N)
+        Setpoints and positions of every trial, learning coordinates [m].
+
+    Returns
+    -------
+    list of RefreshResult
+        One per plant: the refresh adopted, or not accepted with the reason.
+    """
+    out = list(results)
+    rows = [
+        k for k, r in enumerate(results)
+        if r.accepted and not r.reason.startswith("taken back")
+    ]  # fmt: skip
+    if not rows:
+        return out
+    errors = prediction_errors(
+        settings, adaptive, [[results[k].model for k in rows], [models[k] for k in rows]],
+        u[rows], y[rows],
+    )  # fmt: skip
+    lag = int(round(adaptive.refresh_block_s / models[rows[0]].dt_s))
+    stat = prediction_loss_z(errors[0], errors[1], lag)
+    newest = u.shape[1] - 1
+    for i, k in enumerate(rows):
+        r, zk = results[k], float(stat[i])
+        if zk < -TAKEBACK_Z:
+            why = (
+                f"{r.reason}; adopted: predicted trial {newest}, which it was not fitted to, "
+                f"better than the model in use (z = {zk:.2f} < {-TAKEBACK_Z:.2f})"
+            )
+            out[k] = replace(r, reason=why, holdout_z=zk)
+        else:
+            why = (
+                f"fitted to trials 0-{newest - 1}, moved {100 * r.moved:.0f} %, not adopted: "
+                f"predicted trial {newest} no better than the model in use "
+                f"(z = {zk:.2f} >= {-TAKEBACK_Z:.2f})"
+            )
+            out[k] = replace(r, model=models[k], accepted=False, reason=why, moved=0.0,
+                             holdout_z=zk)  # fmt: skip
+    return out
+
+
+def prediction_errors(
+    settings: LearnerSettings,
+    adaptive: AdaptiveSettings,
+    model_sets: Sequence[Sequence[DiscreteModel]],
+    u: np.ndarray,
+    y: np.ndarray,
+) -> list[np.ndarray]:
+    """Each set of models' error predicting the newest trial of one axis of K plants, as the
+    learning step before it did: the estimate ``d_hat`` from the trials before it with that
+    model, then ``F u_newest + d_hat - y_newest``.
+
+    Parameters
+    ----------
+    settings, adaptive
+        As :func:`plan_next_trial`.
+    model_sets : sequence of sequences of DiscreteModel
+        Sets of K models, one per plant.
+    u, y : ndarray, shape (K, T, N)
+        Setpoints and positions of every trial, learning coordinates [m]; T >= 2.
+
+    Returns
+    -------
+    list of ndarray, shape (K, N)
+        One per set [m].
+    """
+    errors = []
+    for candidates in model_sets:
+        d_hat = _estimates(settings, adaptive, candidates, u[:, :-1], y[:, :-1])
+        newest = model_outputs(candidates, u[:, -1:])[:, 0]
+        errors.append(newest + d_hat - y[:, -1])
+    return errors
 
 
 def takeback_axes(
@@ -793,11 +903,8 @@ def takeback_axes(
     if n_trials < 2 or not rows:
         return z, out
     in_use = [models[k] for k in rows]
-    errors = []
-    for candidates in (in_use, [prior] * len(rows)):
-        d_hat = _estimates(settings, adaptive, candidates, u[rows, :-1], y[rows, :-1])
-        newest = model_outputs(candidates, u[rows, -1:])[:, 0]
-        errors.append(newest + d_hat - y[rows, -1])
+    errors = prediction_errors(settings, adaptive, [in_use, [prior] * len(rows)], u[rows],
+                               y[rows])  # fmt: skip
     lag = int(round(adaptive.refresh_block_s / prior.dt_s))
     stat = prediction_loss_z(errors[0], errors[1], lag)
     band = settings.weights.wdu / settings.weights.we

@@ -142,6 +142,10 @@ class RefreshResult:
         With the learning's take-back: how much better the profile's model predicted the
         newest trial than the model in use (:func:`prediction_loss_z`); NaN when not judged
         (no take-back, or the model in use is the profile's).
+    holdout_z : float
+        With the learning's hold-out: how much better the model in use predicted the newest
+        trial than the candidate fitted to the trials before it (:func:`prediction_loss_z`;
+        below ``-1.645`` the candidate is adopted); NaN when not judged.
     """
 
     model: DiscreteModel
@@ -154,6 +158,7 @@ class RefreshResult:
     pairs: int
     snr: float
     takeback_z: float = float("nan")
+    holdout_z: float = float("nan")
 
     def as_dict(self) -> dict:
         """JSON-ready dictionary (the model as its discrete state space)."""
@@ -167,6 +172,7 @@ class RefreshResult:
             "pairs": self.pairs,
             "snr": self.snr,
             "takeback_z": self.takeback_z,
+            "holdout_z": self.holdout_z,
             "model": self.model.as_dict(),
         }
 

@@ -311,7 +311,10 @@ def _learned_axes(f: Fields) -> tuple[int, ...]:
 def _adaptive(f: Fields) -> AdaptiveSettings:
     """``learning.adaptive``: the options beyond the paper (absent: the paper's method)."""
     d = AdaptiveSettings()
-    flags = ("drift_offset", "refresh", "refresh_takeback", "refresh_minmax_step", "safeguard")
+    flags = (
+        "drift_offset", "refresh", "refresh_takeback", "refresh_minmax_step", "refresh_holdout",
+        "safeguard",
+    )  # fmt: skip
     flag = {k: f.value(k, bool, getattr(d, k)) for k in flags}
     cutoff = f.raw("robustness_cutoff_rad_s", None)
     order = f.integer("robustness_order", d.robustness_order)
@@ -328,6 +331,7 @@ def _adaptive(f: Fields) -> AdaptiveSettings:
             else f.number("refresh_max_move", positive=True),
             refresh_takeback=flag["refresh_takeback"],
             refresh_minmax_step=flag["refresh_minmax_step"],
+            refresh_holdout=flag["refresh_holdout"],
             robustness_cutoff_rad_s=cutoff
             if cutoff is None or cutoff == "auto"
             else f.number("robustness_cutoff_rad_s", positive=True),

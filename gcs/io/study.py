@@ -53,6 +53,7 @@ SETTING_KEYS: dict[str, tuple[str, ...]] = {
     "refresh": ("learning", "adaptive", "refresh"),
     "refresh_takeback": ("learning", "adaptive", "refresh_takeback"),
     "refresh_minmax_step": ("learning", "adaptive", "refresh_minmax_step"),
+    "refresh_holdout": ("learning", "adaptive", "refresh_holdout"),
     "robustness_cutoff_rad_s": ("learning", "adaptive", "robustness_cutoff_rad_s"),
     "safeguard": ("learning", "adaptive", "safeguard"),
     "safeguard_k_sigma": ("learning", "adaptive", "safeguard_k_sigma"),
