@@ -738,13 +738,15 @@ def refresh_axes(
         return out  # type: ignore[return-value]
     fit = u.shape[1] - 1 if adaptive.refresh_holdout else u.shape[1]  # the trials fitted to
     du, dy = np.diff(u[:, :fit], axis=1), np.diff(y[:, :fit], axis=1)
-    r_m2 = _noise_variances(models, u[:, :fit], y[:, :fit], floors, axis) if fit > 1 else None
+    if fit > 1:
+        r_m2 = _noise_variances(models, u[:, :fit], y[:, :fit], floors, axis)
+    else:  # one trial: no pair, so refresh_models never reads the variance
+        r_m2 = np.ones(n_plants)
     moved = np.max(np.abs(du), axis=2) > IDENTICAL_TOL_M  # (K, T-1): repeats left out
     for pattern in np.unique(moved[todo], axis=0):  # the plants whose pairs moved alike
         rows = todo[np.all(moved[todo] == pattern, axis=1)]
         results = refresh_models(
-            [models[k] for k in rows], du[rows][:, pattern], dy[rows][:, pattern],
-            np.ones(rows.size) if r_m2 is None else r_m2[rows],
+            [models[k] for k in rows], du[rows][:, pattern], dy[rows][:, pattern], r_m2[rows],
             adaptive.refresh_settings(), settings.weights.wdu / settings.weights.we,
             None if noises is None else [noises[k] for k in rows],
             None if converged is None else [converged[k] for k in rows],
