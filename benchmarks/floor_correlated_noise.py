@@ -45,6 +45,10 @@ and their median fraction.
 ``learning.adaptive.refresh_holdout`` (the same seeds); the summary adds the refreshes fitted
 to the trials before the newest that the newest did not confirm.
 
+``--pool-repeats off,on`` flies the adaptive profile once per choice of
+``learning.adaptive.refresh_pool_repeats`` (the same seeds): the refresh's first pair against
+the mean of trial 0's flights instead of the last of them.
+
 ``--plants off35`` flies plants 35 % off the profile's model instead (``max |F_model / F_true -
 1|`` over the learning band: 0.35 north, 0.35 east, against 0.22 and 0.18 for the tests'
 plants), where the refresh has a model to correct.
@@ -54,7 +58,7 @@ Usage::
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
         [--seeds 4] [--trials 16] [--refresh-noise white,measured] [--plants tests]
         [--latency 0.05] [--refresh-max-move 1.0] [--refresh-takeback off,on]
-        [--minmax-step off,on] [--holdout off,on] [--json out.json]
+        [--minmax-step off,on] [--holdout off,on] [--pool-repeats off,on] [--json out.json]
 """
 
 from __future__ import annotations
@@ -120,6 +124,7 @@ def run(
     takeback: str = "",
     minmax: str = "",
     holdout: str = "",
+    pool: str = "",
 ) -> dict:
     """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions."""
     ref = sample_reference(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, DT_S)
@@ -142,6 +147,9 @@ def run(
     if holdout and learner.adaptive is not None:
         on = holdout == "on"
         learner.adaptive = dataclasses.replace(learner.adaptive, refresh_holdout=on)
+    if pool and learner.adaptive is not None:
+        on = pool == "on"
+        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_pool_repeats=on)
     u = ref[:-1].copy()
     lag = int(round(latency_s / DT_S))
     epos, steps = [], []
@@ -173,7 +181,7 @@ def run(
     w = learner.settings.weights
     errors = [model_error(learner.models[a], plants[a], w.wdu / w.we) for a in range(2)]
     return {
-        "profile": label(profile, refresh_noise, takeback, minmax, holdout),
+        "profile": label(profile, refresh_noise, takeback, minmax, holdout, pool),
         "model_error": errors,
         "sigma_m": sigma_m,
         "corr_s": corr_s,
@@ -188,13 +196,18 @@ def run(
 
 
 def label(
-    profile: str, refresh_noise: str = "", takeback: str = "", minmax: str = "", holdout: str = ""
+    profile: str,
+    refresh_noise: str = "",
+    takeback: str = "",
+    minmax: str = "",
+    holdout: str = "",
+    pool: str = "",
 ) -> str:
-    """A variant's name: the profile, then its refresh noise, take-back, minmax step and
-    hold-out where chosen."""
+    """A variant's name: the profile, then its refresh noise, take-back, minmax step,
+    hold-out and pooled repeats where chosen."""
     chosen = (
         refresh_noise, takeback and f"takeback {takeback}", minmax and f"minmax {minmax}",
-        holdout and f"holdout {holdout}",
+        holdout and f"holdout {holdout}", pool and f"pool {pool}",
     )  # fmt: skip
     return "/".join([profile] + [x for x in chosen if x])
 
@@ -250,24 +263,31 @@ def main() -> None:
         help="refresh_holdout choices for the adaptive profile, off and/or on, "
         "comma-separated (default: the profile's own)",
     )
+    parser.add_argument(
+        "--pool-repeats",
+        default="",
+        help="refresh_pool_repeats choices for the adaptive profile, off and/or on, "
+        "comma-separated (default: the profile's own)",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
-    variants = [("antx", "", "", "", "")] + [
-        ("antx-adaptive", n, tb, mm, ho)
+    variants = [("antx", "", "", "", "", "")] + [
+        ("antx-adaptive", n, tb, mm, ho, po)
         for n in args.refresh_noise.split(",")
         for tb in args.refresh_takeback.split(",")
         for mm in args.minmax_step.split(",")
         for ho in args.holdout.split(",")
+        for po in args.pool_repeats.split(",")
     ]
     labels = [label(*v) for v in variants]
     runs = []
     t0 = time.monotonic()
     for corr in (float(c) for c in args.corr.split(",")):
-        for profile, noise, takeback, minmax, holdout in variants:
+        for profile, noise, takeback, minmax, holdout, pool in variants:
             for seed in range(args.seeds):
                 runs.append(
                     run(profile, args.sigma, corr, seed, args.trials, noise, args.plants,
-                        args.latency, args.refresh_max_move, takeback, minmax, holdout)
+                        args.latency, args.refresh_max_move, takeback, minmax, holdout, pool)
                 )  # fmt: skip
                 print(line(runs[-1]), flush=True)
     summary = []

@@ -1,17 +1,18 @@
 """Recorded learning runs learnt again with and without the take-back of a refreshed model
-(``learning.adaptive.refresh_takeback``): what each would have predicted of the trials flown.
+(``learning.adaptive.refresh_takeback``), or another of the refresh's options on and off
+(``--option``): what each would have predicted of the trials flown.
 
 Printed, not asserted. For every learning run given (run directories, or directories searched
 for them; runs of ``learning.adaptive`` with the data-driven noise model and the refresh), the
 trials as flown (up to the first that flies another's setpoints again) are learnt again by a
-``gcs.Learner`` from the profile, trial by trial, once with ``refresh_takeback`` off and once
-on (everything else as the run's profile). After each step, its models and estimate predict
-the next trial at the setpoints it flew (``F u + d_hat``, the step's own plan), per axis, and
-are scored by the RMS error against what the trial measured.
+``gcs.Learner`` from the profile, trial by trial, once with ``refresh_takeback`` (or
+``--option``) off and once on (everything else as the run's profile). After each step, its
+models and estimate predict the next trial at the setpoints it flew (``F u + d_hat``, the step's
+own plan), per axis, and are scored by the RMS error against what the trial measured.
 
 The trials were flown with the setpoints of the run's own learning, so this compares the two
-learnings' foresight on the same flights, not the trials they would have flown. With the take-
-back off the replay is the run's learning when the run had it off: its estimates are checked
+learnings' foresight on the same flights, not the trials they would have flown. With the option
+off the replay is the run's learning when the run had it off: its estimates are checked
 against the run's ``estimate-JJJ.csv`` (``max |replay - recorded|`` in the summary).
 
 Per run: each judgement (trial, axis, z; ``back`` where the profile's model was taken back) and
@@ -19,7 +20,8 @@ the prediction errors of every step where the two learnings differ. Then over al
 judgements, the take-backs, and for the steps that differ the ratio on / off of the prediction
 errors.
 
-Usage: ``python benchmarks/takeback_replay.py RUN_OR_DIR ... [--json OUT]``
+Usage: ``python benchmarks/takeback_replay.py RUN_OR_DIR ... [--option refresh_pool_repeats]
+[--json OUT]``
 """
 
 from __future__ import annotations
@@ -52,11 +54,12 @@ def flown_trials(run: RunDir) -> list[Trial]:
     return trials
 
 
-def learn_again(run: RunDir, trials: list[Trial], takeback: bool) -> list[dict]:
-    """One row per learning step that plans a flown trial: its judgements and the RMS error
-    of its prediction of that trial per axis [m]."""
+def learn_again(run: RunDir, trials: list[Trial], option: str, on: bool) -> list[dict]:
+    """One row per learning step that plans a flown trial, with ``option`` of the run's
+    ``learning.adaptive`` set to ``on``: its judgements and the RMS error of its prediction of
+    that trial per axis [m]."""
     profile = run.profile()
-    adaptive = dataclasses.replace(profile.learning.adaptive, refresh_takeback=takeback)
+    adaptive = dataclasses.replace(profile.learning.adaptive, **{option: on})
     ref = run.reference().pos_ned_m[:, :2]
     learner = Learner(
         learner_settings(profile, run.algorithm), ref, adaptive, profile.learning.repeats
@@ -95,16 +98,17 @@ def learn_again(run: RunDir, trials: list[Trial], takeback: bool) -> list[dict]:
     return rows
 
 
-def replay_run(path: Path) -> dict | None:
-    """Both learnings of one run, or None when it is not a run of the data-driven refresh."""
+def replay_run(path: Path, option: str = "refresh_takeback") -> dict | None:
+    """Both learnings of one run, ``option`` off and on, or None when it is not a run of the
+    data-driven refresh."""
     run = RunDir.open(path)
     adaptive = run.profile().learning.adaptive
     if adaptive is None or adaptive.noise != "data" or not adaptive.refresh:
         return None
     trials = flown_trials(run)
-    off, on = learn_again(run, trials, False), learn_again(run, trials, True)
+    off, on = learn_again(run, trials, option, False), learn_again(run, trials, option, True)
     diff = 0.0
-    if not run.profile().learning.adaptive.refresh_takeback:
+    if not getattr(adaptive, option):
         for row in off:
             if run.estimate_path(row["trial"]).exists():
                 recorded = run.read_estimate(row["trial"])[0][:, :2]
@@ -131,7 +135,7 @@ def run_lines(result: dict) -> list[str]:
     return lines
 
 
-def summary(results: list[dict]) -> list[str]:
+def summary(results: list[dict], option: str = "refresh_takeback") -> list[str]:
     """Judgements, take-backs, and the ratio on / off where the predictions differ."""
     z = [j[0] for r in results for row in r["on"] for j in row["judged"] if np.isfinite(j[0])]
     backs = sum(j[1] for r in results for row in r["on"] for j in row["judged"])
@@ -143,7 +147,7 @@ def summary(results: list[dict]) -> list[str]:
         if on["errors_m"][a] != off["errors_m"][a]
     ]
     lines = [
-        f"{len(results)} runs; max |replay without take-back - recorded estimate| "
+        f"{len(results)} runs; max |replay with {option} off - recorded estimate| "
         f"{max(r['recorded_diff_m'] for r in results):.1e} m",
         f"judgements {len(z)}: z quantiles 10/50/90 % "
         + ", ".join(f"{v:+.2f}" for v in np.percentile(z, [10, 50, 90]))
@@ -153,8 +157,13 @@ def summary(results: list[dict]) -> list[str]:
     ]
     if ratios:
         lines.append(
-            f"predictions that differ: {len(ratios)}; error with / without the take-back: "
+            f"predictions that differ: {len(ratios)}; error with / without {option}: "
             + ", ".join(f"{v:.2f}" for v in ratios)
+        )
+        lines.append(
+            f"ratio median {np.median(ratios):.2f}, 10/90 % "
+            + ", ".join(f"{v:.2f}" for v in np.percentile(ratios, [10, 90]))
+            + f"; better with it in {sum(v < 1 for v in ratios)} of {len(ratios)}"
         )
     return lines
 
@@ -162,12 +171,19 @@ def summary(results: list[dict]) -> list[str]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("paths", nargs="+", help="run directories, or directories holding them")
+    parser.add_argument(
+        "--option",
+        default="refresh_takeback",
+        choices=("refresh_takeback", "refresh_minmax_step", "refresh_holdout",
+                 "refresh_pool_repeats"),
+        help="the learning.adaptive option learnt again off and on",
+    )  # fmt: skip
     parser.add_argument("--json", type=Path, help="write every run's rows here")
     args = parser.parse_args()
     results = []
     for path in find_runs(args.paths):
         try:
-            result = replay_run(path)
+            result = replay_run(path, args.option)
         except (OSError, ValueError) as exc:
             print(f"{path}: not replayed ({exc})", file=sys.stderr)
             continue
@@ -179,7 +195,7 @@ def main() -> None:
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     print()
-    print("\n".join(summary(results)))
+    print("\n".join(summary(results, args.option)))
 
 
 if __name__ == "__main__":

@@ -947,7 +947,7 @@ def _adaptive_cases() -> Iterator[Case]:
     # the options that are on or off, each given a word and a number
     flags = (
         ("refresh_takeback", ("yes", 1)), ("refresh_minmax_step", ("on", 0)),
-        ("refresh_holdout", ("true", 1)),
+        ("refresh_holdout", ("true", 1)), ("refresh_pool_repeats", ("no", 0)),
     )  # fmt: skip
     for flag, values in flags:
         field = f"learning.adaptive.{flag}"

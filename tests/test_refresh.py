@@ -18,6 +18,7 @@ from gcs.core.refresh import (
     fit_output_error,
     model_change,
     model_from_transfer_function,
+    pooled_pairs,
     prediction_loss_z,
     refresh_model,
     simulate_tf,
@@ -405,3 +406,51 @@ def test_prediction_loss_z_is_about_standard_normal_when_both_predict_alike() ->
 def test_prediction_loss_z_refusals(e1, e2, lag, match) -> None:
     with pytest.raises(ValueError, match=match):
         prediction_loss_z(e1, e2, lag)
+
+
+def _moved(u: np.ndarray) -> np.ndarray:
+    return np.max(np.abs(np.diff(u, axis=1)), axis=2) > 1e-9
+
+
+def test_pooled_pairs_without_repeats_are_the_differences_bit_for_bit() -> None:
+    rng = np.random.default_rng(3)
+    u, y = rng.standard_normal((2, 5, 40)), rng.standard_normal((2, 5, 40))
+    du, dy = pooled_pairs(u, y, _moved(u))
+    assert np.array_equal(du, np.diff(u, axis=1)) and np.array_equal(dy, np.diff(y, axis=1))
+
+
+def test_pooled_pairs_compare_the_means_of_the_repeats_scaled_to_two_flights_noise() -> None:
+    """Trials 0-3 identical, then 4, then 5 twice: the pairs (0-3 | 4) and (4 | 5, 6), each
+    the difference of the groups' means times sqrt(2 / (1/n_a + 1/n_b)), computed here
+    from the groups directly."""
+    rng = np.random.default_rng(4)
+    base, step, step2 = rng.standard_normal((3, 30))
+    u = np.array([base] * 4 + [base + step] + [base + step + step2] * 2)[None]
+    y = rng.standard_normal((1, 7, 30))
+    du, dy = pooled_pairs(u, y, _moved(u))
+    c1, c2 = np.sqrt(2 / (1 / 4 + 1)), np.sqrt(2 / (1 + 1 / 2))
+    np.testing.assert_allclose(du[0, 3], c1 * step, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(dy[0, 3], c1 * (y[0, 4] - y[0, :4].mean(axis=0)), rtol=1e-13)
+    np.testing.assert_allclose(du[0, 4], c2 * step2, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(dy[0, 4], c2 * (y[0, 5:].mean(axis=0) - y[0, 4]), rtol=1e-13)
+    assert not np.any(du[0, [0, 1, 2, 5]]) and not np.any(dy[0, [0, 1, 2, 5]])
+
+
+@given(st.integers(1, 5), st.integers(1, 4), st.integers(0, 10_000))
+@settings(max_examples=25, deadline=None)
+def test_pooled_pairs_keep_the_model_and_carry_two_flights_noise(n_a, n_b, seed) -> None:
+    """A linear plant with a repeatable disturbance: the noiseless pooled pair obeys the model
+    exactly (``c dy = F (c du)``), and with white noise of variance r per flight its error has
+    the variance 2 r (over 40000 samples, within 5 %: seven of the estimate's standard errors)."""
+    rng = np.random.default_rng(seed)
+    n = 40_000
+    u0, u1 = rng.standard_normal((2, n)) * 0.1
+    d = rng.standard_normal(n)  # repeatable
+    u = np.array([u0] * n_a + [u1] * n_b)[None]
+    clean = np.array([simulate(EQ11, x[:, None])[:, 0] + d for x in u[0]])[None]
+    du, dy = pooled_pairs(u, clean, _moved(u))
+    t = n_a - 1
+    np.testing.assert_allclose(dy[0, t], simulate(EQ11, du[0, t][:, None])[:, 0], atol=1e-12)
+    r = 0.04
+    _, noisy = pooled_pairs(u, clean + np.sqrt(r) * rng.standard_normal(clean.shape), _moved(u))
+    assert np.var(noisy[0, t] - dy[0, t]) == pytest.approx(2 * r, rel=0.05)

@@ -51,6 +51,7 @@ from gcs.core.refresh import (
     RefreshSettings,
     fit_ar_noise,
     model_change,
+    pooled_pairs,
     prediction_loss_z,
     refresh_models,
     transfer_function,
@@ -329,6 +330,11 @@ class AdaptiveSettings:
         significantly better than the model in use (:func:`gcs.core.refresh.
         prediction_loss_z` below ``-TAKEBACK_Z``; :func:`holdout_axes`). A refreshed model is
         then never flown before a trial has confirmed it; the cost is one trial's delay.
+    refresh_pool_repeats : bool
+        With ``refresh``: where consecutive flights share their setpoints (trial 0 and its
+        repeats), a pair compares the mean of those flights, not the last of them, with the
+        next setpoints' (:func:`gcs.core.refresh.pooled_pairs`): the first refresh after
+        ``repeats: 3`` sees the noise ``1.25 r`` instead of ``2 r``.
     refresh_noise : str
         The non-repeatable error the refresh assumes: ``"white"``, of the floor's variance;
         ``"measured"``, an autoregressive model of it fitted to the flights of identical
@@ -364,6 +370,7 @@ class AdaptiveSettings:
     refresh_takeback: bool = False
     refresh_minmax_step: bool = False
     refresh_holdout: bool = False
+    refresh_pool_repeats: bool = False
     robustness_cutoff_rad_s: float | str | None = None
     robustness_order: int = 2
     safeguard: bool = False
@@ -743,6 +750,8 @@ def refresh_axes(
     else:  # one trial: no pair, so refresh_models never reads the variance
         r_m2 = np.ones(n_plants)
     moved = np.max(np.abs(du), axis=2) > IDENTICAL_TOL_M  # (K, T-1): repeats left out
+    if adaptive.refresh_pool_repeats:
+        du, dy = pooled_pairs(u[:, :fit], y[:, :fit], moved)
     for pattern in np.unique(moved[todo], axis=0):  # the plants whose pairs moved alike
         rows = todo[np.all(moved[todo] == pattern, axis=1)]
         results = refresh_models(

@@ -61,6 +61,7 @@ __all__ = [
     "ArNoise",
     "fit_ar_noise",
     "prediction_loss_z",
+    "pooled_pairs",
 ]
 
 
@@ -599,6 +600,52 @@ def _freq(b: np.ndarray, a: np.ndarray, delay: int, omega: np.ndarray, dt_s: flo
     zinv = np.exp(-1j * omega * dt_s)
     powers = zinv[None, :] ** np.arange(1, b.shape[-1] + 1)[:, None]  # (n, K)
     return (b @ powers) / (1.0 + a @ powers) * zinv**delay
+
+
+def pooled_pairs(
+    u_m: np.ndarray, y_m: np.ndarray, moved: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of consecutive trials of different setpoints, each side the mean of its repeats.
+
+    A run of consecutive flights of identical setpoints (trial 0 and its repeats, say) is one
+    group; the pair where the setpoints change compares the mean of the group before with the
+    mean of the group after, so its non-repeatable error has the variance ``r (1/n_a +
+    1/n_b)`` instead of ``2 r``. Each pair is then scaled by ``c = sqrt(2 / (1/n_a +
+    1/n_b))``, input and output alike (``c dy = F (c du) + c v``, the model linear): every
+    scaled pair carries the noise of a difference of two single flights, ``2 r``, as the
+    refresh assumes, and the least-squares fit weighs the pooled pairs by their precision.
+    Where no group holds more than one flight, ``c = 1`` and the pairs are ``np.diff``'s.
+
+    Parameters
+    ----------
+    u_m, y_m : ndarray, shape (K, T, N)
+        Setpoints and positions of every trial of K plants, oldest first [m].
+    moved : ndarray of bool, shape (K, T-1)
+        Whether trial ``t + 1``'s setpoints differ from trial ``t``'s.
+
+    Returns
+    -------
+    du_m, dy_m : ndarray, shape (K, T-1, N)
+        At every ``t`` where ``moved``: the scaled change from the group ending at trial ``t``
+        to the group starting at ``t + 1`` (input, output) [m]; zero elsewhere.
+    """
+    u = np.asarray(u_m, dtype=float)
+    y = np.asarray(y_m, dtype=float)
+    moved = np.asarray(moved, dtype=bool)
+    du = np.zeros((u.shape[0], u.shape[1] - 1, u.shape[2]))
+    dy = np.zeros_like(du)
+    for k in range(u.shape[0]):
+        group = np.concatenate(([0], np.cumsum(moved[k])))  # (T,): each trial's group
+        count = np.bincount(group).astype(float)
+        mean_y = np.zeros((count.size, y.shape[2]))
+        np.add.at(mean_y, group, y[k])
+        mean_y /= count[:, None]
+        for t in np.flatnonzero(moved[k]):
+            a, b = group[t], group[t + 1]
+            c = np.sqrt(2.0 / (1.0 / count[a] + 1.0 / count[b]))
+            du[k, t] = c * (u[k, t + 1] - u[k, t])
+            dy[k, t] = c * (mean_y[b] - mean_y[a])
+    return du, dy
 
 
 def model_change(

@@ -54,6 +54,7 @@ SETTING_KEYS: dict[str, tuple[str, ...]] = {
     "refresh_takeback": ("learning", "adaptive", "refresh_takeback"),
     "refresh_minmax_step": ("learning", "adaptive", "refresh_minmax_step"),
     "refresh_holdout": ("learning", "adaptive", "refresh_holdout"),
+    "refresh_pool_repeats": ("learning", "adaptive", "refresh_pool_repeats"),
     "robustness_cutoff_rad_s": ("learning", "adaptive", "robustness_cutoff_rad_s"),
     "safeguard": ("learning", "adaptive", "safeguard"),
     "safeguard_k_sigma": ("learning", "adaptive", "safeguard_k_sigma"),
