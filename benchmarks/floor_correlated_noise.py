@@ -138,18 +138,13 @@ def run(
         learner.adaptive = dataclasses.replace(learner.adaptive, refresh_noise=refresh_noise)
     if max_move is not None and learner.adaptive is not None:
         learner.adaptive = dataclasses.replace(learner.adaptive, refresh_max_move=max_move)
-    if takeback and learner.adaptive is not None:
-        on = takeback == "on"
-        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_takeback=on)
-    if minmax and learner.adaptive is not None:
-        on = minmax == "on"
-        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_minmax_step=on)
-    if holdout and learner.adaptive is not None:
-        on = holdout == "on"
-        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_holdout=on)
-    if pool and learner.adaptive is not None:
-        on = pool == "on"
-        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_pool_repeats=on)
+    switches = {
+        "refresh_takeback": takeback, "refresh_minmax_step": minmax,
+        "refresh_holdout": holdout, "refresh_pool_repeats": pool,
+    }  # fmt: skip
+    chosen = {field: choice == "on" for field, choice in switches.items() if choice}
+    if chosen and learner.adaptive is not None:
+        learner.adaptive = dataclasses.replace(learner.adaptive, **chosen)
     u = ref[:-1].copy()
     lag = int(round(latency_s / DT_S))
     epos, steps = [], []
