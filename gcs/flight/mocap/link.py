@@ -27,7 +27,7 @@ import numpy as np
 
 from gcs.core.frames import FrameMapping
 from gcs.errors import MocapError
-from gcs.flight.mocap.client import MocapClient, MocapSample
+from gcs.flight.mocap.client import MocapClient, MocapSample, series_of
 from gcs.flight.mocap.forward import VisionForwarder
 from gcs.flight.mocap.health import HealthLimits, stream_problem
 from gcs.flight.mocap.latency import estimate_lag_s
@@ -149,7 +149,13 @@ class MocapLink:
         if ended is not None:
             return ended
         now = time.monotonic()
-        return stream_problem(self.client.recent(HEALTH_WINDOW_S, now), now, self.limits)
+        series = self.client.recent(HEALTH_WINDOW_S, now)
+        latest = self.client.latest()
+        if len(series) == 0 and latest is not None:
+            # no frame in the window: the newest one says how stale the stream is, judged
+            # against the profile's max_age_s (which may exceed the window)
+            series = series_of([latest])
+        return stream_problem(series, now, self.limits)
 
     @property
     def max_gap_s(self) -> float:
