@@ -147,10 +147,11 @@ def test_a_gap_longer_than_the_window_is_judged_by_the_profiles_stale_limit() ->
     hold before a trial on "no mocap frames received", half a second into a pause of the stream,
     though the test profile's stale limit was 0.8 s: the watch judged only the frames of its
     last 0.5 s. Frames had come, so such a pause is judged by the newest frame's age against
-    ``max_age_s``: flown through under 0.8 s, stale (with its age) under 0.4 s, and "no mocap
-    frames received" only where none ever came."""
+    ``max_age_s``: flown through under a limit of 2 s (far above the pause, so that a loaded
+    machine cannot make it stale before the check), stale (with its age) under 0.4 s, and "no
+    mocap frames received" only where none ever came."""
     source = parse_mocap_url("optitrack://127.0.0.1/drone")
-    silent_s = HEALTH_WINDOW_S + 0.15  # since the newest frame, at the moment of the check
+    silent_s = HEALTH_WINDOW_S + 0.1  # since the newest frame, at least, at the check
 
     def after_a_pause(max_age_s: float) -> str | None:
         link = MocapLink(source, MOTIVE, MocapSettings(max_age_s=max_age_s))
@@ -159,9 +160,9 @@ def test_a_gap_longer_than_the_window_is_judged_by_the_profiles_stale_limit() ->
             link.client._record(b"S", SAMPLE.pack(i, t_s, True, 0.01 * i, 0, 1.5, 1, 0, 0, 0))
         return link.problem()
 
-    assert after_a_pause(0.8) is None
+    assert after_a_pause(2.0) is None
     stale = after_a_pause(0.4)
     assert stale is not None and stale.startswith("mocap stream stale ("), stale
     assert float(stale.split("(")[1].split(" s")[0]) >= silent_s - 0.005
-    never = MocapLink(source, MOTIVE, MocapSettings(max_age_s=0.8))
+    never = MocapLink(source, MOTIVE, MocapSettings(max_age_s=2.0))
     assert never.problem() == "no mocap frames received"
