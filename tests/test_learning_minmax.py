@@ -29,7 +29,8 @@ CAUTIOUS = AdaptiveSettings(noise="data", refresh=True, safeguard=True, refresh_
 
 def worst_on_grid(e0: np.ndarray, g: np.ndarray, s: np.ndarray) -> np.ndarray:
     """The larger of the models' squared errors at each step of ``s``, summed directly."""
-    return np.array([max(np.sum((e0[m] - x * g[m]) ** 2) for m in range(e0.shape[0])) for x in s])
+    residual = e0[None, :, :] - s[:, None, None] * g[None, :, :]  # (steps, models, samples)
+    return np.sum(residual**2, axis=2).max(axis=1)
 
 
 @settings(max_examples=200, deadline=None)
