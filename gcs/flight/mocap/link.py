@@ -150,8 +150,7 @@ class MocapLink:
             return ended
         now = time.monotonic()
         series = self.client.recent(HEALTH_WINDOW_S, now)
-        latest = self.client.latest()
-        if len(series) == 0 and latest is not None:
+        if len(series) == 0 and (latest := self.client.latest()) is not None:
             # no frame in the window: the newest one says how stale the stream is, judged
             # against the profile's max_age_s (which may exceed the window)
             series = series_of([latest])
