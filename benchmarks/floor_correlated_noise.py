@@ -49,6 +49,10 @@ to the trials before the newest that the newest did not confirm.
 ``learning.adaptive.refresh_pool_repeats`` (the same seeds): the refresh's first pair against
 the mean of trial 0's flights instead of the last of them.
 
+``--min-gain-z 0,1.645`` flies the adaptive profile once per value of
+``learning.adaptive.refresh_min_gain_z`` (the same seeds): how significant the refresh's
+held-out gain must be for it to accept a candidate.
+
 ``--plants off35`` flies plants 35 % off the profile's model instead (``max |F_model / F_true -
 1|`` over the learning band: 0.35 north, 0.35 east, against 0.22 and 0.18 for the tests'
 plants), where the refresh has a model to correct.
@@ -58,7 +62,8 @@ Usage::
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
         [--seeds 4] [--trials 16] [--refresh-noise white,measured] [--plants tests]
         [--latency 0.05] [--refresh-max-move 1.0] [--refresh-takeback off,on]
-        [--minmax-step off,on] [--holdout off,on] [--pool-repeats off,on] [--json out.json]
+        [--minmax-step off,on] [--holdout off,on] [--pool-repeats off,on]
+        [--min-gain-z 0,1.645] [--json out.json]
 """
 
 from __future__ import annotations
@@ -125,6 +130,7 @@ def run(
     minmax: str = "",
     holdout: str = "",
     pool: str = "",
+    min_gain_z: str = "",
 ) -> dict:
     """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions."""
     ref = sample_reference(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, DT_S)
@@ -143,6 +149,8 @@ def run(
         "refresh_holdout": holdout, "refresh_pool_repeats": pool,
     }  # fmt: skip
     chosen = {field: choice == "on" for field, choice in switches.items() if choice}
+    if min_gain_z:
+        chosen["refresh_min_gain_z"] = float(min_gain_z)
     if chosen and learner.adaptive is not None:
         learner.adaptive = dataclasses.replace(learner.adaptive, **chosen)
     u = ref[:-1].copy()
@@ -176,7 +184,7 @@ def run(
     w = learner.settings.weights
     errors = [model_error(learner.models[a], plants[a], w.wdu / w.we) for a in range(2)]
     return {
-        "profile": label(profile, refresh_noise, takeback, minmax, holdout, pool),
+        "profile": label(profile, refresh_noise, takeback, minmax, holdout, pool, min_gain_z),
         "model_error": errors,
         "sigma_m": sigma_m,
         "corr_s": corr_s,
@@ -197,12 +205,14 @@ def label(
     minmax: str = "",
     holdout: str = "",
     pool: str = "",
+    min_gain_z: str = "",
 ) -> str:
     """A variant's name: the profile, then its refresh noise, take-back, minmax step,
-    hold-out and pooled repeats where chosen."""
+    hold-out, pooled repeats and significance of the refresh's gain where chosen."""
     chosen = (
         refresh_noise, takeback and f"takeback {takeback}", minmax and f"minmax {minmax}",
         holdout and f"holdout {holdout}", pool and f"pool {pool}",
+        min_gain_z and f"z {min_gain_z}",
     )  # fmt: skip
     return "/".join([profile] + [x for x in chosen if x])
 
@@ -264,25 +274,32 @@ def main() -> None:
         help="refresh_pool_repeats choices for the adaptive profile, off and/or on, "
         "comma-separated (default: the profile's own)",
     )
+    parser.add_argument(
+        "--min-gain-z",
+        default="",
+        help="refresh_min_gain_z values for the adaptive profile, comma-separated "
+        "(default: the profile's own)",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
-    variants = [("antx", "", "", "", "", "")] + [
-        ("antx-adaptive", n, tb, mm, ho, po)
+    variants = [("antx", "", "", "", "", "", "")] + [
+        ("antx-adaptive", n, tb, mm, ho, po, z)
         for n in args.refresh_noise.split(",")
         for tb in args.refresh_takeback.split(",")
         for mm in args.minmax_step.split(",")
         for ho in args.holdout.split(",")
         for po in args.pool_repeats.split(",")
+        for z in args.min_gain_z.split(",")
     ]
     labels = [label(*v) for v in variants]
     runs = []
     t0 = time.monotonic()
     for corr in (float(c) for c in args.corr.split(",")):
-        for profile, noise, takeback, minmax, holdout, pool in variants:
+        for profile, noise, takeback, minmax, holdout, pool, z in variants:
             for seed in range(args.seeds):
                 runs.append(
                     run(profile, args.sigma, corr, seed, args.trials, noise, args.plants,
-                        args.latency, args.refresh_max_move, takeback, minmax, holdout, pool)
+                        args.latency, args.refresh_max_move, takeback, minmax, holdout, pool, z)
                 )  # fmt: skip
                 print(line(runs[-1]), flush=True)
     summary = []

@@ -1,6 +1,7 @@
 """Recorded learning runs learnt again with and without the take-back of a refreshed model
 (``learning.adaptive.refresh_takeback``), or another of the refresh's options on and off
-(``--option``): what each would have predicted of the trials flown.
+(``--option``; ``refresh_min_gain_z`` 0 and 1.645): what each would have predicted of the
+trials flown.
 
 Printed, not asserted. For every learning run given (run directories, or directories searched
 for them; runs of ``learning.adaptive`` with the data-driven noise model and the refresh), the
@@ -59,7 +60,8 @@ def learn_again(run: RunDir, trials: list[Trial], option: str, on: bool) -> list
     ``learning.adaptive`` set to ``on``: its judgements and the RMS error of its prediction of
     that trial per axis [m]."""
     profile = run.profile()
-    adaptive = dataclasses.replace(profile.learning.adaptive, **{option: on})
+    value = (TAKEBACK_Z if on else 0.0) if option == "refresh_min_gain_z" else on
+    adaptive = dataclasses.replace(profile.learning.adaptive, **{option: value})
     ref = run.reference().pos_ned_m[:, :2]
     learner = Learner(
         learner_settings(profile, run.algorithm), ref, adaptive, profile.learning.repeats
@@ -175,8 +177,9 @@ def main() -> None:
         "--option",
         default="refresh_takeback",
         choices=("refresh_takeback", "refresh_minmax_step", "refresh_holdout",
-                 "refresh_pool_repeats"),
-        help="the learning.adaptive option learnt again off and on",
+                 "refresh_pool_repeats", "refresh_min_gain_z"),
+        help="the learning.adaptive option learnt again off and on (refresh_min_gain_z: 0 "
+        "and 1.645)",
     )  # fmt: skip
     parser.add_argument("--json", type=Path, help="write every run's rows here")
     args = parser.parse_args()

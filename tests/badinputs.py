@@ -944,13 +944,15 @@ def _adaptive_cases() -> Iterator[Case]:
             "learning.adaptive.refresh_noise",
         )
 
-    # the options that are on or off, each given a word and a number
-    flags = (
+    # the options that are on or off, each given a word and a number; the numbers out of range
+    fields = (
         ("refresh_takeback", ("yes", 1)), ("refresh_minmax_step", ("on", 0)),
         ("refresh_holdout", ("true", 1)), ("refresh_pool_repeats", ("no", 0)),
+        ("refresh_max_move", (0, -0.5, "far", float("nan"))),
+        ("refresh_min_gain_z", (-1.645, "strict", float("inf"))),
     )  # fmt: skip
-    for flag, values in flags:
-        field = f"learning.adaptive.{flag}"
+    for name, values in fields:
+        field = f"learning.adaptive.{name}"
         for value in values:
             yield Case(
                 f"profile field: {field}",
@@ -961,21 +963,6 @@ def _adaptive_cases() -> Iterator[Case]:
                 ),
                 field,
             )
-
-    k = "profile field: learning.adaptive.refresh_max_move"
-    for value in (0, -0.5, "far", float("nan")):
-        yield Case(
-            k,
-            "fly",
-            f"learning.adaptive.refresh_max_move {value!r}",
-            lambda ws, v=value: _fly(
-                ws,
-                profile=ws.profile(
-                    "learning.adaptive.refresh_max_move", v, base="antx-adaptive.yaml"
-                ),
-            ),
-            "learning.adaptive.refresh_max_move",
-        )
 
 
 def _run_cases() -> Iterator[Case]:

@@ -342,6 +342,94 @@ def test_max_move_must_be_positive_and_finite(bad: float) -> None:
         RefreshSettings(max_move=bad)
 
 
+# ------------------------------------------------------------------ min_gain_z
+
+
+def _wander_pairs(seed: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """One pair on the profile's own model (EQ11 is the truth) with a slow wander: every
+    candidate fits noise. Returns du, dy and one flight's noise variance."""
+    du = excitation(300 + seed, 1)
+    v = _ar_series(np.array([1.94, -0.9425]), 1.0, (2, 280), 400 + seed)
+    v *= 0.1 / np.std(v)
+    return du, simulate(EQ11, du.T).T + (v[0] - v[1])[None], 0.01
+
+
+def _same(m1, m2) -> bool:
+    return m1.delay_samples == m2.delay_samples and all(
+        np.array_equal(getattr(m1, k), getattr(m2, k)) for k in "ABC"
+    )
+
+
+def test_a_gain_short_of_min_gain_z_is_refused_and_says_so() -> None:
+    """On a slow wander the plain refresh accepts fits to noise; with ``min_gain_z`` 1.645
+    it accepts only those whose held-out gain is that significant, the same candidates, and
+    says of the others how significant they were."""
+    strict = RefreshSettings(min_snr=0.0, min_gain_z=1.645)
+    plain_n = strict_n = 0
+    for seed in range(16):
+        du, dy, r = _wander_pairs(seed)
+        plain = refresh_model(EQ11, du, dy, r, RefreshSettings(min_snr=0.0), 0.01)
+        res = refresh_model(EQ11, du, dy, r, strict, 0.01)
+        assert np.isnan(plain.gain_z) and "gain_z" not in plain.as_dict()
+        plain_n += plain.accepted
+        strict_n += res.accepted
+        if not plain.accepted:  # no gain, or unstable: the same refusal
+            assert not res.accepted and res.reason == plain.reason
+            continue
+        assert res.as_dict()["gain_z"] == res.gain_z
+        assert res.cv_loss_candidate_m2 == plain.cv_loss_candidate_m2
+        if res.accepted:
+            assert res.gain_z >= 1.645 and res.reason.endswith(f"(z = {res.gain_z:.2f} >= 1.645)")
+            assert _same(res.model, plain.model)
+        else:
+            assert 0 < res.gain_z < 1.645 and res.model is EQ11 and res.moved == 0.0
+            assert (
+                res.reason
+                == f"rejected: explains held-out data better by z = {res.gain_z:.2f}, below 1.645"
+            )  # noqa: E501
+    assert 0 < strict_n < plain_n, (strict_n, plain_n)
+
+
+def test_gain_z_is_the_statistic_of_the_folds_held_out_errors() -> None:
+    """``gain_z`` against the two folds' fits made here: each fold's candidate from
+    :func:`fit_output_error` on alternate 1 s blocks, its errors on the other blocks, and
+    :func:`prediction_loss_z` of the model in use's errors against them (lags up to a block)."""
+    du, dy, r = _wander_pairs(3)
+    settings = RefreshSettings(min_snr=0.0, delay_search=0, min_gain_z=1e-9)
+    res = refresh_model(EQ11, du, dy, r, settings, 0.01)
+    assert np.isfinite(res.gain_z)
+    b, a = transfer_function(EQ11)
+    block = 20  # 1 s at 0.05 s
+    fold = (np.arange(du.shape[1]) // block) % 2
+    held = np.zeros(du.shape[1])
+    for f in (0, 1):
+        mask = np.broadcast_to(fold == f, du.shape)[None]
+        bf, af, _ = fit_output_error(b[None], a[None], 5, du[None], dy[None], mask, 40, True)
+        pred = simulate_tf(bf, af, 5, du[None], True)[0, 0]
+        held = np.where(fold == 1 - f, pred - dy[0], held)
+    current = simulate(EQ11, du.T).T[0] - dy[0]
+    assert res.gain_z == pytest.approx(float(prediction_loss_z(current, held, block)), rel=1e-6)
+
+
+def test_a_large_true_move_clears_min_gain_z() -> None:
+    """A vehicle far from the model in use, a little white noise: the gain is significant
+    and the candidate is the one the plain refresh accepts."""
+    true = loop(2.2, 0.5, 1.3, 0.25)
+    rng = np.random.default_rng(8)
+    du = excitation(6)
+    dy = simulate(true, du.T).T + 0.005 * rng.standard_normal(du.shape)
+    plain = refresh_model(EQ11, du, dy, 2.5e-5, RefreshSettings(), 0.01)
+    strict = refresh_model(EQ11, du, dy, 2.5e-5, RefreshSettings(min_gain_z=1.645), 0.01)
+    assert plain.accepted and strict.accepted and strict.gain_z > 1.645
+    assert _same(strict.model, plain.model) and strict.moved == plain.moved
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf")])
+def test_min_gain_z_must_be_finite_and_not_negative(bad: float) -> None:
+    with pytest.raises(ValueError, match="min_gain_z"):
+        RefreshSettings(min_gain_z=bad)
+
+
 # ------------------------------------------------------------------ prediction_loss_z
 
 

@@ -162,9 +162,15 @@ def test_the_adaptive_batch_refreshes_some_plants_and_reverts_one_alone(plan: St
             assert [r[1] for r in replaced] == [True, True, False, False]
 
 
-def test_the_refresh_limit_holds_alike_batched_and_per_plant(plan: StudyPlan) -> None:
+@pytest.mark.parametrize(
+    "change", [{"refresh_max_move": 0.05}, {"refresh_min_gain_z": 3.0}], ids=lambda c: next(iter(c))
+)
+def test_the_refresh_refusals_hold_alike_batched_and_per_plant(
+    plan: StudyPlan, change: dict
+) -> None:
     """``refresh_max_move``: the plants whose learning converged keep models the limit
-    refuses, in the batch as in a learner per plant."""
+    refuses; ``refresh_min_gain_z``: the plants keep the models whose held-out gain falls
+    short of it (each gain judged); in the batch as in a learner per plant."""
     adaptive = plan.settings[1]
     nominal = adaptive.settings.models
 
@@ -172,14 +178,20 @@ def test_the_refresh_limit_holds_alike_batched_and_per_plant(plan: StudyPlan) ->
         return sum(m is not n for ms in batch.models for m, n in zip(ms, nominal, strict=True))
 
     free, _, _ = _fly_batch(plan, adaptive, batched=True)
-    limited = dataclasses.replace(
-        adaptive, adaptive=dataclasses.replace(adaptive.adaptive, refresh_max_move=0.05)
+    strict = dataclasses.replace(
+        adaptive, adaptive=dataclasses.replace(adaptive.adaptive, **change)
     )
-    batch, flown, _ = _fly_batch(plan, limited, batched=True)
-    each, flown_each, _ = _fly_batch(plan, limited, batched=False)
+    batch, flown, _ = _fly_batch(plan, strict, batched=True)
+    each, flown_each, _ = _fly_batch(plan, strict, batched=False)
     np.testing.assert_allclose(flown, flown_each, rtol=0, atol=1e-9)
     assert batch.failed == each.failed == [None] * plan.plants
-    assert replaced(batch) == replaced(each) < replaced(free)
+    assert replaced(batch) == replaced(each)
+    if "refresh_max_move" in change:
+        assert replaced(batch) < replaced(free)
+    else:
+        axes = [ax for learner in each._each for ax in learner.last.record.axes]
+        assert np.isfinite([ax.refresh.gain_z for ax in axes if ax.refresh]).any()
+        assert replaced(batch) <= replaced(free)
 
 
 def test_a_plant_whose_trial_is_refused_stops_alone(plan: StudyPlan) -> None:

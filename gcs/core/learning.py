@@ -309,6 +309,11 @@ class AdaptiveSettings:
         trial 0), a refresh that moves the model by more than this where learning acts is
         rejected: such a move contradicts the convergence (``max_move`` of
         :class:`gcs.core.refresh.RefreshSettings`); None: no limit.
+    refresh_min_gain_z : float
+        How significant a candidate's held-out gain over the model in use must be for the
+        refresh to accept it, in standard errors (``min_gain_z`` of
+        :class:`gcs.core.refresh.RefreshSettings`): 0 (default), any gain; 1.645, a gain
+        significant at the one-sided 5 % level.
     refresh_takeback : bool
         With ``refresh``: judge a refreshed model by the next trial, which it has not seen:
         the model in use and the profile's each predict the newest trial from the trials
@@ -367,6 +372,7 @@ class AdaptiveSettings:
     refresh_block_s: float = 1.0
     refresh_noise: str = "white"
     refresh_max_move: float | None = None
+    refresh_min_gain_z: float = 0.0
     refresh_takeback: bool = False
     refresh_minmax_step: bool = False
     refresh_holdout: bool = False
@@ -408,6 +414,7 @@ class AdaptiveSettings:
             min_snr=self.refresh_min_snr,
             block_s=self.refresh_block_s,
             max_move=self.refresh_max_move,
+            min_gain_z=self.refresh_min_gain_z,
         )
 
     def safeguard_settings(self) -> SafeguardSettings:

@@ -90,6 +90,12 @@ class RefreshSettings:
         learning with a model converges only where the vehicle is within 100 % of it
         (``|1 - F_true / F| < 1``), so such a move contradicts what was flown (docs/
         learning-floor.md, section 5). None: no limit.
+    min_gain_z : float
+        How significant the candidate's held-out gain must be: the Diebold-Mariano statistic
+        of the model in use's and the candidate's squared errors on the held-out samples
+        (:func:`prediction_loss_z`, lags up to one block) at least this. 0 (default): any
+        gain (a smaller held-out error), which is the statistic above 0; 1.645: a gain
+        significant at the one-sided 5 % level.
     """
 
     min_snr: float = 1.0
@@ -98,6 +104,7 @@ class RefreshSettings:
     stability_margin: float = 0.999
     delay_search: int = 2
     max_move: float | None = None
+    min_gain_z: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.min_snr) and self.min_snr >= 0):
@@ -112,6 +119,8 @@ class RefreshSettings:
             raise ValueError(f"delay_search must be an integer >= 0, got {self.delay_search}")
         if self.max_move is not None and not (np.isfinite(self.max_move) and self.max_move > 0):
             raise ValueError(f"max_move must be > 0 or None, got {self.max_move}")
+        if not (np.isfinite(self.min_gain_z) and self.min_gain_z >= 0):
+            raise ValueError(f"min_gain_z must be finite and >= 0, got {self.min_gain_z}")
 
 
 @dataclass(frozen=True)
@@ -147,6 +156,10 @@ class RefreshResult:
         With the learning's hold-out: how much better the model in use predicted the newest
         trial than the candidate fitted to the trials before it (:func:`prediction_loss_z`;
         below ``-1.645`` the candidate is adopted); NaN when not judged.
+    gain_z : float
+        With ``min_gain_z`` above 0: how significant the candidate's held-out gain over the
+        model in use was (:func:`prediction_loss_z`); NaN when not judged (and then left out
+        of :meth:`as_dict`).
     """
 
     model: DiscreteModel
@@ -160,9 +173,18 @@ class RefreshResult:
     snr: float
     takeback_z: float = float("nan")
     holdout_z: float = float("nan")
+    gain_z: float = float("nan")
 
     def as_dict(self) -> dict:
-        """JSON-ready dictionary (the model as its discrete state space)."""
+        """JSON-ready dictionary (the model as its discrete state space).
+
+        Returns
+        -------
+        dict
+            Every field; ``gain_z`` only where it was judged, so that the records of the
+            default refresh stay as they were.
+        """
+        judged = {} if np.isnan(self.gain_z) else {"gain_z": self.gain_z}
         return {
             "accepted": self.accepted,
             "reason": self.reason,
@@ -174,6 +196,7 @@ class RefreshResult:
             "snr": self.snr,
             "takeback_z": self.takeback_z,
             "holdout_z": self.holdout_z,
+            **judged,
             "model": self.model.as_dict(),
         }
 
@@ -744,6 +767,7 @@ class _Batch:
     cv_candidate: np.ndarray
     pairs: np.ndarray
     snr: np.ndarray
+    gain_z: np.ndarray
 
 
 def _fold_fits_each(
@@ -755,25 +779,30 @@ def _fold_fits_each(
     valid: np.ndarray,
     masks: list[np.ndarray],
     settings: RefreshSettings,
-) -> tuple[list[np.ndarray], Callable[[int], tuple[np.ndarray, np.ndarray]]]:
-    """Cross-validated loss of each delay's candidate (two folds), and the fit on every
-    sample of one delay: one delay and one fold at a time (the batch's many rows)."""
-    cvs = []
+) -> tuple[list[np.ndarray], Callable[[int], tuple[np.ndarray, np.ndarray]], list[np.ndarray]]:
+    """Cross-validated loss of each delay's candidate (two folds), the fit on every sample
+    of one delay, and each delay's held-out errors (M, P, N): one delay and one fold at a time
+    (the batch's many rows)."""
+    cvs, helds = [], []
     for d in delays:
         cv = np.zeros(br.shape[0])
+        err = np.zeros(du.shape)
         for f in (0, 1):
             bf, af, _ = fit_output_error(br, ar, d, du, dy, masks[f], settings.max_iter)
-            held = _sse((simulate_tf(bf, af, d, du) - dy) * masks[1 - f])
+            res = (simulate_tf(bf, af, d, du) - dy) * masks[1 - f]
+            held = _sse(res)
             ok = _stable(af, settings.stability_margin) & np.isfinite(held)
             cv += np.where(ok, held, np.inf)
+            err += res
         cvs.append(cv)
+        helds.append(err)
 
     def full(d: int) -> tuple[np.ndarray, np.ndarray]:
         every = np.broadcast_to(valid, du.shape)
         bd, ad, _ = fit_output_error(br, ar, d, du, dy, every, settings.max_iter)
         return bd, ad
 
-    return cvs, full
+    return cvs, full, helds
 
 
 def _fold_fits(
@@ -785,7 +814,7 @@ def _fold_fits(
     valid: np.ndarray,
     masks: list[np.ndarray],
     settings: RefreshSettings,
-) -> tuple[list[np.ndarray], Callable[[int], tuple[np.ndarray, np.ndarray]]]:
+) -> tuple[list[np.ndarray], Callable[[int], tuple[np.ndarray, np.ndarray]], list[np.ndarray]]:
     """:func:`_fold_fits_each` for a few rows (the learner's one), simulated row by row: every
     delay's and fold's fit in one Levenberg-Marquardt call (a row each, iterated as alone),
     then the fits on every sample of the delays that improve the loss in one more call."""
@@ -798,9 +827,11 @@ def _fold_fits(
     fit_mask = np.concatenate([masks[0], masks[1]] * nd)
     held_mask = np.concatenate([masks[1], masks[0]] * nd)
     bf, af, _ = fit_output_error(b0, a0, row_delay, u, y, fit_mask, settings.max_iter, True)
-    held = _sse((_iir(bf, af, u, row_delay, True) - y) * held_mask)
+    res = (_iir(bf, af, u, row_delay, True) - y) * held_mask
+    held = _sse(res)
     ok = _stable(af, settings.stability_margin) & np.isfinite(held)
     term = np.where(ok, held, np.inf).reshape(nd, 2, m)
+    errs = res.reshape(nd, 2, m, *du.shape[1:]).sum(axis=1)  # the folds' held-out samples
     cvs = []
     for i in range(nd):
         cv = np.zeros(m)
@@ -826,7 +857,7 @@ def _fold_fits(
         )  # fmt: skip
         for i, d in enumerate(wanted):
             fitted[d] = (bd[i * m : (i + 1) * m], ad[i * m : (i + 1) * m])
-    return cvs, fitted.__getitem__
+    return cvs, fitted.__getitem__, list(errs)
 
 
 @_quiet
@@ -888,7 +919,7 @@ def refresh_decision(
     result = _Batch(
         out_b, out_a, np.full(m_rows, delay), np.zeros(m_rows, bool), reason, np.zeros(m_rows),
         nan.copy(), nan.copy(), nan.copy(), use.sum(axis=-1),
-        snr_all[:, -1] if n_pairs else nan.copy(),
+        snr_all[:, -1] if n_pairs else nan.copy(), nan.copy(),
     )  # fmt: skip
     rows = np.flatnonzero(newest)
     if rows.size == 0:
@@ -907,12 +938,14 @@ def refresh_decision(
     bc, ac = br.copy(), ar.copy()
     delays = range(max(0, delay - settings.delay_search), delay + settings.delay_search + 1)
     fits = _fold_fits if rowwise else _fold_fits_each
-    cvs, full = fits(br, ar, list(delays), dur, dyr, valid, masks, settings)
-    for d, cv in zip(delays, cvs, strict=True):
+    cvs, full, helds = fits(br, ar, list(delays), dur, dyr, valid, masks, settings)
+    held_best = np.zeros(dur.shape)
+    for d, cv, held in zip(delays, cvs, helds, strict=True):
         better = cv < best_cv
         if not np.any(better):
             continue
         bd, ad = full(d)
+        held_best = np.where(better[:, None, None], held, held_best)
         best_cv = np.where(better, cv, best_cv)
         best_d = np.where(better, d, best_d)
         bc = np.where(better[:, None], bd, bc)
@@ -928,9 +961,17 @@ def refresh_decision(
     too_far = np.zeros(rows.size, dtype=bool)
     if settings.max_move is not None and converged is not None:
         too_far = np.asarray(converged, dtype=bool)[rows] & (moved_c > settings.max_move)
-    accept = stable & better & ~too_far
+    gain_z = np.full(rows.size, np.nan)
+    if settings.min_gain_z > 0:
+        for i in np.flatnonzero(better):
+            pairs = valid[i, :, 0]  # the informative pairs, back to back
+            current, candidate = res0[i, pairs].ravel(), held_best[i, pairs].ravel()
+            gain_z[i] = prediction_loss_z(current, candidate, block)
+    weak = better & (gain_z < settings.min_gain_z)  # NaN (not judged) is never weak
+    accept = stable & better & ~too_far & ~weak
     result.cv_current[rows] = cv_cur / count
     result.cv_candidate[rows] = best_cv / count
+    result.gain_z[rows] = gain_z
     result.candidate_moved[rows] = moved_c
     result.moved[rows] = np.where(accept, moved_c, 0.0)
     result.accepted[rows] = accept
@@ -942,12 +983,19 @@ def refresh_decision(
         "accepted: explains held-out data better",
         np.where(stable, "rejected: does not explain held-out data better", "rejected: unstable"),
     ).astype(object)
+    for i in np.flatnonzero(stable & weak & ~too_far):
+        why[i] = (
+            f"rejected: explains held-out data better by z = {gain_z[i]:.2f}, below "
+            f"{settings.min_gain_z:g}"
+        )
     for i in np.flatnonzero(stable & better & too_far):
         why[i] = (
             f"rejected: moves the model {100 * moved_c[i]:.0f} % (limit "
             f"{100 * settings.max_move:.0f} %), which the learning's convergence with it "
             "contradicts"
         )
+    for i in np.flatnonzero(accept & np.isfinite(gain_z)):
+        why[i] = f"{why[i]} (z = {gain_z[i]:.2f} >= {settings.min_gain_z:g})"
     result.reason[rows] = why
     return result
 
@@ -1105,5 +1153,6 @@ def refresh_models(
                 cv_loss_candidate_m2=float(dec.cv_candidate[i]),
                 pairs=int(dec.pairs[i]),
                 snr=float(dec.snr[i]),
+                gain_z=float(dec.gain_z[i]),
             )
     return out  # type: ignore[return-value]

@@ -329,6 +329,9 @@ def _adaptive(f: Fields) -> AdaptiveSettings:
             refresh_max_move=None
             if f.raw("refresh_max_move", None) is None
             else f.number("refresh_max_move", positive=True),
+            refresh_min_gain_z=f.number(
+                "refresh_min_gain_z", d.refresh_min_gain_z, rule=Rule(ge=0)
+            ),
             refresh_takeback=flag["refresh_takeback"],
             refresh_minmax_step=flag["refresh_minmax_step"],
             refresh_holdout=flag["refresh_holdout"],
