@@ -779,30 +779,33 @@ def _fold_fits_each(
     valid: np.ndarray,
     masks: list[np.ndarray],
     settings: RefreshSettings,
-) -> tuple[list[np.ndarray], Callable[[int], tuple[np.ndarray, np.ndarray]], list[np.ndarray]]:
+) -> tuple[
+    list[np.ndarray],
+    Callable[[int], tuple[np.ndarray, np.ndarray]],
+    Callable[[int], np.ndarray],
+]:
     """Cross-validated loss of each delay's candidate (two folds), the fit on every sample
-    of one delay, and each delay's held-out errors (M, P, N): one delay and one fold at a time
-    (the batch's many rows)."""
-    cvs, helds = [], []
+    of one delay, and one delay's held-out errors (M, P, N), summed over the folds when asked:
+    one delay and one fold at a time (the batch's many rows)."""
+    cvs, folds = [], {}
     for d in delays:
         cv = np.zeros(br.shape[0])
-        err = np.zeros(du.shape)
+        folds[d] = []
         for f in (0, 1):
             bf, af, _ = fit_output_error(br, ar, d, du, dy, masks[f], settings.max_iter)
             res = (simulate_tf(bf, af, d, du) - dy) * masks[1 - f]
             held = _sse(res)
             ok = _stable(af, settings.stability_margin) & np.isfinite(held)
             cv += np.where(ok, held, np.inf)
-            err += res
+            folds[d].append(res)
         cvs.append(cv)
-        helds.append(err)
 
     def full(d: int) -> tuple[np.ndarray, np.ndarray]:
         every = np.broadcast_to(valid, du.shape)
         bd, ad, _ = fit_output_error(br, ar, d, du, dy, every, settings.max_iter)
         return bd, ad
 
-    return cvs, full, helds
+    return cvs, full, lambda d: folds[d][0] + folds[d][1]
 
 
 def _fold_fits(
@@ -814,7 +817,11 @@ def _fold_fits(
     valid: np.ndarray,
     masks: list[np.ndarray],
     settings: RefreshSettings,
-) -> tuple[list[np.ndarray], Callable[[int], tuple[np.ndarray, np.ndarray]], list[np.ndarray]]:
+) -> tuple[
+    list[np.ndarray],
+    Callable[[int], tuple[np.ndarray, np.ndarray]],
+    Callable[[int], np.ndarray],
+]:
     """:func:`_fold_fits_each` for a few rows (the learner's one), simulated row by row: every
     delay's and fold's fit in one Levenberg-Marquardt call (a row each, iterated as alone),
     then the fits on every sample of the delays that improve the loss in one more call."""
@@ -831,7 +838,7 @@ def _fold_fits(
     held = _sse(res)
     ok = _stable(af, settings.stability_margin) & np.isfinite(held)
     term = np.where(ok, held, np.inf).reshape(nd, 2, m)
-    errs = res.reshape(nd, 2, m, *du.shape[1:]).sum(axis=1)  # the folds' held-out samples
+    per_fold = res.reshape(nd, 2, m, *du.shape[1:])  # a view: summed when a delay is asked
     cvs = []
     for i in range(nd):
         cv = np.zeros(m)
@@ -857,7 +864,7 @@ def _fold_fits(
         )  # fmt: skip
         for i, d in enumerate(wanted):
             fitted[d] = (bd[i * m : (i + 1) * m], ad[i * m : (i + 1) * m])
-    return cvs, fitted.__getitem__, list(errs)
+    return cvs, fitted.__getitem__, lambda d: per_fold[list(delays).index(d)].sum(axis=0)
 
 
 @_quiet
@@ -938,14 +945,12 @@ def refresh_decision(
     bc, ac = br.copy(), ar.copy()
     delays = range(max(0, delay - settings.delay_search), delay + settings.delay_search + 1)
     fits = _fold_fits if rowwise else _fold_fits_each
-    cvs, full, helds = fits(br, ar, list(delays), dur, dyr, valid, masks, settings)
-    held_best = np.zeros(dur.shape)
-    for d, cv, held in zip(delays, cvs, helds, strict=True):
+    cvs, full, held_errors = fits(br, ar, list(delays), dur, dyr, valid, masks, settings)
+    for d, cv in zip(delays, cvs, strict=True):
         better = cv < best_cv
         if not np.any(better):
             continue
         bd, ad = full(d)
-        held_best = np.where(better[:, None, None], held, held_best)
         best_cv = np.where(better, cv, best_cv)
         best_d = np.where(better, d, best_d)
         bc = np.where(better[:, None], bd, bc)
@@ -962,11 +967,12 @@ def refresh_decision(
     if settings.max_move is not None and converged is not None:
         too_far = np.asarray(converged, dtype=bool)[rows] & (moved_c > settings.max_move)
     gain_z = np.full(rows.size, np.nan)
-    if settings.min_gain_z > 0:
+    if settings.min_gain_z > 0:  # the chosen delay's held-out errors, each delay summed once
+        held = {d: held_errors(d) for d in {int(best_d[i]) for i in np.flatnonzero(better)}}
         for i in np.flatnonzero(better):
             pairs = valid[i, :, 0]  # the informative pairs, back to back
-            current, candidate = res0[i, pairs].ravel(), held_best[i, pairs].ravel()
-            gain_z[i] = prediction_loss_z(current, candidate, block)
+            candidate = held[int(best_d[i])][i, pairs].ravel()
+            gain_z[i] = prediction_loss_z(res0[i, pairs].ravel(), candidate, block)
     weak = better & (gain_z < settings.min_gain_z)  # NaN (not judged) is never weak
     accept = stable & better & ~too_far & ~weak
     result.cv_current[rows] = cv_cur / count
