@@ -948,6 +948,7 @@ def _adaptive_cases() -> Iterator[Case]:
     fields = (
         ("refresh_takeback", ("yes", 1)), ("refresh_minmax_step", ("on", 0)),
         ("refresh_holdout", ("true", 1)), ("refresh_pool_repeats", ("no", 0)),
+        ("refresh_anchor", ("yes", 1)),
         ("refresh_max_move", (0, -0.5, "far", float("nan"))),
         ("refresh_min_gain_z", (-1.645, "strict", float("inf"))),
     )  # fmt: skip

@@ -1,5 +1,6 @@
 """Tests of the refresh's pairs against the mean of flights of identical setpoints (the
-learning's ``refresh_pool_repeats`` option; the pairs themselves: tests/test_refresh.py)."""
+learning's ``refresh_pool_repeats`` option) and against trial 0's flights (``refresh_anchor``;
+the pairs themselves: tests/test_refresh.py)."""
 
 from __future__ import annotations
 
@@ -8,10 +9,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_learning_takeback import BACK, PROFILE, REF, SETTINGS, N, history
+from test_learning_takeback import BACK, PROFILE, REF, SETTINGS, N, history, scaled
 
 from gcs.core.learning import refresh_axes
 from gcs.core.model import simulate
+from gcs.core.refresh import model_change, transfer_function
 
 POOL = replace(BACK, refresh_takeback=False, refresh_pool_repeats=True)
 PLAIN = replace(POOL, refresh_pool_repeats=False)
@@ -63,3 +65,56 @@ def test_pooling_the_repeats_fits_less_of_the_noise() -> None:
             result = refresh_axes(SETTINGS, mode, [SETTINGS.models[0]], u, y, [None], 0)[0]
             moved[mode.refresh_pool_repeats].append(result.candidate_moved)
     assert np.median(moved[True]) < np.median(moved[False]), moved
+
+
+ANCHOR = replace(POOL, refresh_anchor=True)
+
+
+def _converging_history(seed: int, plant, noise_m: float = 0.05):  # noqa: ANN001
+    """Trial 0 flown four times, a large change (j = 1), then two small ones near the floor
+    (j = 2, 3: a tenth of it each), by ``plant`` with white noise."""
+    rng = np.random.default_rng(seed)
+    yd = REF[1:, 0] - REF[0, 0]
+    change = np.convolve(rng.standard_normal(N + 9), np.ones(10) / 10, "valid")
+    change *= 0.3 / np.std(change)
+    small = [np.convolve(rng.standard_normal(N + 9), np.ones(10) / 10, "valid") for _ in range(2)]
+    u = [yd] * 4 + [yd + change]
+    for s in small:
+        u.append(u[-1] + 0.03 * s / np.std(s))
+    u = np.array(u)
+    y = np.array([simulate(plant, x) for x in u]) + noise_m * rng.standard_normal((len(u), N))
+    return u[None], y[None]
+
+
+def test_against_the_anchor_the_newest_pair_keeps_the_whole_change() -> None:
+    """Near the floor a consecutive pair's input change is the small step, the anchor's the
+    whole way from trial 0: its predicted change, and so its signal-to-noise ratio against
+    the same floor, is far above the pooled consecutive pair's."""
+    u, y = _converging_history(21, SETTINGS.models[0])
+    on = refresh_axes(SETTINGS, ANCHOR, [SETTINGS.models[0]], u, y, [None], 0)[0]
+    off = refresh_axes(SETTINGS, POOL, [SETTINGS.models[0]], u, y, [None], 0)[0]
+    assert on.pairs == 3 and on.snr > 10 * off.snr, (on.snr, off.snr)
+
+
+def test_against_the_anchor_a_converged_history_still_corrects_the_model() -> None:
+    """The vehicle has 1.5 times the profile's gain (the profile 33 % off where learning
+    acts). From four flights of trial 0, j = 1 and two small steps, over 20 seeds: the
+    consecutive pairs' newest is within the noise, so the refresh is not attempted and the
+    profile's model stays; against the anchor every pair is informative and the refreshed
+    model comes to within a quarter of the vehicle (median; its distance computed here from
+    the two transfer functions)."""
+    truth = scaled(SETTINGS.models[0], 1.5)
+    bt, at = transfer_function(truth)
+    band = SETTINGS.weights.wdu / SETTINGS.weights.we
+    off: dict[bool, list[float]] = {False: [], True: []}
+    for seed in range(20):
+        u, y = _converging_history(seed, truth)
+        for mode in (POOL, ANCHOR):
+            result = refresh_axes(SETTINGS, mode, [SETTINGS.models[0]], u, y, [None], 0)[0]
+            b, a = transfer_function(result.model)
+            off[mode.refresh_anchor].append(float(model_change(
+                bt, at, b, a, truth.delay_samples, truth.dt_s, band, result.model.delay_samples
+            )[0]))  # fmt: skip
+            if not mode.refresh_anchor:
+                assert result.model is SETTINGS.models[0] and not result.accepted
+    assert min(off[False]) > 0.3 and np.median(off[True]) < 0.25, off

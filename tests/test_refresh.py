@@ -14,6 +14,7 @@ from gcs.core.model import from_transfer_function, markov_parameters, simulate
 from gcs.core.refresh import (
     ArNoise,
     RefreshSettings,
+    anchor_pairs,
     fit_ar_noise,
     fit_output_error,
     model_change,
@@ -542,3 +543,39 @@ def test_pooled_pairs_keep_the_model_and_carry_two_flights_noise(n_a, n_b, seed)
     r = 0.04
     _, noisy = pooled_pairs(u, clean + np.sqrt(r) * rng.standard_normal(clean.shape), _moved(u))
     assert np.var(noisy[0, t] - dy[0, t]) == pytest.approx(2 * r, rel=0.05)
+
+
+def test_anchor_pairs_compare_every_group_with_trial_0s_flights() -> None:
+    """Trials 0-3 identical, then 4, then 5 twice: the pairs (0-3 | 4) and (0-3 | 5, 6), each
+    the difference of the groups' means times sqrt(2 / (1/n_0 + 1/n_b)), computed here from
+    the groups directly; the first is the pooled pair."""
+    rng = np.random.default_rng(5)
+    base, step, step2 = rng.standard_normal((3, 30))
+    u = np.array([base] * 4 + [base + step] + [base + step + step2] * 2)[None]
+    y = rng.standard_normal((1, 7, 30))
+    du, dy = anchor_pairs(u, y, _moved(u))
+    anchor = y[0, :4].mean(axis=0)
+    c1, c2 = np.sqrt(2 / (1 / 4 + 1)), np.sqrt(2 / (1 / 4 + 1 / 2))
+    np.testing.assert_allclose(du[0, 3], c1 * step, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(dy[0, 3], c1 * (y[0, 4] - anchor), rtol=1e-13)
+    np.testing.assert_allclose(du[0, 4], c2 * (step + step2), rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(dy[0, 4], c2 * (y[0, 5:].mean(axis=0) - anchor), rtol=1e-13)
+    assert not np.any(du[0, [0, 1, 2, 5]]) and not np.any(dy[0, [0, 1, 2, 5]])
+    pooled = pooled_pairs(u, y, _moved(u))
+    assert np.array_equal(du[0, 3], pooled[0][0, 3]) and np.array_equal(dy[0, 3], pooled[1][0, 3])
+
+
+@given(st.lists(st.integers(1, 3), min_size=2, max_size=5), st.integers(0, 10_000))
+@settings(max_examples=25, deadline=None)
+def test_anchor_pairs_keep_the_model_for_any_groups(sizes: list[int], seed: int) -> None:
+    """Groups of 1-3 flights of random setpoints, a linear plant and a repeatable disturbance:
+    every noiseless anchor pair obeys the model exactly (``c dy = F (c du)``)."""
+    rng = np.random.default_rng(seed)
+    inputs = rng.standard_normal((len(sizes), 60)) * 0.1
+    u = np.array([x for x, n in zip(inputs, sizes, strict=True) for _ in range(n)])[None]
+    d = rng.standard_normal(60)
+    y = np.array([simulate(EQ11, x[:, None])[:, 0] + d for x in u[0]])[None]
+    moved = _moved(u)
+    du, dy = anchor_pairs(u, y, moved)
+    for t in np.flatnonzero(moved[0]):
+        np.testing.assert_allclose(dy[0, t], simulate(EQ11, du[0, t][:, None])[:, 0], atol=1e-12)

@@ -222,19 +222,26 @@ def _decided(learner, option: str) -> list[float]:  # noqa: ANN001
         return [ax.refresh.takeback_z for ax in axes]
     if option == "refresh_holdout":
         return [ax.refresh.holdout_z for ax in axes]
-    if option == "refresh_pool_repeats":
+    if option in ("refresh_pool_repeats", "refresh_anchor"):
         return [ax.refresh.snr if ax.refresh else float("nan") for ax in axes]
     return [ax.minmax_step for ax in axes]
 
 
 @pytest.mark.parametrize(
     "option",
-    ["refresh_takeback", "refresh_minmax_step", "refresh_holdout", "refresh_pool_repeats"],
+    [
+        "refresh_takeback",
+        "refresh_minmax_step",
+        "refresh_holdout",
+        "refresh_pool_repeats",
+        "refresh_anchor",
+    ],
 )
 def test_the_refresh_options_hold_alike_batched_and_per_plant(plan: StudyPlan, option: str) -> None:
     """``refresh_takeback``: the same plants go back to the nominal model, at the same step;
     ``refresh_minmax_step``: the same fractions of the same updates; ``refresh_holdout``: the
-    same candidates adopted or not; ``refresh_pool_repeats``: the same pooled pairs; in the
+    same candidates adopted or not; ``refresh_pool_repeats``, ``refresh_anchor``: the same
+    pooled pairs; in the
     batch as in a learner per plant. Each option acts on some plant: refreshed models judged,
     steps cut, pairs weighed."""
     adaptive = plan.settings[1]
@@ -246,7 +253,7 @@ def test_the_refresh_options_hold_alike_batched_and_per_plant(plan: StudyPlan, o
     np.testing.assert_allclose(flown, flown_each, rtol=0, atol=1e-9)
     assert batch.failed == each.failed == [None] * plan.plants
     decided = [x for learner in each._each for x in _decided(learner, option)]
-    if option in ("refresh_takeback", "refresh_holdout", "refresh_pool_repeats"):
+    if option in ("refresh_takeback", "refresh_holdout", "refresh_pool_repeats", "refresh_anchor"):
         assert np.isfinite(decided).any()  # refreshed models were judged, pairs weighed
     else:
         assert all(0.0 <= f <= 1.0 for f in decided) and min(decided) < 0.9

@@ -49,6 +49,7 @@ from gcs.core.refresh import (
     ArNoise,
     RefreshResult,
     RefreshSettings,
+    anchor_pairs,
     fit_ar_noise,
     model_change,
     pooled_pairs,
@@ -340,6 +341,12 @@ class AdaptiveSettings:
         repeats), a pair compares the mean of those flights, not the last of them, with the
         next setpoints' (:func:`gcs.core.refresh.pooled_pairs`): the first refresh after
         ``repeats: 3`` sees the noise ``1.25 r`` instead of ``2 r``.
+    refresh_anchor : bool
+        With ``refresh``: every pair compares a group of identical setpoints with the first
+        (trial 0 and its repeats, their mean), not with the group before it
+        (:func:`gcs.core.refresh.anchor_pairs`): each pair carries the whole input change
+        from trial 0, large when the steps near the floor are small. Pools the repeats as
+        ``refresh_pool_repeats`` does; the first pair is the same.
     refresh_noise : str
         The non-repeatable error the refresh assumes: ``"white"``, of the floor's variance;
         ``"measured"``, an autoregressive model of it fitted to the flights of identical
@@ -377,6 +384,7 @@ class AdaptiveSettings:
     refresh_minmax_step: bool = False
     refresh_holdout: bool = False
     refresh_pool_repeats: bool = False
+    refresh_anchor: bool = False
     robustness_cutoff_rad_s: float | str | None = None
     robustness_order: int = 2
     safeguard: bool = False
@@ -757,7 +765,9 @@ def refresh_axes(
     else:  # one trial: no pair, so refresh_models never reads the variance
         r_m2 = np.ones(n_plants)
     moved = np.max(np.abs(du), axis=2) > IDENTICAL_TOL_M  # (K, T-1): repeats left out
-    if adaptive.refresh_pool_repeats:
+    if adaptive.refresh_anchor:
+        du, dy = anchor_pairs(u[:, :fit], y[:, :fit], moved)
+    elif adaptive.refresh_pool_repeats:
         du, dy = pooled_pairs(u[:, :fit], y[:, :fit], moved)
     for pattern in np.unique(moved[todo], axis=0):  # the plants whose pairs moved alike
         rows = todo[np.all(moved[todo] == pattern, axis=1)]

@@ -62,6 +62,7 @@ __all__ = [
     "fit_ar_noise",
     "prediction_loss_z",
     "pooled_pairs",
+    "anchor_pairs",
 ]
 
 
@@ -625,6 +626,16 @@ def _freq(b: np.ndarray, a: np.ndarray, delay: int, omega: np.ndarray, dt_s: flo
     return (b @ powers) / (1.0 + a @ powers) * zinv**delay
 
 
+def _group_means(y: np.ndarray, moved: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each trial's group of consecutive identical setpoints (T,), the groups' sizes and their
+    mean outputs (G, N), of one plant."""
+    group = np.concatenate(([0], np.cumsum(moved)))
+    count = np.bincount(group).astype(float)
+    mean_y = np.zeros((count.size, y.shape[1]))
+    np.add.at(mean_y, group, y)
+    return group, count, mean_y / count[:, None]
+
+
 def pooled_pairs(
     u_m: np.ndarray, y_m: np.ndarray, moved: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -652,21 +663,54 @@ def pooled_pairs(
         At every ``t`` where ``moved``: the scaled change from the group ending at trial ``t``
         to the group starting at ``t + 1`` (input, output) [m]; zero elsewhere.
     """
+    return _group_pairs(u_m, y_m, moved, anchor=False)
+
+
+def anchor_pairs(
+    u_m: np.ndarray, y_m: np.ndarray, moved: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of every group of identical setpoints against the first group (the anchor).
+
+    As :func:`pooled_pairs`, but where the setpoints change the group starting there is
+    compared with the first group (trial 0 and its repeats), not with the group before it:
+    every pair sees the whole input change from trial 0, ``u_(t+1) - u_0``, which stays large
+    once learning has converged, where a consecutive pair's change shrinks to the steps near
+    the floor and its output change to the noise. The pairs share the anchor's mean, so their
+    noises are correlated by ``(1/n_0) / (1/n_0 + 1/n_b)`` (a fifth for four flights of
+    trial 0 against one); the fit takes them as independent. Scaled by ``c = sqrt(2 / (1/n_0
+    + 1/n_b))`` as :func:`pooled_pairs` (the first pair is the same).
+
+    Parameters
+    ----------
+    u_m, y_m : ndarray, shape (K, T, N)
+        Setpoints and positions of every trial of K plants, oldest first [m].
+    moved : ndarray of bool, shape (K, T-1)
+        Whether trial ``t + 1``'s setpoints differ from trial ``t``'s.
+
+    Returns
+    -------
+    du_m, dy_m : ndarray, shape (K, T-1, N)
+        At every ``t`` where ``moved``: the scaled change from the first group to the group
+        starting at ``t + 1`` (input, output) [m]; zero elsewhere.
+    """
+    return _group_pairs(u_m, y_m, moved, anchor=True)
+
+
+def _group_pairs(
+    u_m: np.ndarray, y_m: np.ndarray, moved: np.ndarray, anchor: bool
+) -> tuple[np.ndarray, np.ndarray]:
     u = np.asarray(u_m, dtype=float)
     y = np.asarray(y_m, dtype=float)
     moved = np.asarray(moved, dtype=bool)
     du = np.zeros((u.shape[0], u.shape[1] - 1, u.shape[2]))
     dy = np.zeros_like(du)
     for k in range(u.shape[0]):
-        group = np.concatenate(([0], np.cumsum(moved[k])))  # (T,): each trial's group
-        count = np.bincount(group).astype(float)
-        mean_y = np.zeros((count.size, y.shape[2]))
-        np.add.at(mean_y, group, y[k])
-        mean_y /= count[:, None]
+        group, count, mean_y = _group_means(y[k], moved[k])
         for t in np.flatnonzero(moved[k]):
-            a, b = group[t], group[t + 1]
+            a, b = (0, group[t + 1]) if anchor else (group[t], group[t + 1])
+            first = 0 if anchor else t  # any trial of group a: they share their setpoints
             c = np.sqrt(2.0 / (1.0 / count[a] + 1.0 / count[b]))
-            du[k, t] = c * (u[k, t + 1] - u[k, t])
+            du[k, t] = c * (u[k, t + 1] - u[k, first])
             dy[k, t] = c * (mean_y[b] - mean_y[a])
     return du, dy
 

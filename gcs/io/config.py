@@ -313,7 +313,7 @@ def _adaptive(f: Fields) -> AdaptiveSettings:
     d = AdaptiveSettings()
     flags = (
         "drift_offset", "refresh", "refresh_takeback", "refresh_minmax_step", "refresh_holdout",
-        "refresh_pool_repeats", "safeguard",
+        "refresh_pool_repeats", "refresh_anchor", "safeguard",
     )  # fmt: skip
     flag = {k: f.value(k, bool, getattr(d, k)) for k in flags}
     cutoff = f.raw("robustness_cutoff_rad_s", None)
@@ -336,6 +336,7 @@ def _adaptive(f: Fields) -> AdaptiveSettings:
             refresh_minmax_step=flag["refresh_minmax_step"],
             refresh_holdout=flag["refresh_holdout"],
             refresh_pool_repeats=flag["refresh_pool_repeats"],
+            refresh_anchor=flag["refresh_anchor"],
             robustness_cutoff_rad_s=cutoff
             if cutoff is None or cutoff == "auto"
             else f.number("robustness_cutoff_rad_s", positive=True),

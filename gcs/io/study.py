@@ -55,6 +55,7 @@ SETTING_KEYS: dict[str, tuple[str, ...]] = {
     "refresh_minmax_step": ("learning", "adaptive", "refresh_minmax_step"),
     "refresh_holdout": ("learning", "adaptive", "refresh_holdout"),
     "refresh_pool_repeats": ("learning", "adaptive", "refresh_pool_repeats"),
+    "refresh_anchor": ("learning", "adaptive", "refresh_anchor"),
     "refresh_min_gain_z": ("learning", "adaptive", "refresh_min_gain_z"),
     "robustness_cutoff_rad_s": ("learning", "adaptive", "robustness_cutoff_rad_s"),
     "safeguard": ("learning", "adaptive", "safeguard"),
