@@ -56,12 +56,18 @@ def flown_trials(run: RunDir) -> list[Trial]:
 
 
 def learn_again(run: RunDir, trials: list[Trial], option: str, on: bool) -> list[dict]:
-    """One row per learning step that plans a flown trial, with ``option`` of the run's
-    ``learning.adaptive`` set to ``on``: its judgements and the RMS error of its prediction of
-    that trial per axis [m]."""
-    profile = run.profile()
+    """:func:`relearn` with ``option`` of the run's ``learning.adaptive`` set to ``on``
+    (``refresh_min_gain_z``: 1.645 and 0)."""
     value = (TAKEBACK_Z if on else 0.0) if option == "refresh_min_gain_z" else on
-    adaptive = dataclasses.replace(profile.learning.adaptive, **{option: value})
+    return relearn(run, trials, {option: value})
+
+
+def relearn(run: RunDir, trials: list[Trial], changes: dict) -> list[dict]:
+    """One row per learning step that plans a flown trial, with ``changes`` to the run's
+    ``learning.adaptive``: its judgements, the models it planned the trial with and the RMS
+    error of its prediction of that trial per axis [m]."""
+    profile = run.profile()
+    adaptive = dataclasses.replace(profile.learning.adaptive, **changes)
     ref = run.reference().pos_ned_m[:, :2]
     learner = Learner(
         learner_settings(profile, run.algorithm), ref, adaptive, profile.learning.repeats
@@ -96,7 +102,7 @@ def learn_again(run: RunDir, trials: list[Trial], option: str, on: bool) -> list
             for ax in step.record.axes
         ]
         rows.append({"trial": t, "predicts": t + 1, "errors_m": errors, "judged": judged,
-                     "d_hat_m": step.d_hat_m})  # fmt: skip
+                     "d_hat_m": step.d_hat_m, "models": tuple(step.models)})  # fmt: skip
     return rows
 
 
@@ -116,7 +122,7 @@ def replay_run(path: Path, option: str = "refresh_takeback") -> dict | None:
                 recorded = run.read_estimate(row["trial"])[0][:, :2]
                 diff = max(diff, float(np.max(np.abs(row["d_hat_m"] - recorded))))
     for row in off + on:
-        del row["d_hat_m"]
+        del row["d_hat_m"], row["models"]
     return {"run": str(path), "trials": len(trials), "off": off, "on": on, "recorded_diff_m": diff}
 
 
@@ -177,7 +183,7 @@ def main() -> None:
         "--option",
         default="refresh_takeback",
         choices=("refresh_takeback", "refresh_minmax_step", "refresh_holdout",
-                 "refresh_pool_repeats", "refresh_min_gain_z"),
+                 "refresh_pool_repeats", "refresh_anchor", "refresh_min_gain_z"),
         help="the learning.adaptive option learnt again off and on (refresh_min_gain_z: 0 "
         "and 1.645)",
     )  # fmt: skip
