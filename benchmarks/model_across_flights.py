@@ -190,6 +190,15 @@ def held_out_m(model: DiscreteModel | None, others: list[Flight], axis: int) -> 
     return float(np.median([np.median(errors_m(model, f, axis)) for f in others]))
 
 
+def memo_held_out_m(
+    model: DiscreteModel, others: list[Flight], axis: int, known: dict[int, float]
+) -> float:
+    """:func:`held_out_m`, each model object scored once (``known``: by ``id``)."""
+    if id(model) not in known:
+        known[id(model)] = held_out_m(model, others, axis)
+    return known[id(model)]
+
+
 def pooled(flights: list[Flight], axis: int, start: DiscreteModel) -> DiscreteModel | None:
     du = np.concatenate([anchor_pairs(f)[0][..., axis] for f in flights])
     dy = np.concatenate([anchor_pairs(f)[1][..., axis] for f in flights])
@@ -225,6 +234,9 @@ def study(flights: list[Flight]) -> dict:
                     "decisions": {}}  # fmt: skip
         for h, own in enumerate(halves):
             others = halves[1 - h]
+            # a model's score by its identity: a run's models are shared by the trials they
+            # planned and the decisions that made them
+            known: dict[int, float] = {}
             model = pooled(own, axis, start)
             ax["halves"].append({
                 "model": describe(model),
@@ -245,7 +257,7 @@ def study(flights: list[Flight]) -> dict:
             for f in own:
                 for t, models in f.planned_by.items():
                     m = models[axis]
-                    score = held_out_m(m, others, axis)
+                    score = memo_held_out_m(m, others, axis, known)
                     same = same_model(m, f.profile_models[axis])
                     ax["used"]["profile" if same else "refreshed"].append(score)
                     held[(f.name, t, axis)] = score
@@ -257,7 +269,9 @@ def study(flights: list[Flight]) -> dict:
                         )  # fmt: skip
                 for _, a, kind, moved, before, after in f.decisions:
                     if a == axis:
-                        change = held_out_m(after, others, axis) - held_out_m(before, others, axis)
+                        change = memo_held_out_m(after, others, axis, known) - memo_held_out_m(
+                            before, others, axis, known
+                        )
                         ax["decisions"].setdefault(kind, []).append((change, moved))
         out["axes"][name] = ax
     out["trials"] = [

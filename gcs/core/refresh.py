@@ -626,16 +626,6 @@ def _freq(b: np.ndarray, a: np.ndarray, delay: int, omega: np.ndarray, dt_s: flo
     return (b @ powers) / (1.0 + a @ powers) * zinv**delay
 
 
-def _group_means(y: np.ndarray, moved: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each trial's group of consecutive identical setpoints (T,), the groups' sizes and their
-    mean outputs (G, N), of one plant."""
-    group = np.concatenate(([0], np.cumsum(moved)))
-    count = np.bincount(group).astype(float)
-    mean_y = np.zeros((count.size, y.shape[1]))
-    np.add.at(mean_y, group, y)
-    return group, count, mean_y / count[:, None]
-
-
 def pooled_pairs(
     u_m: np.ndarray, y_m: np.ndarray, moved: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -705,7 +695,11 @@ def _group_pairs(
     du = np.zeros((u.shape[0], u.shape[1] - 1, u.shape[2]))
     dy = np.zeros_like(du)
     for k in range(u.shape[0]):
-        group, count, mean_y = _group_means(y[k], moved[k])
+        group = np.concatenate(([0], np.cumsum(moved[k])))  # (T,): each trial's group
+        count = np.bincount(group).astype(float)
+        mean_y = np.zeros((count.size, y.shape[2]))
+        np.add.at(mean_y, group, y[k])
+        mean_y /= count[:, None]
         for t in np.flatnonzero(moved[k]):
             a, b = (0, group[t + 1]) if anchor else (group[t], group[t + 1])
             first = 0 if anchor else t  # any trial of group a: they share their setpoints
