@@ -209,11 +209,13 @@ def test_random_eights_phase_is_monotone_and_makes_whole_loops(shape):
     assert np.all(sd <= 2 * np.pi / shape.period_s + 1e-12)
     assert s[0] == 0.0
     assert s[-1] == pytest.approx(2 * np.pi * shape.loops, rel=1e-12)
-    # rate is the derivative of the phase (trapezoid integration of sd); with ramp_s = 0 the
-    # rate jumps by 2 pi / period at the start and at the end of the loops, and a trapezoid
-    # across each jump is off by at most half the jump times the step
+    # rate is the derivative of the phase (trapezoid integration of sd); with a ramp shorter
+    # than the step (ramp_s = 0, or hypothesis's 5e-324) the rate jumps by 2 pi / period at the
+    # start and at the end of the loops, and a trapezoid across each jump is off by at most
+    # half the jump times the step
     integral = np.concatenate([[0.0], np.cumsum(0.5 * (sd[1:] + sd[:-1]) * np.diff(t))])
-    jumps = 2 * np.pi / shape.period_s * (t[1] - t[0]) if shape.ramp_s == 0.0 else 0.0
+    step = t[1] - t[0]
+    jumps = 2 * np.pi / shape.period_s * step if shape.ramp_s < step else 0.0
     np.testing.assert_allclose(s, integral, atol=1e-3 * (1 + s[-1]) + jumps)
 
 
