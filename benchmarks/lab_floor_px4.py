@@ -15,8 +15,10 @@ safeguard's decisions, from the run's records.
 Points are given (``--point RATE:LATENCY:NOISE:HEADING:MATCH[:MASS:DRAG]``; ``--point
 gps``: PX4's default airframe on GPS, no rig) or drawn across the ranges with a seed (``--draw
 K --seed S``, ``--vehicle`` for the mass and drag too: printed, so any run can be flown
-again). A profile ``NAME+a.b=VALUE`` sets a field of
-the shipped one (``antx-adaptive+learning.adaptive.repeats=3``). Run directories are kept
+again). Flights of the same point replay each other on a quiet machine (the rig's marker noise
+and PX4's own from every start are the same): ``--round K`` gives them an opening of their own,
+the rig's noise seeded K and a ground wait drawn from K. A profile ``NAME+a.b=VALUE`` sets a
+field of the shipped one (``antx-adaptive+learning.adaptive.repeats=3``). Run directories are kept
 under ``--out``: a run there is resumed for the trials it lacks, or with ``--again K``
 resumed flying trial K's setpoints again (the same setpoints twice: their floor); with
 ``--then-again K,K,...`` each flight is followed, on the same PX4 not restarted, by one flight
@@ -120,6 +122,22 @@ def draw_points(count: int, seed: int, vehicle: bool = False) -> list[LabConditi
     return points
 
 
+#: Longest ground wait [s] a round draws. PX4 seeds its random numbers with a constant at start,
+#: so SIH's sensor noise is the same sequence from every start, drawn step by step of the
+#: simulation: flown on a quiet machine, a round with the same rig seed replays an earlier one
+#: (docs/learning-floor.md, "The vehicle's model across flights"). A wait on the ground starts
+#: the flight at another point of that sequence.
+ROUND_WAIT_S = 5.0
+
+
+def round_wait_s(k: int) -> float:
+    """The ground wait [s] of round ``k``: uniform in [0, :data:`ROUND_WAIT_S`) drawn from
+    ``k``, to 10 ms; 0 for round 0 (the rounds flown before there were rounds)."""
+    if k == 0:
+        return 0.0
+    return round(float(np.random.default_rng([k, 2]).uniform(0.0, ROUND_WAIT_S)), 2)
+
+
 def name_of(point: LabConditions | None, profile: str, trajectory: Path | None = None) -> str:
     if point is GPS:
         return f"{profile}-gps" + (f"-t{trajectory.stem}" if trajectory else "")
@@ -131,6 +149,8 @@ def name_of(point: LabConditions | None, profile: str, trajectory: Path | None =
         name += f"-kg{point.mass_kg or 1:g}-kdv{point.drag_n_s_m or 1:g}"
     if point.evp_noise_m is not None:
         name += f"-evp{point.evp_noise_m:g}"
+    if point.marker_seed:
+        name += f"-k{point.marker_seed}"
     return name + (f"-t{trajectory.stem}" if trajectory else "")
 
 
@@ -388,6 +408,13 @@ def main() -> None:
         help="seconds PX4 waits on the ground after it has started, before the first flight",
     )
     parser.add_argument(
+        "--round",
+        type=int,
+        default=0,
+        help="an opening of its own: the rig's marker noise seeded K and a ground wait drawn "
+        "from K added to --boot-wait (0: seed 0, no wait, as before)",
+    )
+    parser.add_argument(
         "--identify",
         action="store_true",
         help="identify each new run's vehicle first (gcs identify) and fly the identified profile",
@@ -404,6 +431,9 @@ def main() -> None:
                 p if p is GPS else dataclasses.replace(p, evp_noise_m=args.evp_noise)
                 for p in points
             ]
+        points = [p if p is GPS else dataclasses.replace(p, marker_seed=args.round) for p in points]
+        boot_wait_s = args.boot_wait + round_wait_s(args.round)
+        print(f"round {args.round}: marker seed {args.round}, ground wait {boot_wait_s:g} s")
         for p in points:
             print("point", json.dumps("gps" if p is GPS else p.__dict__), flush=True)
         build = Px4Build(build_dir()[0])
@@ -423,7 +453,7 @@ def main() -> None:
                         args.identify,
                         tuple(int(k) for k in args.then_again.split(",") if k),
                         args.warm,
-                        args.boot_wait,
+                        boot_wait_s,
                     ),
                     plan,
                 )

@@ -88,6 +88,9 @@ class LabConditions:
         What PX4 is told of the mocap's position noise [m] (``EKF2_EVP_NOISE``: EKF2 weighs a
         vision position as at least this noisy, whatever the message's covariance says);
         None keeps PX4's 0.1 m.
+    marker_seed : int
+        Seed of the rig's marker noise (``--seed``): flights of the same seed draw the same
+        noise, frame by frame.
     """
 
     rate_hz: float = 120.0
@@ -98,12 +101,14 @@ class LabConditions:
     mass_kg: float | None = None
     drag_n_s_m: float | None = None
     evp_noise_m: float | None = None
+    marker_seed: int = 0
 
     def rig_args(self) -> list[str]:
         """The rig's options (:func:`px4.lab_rig.rig_command`) for these conditions."""
         return [
             "--rate", f"{self.rate_hz:g}", "--latency-ms", f"{self.latency_ms:g}",
             "--noise-mm", f"{self.noise_mm:g}", "--yaw-offset-deg", f"{self.yaw_offset_deg:g}",
+            "--seed", str(self.marker_seed),
         ]  # fmt: skip
 
     def px4_params(self, **overrides: float) -> dict[str, float]:
