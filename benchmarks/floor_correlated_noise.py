@@ -20,38 +20,21 @@ The floor of a line is the non-repeatable error's own e_pos, ``sigma sqrt(pi / 2
 expected mean distance of a 2-D Gaussian error with that standard deviation per axis), the
 same for both profiles and every correlation; ``est`` is the floor the adaptive learner
 estimated from trial 0 and its repeats, in the same units. After ``|``: per learning step,
-the refresh's accepted model moves [%] north/east (``-`` kept), ``R`` when the safeguard fell
-back. ``--refresh-noise white,measured`` flies the adaptive profile once per choice of
-``learning.adaptive.refresh_noise`` (the same seeds, so the same wander), and the summary adds,
-per choice, the accepted moves and the model's error after the last refresh,
+the refresh's accepted model moves [%] north/east (``-`` kept, ``B`` taken back), ``R`` when
+the safeguard fell back.
+
+``--vary FIELD=V1,V2`` flies the adaptive profile once per value of its
+``learning.adaptive.FIELD`` (YAML scalars: ``refresh_takeback=false,true``,
+``refresh_min_gain_z=0,1.645``, ``refresh_noise=white,measured``); given several times, once
+per combination. Every variant flies the same seeds, so the same wander. The summary adds, per
+variant, the refresh's accepted moves and those taken back, the steps the minmax bound cut,
+the refreshes not adopted (``refresh_holdout``) and the model's error after the last refresh,
 ``max |F / F_true - 1|`` over the learning band of the true plant (the quantity that decides
 convergence), largest over the two axes.
 
 ``--latency L`` [s] delays what the learner measures by ``L`` (rounded to samples): a lab's
 motion-to-frame latency that the model does not hold (the refresh may find it: it searches the
 model's delay within +-2 samples).
-
-``--refresh-max-move M`` sets ``learning.adaptive.refresh_max_move`` of the adaptive profile.
-
-``--refresh-takeback off,on`` flies the adaptive profile once per choice of
-``learning.adaptive.refresh_takeback`` (the same seeds, so the same wander); the summary adds
-the refreshed models taken back.
-
-``--minmax-step off,on`` flies the adaptive profile once per choice of
-``learning.adaptive.refresh_minmax_step`` (the same seeds); the summary adds the steps it cut
-and their median fraction.
-
-``--holdout off,on`` flies the adaptive profile once per choice of
-``learning.adaptive.refresh_holdout`` (the same seeds); the summary adds the refreshes fitted
-to the trials before the newest that the newest did not confirm.
-
-``--pool-repeats off,on`` flies the adaptive profile once per choice of
-``learning.adaptive.refresh_pool_repeats`` (the same seeds): the refresh's first pair against
-the mean of trial 0's flights instead of the last of them.
-
-``--min-gain-z 0,1.645`` flies the adaptive profile once per value of
-``learning.adaptive.refresh_min_gain_z`` (the same seeds): how significant the refresh's
-held-out gain must be for it to accept a candidate.
 
 ``--plants off35`` flies plants 35 % off the profile's model instead (``max |F_model / F_true -
 1|`` over the learning band: 0.35 north, 0.35 east, against 0.22 and 0.18 for the tests'
@@ -60,22 +43,22 @@ plants), where the refresh has a model to correct.
 Usage::
 
     .venv/bin/python benchmarks/floor_correlated_noise.py [--sigma 0.1] [--corr 0.05,0.75,2.0]
-        [--seeds 4] [--trials 16] [--refresh-noise white,measured] [--plants tests]
-        [--latency 0.05] [--refresh-max-move 1.0] [--refresh-takeback off,on]
-        [--minmax-step off,on] [--holdout off,on] [--pool-repeats off,on]
-        [--min-gain-z 0,1.645] [--json out.json]
+        [--seeds 4] [--trials 16] [--plants tests] [--latency 0.05]
+        [--vary refresh_takeback=false,true ...] [--json out.json]
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -84,6 +67,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from synthetic import true_plants  # noqa: E402
 
 from gcs import Learner  # noqa: E402
+from gcs.core.learning import AdaptiveSettings  # noqa: E402
 from gcs.core.model import from_transfer_function, simulate  # noqa: E402
 from gcs.core.refresh import model_change, transfer_function  # noqa: E402
 from gcs.core.trajectory_sources import sample_reference  # noqa: E402
@@ -122,17 +106,12 @@ def run(
     corr_s: float,
     seed: int,
     trials: int,
-    refresh_noise: str = "",
     plants: str = "tests",
     latency_s: float = 0.0,
-    max_move: float | None = None,
-    takeback: str = "",
-    minmax: str = "",
-    holdout: str = "",
-    pool: str = "",
-    min_gain_z: str = "",
+    fields: dict | None = None,
 ) -> dict:
-    """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions."""
+    """One run of ``trials`` flights; e_pos per trial [m] and the learner's decisions.
+    ``fields`` set fields of the adaptive profile's ``learning.adaptive``."""
     ref = sample_reference(load_trajectory(ROOT / "trajectories" / "eight.yaml").shape, DT_S)
     ref = ref.pos_ned_m[:, :2]
     n = ref.shape[0] - 1
@@ -140,19 +119,8 @@ def run(
     plants = true_plants() if plants == "tests" else OFF35
     rng = np.random.default_rng(seed)
     learner = Learner.from_profile(profile, ref)
-    if refresh_noise:
-        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_noise=refresh_noise)
-    if max_move is not None and learner.adaptive is not None:
-        learner.adaptive = dataclasses.replace(learner.adaptive, refresh_max_move=max_move)
-    switches = {
-        "refresh_takeback": takeback, "refresh_minmax_step": minmax,
-        "refresh_holdout": holdout, "refresh_pool_repeats": pool,
-    }  # fmt: skip
-    chosen = {field: choice == "on" for field, choice in switches.items() if choice}
-    if min_gain_z:
-        chosen["refresh_min_gain_z"] = float(min_gain_z)
-    if chosen and learner.adaptive is not None:
-        learner.adaptive = dataclasses.replace(learner.adaptive, **chosen)
+    if fields and learner.adaptive is not None:
+        learner.adaptive = dataclasses.replace(learner.adaptive, **fields)
     u = ref[:-1].copy()
     lag = int(round(latency_s / DT_S))
     epos, steps = [], []
@@ -184,7 +152,7 @@ def run(
     w = learner.settings.weights
     errors = [model_error(learner.models[a], plants[a], w.wdu / w.we) for a in range(2)]
     return {
-        "profile": label(profile, refresh_noise, takeback, minmax, holdout, pool, min_gain_z),
+        "profile": label(profile, fields or {}),
         "model_error": errors,
         "sigma_m": sigma_m,
         "corr_s": corr_s,
@@ -198,23 +166,9 @@ def run(
     }
 
 
-def label(
-    profile: str,
-    refresh_noise: str = "",
-    takeback: str = "",
-    minmax: str = "",
-    holdout: str = "",
-    pool: str = "",
-    min_gain_z: str = "",
-) -> str:
-    """A variant's name: the profile, then its refresh noise, take-back, minmax step,
-    hold-out, pooled repeats and significance of the refresh's gain where chosen."""
-    chosen = (
-        refresh_noise, takeback and f"takeback {takeback}", minmax and f"minmax {minmax}",
-        holdout and f"holdout {holdout}", pool and f"pool {pool}",
-        min_gain_z and f"z {min_gain_z}",
-    )  # fmt: skip
-    return "/".join([profile] + [x for x in chosen if x])
+def label(profile: str, fields: dict) -> str:
+    """A variant's name: the profile, then the fields it sets."""
+    return "/".join([profile] + [f"{k}={yaml.safe_dump(v).split()[0]}" for k, v in fields.items()])
 
 
 def line(r: dict) -> str:
@@ -239,67 +193,35 @@ def main() -> None:
     parser.add_argument("--corr", default="0.05,0.75,2.0", help="correlation times [s]")
     parser.add_argument("--seeds", type=int, default=4)
     parser.add_argument("--trials", type=int, default=16)
-    parser.add_argument(
-        "--refresh-noise",
-        default="",
-        help="refresh_noise choices for the adaptive profile, comma-separated "
-        "(default: the profile's own)",
-    )
     parser.add_argument("--plants", choices=("tests", "off35"), default="tests")
     parser.add_argument("--latency", type=float, default=0.0, help="measurement latency [s]")
     parser.add_argument(
-        "--refresh-max-move", type=float, help="learning.adaptive.refresh_max_move (adaptive)"
-    )
-    parser.add_argument(
-        "--refresh-takeback",
-        default="",
-        help="refresh_takeback choices for the adaptive profile, off and/or on, comma-separated "
-        "(default: the profile's own)",
-    )
-    parser.add_argument(
-        "--minmax-step",
-        default="",
-        help="refresh_minmax_step choices for the adaptive profile, off and/or on, "
-        "comma-separated (default: the profile's own)",
-    )
-    parser.add_argument(
-        "--holdout",
-        default="",
-        help="refresh_holdout choices for the adaptive profile, off and/or on, "
-        "comma-separated (default: the profile's own)",
-    )
-    parser.add_argument(
-        "--pool-repeats",
-        default="",
-        help="refresh_pool_repeats choices for the adaptive profile, off and/or on, "
-        "comma-separated (default: the profile's own)",
-    )
-    parser.add_argument(
-        "--min-gain-z",
-        default="",
-        help="refresh_min_gain_z values for the adaptive profile, comma-separated "
-        "(default: the profile's own)",
+        "--vary",
+        action="append",
+        default=[],
+        metavar="FIELD=V1,V2",
+        help="fly the adaptive profile once per value of learning.adaptive.FIELD; "
+        "several: once per combination",
     )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
-    variants = [("antx", "", "", "", "", "", "")] + [
-        ("antx-adaptive", n, tb, mm, ho, po, z)
-        for n in args.refresh_noise.split(",")
-        for tb in args.refresh_takeback.split(",")
-        for mm in args.minmax_step.split(",")
-        for ho in args.holdout.split(",")
-        for po in args.pool_repeats.split(",")
-        for z in args.min_gain_z.split(",")
-    ]
+    known = {f.name for f in dataclasses.fields(AdaptiveSettings)}
+    axes = []
+    for spec in args.vary:
+        name, _, values = spec.partition("=")
+        if name not in known or not values:
+            parser.error(f"--vary {spec}: not FIELD=V1,V2 with FIELD one of learning.adaptive's")
+        axes.append([(name, yaml.safe_load(v)) for v in values.split(",")])
+    variants = [("antx", {})] + [("antx-adaptive", dict(c)) for c in itertools.product(*axes)]
     labels = [label(*v) for v in variants]
     runs = []
     t0 = time.monotonic()
     for corr in (float(c) for c in args.corr.split(",")):
-        for profile, noise, takeback, minmax, holdout, pool, z in variants:
+        for profile, fields in variants:
             for seed in range(args.seeds):
                 runs.append(
-                    run(profile, args.sigma, corr, seed, args.trials, noise, args.plants,
-                        args.latency, args.refresh_max_move, takeback, minmax, holdout, pool, z)
+                    run(profile, args.sigma, corr, seed, args.trials, args.plants, args.latency,
+                        fields)
                 )  # fmt: skip
                 print(line(runs[-1]), flush=True)
     summary = []
