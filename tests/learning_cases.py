@@ -8,7 +8,9 @@ learning API existed; ``tests/test_learning_regression.py`` asserts that the cod
 computes them bit for bit. ``python tests/learning_cases.py`` writes the record again (only
 ever from a version whose learning is known to be the reference). The cases of
 profiles/antx-adaptive.yaml state their ``repeats`` (the record's trial plan), so that a change
-of the profile's default does not change what they learn.
+of the profile's default does not change what they learn; ``adaptive``, ``auto`` and ``table1``
+learn with the profile's refresh as recorded (:func:`_as_recorded`), and ``anchor`` with the
+profile as shipped.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from synthetic import (
 )
 
 from gcs.core.metrics import epos, max_error
-from gcs.io.config import load_profile, trajectory_from_dict
+from gcs.io.config import load_profile, profile_from_dict, trajectory_from_dict
 from gcs.io.records import TrialStatus
 from gcs.io.rundir import RunDir
 
@@ -65,8 +67,18 @@ def _arrays(run: RunDir, prefix: str) -> dict[str, np.ndarray]:
     return out
 
 
+def _as_recorded(data: dict) -> dict:
+    """profiles/antx-adaptive.yaml's ``data`` with the refresh the record was learnt with:
+    consecutive pairs (no ``refresh_anchor``) and the take-back on, as shipped until
+    2026-12-07; the rest (and the text of a profile written from it) as shipped."""
+    adaptive = data["learning"]["adaptive"]
+    adaptive.pop("refresh_anchor", None)
+    adaptive["refresh_takeback"] = True
+    return data
+
+
 def _profile_file(tmp: Path, base: Path, name: str, **adaptive: object) -> Path:
-    data = yaml.safe_load(base.read_text())
+    data = _as_recorded(yaml.safe_load(base.read_text()))
     data["learning"]["adaptive"].update(adaptive)
     path = tmp / f"{name}.yaml"
     path.write_text(yaml.safe_dump(data))
@@ -119,8 +131,17 @@ def _kilc(tmp: Path) -> dict[str, np.ndarray]:
 
 
 def _adaptive(tmp: Path) -> dict[str, np.ndarray]:
-    run = make_adaptive_run(_fresh(tmp, "adaptive"), trials=6, gust_m=0.01, repeats=1)
+    data = _as_recorded(yaml.safe_load(ADAPTIVE.read_text()))
+    data["learning"]["adaptive"]["repeats"] = 1
+    prof = profile_from_dict(data, str(ADAPTIVE))
+    run = make_adaptive_run(_fresh(tmp, "adaptive"), trials=6, gust_m=0.01, prof=prof)
     return _arrays(run, "adaptive")
+
+
+def _anchor(tmp: Path) -> dict[str, np.ndarray]:
+    """The ``adaptive`` case's trials with the profile as shipped (pairs against trial 0)."""
+    run = make_adaptive_run(_fresh(tmp, "anchor"), trials=6, gust_m=0.01, repeats=1)
+    return _arrays(run, "anchor")
 
 
 def _auto(tmp: Path) -> dict[str, np.ndarray]:
@@ -155,8 +176,9 @@ def _px4(name: str) -> Callable[[Path], dict[str, np.ndarray]]:
 ADAPTIVE = ROOT.parent / "profiles" / "antx-adaptive.yaml"
 #: every case by the prefix of its arrays' keys; each builds its runs in a directory of its own
 CASES: dict[str, Callable[[Path], dict[str, np.ndarray]]] = {
-    "smoother": _smoother, "kilc": _kilc, "adaptive": _adaptive, "auto": _auto,
-    "table1": _table1, "mocap": _mocap, **{f"px4-{name}": _px4(name) for name in PX4_RUNS},
+    "smoother": _smoother, "kilc": _kilc, "adaptive": _adaptive, "anchor": _anchor,
+    "auto": _auto, "table1": _table1, "mocap": _mocap,
+    **{f"px4-{name}": _px4(name) for name in PX4_RUNS},
 }  # fmt: skip
 
 
