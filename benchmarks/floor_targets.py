@@ -25,7 +25,9 @@ one point (the same noise; ``--within-run`` draws the trials from the floor's ow
 one flight session). Then the floor is drawn from ``--floor-flights`` flights of one
 run, the trials from the others, and the targets are also those of the lab-floor test (two
 trials, each within 2 floors of a floor from three flights) and of its goal (five trials, each
-within 1.5 floors and their median within 1.25).
+within 1.5 floors and their median within 1.25). ``--weights recorded`` gives each trial
+j = 2..6 the estimate's trial weights the runs (or ``--weights-run`` ones) recorded for it:
+a learner whose model foresaw everything, estimating as those runs did.
 
 Nothing is asserted; the figures go to docs/results.md as they come out.
 
@@ -33,6 +35,8 @@ Nothing is asserted; the figures go to docs/results.md as they come out.
     .venv/bin/python benchmarks/floor_targets.py --mock-config profiles/mock-gps.yaml
     .venv/bin/python benchmarks/floor_targets.py --setpoints logs/p5-live/x/setpoints-008.csv
     .venv/bin/python benchmarks/floor_targets.py --run RUN_A --run RUN_B --floor-flights 3
+    .venv/bin/python benchmarks/floor_targets.py --run RUN_A --run RUN_B --floor-flights 4 \
+        --weights recorded --weights-run RUN_A
 """
 
 from __future__ import annotations
@@ -76,6 +80,26 @@ def recorded_groups(runs: list[Path]) -> tuple[np.ndarray, list[np.ndarray]]:
     return ref, groups
 
 
+def recorded_weights(runs: list[Path], iterations: range = range(2, 7)) -> list[np.ndarray]:
+    """Per learned trial ``j`` in ``iterations``, the trial weights its estimate had in the runs
+    (the learn record that made trial ``j``'s setpoints, each axis): their median over runs and
+    axes, of the length most of them have (trial 0 and its repeats first, oldest first)."""
+    found: dict[int, list[list[float]]] = {j: [] for j in iterations}
+    for path in runs:
+        for record in RunDir.open(path).learn_records().values():
+            j = record["next_iteration"]
+            if j in found:
+                found[j] += [axis["noise"]["weights"] for axis in record["decision"]["axes"]]
+    out = []
+    for j in iterations:
+        if not found[j]:
+            raise SystemExit(f"no learn record made a trial j = {j} in these runs")
+        lengths = [len(w) for w in found[j]]
+        common = max(set(lengths), key=lengths.count)
+        out.append(np.median([w for w in found[j] if len(w) == common], axis=0))
+    return out
+
+
 def flight_deltas(ys: np.ndarray) -> np.ndarray:
     """Each of ``K`` flights' non-repeatable part, ``sqrt(K / (K - 1)) (Y_i - mean Y)``
     (K, N, 2) [m] (docs/learning-floor.md, section 1)."""
@@ -87,7 +111,7 @@ def targets(
     groups: list[np.ndarray],
     floor_flights_n: int,
     draws: int,
-    weights: np.ndarray | None = None,
+    weights: list[np.ndarray] | None = None,
     within: bool = False,
     seed: int = 0,
 ) -> dict[str, float | None | list[float]]:
@@ -97,28 +121,30 @@ def targets(
     trials than there are is None).
 
     ``weights``: a learner whose model is right but whose estimate is the weighted mean of
-    earlier flights (their non-repeatable parts, drawn from the other flights too): each
-    trial's error is its flight's ``delta`` minus that weighted mean (of any other flights,
-    the floor's too, as learning weighs trial 0 and its repeats); None: a perfect estimate.
+    earlier flights (their non-repeatable parts, drawn from the other flights too): trial
+    ``i``'s error is its flight's ``delta`` minus the mean weighted by ``weights[i]`` (of any
+    other flights, the floor's too, as learning weighs trial 0 and its repeats), and there
+    are as many trials as weight vectors (at most six); None: a perfect estimate.
     """
     # (group, flight, one flight's non-repeatable part (N, 2))
     deltas = [(g, i, d) for g, ys in enumerate(groups) for i, d in enumerate(flight_deltas(ys))]
-    w = np.zeros(0) if weights is None else np.asarray(weights, dtype=float)
+    ws = [np.zeros(0)] * 6 if weights is None else [np.asarray(w, float) for w in weights[:6]]
     rng = np.random.default_rng(seed)
     need = {"median3_within_1_15": 3, "max6_within_1_3": 6, "max2_within_2": 2, "goal5": 5}
     hits = dict.fromkeys(need, 0)
-    ratios, counts = [], []
+    ratios, counts, every = [], [], []
     for _ in range(draws):
         g = int(rng.integers(len(groups)))
         chosen = rng.permutation(groups[g].shape[0])[:floor_flights_n]
         floor = floor_from_flights(groups[g][chosen]).epos_m
         pool = [(h, i) for (h, i, _) in deltas if h == g or not within]
         rest = [k for k, (h, i) in enumerate(pool) if not (h == g and i in chosen)]
-        if len(rest) < 2 or len(pool) < 1 + w.size:
+        if len(rest) < 2 or len(pool) < 1 + max(w.size for w in ws):
             raise SystemExit(f"{len(pool)} flights, {len(rest)} beside the floor's: too few")
         by_key = {(h, i): d for (h, i, d) in deltas}
         trials = []
-        for own in rng.permutation(rest)[:6]:  # distinct flights, one per trial
+        flights = rng.permutation(rest)[: len(ws)]  # distinct flights, one per trial
+        for own, w in zip(flights, ws[: flights.size], strict=True):
             # the estimate's flights: any others, the floor's too (learning weighs trial 0
             # and its repeats as well; successive estimates share flights)
             others = [k for k in rng.permutation(len(pool)) if k != own][: w.size]
@@ -132,10 +158,12 @@ def targets(
         hits["max2_within_2"] += t[:2].max() <= 2.0
         hits["goal5"] += t.size >= 5 and t[:5].max() <= 1.5 and np.median(t[:5]) <= 1.25
         ratios.append(t[0])
+        every.extend(t)
     out: dict[str, float | None | list[float]] = {
         k: (v / draws if min(counts) >= need[k] else None) for k, v in hits.items()
     }
     out["ratio_quantiles"] = [float(q) for q in np.quantile(ratios, [0.05, 0.5, 0.95])]
+    out["share_above_1_5"] = float(np.mean(np.array(every) > 1.5))  # of all drawn trials
     return out
 
 
@@ -146,9 +174,16 @@ def _pct(value: float | None) -> str:
 def main_recorded(args: argparse.Namespace) -> None:
     """The targets of recorded flights (``--run``)."""
     _, groups = recorded_groups(args.run)
-    weights = (
-        None if args.weights is None else np.array([float(x) for x in args.weights.split(",")])
-    )
+    if args.weights is None:
+        weights = None
+    elif args.weights == "recorded":
+        weights = recorded_weights(args.weights_run or args.run)
+        print(
+            "the runs' trial weights, j = 2..6: "
+            + "; ".join(",".join(f"{x:.2f}" for x in w) for w in weights)
+        )
+    else:
+        weights = [np.array([float(x) for x in args.weights.split(",")])] * 6
     found = targets(groups, args.floor_flights, args.draws, weights, args.within_run)
     per_flight = [float(np.hypot(*d.T).mean()) for ys in groups for d in flight_deltas(ys)]
     floors = [floor_from_flights(ys).epos_m for ys in groups]
@@ -171,6 +206,7 @@ def main_recorded(args: argparse.Namespace) -> None:
         + " / ".join(f"{q:.2f}" for q in found["ratio_quantiles"])
         + f"; two within 2 floors (the lab-floor test): {_pct(found['max2_within_2'])}; "
         f"five within 1.5, median within 1.25 (its goal): {_pct(found['goal5'])}; "
+        f"trials above 1.5: {_pct(found['share_above_1_5'])}; "
         f"median of 3 within 1.15: {_pct(found['median3_within_1_15'])}; none of 6 "
         f"above 1.3: {_pct(found['max6_within_1_3'])}"
         + (" (floor and trials of one run)" if args.within_run else "")
@@ -197,7 +233,15 @@ def main() -> None:
     parser.add_argument(
         "--weights",
         default=None,
-        help="--run: trials of a right model with an estimate of these trial weights (w1,w2,..)",
+        help="--run: trials of a right model with an estimate of these trial weights (w1,w2,..;"
+        " 'recorded': those the runs' estimates had at j = 2..6, one vector per trial)",
+    )
+    parser.add_argument(
+        "--weights-run",
+        type=Path,
+        action="append",
+        default=[],
+        help="--weights recorded: the runs whose weights to take (repeatable; default --run)",
     )
     parser.add_argument(
         "--within-run",
