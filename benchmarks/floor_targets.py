@@ -27,7 +27,8 @@ run, the trials from the others, and the targets are also those of the lab-floor
 trials, each within 2 floors of a floor from three flights) and of its goal (five trials, each
 within 1.5 floors and their median within 1.25). ``--weights recorded`` gives each trial
 j = 2..6 the estimate's trial weights the runs (or ``--weights-run`` ones) recorded for it:
-a learner whose model foresaw everything, estimating as those runs did.
+a learner whose model foresaw everything, estimating as those runs did; ``--point-floor``
+judges every trial against the point's floor (the median of the runs' floors) instead.
 
 Nothing is asserted; the figures go to docs/results.md as they come out.
 
@@ -114,6 +115,7 @@ def targets(
     weights: list[np.ndarray] | None = None,
     within: bool = False,
     seed: int = 0,
+    point_floor_m: float | None = None,
 ) -> dict[str, float | None | list[float]]:
     """The chance that trials with nothing repeatable left meet each target, against a floor
     from ``floor_flights_n`` flights of one group and up to six trials from the other flights
@@ -125,6 +127,10 @@ def targets(
     ``i``'s error is its flight's ``delta`` minus the mean weighted by ``weights[i]`` (of any
     other flights, the floor's too, as learning weighs trial 0 and its repeats), and there
     are as many trials as weight vectors (at most six); None: a perfect estimate.
+
+    ``point_floor_m``: judge every draw against this floor [m] (e.g. the point's, the median
+    of the groups' floors) instead of the drawn group's; the trials still come from flights
+    other than those ``floor_flights_n`` drawn.
     """
     # (group, flight, one flight's non-repeatable part (N, 2))
     deltas = [(g, i, d) for g, ys in enumerate(groups) for i, d in enumerate(flight_deltas(ys))]
@@ -137,6 +143,7 @@ def targets(
         g = int(rng.integers(len(groups)))
         chosen = rng.permutation(groups[g].shape[0])[:floor_flights_n]
         floor = floor_from_flights(groups[g][chosen]).epos_m
+        floor = floor if point_floor_m is None else point_floor_m
         pool = [(h, i) for (h, i, _) in deltas if h == g or not within]
         rest = [k for k, (h, i) in enumerate(pool) if not (h == g and i in chosen)]
         if len(rest) < 2 or len(pool) < 1 + max(w.size for w in ws):
@@ -184,15 +191,18 @@ def main_recorded(args: argparse.Namespace) -> None:
         )
     else:
         weights = [np.array([float(x) for x in args.weights.split(",")])] * 6
-    found = targets(groups, args.floor_flights, args.draws, weights, args.within_run)
-    per_flight = [float(np.hypot(*d.T).mean()) for ys in groups for d in flight_deltas(ys)]
     floors = [floor_from_flights(ys).epos_m for ys in groups]
+    point_floor = float(np.median(floors)) if args.point_floor else None
+    found = targets(
+        groups, args.floor_flights, args.draws, weights, args.within_run, 0, point_floor
+    )
+    per_flight = [float(np.hypot(*d.T).mean()) for ys in groups for d in flight_deltas(ys)]
     out = {
         "runs": [str(r) for r in args.run], "flights": [len(ys) for ys in groups],
         "floor_m": floors, "perfect_trial_epos_mean_m": float(np.mean(per_flight)),
         "perfect_trial_epos_sd_m": float(np.std(per_flight, ddof=1)),
         "floor_flights": args.floor_flights, "weights": args.weights,
-        "within_run": args.within_run, **found,
+        "within_run": args.within_run, "point_floor_m": point_floor, **found,
     }  # fmt: skip
     f = float(np.mean(floors))
     print(
@@ -202,7 +212,12 @@ def main_recorded(args: argparse.Namespace) -> None:
         f"{1e3 * out['perfect_trial_epos_sd_m']:.1f} mm "
         f"({100 * out['perfect_trial_epos_sd_m'] / f:.0f} % of the floor)\n"
         f"  {'perfect trials' if weights is None else 'trials, estimate weights ' + args.weights}"
-        f" against a floor from {args.floor_flights} flights: e/floor 5-50-95 % "
+        + (
+            f" against the point's floor ({1e3 * point_floor:.1f} mm, the median of the runs')"
+            if point_floor is not None
+            else f" against a floor from {args.floor_flights} flights"
+        )
+        + ": e/floor 5-50-95 % "
         + " / ".join(f"{q:.2f}" for q in found["ratio_quantiles"])
         + f"; two within 2 floors (the lab-floor test): {_pct(found['max2_within_2'])}; "
         f"five within 1.5, median within 1.25 (its goal): {_pct(found['goal5'])}; "
@@ -242,6 +257,11 @@ def main() -> None:
         action="append",
         default=[],
         help="--weights recorded: the runs whose weights to take (repeatable; default --run)",
+    )
+    parser.add_argument(
+        "--point-floor",
+        action="store_true",
+        help="--run: judge every trial against the point's floor (the median of the runs')",
     )
     parser.add_argument(
         "--within-run",
