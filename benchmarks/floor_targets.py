@@ -134,6 +134,7 @@ def targets(
     """
     # (group, flight, one flight's non-repeatable part (N, 2))
     deltas = [(g, i, d) for g, ys in enumerate(groups) for i, d in enumerate(flight_deltas(ys))]
+    by_key = {(h, i): d for (h, i, d) in deltas}
     ws = [np.zeros(0)] * 6 if weights is None else [np.asarray(w, float) for w in weights[:6]]
     rng = np.random.default_rng(seed)
     need = {"median3_within_1_15": 3, "max6_within_1_3": 6, "max2_within_2": 2, "goal5": 5}
@@ -142,13 +143,14 @@ def targets(
     for _ in range(draws):
         g = int(rng.integers(len(groups)))
         chosen = rng.permutation(groups[g].shape[0])[:floor_flights_n]
-        floor = floor_from_flights(groups[g][chosen]).epos_m
-        floor = floor if point_floor_m is None else point_floor_m
+        if point_floor_m is None:
+            floor = floor_from_flights(groups[g][chosen]).epos_m
+        else:
+            floor = point_floor_m
         pool = [(h, i) for (h, i, _) in deltas if h == g or not within]
         rest = [k for k, (h, i) in enumerate(pool) if not (h == g and i in chosen)]
         if len(rest) < 2 or len(pool) < 1 + max(w.size for w in ws):
             raise SystemExit(f"{len(pool)} flights, {len(rest)} beside the floor's: too few")
-        by_key = {(h, i): d for (h, i, d) in deltas}
         trials = []
         flights = rng.permutation(rest)[: len(ws)]  # distinct flights, one per trial
         for own, w in zip(flights, ws[: flights.size], strict=True):
