@@ -143,10 +143,9 @@ def targets(
     for _ in range(draws):
         g = int(rng.integers(len(groups)))
         chosen = rng.permutation(groups[g].shape[0])[:floor_flights_n]
-        if point_floor_m is None:
-            floor = floor_from_flights(groups[g][chosen]).epos_m
-        else:
-            floor = point_floor_m
+        floor = (
+            floor_from_flights(groups[g][chosen]).epos_m if point_floor_m is None else point_floor_m
+        )
         pool = [(h, i) for (h, i, _) in deltas if h == g or not within]
         rest = [k for k, (h, i) in enumerate(pool) if not (h == g and i in chosen)]
         if len(rest) < 2 or len(pool) < 1 + max(w.size for w in ws):

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import hashlib
 import os
 import re
 import shutil
@@ -113,14 +112,14 @@ class Px4Build:
 
     def runnable(self, cache: Path = CACHE) -> Path:
         """A ``bin`` folder that runs: the binary and ``px4-alias.sh`` copied, every alias a
-        symbolic link to ``px4``. Made once per binary (its content hash names the folder) and
-        put in place atomically, so that parallel test workers share it."""
+        symbolic link to ``px4``. Made once per binary file (its device, inode, size and
+        modification time name the folder: a rebuilt or replaced binary gets a folder of its
+        own) and put in place atomically, so that parallel test workers share it."""
         self.check()
         binary = self.root / "bin" / "px4"
-        # a cache key (the folder of this binary's copy), not a record: nothing is compared
-        # with it, so a build made on another machine only gets a folder of its own
-        digest = hashlib.sha256(binary.read_bytes()).hexdigest()[:16]
-        done = cache / digest / "bin"
+        st = binary.stat()
+        key = f"{st.st_dev:x}-{st.st_ino:x}-{st.st_size:x}-{st.st_mtime_ns:x}"
+        done = cache / key / "bin"
         if (done / "px4").is_file():
             return done
         cache.mkdir(parents=True, exist_ok=True)
@@ -136,7 +135,7 @@ class Px4Build:
         for name in self.aliases():
             (bin_dir / name).symlink_to("px4")
         try:
-            staging.rename(cache / digest)
+            staging.rename(cache / key)
         except OSError:  # another worker was first: use its copy
             shutil.rmtree(staging, ignore_errors=True)
         return done
